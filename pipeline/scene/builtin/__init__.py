@@ -1,0 +1,1 @@
+"""Built-in scenes, generated procedurally and written as real glTF 2.0 files."""
