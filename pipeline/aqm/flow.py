@@ -1,0 +1,110 @@
+"""Per-pixel image velocity from camera motion by 3-D warping (§6 of the paper; Myszkowski et al. 1999).
+
+Each pixel of frame f is lifted to its world-space point with the frame's depth and camera, then
+projected with the camera of a neighbouring frame; the displacement in pixels per frame, times fps
+and divided by pixels per degree, is the image velocity in deg/s (notes/aqm.md §2b). Only the camera
+moves: animated objects are assumed tracked by the eye (§6), so their own motion is left out, and the
+flow is that of a static world seen by the moving camera.
+
+Conventions (DESIGN.md): cameras look down -Z with +Y up; ``world_to_camera`` is a 4x4 matrix;
+the projection is a pinhole with vertical field of view ``yfov`` (radians) over the depth image's
+rows; ``depth`` is the positive distance along the viewing axis (-z in camera space), +inf for
+pixels that see nothing (sky), which are warped as directions.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from ..errors import LoomError
+
+
+def _check_camera(matrix, name: str) -> np.ndarray:
+    m = np.asarray(matrix, dtype=np.float64)
+    if m.shape != (4, 4) or not np.all(np.isfinite(m)):
+        raise LoomError(f"expected a finite 4x4 world-to-camera matrix, got shape {m.shape}", field=name)
+    return m
+
+
+def _check_depth(depth) -> np.ndarray:
+    d = np.asarray(depth, dtype=np.float64)
+    if d.ndim != 2:
+        raise LoomError(f"expected a 2-D depth image, got shape {d.shape}", field="depth")
+    if np.isnan(d).any() or (d <= 0).any():
+        raise LoomError("depth must be positive (or +inf for empty pixels), found NaN or <= 0", field="depth")
+    return d
+
+
+def focal_pixels(height: int, yfov: float) -> float:
+    """Pinhole focal length in pixels for a vertical field of view ``yfov`` (radians) over ``height`` rows."""
+    return 0.5 * height / np.tan(0.5 * yfov)
+
+
+def unproject(depth: np.ndarray, yfov: float) -> np.ndarray:
+    """Homogeneous camera-space points (H, W, 4) of each pixel centre; w = 0 for infinite depth."""
+    h, w = depth.shape
+    f = focal_pixels(h, yfov)
+    x = (np.arange(w) + 0.5 - 0.5 * w) / f
+    y = -(np.arange(h) + 0.5 - 0.5 * h) / f
+    finite = np.isfinite(depth)
+    scale = np.where(finite, depth, 1.0)
+    pts = np.empty((h, w, 4))
+    pts[..., 0] = x[None, :] * scale
+    pts[..., 1] = y[:, None] * scale
+    pts[..., 2] = -scale
+    pts[..., 3] = finite
+    return pts
+
+
+def project(points: np.ndarray, shape: tuple[int, int], yfov: float) -> np.ndarray:
+    """Continuous pixel coordinates (..., 2) = (column, row) of camera-space points; NaN behind the camera."""
+    h, w = shape
+    f = focal_pixels(h, yfov)
+    z = -points[..., 2]
+    with np.errstate(divide="ignore", invalid="ignore"):
+        u = 0.5 * w + f * points[..., 0] / z
+        v = 0.5 * h - f * points[..., 1] / z
+    out = np.stack([u, v], axis=-1)
+    out[z <= 0] = np.nan
+    return out
+
+
+def warp_displacement(depth, world_to_camera, other_world_to_camera, yfov: float) -> np.ndarray:
+    """Displacement (H, W, 2) in pixels of each pixel when seen by the other camera; NaN if behind it."""
+    d = _check_depth(depth)
+    cam = _check_camera(world_to_camera, "world_to_camera")
+    other = _check_camera(other_world_to_camera, "other_world_to_camera")
+    pts = unproject(d, yfov)
+    warp = other @ np.linalg.inv(cam)  # camera f -> world -> camera g
+    moved = pts @ warp.T
+    return project(moved, d.shape, yfov) - project(pts, d.shape, yfov)
+
+
+def image_velocity(depth, world_to_camera, *, yfov: float, fps: float, ppd: float,
+                   previous=None, following=None) -> np.ndarray:
+    """Image velocity (H, W, 2) in deg/s (x right, y down) of frame f from its neighbours' cameras.
+
+    ``previous``/``following`` are the world-to-camera matrices of frames f-1 and f+1; with both the
+    velocity is the central difference, with one a one-sided difference. ``ppd`` is pixels per degree
+    of the depth image as displayed (ViewingConditions.ppd). A pixel that falls behind a neighbour's
+    camera uses the other neighbour; behind both, it gets 0 deg/s (fully visible: the conservative
+    choice for a stopping criterion).
+    """
+    if previous is None and following is None:
+        raise LoomError("needs the camera of at least one neighbouring frame", field="flow")
+    if not (fps > 0 and ppd > 0):
+        raise LoomError(f"fps and ppd must be positive, got {fps} and {ppd}", field="flow")
+    steps = []
+    if previous is not None:
+        steps.append(-warp_displacement(depth, world_to_camera, previous, yfov))
+    if following is not None:
+        steps.append(warp_displacement(depth, world_to_camera, following, yfov))
+    stack = np.stack(steps)
+    valid = np.isfinite(stack).all(axis=-1, keepdims=True)
+    count = valid.sum(axis=0)
+    per_frame = np.where(valid, stack, 0.0).sum(axis=0) / np.maximum(count, 1)
+    return pixels_per_frame_to_deg_per_s(per_frame, fps, ppd)
+
+
+def pixels_per_frame_to_deg_per_s(flow: np.ndarray, fps: float, ppd: float) -> np.ndarray:
+    """v_I = delta_p * fps / ppd (notes/aqm.md §2b)."""
+    return np.asarray(flow, dtype=np.float64) * (fps / ppd)

@@ -1,0 +1,125 @@
+"""The Animation Quality Metric: two renderings of a frame in, M_AQM and d_AQM out (§2.2, §5.2.3, §6).
+
+Stages (one module each): display luminance and resampling to ``aqm_size`` with the viewing distance
+scaled so visual angles, hence spatial frequencies, are kept (display.py, §6) -> Daly's nonlinearity
+with local adaptation (nonlinearity.py) -> CSF with per-pixel adaptation luminance and retinal velocity
+(csf.py) -> six radial bands (bands.py) -> mutual masking (masking.py) -> psychometric function and
+probability summation (psychometric.py) -> M_AQM (per-pixel detection probability) and d_AQM (% of
+pixels with P > 0.75, i.e. above 1 JND).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import LoomError
+from .bands import decompose
+from .csf import (G_SP, luminance_bank, luminance_coordinate, retinal_velocity, space_variant_filter,
+                  velocity_bank, velocity_coordinate)
+from .display import (ViewingConditions, aqm_shape, check_image, check_luminance, display_luminance,
+                      relative_luminance, resample)
+from .masking import mutual_masking
+from .nonlinearity import local_adaptation, nonlinear_contrast
+from .psychometric import BETA, P_THRESHOLD, d_aqm, detection_probability
+
+AQM_SIZE = 256  # §6; RenderConfig.aqm_size
+
+
+@dataclass(frozen=True)
+class AQMResult:
+    """M_AQM (``map``: detection probability per pixel at the AQM resolution) and d_AQM (percent)."""
+
+    map: np.ndarray
+    d_aqm: float
+    ppd: float  # pixels per degree of ``map`` (display ppd scaled with the resampling)
+    threshold: float = P_THRESHOLD
+
+    @property
+    def visible(self) -> np.ndarray:
+        """Pixels where a difference is predicted visible (P > threshold, 1 JND)."""
+        return self.map > self.threshold
+
+
+def aqm(image_a, image_b, *, flow=None, viewing: ViewingConditions = ViewingConditions(),
+        pursuit_gain: float = G_SP, aqm_size: int = AQM_SIZE, names: tuple[str, str] = ("A", "B"),
+        flow_name: str = "flow") -> AQMResult:
+    """Predict visible differences between two linear-RGB renderings of one frame.
+
+    ``image_a``/``image_b``: (H, W, 3|4) linear Rec.709 RGB (or (H, W) relative luminance); 1.0 is the
+    display's peak white (ViewingConditions). ``flow``: image velocity in deg/s of frame pixels,
+    (H, W, 2) vectors or (H, W) speeds, from camera motion (flow.py); None for a still frame.
+    ``pursuit_gain``: smooth-pursuit gain of the eye for that flow (0.82 Daly 1998; 0 = not followed,
+    1 = fully tracked). ``names`` label the inputs in error messages. Symmetric in a and b.
+    """
+    a = check_image(image_a, names[0])
+    b = check_image(image_b, names[1])
+    _check_same_size(a, b, names)
+    lum_a = display_luminance(relative_luminance(a), viewing, names[0])
+    lum_b = display_luminance(relative_luminance(b), viewing, names[1])
+    return aqm_luminance(lum_a, lum_b, flow=flow, viewing=viewing, pursuit_gain=pursuit_gain,
+                         aqm_size=aqm_size, names=names, flow_name=flow_name)
+
+
+def aqm_luminance(lum_a, lum_b, *, flow=None, viewing: ViewingConditions = ViewingConditions(),
+                  pursuit_gain: float = G_SP, aqm_size: int = AQM_SIZE, names: tuple[str, str] = ("A", "B"),
+                  flow_name: str = "flow") -> AQMResult:
+    """:func:`aqm` for inputs already in display luminance, cd/m^2 (H, W); viewing gives only the geometry."""
+    lum_a = check_image(lum_a, names[0])
+    lum_b = check_image(lum_b, names[1])
+    _check_same_size(lum_a, lum_b, names)
+    for lum, name in ((lum_a, names[0]), (lum_b, names[1])):
+        if lum.ndim != 2:
+            raise LoomError(f"expected a luminance image (H, W), got {lum.shape}", path=name, field="shape")
+        check_luminance(lum, name)
+    if not (isinstance(aqm_size, int) and aqm_size >= 16):
+        raise LoomError(f"must be an integer >= 16, got {aqm_size!r}", field="aqm_size")
+    if not 0.0 <= pursuit_gain <= 1.0:
+        raise LoomError(f"must lie in [0, 1], got {pursuit_gain!r}", field="pursuit_gain")
+
+    full = lum_a.shape
+    shape = aqm_shape(full, aqm_size)
+    # Scaling the image and the viewing distance together keeps every visual angle (§6).
+    ppd = viewing.ppd * np.sqrt(shape[0] * shape[1] / (full[0] * full[1]))
+    lum_a, lum_b = resample(lum_a, shape), resample(lum_b, shape)
+    i2 = (shape[0] / ppd) * (shape[1] / ppd)  # image area in deg^2, Daly's i^2
+
+    adaptation = local_adaptation(lum_a, lum_b, ppd)
+    stages = []
+    if flow is not None:
+        v_r = retinal_velocity(resample(_check_flow(flow, full, flow_name), shape), pursuit_gain)
+        stages.append((velocity_bank(shape, ppd), velocity_coordinate(v_r)))
+    stages.append((luminance_bank(shape, ppd, i2, viewing.viewing_distance_m), luminance_coordinate(adaptation)))
+
+    bands_a = _csf_bands(nonlinear_contrast(lum_a, adaptation), shape, stages)
+    bands_b = _csf_bands(nonlinear_contrast(lum_b, adaptation), shape, stages)
+    elevation = mutual_masking(bands_a, bands_b)
+    probability = detection_probability(bands_b - bands_a, elevation)
+    return AQMResult(map=probability, d_aqm=d_aqm(probability), ppd=float(ppd))
+
+
+def _csf_bands(contrast: np.ndarray, shape: tuple[int, int], stages) -> np.ndarray:
+    """CSF-weighted band signals (6, H, W) in threshold units: each stage is a per-pixel filter bank."""
+    spectrum = np.fft.rfft2(contrast)
+    for bank, coord in stages:
+        filtered, image = space_variant_filter(spectrum, shape, bank, coord)
+        spectrum = filtered if image is None else np.fft.rfft2(image)
+    return decompose(spectrum, shape, BETA)
+
+
+def _check_same_size(a: np.ndarray, b: np.ndarray, names) -> None:
+    if a.shape[:2] != b.shape[:2]:
+        raise LoomError(f"image sizes differ: {a.shape[1]}x{a.shape[0]} vs {b.shape[1]}x{b.shape[0]}",
+                        path=names[1], field="size")
+
+
+def _check_flow(flow, shape: tuple[int, int], name: str) -> np.ndarray:
+    f = np.asarray(flow, dtype=np.float64)
+    if f.shape[:2] != tuple(shape) or not (f.ndim == 2 or (f.ndim == 3 and f.shape[2] == 2)):
+        raise LoomError(f"expected shape {shape} or {shape + (2,)} to match the images, got {f.shape}",
+                        path=name, field="shape")
+    if not np.all(np.isfinite(f)):
+        raise LoomError("NaN or Inf velocity", path=name, field="pixels")
+    if f.ndim == 2 and (f < 0).any():
+        raise LoomError("negative speed in a one-channel flow", path=name, field="pixels")
+    return f
