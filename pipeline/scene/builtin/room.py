@@ -1,0 +1,123 @@
+"""ROOM: the paper's main test scene (§6, Figs. 1, 3, 7), about 5,300 elements, 135 frames.
+
+Layout (metres, y up): a 6 x 3 x 5 box, x in [0, 6], z in [0, 5]. Red wall at x = 0, blue wall at
+z = 5 (behind the camera), the floor, ceiling, back wall (z = 0) and right wall (x = 6) white-ish.
+In the back-left corner a niche (x < 1.5, z < 1.6, under a soffit at 2.2 m) opens towards +z; a
+full-height partition at x = 1.5 hides it from every light, so it is lit only indirectly.
+A polished metal sphere stands on the floor near the right wall (specular paths).
+
+Lights and motion, in three 45-frame segments:
+- ``aircraft``: a white fuselage-and-wings body flying across the room at 2.25 m (x 1.0 -> 5.1,
+  slight bank). A spot light 0.3 m under it, pointing up, lights only its underside; the light the
+  underside reflects makes a moving highlight on the floor (Fig. 3). Its cone (50 deg) sees only
+  upward directions, so it never lights the niche.
+- ``corner_spot``: a fixed ceiling spot aimed into the back-right corner. The saturated green
+  ``torus`` stands there, strongly lit, for frames 1-45 (green colour bleeding on the white walls
+  and floor, Fig. 1), moves out of the cone during frames 46-90 (the bleeding fades), and rests in
+  the room's middle for frames 91-135 while the aircraft finishes its flight.
+The camera is static at the front, seeing the floor highlight, the torus corner and the niche.
+"""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+
+from pipeline.scene.builtin import shapes
+from pipeline.scene.builtin.gltf_builder import GltfBuilder
+
+ELEMENT_SIZE = 0.4
+FPS = 30
+FRAMES = 135
+WIDTH, HEIGHT, DEPTH = 6.0, 3.0, 5.0
+NICHE_X, NICHE_Z, SOFFIT_Y = 1.5, 1.6, 2.2
+
+
+def _seconds(frame: float) -> float:
+    """Time of 1-based ``frame``."""
+    return (frame - 1) / FPS
+
+
+def _add_shell(b: GltfBuilder) -> None:
+    """Floor, ceiling and walls facing into the room, and the niche (partition, soffit, fascia)."""
+    white = b.add_material("wall_white", (0.72, 0.72, 0.70))
+    ceiling_white = b.add_material("ceiling_white", (0.78, 0.78, 0.78))
+    floor_grey = b.add_material("floor_grey", (0.55, 0.52, 0.48))
+    red = b.add_material("wall_red", (0.75, 0.12, 0.10))
+    blue = b.add_material("wall_blue", (0.12, 0.20, 0.70))
+    X, Y, Z = np.array([WIDTH, 0, 0]), np.array([0, HEIGHT, 0]), np.array([0, 0, DEPTH])
+    walls = [
+        ("floor", shapes.quad((0, 0, 0), Z, X), floor_grey),
+        ("ceiling", shapes.quad((0, HEIGHT, 0), X, Z), ceiling_white),
+        ("wall_left", shapes.quad((0, 0, 0), Y, Z), red),
+        ("wall_right", shapes.quad((WIDTH, 0, 0), Z, Y), white),
+        ("wall_back", shapes.quad((0, 0, 0), X, Y), white),
+        ("wall_front", shapes.quad((0, 0, DEPTH), Y, X), blue),
+    ]
+    # The niche: a partition, the soffit closing it at 2.2 m, a fascia above its opening. Single
+    # quads suffice: surfaces reflect on both faces.
+    niche = shapes.merge([
+        shapes.quad((NICHE_X, 0, 0), (0, 0, NICHE_Z), (0, HEIGHT, 0)),                    # faces +x
+        shapes.quad((0, SOFFIT_Y, 0), (NICHE_X, 0, 0), (0, 0, NICHE_Z)),                   # faces -y
+        shapes.quad((0, SOFFIT_Y, NICHE_Z), (NICHE_X, 0, 0), (0, HEIGHT - SOFFIT_Y, 0)),   # faces +z
+    ])
+    walls.append(("niche", niche, white))
+    for name, (positions, indices), material in walls:
+        b.add_node(name, b.add_mesh(name, positions, indices, material))
+
+
+def _add_aircraft(b: GltfBuilder) -> None:
+    """The aircraft with its upward spot light as a child, flying along +x at 2.25 m."""
+    body = b.add_material("aircraft_white", (0.8, 0.8, 0.8))
+    mesh = shapes.merge([
+        shapes.box((1.4, 0.26, 0.28)),                              # fuselage along x
+        shapes.box((0.5, 0.05, 1.8), (0.05, -0.05, 0.0)),           # wings along z
+        shapes.box((0.25, 0.04, 0.7), (-0.6, 0.0, 0.0)),           # tailplane
+        shapes.box((0.25, 0.3, 0.04), (-0.6, 0.25, 0.0)),          # fin
+    ])
+    spot = b.add_spot_light("aircraft_spot", (1.0, 0.95, 0.85), 12.0,
+                            inner_cone_angle=math.radians(35), outer_cone_angle=math.radians(50))
+    up = shapes.axis_angle((1, 0, 0), math.pi / 2)  # the light's -Z turned to +Y
+    light_node = b.add_node("aircraft_spot", translation=(0.05, -0.38, 0.0), rotation=up, light=spot)
+    mesh_node = b.add_node("aircraft_body", b.add_mesh("aircraft", *mesh, material=body))
+    aircraft = b.add_node("aircraft", children=[mesh_node, light_node])
+    keys = np.array([1, 45, 90, 135], dtype=float)
+    times = [_seconds(f) for f in keys]
+    path = np.array([[1.0, 2.25, 2.7], [2.4, 2.25, 2.5], [3.9, 2.2, 2.5], [5.1, 2.25, 2.7]])
+    b.add_animation("aircraft_flight", aircraft, "translation", times, path)
+    bank = [shapes.axis_angle((1, 0, 0), a) for a in np.radians([6.0, -4.0, 4.0, -6.0])]
+    b.add_animation("aircraft_flight", aircraft, "rotation", times, bank)
+
+
+def _add_torus_corner(b: GltfBuilder) -> None:
+    """The green torus, lit in the back-right corner by a fixed spot, leaving it from frame 46."""
+    corner_target = np.array([5.3, 0.6, 0.7])
+    eye = np.array([4.6, 2.9, 1.2])
+    spot = b.add_spot_light("corner_spot", (1.0, 0.97, 0.9), 60.0,
+                            inner_cone_angle=math.radians(18), outer_cone_angle=math.radians(26))
+    b.add_node("corner_spot", translation=eye, rotation=shapes.look_at(eye, corner_target), light=spot)
+    green = b.add_material("torus_green", (0.08, 0.75, 0.12))
+    torus = b.add_node("torus", b.add_mesh("torus", *shapes.torus(0.42, 0.14, 32, 12), material=green))
+    times = [_seconds(f) for f in (1, 45, 90, 135)]
+    positions = [[5.3, 0.57, 0.7], [5.3, 0.57, 0.7], [3.6, 0.57, 2.1], [3.6, 0.57, 2.1]]
+    tilt = shapes.axis_angle((1, 0, 0), math.pi / 2)  # ring stands vertical, its hole along z
+    headings = np.radians([-45.0, -45.0, 30.0, 30.0])  # first facing the corner's diagonal
+    rotations = [shapes.multiply_quaternions(shapes.axis_angle((0, 1, 0), h), tilt) for h in headings]
+    b.add_animation("torus_leaves_corner", torus, "translation", times, positions)
+    b.add_animation("torus_leaves_corner", torus, "rotation", times, rotations)
+
+
+def build() -> GltfBuilder:
+    """The ROOM scene (see the module docstring)."""
+    b = GltfBuilder("room")
+    _add_shell(b)
+    metal = b.add_material("polished_metal", (0.9, 0.9, 0.92), metallic=1.0, roughness=0.05)
+    b.add_node("metal_sphere", b.add_mesh("metal_sphere", *shapes.uv_sphere(0.35, 10, 20), material=metal),
+               translation=(5.0, 0.35, 3.6))
+    _add_aircraft(b)
+    _add_torus_corner(b)
+    eye, target = (3.0, 1.9, 4.85), (3.0, 0.6, 1.4)
+    camera = b.add_camera("camera", yfov=math.radians(62), znear=0.05, zfar=30.0)
+    b.add_node("camera", camera=camera, translation=eye, rotation=shapes.look_at(eye, target))
+    b.set_scene_extras({"photonloom": {"element_size": ELEMENT_SIZE, "fps": FPS, "frames": FRAMES}})
+    return b
