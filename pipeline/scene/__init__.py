@@ -1,0 +1,6 @@
+"""Scenes: glTF 2.0 loading, animation, lights, materials, camera, element mesh, built-in scenes."""
+from .elements import ElementMesh
+from .scene import FrameState, MeshInstance, Scene
+from .timeline import Timeline, parse_frame_range
+
+__all__ = ["ElementMesh", "FrameState", "MeshInstance", "Scene", "Timeline", "parse_frame_range"]

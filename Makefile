@@ -1,0 +1,41 @@
+# photonloom: `make demo` renders the built-in ROOM animation, `make test` runs the test suite.
+# Both start with `setup`, which is idempotent and makes a fresh Debian machine ready.
+
+PYTHON ?= python3
+VENV   := .venv
+PY     := $(VENV)/bin/python
+LOOM   := $(VENV)/bin/loom
+STAMP  := $(VENV)/.installed
+DEMO   := out/demo
+
+.PHONY: setup opencl test test-all demo bench clean
+
+setup: opencl $(STAMP)
+
+# Debian's PoCL (the pip wheel fails on these CPUs); installed only when no OpenCL CPU device exists.
+opencl:
+	@bash docker/ensure_opencl.sh
+
+$(STAMP): pyproject.toml
+	@$(PYTHON) -c 'import sys; sys.exit(0 if sys.version_info >= (3, 11) else "photonloom needs Python >= 3.11")'
+	@test -x $(PY) || $(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[test]'
+	@touch $(STAMP)
+
+test: setup
+	$(PY) -m pytest
+
+test-all: setup
+	$(PY) -m pytest -m ''
+
+demo: setup
+	@mkdir -p $(DEMO)
+	$(LOOM) scene room -o $(DEMO)/room.glb
+	$(LOOM) info $(DEMO)/room.glb
+
+bench: setup
+	$(LOOM) bench --help
+
+clean:
+	rm -rf out .pytest_cache

@@ -1,0 +1,94 @@
+"""Punctual lights (``KHR_lights_punctual``) in world space, in radiometric units.
+
+Units (DESIGN.md): point and spot ``intensity x color`` is radiant intensity (W/sr); directional
+``intensity x color`` is irradiance (W/m^2) on a surface facing it. No 683 lm/W or 4*pi factor.
+Spot fall-off is the curve the KHR_lights_punctual specification recommends (smoothstep-free,
+squared linear interpolation of the cosine between the outer and inner cone).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+LIGHT_KINDS = ("point", "spot", "directional")
+
+
+@dataclass(frozen=True)
+class LightDef:
+    """A light as the file defines it, before it is placed by a node."""
+
+    name: str
+    kind: str
+    color: tuple[float, float, float]
+    intensity: float
+    range: float | None = None
+    inner_cone: float = 0.0
+    outer_cone: float = np.pi / 4
+
+    @property
+    def radiant(self) -> np.ndarray:
+        """RGB radiant intensity (point, spot) or irradiance (directional)."""
+        return np.asarray(self.color, dtype=np.float64) * self.intensity
+
+
+@dataclass(frozen=True)
+class Light:
+    """A light placed in the world at one instant."""
+
+    definition: LightDef
+    node: int
+    position: np.ndarray  # world position (unused for directional)
+    direction: np.ndarray  # unit world direction the light points to (node's -Z)
+
+    @property
+    def kind(self) -> str:
+        return self.definition.kind
+
+    @property
+    def radiant(self) -> np.ndarray:
+        return self.definition.radiant
+
+    def spot_falloff(self, cos_angle: np.ndarray) -> np.ndarray:
+        """Spot attenuation for rays at ``cos_angle`` to the axis (KHR_lights_punctual, "Spot")."""
+        d = self.definition
+        cos_outer = np.cos(d.outer_cone)
+        cos_inner = np.cos(d.inner_cone)
+        scale = 1.0 / max(1e-3, cos_inner - cos_outer)
+        offset = -cos_outer * scale
+        t = np.clip(cos_angle * scale + offset, 0.0, 1.0)
+        return t * t
+
+    def state(self) -> np.ndarray:
+        """Numbers that fully describe the light's effect at this instant (for state keys)."""
+        return np.concatenate([self.position, self.direction, self.radiant])
+
+
+def light_def_from_gltf(raw: dict, index: int) -> LightDef:
+    """Parse one ``KHR_lights_punctual`` light dictionary; raises ValueError on bad fields."""
+    kind = raw.get("type")
+    if kind not in LIGHT_KINDS:
+        raise ValueError(f"type {kind!r} is not one of {', '.join(LIGHT_KINDS)}")
+    color = tuple(float(c) for c in raw.get("color", (1.0, 1.0, 1.0)))
+    intensity = float(raw.get("intensity", 1.0))
+    rng = raw.get("range")
+    if len(color) != 3 or not all(np.isfinite(color)) or min(color) < 0:
+        raise ValueError(f"color {color} must be three finite non-negative numbers")
+    if not np.isfinite(intensity) or intensity < 0:
+        raise ValueError(f"intensity {intensity} must be finite and non-negative")
+    if rng is not None and not float(rng) > 0:
+        raise ValueError(f"range {rng} must be positive")
+    spot = raw.get("spot", {}) if kind == "spot" else {}
+    inner = float(spot.get("innerConeAngle", 0.0))
+    outer = float(spot.get("outerConeAngle", np.pi / 4))
+    if kind == "spot" and not (0 <= inner < outer <= np.pi / 2):
+        raise ValueError(f"spot cone angles inner={inner} outer={outer} need 0 <= inner < outer <= pi/2")
+    return LightDef(
+        name=raw.get("name") or f"light{index}",
+        kind=kind,
+        color=color,
+        intensity=intensity,
+        range=float(rng) if rng is not None else None,
+        inner_cone=inner,
+        outer_cone=outer,
+    )

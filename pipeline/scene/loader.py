@@ -1,0 +1,297 @@
+"""Build a :class:`~pipeline.scene.scene.Scene` from a parsed glTF document, validating as it goes.
+
+Every refusal is a one-line :class:`SceneError` naming the file and the glTF field. Skins and morph
+targets are not supported: they are ignored with a warning and the rest pose is used (documented in
+the README), because many exported scenes carry an unused skin and refusing them would be harsh.
+"""
+from __future__ import annotations
+
+import logging
+
+import numpy as np
+
+from ..errors import SceneError
+from .animation import INTERPOLATIONS, PATHS, Sampler
+from .camera import CameraDef
+from .gltf import GltfDocument
+from .lights import light_def_from_gltf
+from .materials import DEFAULT_MATERIAL, material_from_gltf
+from .scene import _MODE_NAMES, _TRIANGLE_MODES, DEFAULT_ELEMENT_FRACTION, MeshInstance, Node, Scene
+from .timeline import DEFAULT_FPS, Timeline
+
+log = logging.getLogger(__name__)
+
+# Triangles whose area is below this fraction of the squared bounding-box diagonal are "zero-area".
+_ZERO_AREA = 1e-14
+
+
+def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | None = None) -> Scene:
+    g = doc.gltf
+    warnings: list[str] = []
+    nodes = _read_nodes(doc)
+    order = _reachable(doc, nodes)
+
+    materials = [material_from_gltf(m, i) for i, m in enumerate(g.materials)]
+    default_material = len(materials)
+    materials.append(DEFAULT_MATERIAL)
+
+    light_defs = []
+    raw_lights = (g.extensions or {}).get("KHR_lights_punctual", {}).get("lights", [])
+    for i, raw in enumerate(raw_lights):
+        try:
+            light_defs.append(light_def_from_gltf(raw, i))
+        except (ValueError, TypeError) as err:
+            raise doc.error(str(err), f"extensions.KHR_lights_punctual.lights[{i}]") from None
+    for i in order:
+        if nodes[i].light is not None and not 0 <= nodes[i].light < len(light_defs):
+            raise doc.error(f"refers to missing light {nodes[i].light}", f"nodes[{i}].extensions.KHR_lights_punctual")
+
+    cameras = []
+    for i, cam in enumerate(g.cameras):
+        if cam.type != "perspective" or cam.perspective is None:
+            cameras.append(None)  # orthographic cameras are listed but cannot be chosen
+            continue
+        p = cam.perspective
+        if not (p.yfov and 0 < p.yfov < np.pi and p.znear and p.znear > 0):
+            raise doc.error(f"yfov {p.yfov} and znear {p.znear} must be positive (yfov < pi)", f"cameras[{i}].perspective")
+        cameras.append(CameraDef(cam.name or f"camera{i}", float(p.yfov), float(p.znear),
+                                 float(p.zfar) if p.zfar else None,
+                                 float(p.aspectRatio) if p.aspectRatio else None))
+
+    instances, dropped = _read_instances(doc, nodes, order, default_material, warnings)
+    if not instances:
+        raise doc.error("the scene has no triangle meshes", "meshes")
+    emissive = any(materials[inst.material].is_emissive for inst in instances)
+    if not any(nodes[i].light is not None for i in order) and not emissive:
+        raise doc.error("the scene has no light: no KHR_lights_punctual light on a node and no emissive material",
+                        "lights")
+
+    channels = _read_channels(doc, nodes, warnings)
+    extras = _scene_extras(doc)
+    fps = float(fps or extras.get("fps") or DEFAULT_FPS)
+    if not fps > 0:
+        raise doc.error(f"fps {fps} must be positive", "scenes.extras.photonloom.fps")
+    end = max((s.end for ch in channels.values() for s in ch.values()), default=0.0)
+    n_frames = extras.get("frames")
+    if n_frames is None:
+        n_frames = int(round(end * fps)) + 1
+    if int(n_frames) < 1:
+        raise doc.error(f"frames {n_frames} must be at least 1", "scenes.extras.photonloom.frames")
+
+    camera_node = _choose_camera(doc, nodes, order, cameras, camera)
+
+    element_size = extras.get("element_size")
+    if element_size is None:
+        allv = np.concatenate([inst.vertices for inst in instances])
+        element_size = float(np.linalg.norm(allv.max(0) - allv.min(0))) * DEFAULT_ELEMENT_FRACTION
+    if not float(element_size) > 0:
+        raise doc.error(f"element_size {element_size} must be positive", "scenes.extras.photonloom.element_size")
+
+    if dropped:
+        warnings.append(f"dropped {dropped} zero-area triangle(s)")
+    for w in warnings:
+        log.warning("%s: %s", doc.path, w)
+    return Scene(
+        path=doc.path, document=doc, nodes=nodes, order=order, instances=instances,
+        materials=materials, light_defs=light_defs, cameras=cameras, channels=channels,
+        timeline=Timeline(fps=fps, frames=int(n_frames)), camera_node=camera_node,
+        element_size=float(element_size), dropped_triangles=dropped, warnings=warnings,
+    )
+
+
+def _vec(value, default, n, doc, field):
+    if value is None:
+        return np.array(default, dtype=np.float64)
+    arr = np.asarray(value, dtype=np.float64)
+    if arr.shape != (n,) or not np.all(np.isfinite(arr)):
+        raise doc.error(f"must be {n} finite numbers, got {value!r}", field)
+    return arr
+
+
+def _read_nodes(doc: GltfDocument) -> list[Node]:
+    g = doc.gltf
+    parents: dict[int, int] = {}
+    for i, n in enumerate(g.nodes):
+        for c in n.children or []:
+            if not 0 <= c < len(g.nodes):
+                raise doc.error(f"child {c} does not exist", f"nodes[{i}].children")
+            if c in parents:
+                raise doc.error(f"node {c} has two parents ({parents[c]} and {i})", f"nodes[{i}].children")
+            parents[c] = i
+    nodes = []
+    for i, n in enumerate(g.nodes):
+        f = f"nodes[{i}]"
+        matrix = None
+        if n.matrix is not None and list(n.matrix) != [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]:
+            matrix = _vec(n.matrix, None, 16, doc, f + ".matrix").reshape(4, 4).T  # column-major
+        light = (n.extensions or {}).get("KHR_lights_punctual", {}).get("light")
+        if n.mesh is not None and not 0 <= n.mesh < len(g.meshes):
+            raise doc.error(f"refers to missing mesh {n.mesh}", f + ".mesh")
+        if n.camera is not None and not 0 <= n.camera < len(g.cameras):
+            raise doc.error(f"refers to missing camera {n.camera}", f + ".camera")
+        nodes.append(Node(
+            index=i, name=n.name or f"node{i}", parent=parents.get(i), children=tuple(n.children or ()),
+            translation=_vec(n.translation, (0, 0, 0), 3, doc, f + ".translation"),
+            rotation=_vec(n.rotation, (0, 0, 0, 1), 4, doc, f + ".rotation"),
+            scale=_vec(n.scale, (1, 1, 1), 3, doc, f + ".scale"),
+            matrix=matrix, mesh=n.mesh, camera=n.camera, light=light,
+        ))
+    return nodes
+
+
+def _reachable(doc: GltfDocument, nodes: list[Node]) -> list[int]:
+    """Nodes of the default scene, parents before children, depth first in file order."""
+    g = doc.gltf
+    if g.scenes:
+        idx = g.scene if g.scene is not None else 0
+        if not 0 <= idx < len(g.scenes):
+            raise doc.error(f"default scene {idx} does not exist", "scene")
+        roots = list(g.scenes[idx].nodes or [])
+    else:
+        roots = [n.index for n in nodes if n.parent is None]
+    order, seen = [], set()
+    stack = list(reversed(roots))
+    while stack:
+        i = stack.pop()
+        if not 0 <= i < len(nodes):
+            raise doc.error(f"node {i} does not exist", "scenes.nodes")
+        if i in seen:
+            raise doc.error(f"node {i} is reached twice (cycle or shared child)", "nodes")
+        if nodes[i].parent is not None and nodes[i].parent not in seen:
+            raise doc.error(f"root node {i} has a parent", "scenes.nodes")
+        seen.add(i)
+        order.append(i)
+        stack.extend(reversed(nodes[i].children))
+    return order
+
+
+def _triangles(mode: int, idx: np.ndarray) -> np.ndarray:
+    if mode == 4:
+        return idx[: len(idx) // 3 * 3].reshape(-1, 3)
+    if mode == 5:  # strip: flip every other triangle to keep the winding
+        k = np.arange(len(idx) - 2)
+        a, b, c = idx[k], idx[k + 1], idx[k + 2]
+        odd = k % 2 == 1
+        return np.stack([a, np.where(odd, c, b), np.where(odd, b, c)], axis=1)
+    k = np.arange(1, len(idx) - 1)  # fan
+    return np.stack([np.full(len(k), idx[0]), idx[k], idx[k + 1]], axis=1)
+
+
+def _read_instances(doc, nodes, order, default_material, warnings):
+    g = doc.gltf
+    instances: list[MeshInstance] = []
+    dropped = 0
+    warned_skin = False
+    for i in order:
+        node = nodes[i]
+        if node.mesh is None:
+            continue
+        if g.nodes[i].skin is not None and not warned_skin:
+            warnings.append("skins are not supported: meshes are shown in their rest pose")
+            warned_skin = True
+        mesh = g.meshes[node.mesh]
+        for p, prim in enumerate(mesh.primitives):
+            f = f"meshes[{node.mesh}].primitives[{p}]"
+            mode = 4 if prim.mode is None else prim.mode
+            if mode not in _TRIANGLE_MODES:
+                raise doc.error(f"mode {_MODE_NAMES.get(mode, mode)} is not supported (triangles only)", f + ".mode")
+            if prim.targets:
+                warnings.append(f"{f}: morph targets are not supported: the rest shape is used")
+            pos_index = getattr(prim.attributes, "POSITION", None)
+            if pos_index is None:
+                raise doc.error("has no POSITION attribute", f + ".attributes")
+            verts = np.asarray(doc.accessor(pos_index, f + ".attributes.POSITION"), dtype=np.float64)
+            if verts.ndim != 2 or verts.shape[1] != 3:
+                raise doc.error("POSITION must be VEC3", f + ".attributes.POSITION")
+            if not np.all(np.isfinite(verts)):
+                bad = int(np.flatnonzero(~np.isfinite(verts).all(1))[0])
+                raise doc.error(f"vertex {bad} has a NaN or Inf position", f + ".attributes.POSITION")
+            if prim.indices is not None:
+                idx = np.asarray(doc.accessor(prim.indices, f + ".indices")).astype(np.int64).ravel()
+            else:
+                idx = np.arange(len(verts), dtype=np.int64)
+            if len(idx) and (idx.min() < 0 or idx.max() >= len(verts)):
+                raise doc.error(f"index {int(idx.max())} is out of range for {len(verts)} vertices", f + ".indices")
+            faces = _triangles(mode, idx)
+            source = np.arange(len(faces))
+            e1 = verts[faces[:, 1]] - verts[faces[:, 0]]
+            e2 = verts[faces[:, 2]] - verts[faces[:, 0]]
+            area2 = np.linalg.norm(np.cross(e1, e2), axis=1)
+            diag = float(np.linalg.norm(verts.max(0) - verts.min(0))) if len(verts) else 0.0
+            keep = area2 > _ZERO_AREA * max(diag, 1e-30) ** 2
+            dropped += int((~keep).sum())
+            if not keep.any():
+                continue
+            material = prim.material if prim.material is not None else default_material
+            if not 0 <= material < len(g.materials) and material != default_material:
+                raise doc.error(f"refers to missing material {material}", f + ".material")
+            instances.append(MeshInstance(
+                index=len(instances), node=i, mesh=node.mesh, primitive=p,
+                name=f"{node.name}/{mesh.name or f'mesh{node.mesh}'}[{p}]",
+                vertices=verts, faces=faces[keep], material=material, source_faces=source[keep],
+            ))
+    return instances, dropped
+
+
+def _read_channels(doc, nodes, warnings) -> dict[int, dict[str, Sampler]]:
+    g = doc.gltf
+    channels: dict[int, dict[str, Sampler]] = {}
+    for a, anim in enumerate(g.animations):
+        for c, ch in enumerate(anim.channels):
+            f = f"animations[{a}].channels[{c}]"
+            target = ch.target
+            if target is None or target.path not in PATHS + ("weights",):
+                raise doc.error(f"target path {getattr(target, 'path', None)!r} is not supported", f + ".target.path")
+            if target.path == "weights":
+                warnings.append(f"{f}: morph weight animation is not supported: ignored")
+                continue
+            if target.node is None:  # allowed by the spec (extensions may target other things)
+                continue
+            if not 0 <= target.node < len(nodes):
+                raise doc.error(f"targets missing node {target.node}", f + ".target.node")
+            if nodes[target.node].matrix is not None:
+                raise doc.error("targets a node defined by a matrix (glTF requires TRS)", f + ".target.node")
+            if ch.sampler is None or not 0 <= ch.sampler < len(anim.samplers):
+                raise doc.error(f"refers to missing sampler {ch.sampler}", f + ".sampler")
+            s = anim.samplers[ch.sampler]
+            sf = f"animations[{a}].samplers[{ch.sampler}]"
+            interp = s.interpolation or "LINEAR"
+            if interp not in INTERPOLATIONS:
+                raise doc.error(f"interpolation {interp!r} is not one of {', '.join(INTERPOLATIONS)}", sf)
+            times = np.asarray(doc.accessor(s.input, sf + ".input"), dtype=np.float64).ravel()
+            values = np.asarray(doc.accessor(s.output, sf + ".output"), dtype=np.float64)
+            width = 4 if target.path == "rotation" else 3
+            if values.ndim != 2 or values.shape[1] != width:
+                raise doc.error(f"output must be {width}-vectors for {target.path}", sf + ".output")
+            if not (np.all(np.isfinite(times)) and np.all(np.isfinite(values))):
+                raise doc.error("keyframes contain NaN or Inf", sf)
+            if np.any(np.diff(times) <= 0):
+                raise doc.error("input times must increase strictly", sf + ".input")
+            per_key = 3 if interp == "CUBICSPLINE" else 1
+            if len(values) != per_key * len(times):
+                raise doc.error(f"has {len(values)} outputs for {len(times)} keys ({interp})", sf + ".output")
+            if interp == "CUBICSPLINE":
+                values = values.reshape(len(times), 3, width)
+            channels.setdefault(target.node, {})[target.path] = Sampler(times, values, interp, target.path)
+    return channels
+
+
+def _scene_extras(doc: GltfDocument) -> dict:
+    g = doc.gltf
+    extras = {}
+    if g.scenes:
+        idx = g.scene if g.scene is not None else 0
+        extras = (g.scenes[idx].extras or {}) if isinstance(g.scenes[idx].extras, dict) else {}
+    ours = extras.get("photonloom", {})
+    return ours if isinstance(ours, dict) else {}
+
+
+def _choose_camera(doc, nodes, order, cameras, name):
+    candidates = [i for i in order if nodes[i].camera is not None and cameras[nodes[i].camera] is not None]
+    if name is None:
+        return candidates[0] if candidates else None
+    for i in candidates:
+        if name in (nodes[i].name, cameras[nodes[i].camera].name):
+            return i
+    names = ", ".join(sorted({cameras[nodes[i].camera].name for i in candidates})) or "none"
+    raise doc.error(f"no camera named {name!r} (cameras: {names})", "cameras")

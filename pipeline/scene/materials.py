@@ -1,0 +1,75 @@
+"""Material model: glTF metallic/roughness factors mapped to diffuse, glossy or mirror behaviour.
+
+Mapping (DESIGN.md "Units and conventions"; written in the README too):
+
+* ``baseColorFactor`` RGB is the Lambertian albedo (alpha ignored). Textures are ignored.
+* ``metallic >= 0.5`` and ``roughness < 0.2``: an ideal **mirror** whose reflectance is the base colour.
+* ``metallic >= 0.5`` and ``0.2 <= roughness < 0.6``: **glossy**, a normalised Phong lobe about the mirror
+  direction with exponent ``2 / alpha^2 - 2``, ``alpha = roughness^2`` (the Blinn-Phong/Beckmann
+  correspondence of Walter et al., EGSR 2007, §5.2), reflectance the base colour.
+* everything else is **diffuse**.
+* ``emissiveFactor x KHR_materials_emissive_strength`` is emitted radiance (front face only).
+* A primitive without a material gets :data:`DEFAULT_MATERIAL`, diffuse grey 0.8 (glTF's own default
+  would be a white albedo of 1.0, which never loses energy in a closed room).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+MIRROR_ROUGHNESS = 0.2
+GLOSSY_ROUGHNESS = 0.6
+METALLIC_THRESHOLD = 0.5
+
+
+@dataclass(frozen=True)
+class Material:
+    name: str
+    albedo: tuple[float, float, float]  # Lambertian albedo or specular reflectance, per channel
+    kind: str  # "diffuse" | "glossy" | "mirror"
+    roughness: float
+    emission: tuple[float, float, float]  # emitted radiance, W/(m^2 sr) per channel
+
+    @property
+    def is_specular(self) -> bool:
+        return self.kind in ("mirror", "glossy")
+
+    @property
+    def is_emissive(self) -> bool:
+        return max(self.emission) > 0.0
+
+    @property
+    def phong_exponent(self) -> float:
+        alpha = max(self.roughness, 1e-3) ** 2
+        return 2.0 / (alpha * alpha) - 2.0
+
+
+def classify(metallic: float, roughness: float) -> str:
+    """``"mirror"``, ``"glossy"`` or ``"diffuse"`` from the glTF factors (see module docstring)."""
+    if metallic >= METALLIC_THRESHOLD and roughness < MIRROR_ROUGHNESS:
+        return "mirror"
+    if metallic >= METALLIC_THRESHOLD and roughness < GLOSSY_ROUGHNESS:
+        return "glossy"
+    return "diffuse"
+
+
+def material_from_gltf(mat, index: int) -> Material:
+    """Build a :class:`Material` from a pygltflib material."""
+    pbr = mat.pbrMetallicRoughness
+    base = list(pbr.baseColorFactor) if pbr and pbr.baseColorFactor is not None else [1.0, 1.0, 1.0, 1.0]
+    metallic = float(pbr.metallicFactor) if pbr and pbr.metallicFactor is not None else 1.0
+    roughness = float(pbr.roughnessFactor) if pbr and pbr.roughnessFactor is not None else 1.0
+    emissive = np.array(mat.emissiveFactor if mat.emissiveFactor is not None else [0.0, 0.0, 0.0], float)
+    strength = (mat.extensions or {}).get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)
+    emission = emissive * float(strength)
+    return Material(
+        name=mat.name or f"material{index}",
+        albedo=tuple(float(c) for c in np.clip(base[:3], 0.0, 1.0)),
+        kind=classify(metallic, roughness),
+        roughness=roughness,
+        emission=tuple(float(c) for c in emission),
+    )
+
+
+DEFAULT_MATERIAL = Material("default", (0.8, 0.8, 0.8), "diffuse", 1.0, (0.0, 0.0, 0.0))

@@ -1,0 +1,241 @@
+"""An animated glTF 2.0 scene and its pose at any instant.
+
+:class:`Scene` holds what the file defines (node hierarchy, mesh instances in rest coordinates,
+materials, lights, cameras, animation channels, timeline). :meth:`Scene.pose` evaluates the
+animation at a time and returns a :class:`FrameState` with world-space triangles, lights and camera.
+Nothing stores positions per frame: poses are computed on demand.
+
+A *mesh instance* is one primitive of a mesh placed by one node; its triangles keep their order
+from the file, less the zero-area ones (dropped and counted). Global source-triangle indices run
+over all instances in depth-first node order; the element mesh and the photon tracer share them.
+"""
+from __future__ import annotations
+
+import hashlib
+import logging
+from dataclasses import dataclass, field
+from functools import cached_property
+from pathlib import Path
+
+import numpy as np
+
+from ..errors import SceneError
+from .animation import INTERPOLATIONS, PATHS, Sampler, trs_matrix
+from .camera import Camera, CameraDef
+from .gltf import GltfDocument, read_gltf
+from .lights import Light, LightDef, light_def_from_gltf
+from .materials import DEFAULT_MATERIAL, Material, material_from_gltf
+from .timeline import DEFAULT_FPS, Timeline
+
+log = logging.getLogger(__name__)
+
+# Primitive modes (glTF §3.7.2.1): 4 TRIANGLES, 5 TRIANGLE_STRIP, 6 TRIANGLE_FAN.
+_TRIANGLE_MODES = {4, 5, 6}
+_MODE_NAMES = {0: "POINTS", 1: "LINES", 2: "LINE_LOOP", 3: "LINE_STRIP"}
+# State keys compare poses rounded to this many decimals, so that float noise from slerp of equal
+# keys does not make two identical poses look different.
+_STATE_DECIMALS = 7
+# Default element size for files that do not state one: this fraction of the bounding-box diagonal.
+DEFAULT_ELEMENT_FRACTION = 1.0 / 50.0
+
+
+@dataclass(frozen=True)
+class Node:
+    index: int
+    name: str
+    parent: int | None
+    children: tuple[int, ...]
+    translation: np.ndarray
+    rotation: np.ndarray  # quaternion x, y, z, w
+    scale: np.ndarray
+    matrix: np.ndarray | None  # a static matrix given instead of TRS
+    mesh: int | None
+    camera: int | None
+    light: int | None
+
+
+@dataclass(frozen=True)
+class MeshInstance:
+    """One primitive of a mesh placed by a node, in the mesh's local coordinates."""
+
+    index: int
+    node: int
+    mesh: int
+    primitive: int
+    name: str
+    vertices: np.ndarray  # (V, 3) float64, local
+    faces: np.ndarray  # (F, 3) int64, zero-area triangles removed
+    material: int  # index into Scene.materials
+    source_faces: np.ndarray  # (F,) int64: index of each kept triangle in the primitive
+
+
+@dataclass
+class FrameState:
+    """The scene at one instant, in world space: what the tracer and compositor need."""
+
+    time: float
+    frame: int | None
+    vertices: np.ndarray  # (V, 3) float32, all instances concatenated
+    faces: np.ndarray  # (F, 3) int32 into vertices, global source-triangle order
+    triangle_instance: np.ndarray  # (F,) int32
+    triangle_material: np.ndarray  # (F,) int32 into materials
+    materials: list[Material]
+    lights: list[Light]
+    emissive_triangles: np.ndarray  # (E,) int32 global triangle indices with emissive material
+    camera: Camera | None
+    instance_matrices: np.ndarray  # (I, 4, 4) float64 local-to-world of each instance
+    state_key: str  # equal for two instants whose geometry and lights are equal
+
+
+@dataclass
+class Scene:
+    path: Path
+    document: GltfDocument = field(repr=False)
+    nodes: list[Node]
+    order: list[int]  # reachable nodes, parents before children (depth first)
+    instances: list[MeshInstance]
+    materials: list[Material]
+    light_defs: list[LightDef]
+    cameras: list[CameraDef]
+    channels: dict[int, dict[str, Sampler]]
+    timeline: Timeline
+    camera_node: int | None
+    element_size: float
+    dropped_triangles: int
+    warnings: list[str]
+
+    # --- loading --------------------------------------------------------------------------------
+
+    @classmethod
+    def load(cls, path: str | Path, *, camera: str | None = None, fps: float | None = None) -> "Scene":
+        """Load a ``.glb``/``.gltf`` file. ``camera`` picks a camera by camera or node name."""
+        from .loader import build_scene
+
+        return build_scene(read_gltf(path), camera=camera, fps=fps)
+
+    # --- identity ---------------------------------------------------------------------------------
+
+    @property
+    def scene_hash(self) -> str:
+        """Digest of the file's JSON and buffers: which scene a photon store was made from."""
+        return self.document.digest[:16]
+
+    # --- animation --------------------------------------------------------------------------------
+
+    def world_matrices(self, t: float) -> np.ndarray:
+        """(n_nodes, 4, 4) local-to-world matrices at time ``t`` (unreachable nodes: identity)."""
+        world = np.tile(np.eye(4), (len(self.nodes), 1, 1))
+        for i in self.order:
+            node = self.nodes[i]
+            if node.matrix is not None:
+                local = node.matrix
+            else:
+                ch = self.channels.get(i, {})
+                tr = ch["translation"].evaluate(t) if "translation" in ch else node.translation
+                rot = ch["rotation"].evaluate(t) if "rotation" in ch else node.rotation
+                sc = ch["scale"].evaluate(t) if "scale" in ch else node.scale
+                local = trs_matrix(tr, rot, sc)
+            world[i] = local if node.parent is None else world[node.parent] @ local
+        return world
+
+    def _lights_at(self, world: np.ndarray) -> list[Light]:
+        lights = []
+        for i in self.order:
+            node = self.nodes[i]
+            if node.light is None:
+                continue
+            m = world[i]
+            d = -m[:3, 2]
+            norm = np.linalg.norm(d)
+            lights.append(Light(self.light_defs[node.light], i, m[:3, 3].copy(),
+                                d / norm if norm > 0 else np.array([0.0, 0.0, -1.0])))
+        return lights
+
+    def _state_key(self, world: np.ndarray, lights: list[Light]) -> str:
+        h = hashlib.sha256()
+        for inst in self.instances:
+            h.update(np.round(world[inst.node], _STATE_DECIMALS).tobytes())
+        for light in lights:
+            h.update(np.round(light.state(), _STATE_DECIMALS).tobytes())
+        return h.hexdigest()[:16]
+
+    def state_key(self, frame: int) -> str:
+        """Key equal for frames whose geometry and lights are equal (camera-only motion)."""
+        world = self.world_matrices(self.timeline.time(frame))
+        return self._state_key(world, self._lights_at(world))
+
+    def pose(self, t: float, *, frame: int | None = None) -> FrameState:
+        """Evaluate the animation at ``t`` seconds: world-space triangles, lights and camera."""
+        world = self.world_matrices(t)
+        lights = self._lights_at(world)
+        inst_mats = np.stack([world[inst.node] for inst in self.instances])
+        verts = [(inst.vertices @ m[:3, :3].T + m[:3, 3]) for inst, m in zip(self.instances, inst_mats)]
+        offsets = np.cumsum([0] + [len(v) for v in verts])
+        faces = np.concatenate([inst.faces + off for inst, off in zip(self.instances, offsets)])
+        tri_inst = np.concatenate(
+            [np.full(len(inst.faces), inst.index, np.int32) for inst in self.instances]
+        )
+        tri_mat = np.asarray([inst.material for inst in self.instances], np.int32)[tri_inst]
+        emissive_mats = np.array([m.is_emissive for m in self.materials])
+        cam = None
+        if self.camera_node is not None:
+            node = self.nodes[self.camera_node]
+            cam = Camera(self.cameras[node.camera], self.camera_node, world[self.camera_node].copy())
+        return FrameState(
+            time=float(t),
+            frame=frame,
+            vertices=np.concatenate(verts).astype(np.float32),
+            faces=faces.astype(np.int32),
+            triangle_instance=tri_inst,
+            triangle_material=tri_mat,
+            materials=self.materials,
+            lights=lights,
+            emissive_triangles=np.flatnonzero(emissive_mats[tri_mat]).astype(np.int32),
+            camera=cam,
+            instance_matrices=inst_mats,
+            state_key=self._state_key(world, lights),
+        )
+
+    def pose_frame(self, frame: int) -> FrameState:
+        """:meth:`pose` at a frame number of the timeline."""
+        return self.pose(self.timeline.time(frame), frame=frame)
+
+    # --- summaries ------------------------------------------------------------------------------
+
+    @property
+    def n_triangles(self) -> int:
+        return sum(len(inst.faces) for inst in self.instances)
+
+    @property
+    def animated_nodes(self) -> list[int]:
+        return sorted(self.channels)
+
+    @cached_property
+    def frame_state_keys(self) -> list[str]:
+        """State key of every frame of the timeline, in order."""
+        return [self.state_key(f) for f in self.timeline.all_frames()]
+
+    @property
+    def has_moving_geometry(self) -> bool:
+        """True when geometry or lights change over the timeline (photons must be re-traced)."""
+        return len(set(self.frame_state_keys)) > 1
+
+    @property
+    def has_camera_motion(self) -> bool:
+        if self.camera_node is None:
+            return False
+        node = self.camera_node
+        moving = set(self.channels)
+        while node is not None:
+            if node in moving:
+                return True
+            node = self.nodes[node].parent
+        return False
+
+    @property
+    def has_specular(self) -> bool:
+        return any(self.materials[inst.material].is_specular for inst in self.instances)
+
+    @property
+    def has_area_lights(self) -> bool:
+        return any(self.materials[inst.material].is_emissive for inst in self.instances)

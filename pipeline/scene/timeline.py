@@ -1,0 +1,72 @@
+"""Frame numbering and render-farm frame ranges.
+
+Frames are numbered from 1, as render farms number them; frame ``f`` shows the scene at
+``t = (f - 1) / fps`` seconds (DESIGN.md's "t = frame / fps", counted from the first frame), so
+frame 1 is the animation's first key. A scene with ``frames`` frames spans (frames - 1) / fps
+seconds. Range syntax (Nuke, Deadline, OpenCue): ``1-100``, ``1-100x2`` (step 2), ``1,5,10-20``.
+"""
+from __future__ import annotations
+
+import re
+from dataclasses import dataclass
+
+from ..errors import LoomError
+
+DEFAULT_FPS = 30.0
+_PART = re.compile(r"^\s*(-?\d+)\s*(?:-\s*(-?\d+)\s*(?:x\s*(\d+)\s*)?)?$")
+
+
+@dataclass(frozen=True)
+class Timeline:
+    fps: float
+    frames: int  # frames are 1..frames
+
+    @property
+    def duration(self) -> float:
+        """Seconds from the first to the last frame."""
+        return (self.frames - 1) / self.fps
+
+    @property
+    def first(self) -> int:
+        return 1
+
+    @property
+    def last(self) -> int:
+        return self.frames
+
+    def time(self, frame: int) -> float:
+        return (frame - 1) / self.fps
+
+    def all_frames(self) -> list[int]:
+        return list(range(1, self.frames + 1))
+
+    def select(self, spec: str | None) -> list[int]:
+        """Frames named by a farm range string, checked against the timeline; ``None`` means all."""
+        if spec is None or spec.strip() in ("", "all"):
+            return self.all_frames()
+        frames = parse_frame_range(spec)
+        outside = [f for f in frames if not self.first <= f <= self.last]
+        if outside:
+            raise LoomError(
+                f"frame {outside[0]} is outside the timeline {self.first}-{self.last}", field="frames"
+            )
+        return frames
+
+
+def parse_frame_range(spec: str) -> list[int]:
+    """Parse ``1-100``, ``1-100x2``, ``1,5,10-20`` into a sorted list of unique frame numbers."""
+    frames: set[int] = set()
+    for part in spec.split(","):
+        m = _PART.match(part)
+        if not m:
+            raise LoomError(f"cannot parse {part.strip()!r} in {spec!r} (use 1-100, 1-100x2, 1,5,10-20)",
+                            field="frames")
+        start = int(m.group(1))
+        end = int(m.group(2)) if m.group(2) is not None else start
+        step = int(m.group(3)) if m.group(3) is not None else 1
+        if step < 1:
+            raise LoomError(f"step must be >= 1 in {part.strip()!r}", field="frames")
+        if end < start:
+            raise LoomError(f"range {part.strip()!r} ends before it starts", field="frames")
+        frames.update(range(start, end + 1, step))
+    return sorted(frames)

@@ -1,0 +1,157 @@
+"""Interpolation modes, clamping, hierarchy, animated lights and cameras, through the real loader."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.scene import Scene
+from pipeline.scene.animation import Sampler, slerp
+from tests.conftest import basic_builder
+
+CUBE = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
+CUBE_FACES = np.array([0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3])
+
+
+def _animated_scene(tmp_path, path, times, values, interpolation, name="anim.glb"):
+    b = basic_builder()
+    node = b.add_node("mover", b.add_mesh("tet", CUBE, CUBE_FACES, material=0))
+    b.add_animation("a", node, path, times, values, interpolation)
+    b.write(tmp_path / name)
+    scene = Scene.load(tmp_path / name)
+    return scene, node
+
+
+@pytest.mark.parametrize(
+    "interpolation, t, expected",
+    [
+        ("LINEAR", 0.5, [1.0, 0.0, 0.0]),
+        ("LINEAR", 1.5, [1.0, 2.0, 0.0]),
+        ("STEP", 0.99, [0.0, 0.0, 0.0]),
+        ("STEP", 1.0, [2.0, 0.0, 0.0]),
+        ("STEP", 1.7, [2.0, 0.0, 0.0]),
+        ("LINEAR", -1.0, [0.0, 0.0, 0.0]),  # clamped before the first key
+        ("LINEAR", 9.0, [0.0, 4.0, 0.0]),  # clamped after the last key
+    ],
+)
+def test_translation_interpolation(tmp_path, interpolation, t, expected):
+    scene, node = _animated_scene(tmp_path, "translation", [0, 1, 2], [[0, 0, 0], [2, 0, 0], [0, 4, 0]],
+                                  interpolation)
+    np.testing.assert_allclose(scene.world_matrices(t)[node][:3, 3], expected, atol=1e-6)
+
+
+def test_cubicspline_is_hermite(tmp_path):
+    # zero tangents: p(s) = 3s^2 - 2s^3 (smoothstep); tangents 1: the Hermite basis sum
+    values = np.array([[[0, 0, 0], [0, 0, 0], [1, 0, 0]],  # in, value, out of key 0
+                       [[1, 0, 0], [1, 1, 1], [0, 0, 0]]], dtype=float)  # key 1
+    scene, node = _animated_scene(tmp_path, "translation", [0, 2], values, "CUBICSPLINE")
+    s, dt = 0.25, 2.0
+    h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
+    x = h10 * dt * 1.0 + h01 * 1.0 + h11 * dt * 1.0
+    yz = h01 * 1.0
+    np.testing.assert_allclose(scene.world_matrices(0.5)[node][:3, 3], [x, yz, yz], atol=1e-6)
+    np.testing.assert_allclose(scene.world_matrices(2.0)[node][:3, 3], [1, 1, 1], atol=1e-6)
+
+
+def test_rotation_slerp_halfway(tmp_path):
+    q90 = [0, np.sin(np.pi / 4), 0, np.cos(np.pi / 4)]  # 90 degrees about +Y
+    scene, node = _animated_scene(tmp_path, "rotation", [0, 1], [[0, 0, 0, 1], q90], "LINEAR")
+    m = scene.world_matrices(0.5)[node]
+    np.testing.assert_allclose(m[:3, :3] @ [1, 0, 0], [np.cos(np.pi / 4), 0, -np.sin(np.pi / 4)], atol=1e-6)
+    m = scene.world_matrices(0.25)[node]
+    np.testing.assert_allclose(m[:3, :3] @ [1, 0, 0], [np.cos(np.pi / 8), 0, -np.sin(np.pi / 8)], atol=1e-6)
+
+
+def test_slerp_takes_the_short_arc():
+    q0 = np.array([0, 0, 0, 1.0])
+    q1 = -np.array([0, np.sin(0.1), 0, np.cos(0.1)])  # same rotation as +, opposite sign
+    q = slerp(q0, q1, 0.5)
+    assert abs(abs(q[1]) - np.sin(0.05)) < 1e-9
+
+
+def test_scale_animation_changes_element_areas(tmp_path):
+    from pipeline.scene import ElementMesh
+
+    scene, node = _animated_scene(tmp_path, "scale", [0, 1], [[1, 1, 1], [2, 2, 2]], "LINEAR")
+    mesh = ElementMesh.build(scene, 0.25)
+    inst = [i for i in scene.instances if i.node == node][0]
+    lo, hi = mesh.instance_elements[inst.index], mesh.instance_elements[inst.index + 1]
+    a0 = mesh.areas(scene.pose(0.0))[lo:hi].sum()
+    a1 = mesh.areas(scene.pose(1.0))[lo:hi].sum()
+    assert a1 == pytest.approx(4 * a0, rel=1e-9)
+    # non-uniform scale: recomputed from positions
+    scene2, node2 = _animated_scene(tmp_path, "scale", [0, 1], [[1, 1, 1], [1, 3, 1]], "LINEAR", "ns.glb")
+    mesh2 = ElementMesh.build(scene2, 0.25)
+    state = scene2.pose(1.0)
+    corners = mesh2.element_positions(state)
+    direct = 0.5 * np.linalg.norm(np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0]), axis=1)
+    np.testing.assert_allclose(mesh2.areas(state), direct, rtol=1e-9)
+
+
+def test_hierarchy_composes_parent_and_child(tmp_path):
+    b = basic_builder()
+    child = b.add_node("child", b.add_mesh("tet", CUBE, CUBE_FACES, material=0), translation=(1, 0, 0))
+    q90 = [0, np.sin(np.pi / 4), 0, np.cos(np.pi / 4)]
+    parent = b.add_node("parent", translation=(0, 5, 0), rotation=q90, scale=(2, 2, 2), children=[child])
+    b.write(tmp_path / "h.glb")
+    scene = Scene.load(tmp_path / "h.glb")
+    world = scene.world_matrices(0.0)
+    # child origin: parent T * R * S * (1, 0, 0) = (0, 5, 0) + 2 * R_y(90) (1, 0, 0) = (0, 5, -2)
+    np.testing.assert_allclose(world[child][:3, 3], [0, 5, -2], atol=1e-6)
+    assert scene.nodes[child].parent == parent
+    state = scene.pose(0.0)
+    inst = [i for i in scene.instances if i.node == child][0]
+    np.testing.assert_allclose(state.instance_matrices[inst.index], world[child])
+
+
+def test_spot_light_on_animated_node(tmp_path):
+    b = basic_builder(light=False)
+    spot = b.add_spot_light("spot", (1, 0.5, 0.25), 40.0, inner_cone_angle=0.2, outer_cone_angle=0.5, range=9.0)
+    down = [-np.sin(np.pi / 4), 0, 0, np.cos(np.pi / 4)]  # -Z rotated to -Y
+    node = b.add_node("spotnode", light=spot, translation=(0, 3, 0), rotation=down)
+    b.add_animation("fly", node, "translation", [0, 1], [[0, 3, 0], [4, 3, 0]])
+    b.write(tmp_path / "spot.glb")
+    scene = Scene.load(tmp_path / "spot.glb")
+    light = scene.pose(0.5).lights[0]
+    assert light.kind == "spot"
+    np.testing.assert_allclose(light.position, [2, 3, 0], atol=1e-6)
+    np.testing.assert_allclose(light.direction, [0, -1, 0], atol=1e-6)
+    np.testing.assert_allclose(light.radiant, [40, 20, 10])
+    assert light.definition.range == 9.0
+    assert light.definition.inner_cone == pytest.approx(0.2) and light.definition.outer_cone == pytest.approx(0.5)
+    # glTF's recommended fall-off: 1 inside the inner cone, 0 outside the outer, smooth in between
+    f = light.spot_falloff(np.cos(np.array([0.1, 0.35, 0.6])))
+    assert f[0] == 1.0 and f[2] == 0.0 and 0 < f[1] < 1
+    assert scene.state_key(1) != scene.state_key(scene.timeline.last)
+
+
+def test_animated_camera_and_camera_choice(tmp_path):
+    b = basic_builder()
+    c1 = b.add_node("cam-a", camera=b.add_camera("A", 0.8, 0.1), translation=(0, 1, 5))
+    b.add_node("cam-b", camera=b.add_camera("B", 0.5, 0.1), translation=(9, 9, 9))
+    b.add_animation("dolly", c1, "translation", [0, 2], [[0, 1, 5], [0, 1, 1]])
+    b.write(tmp_path / "cam.glb")
+    scene = Scene.load(tmp_path / "cam.glb")
+    cam = scene.pose(1.0).camera
+    assert cam.definition.name == "A"
+    np.testing.assert_allclose(cam.position, [0, 1, 3], atol=1e-6)
+    np.testing.assert_allclose(cam.forward, [0, 0, -1], atol=1e-9)
+    assert scene.timeline.frames == 61  # 2 s at the default 30 fps, frames 1..61
+    assert Scene.load(tmp_path / "cam.glb", camera="B").pose(0).camera.definition.yfov == pytest.approx(0.5)
+    assert scene.has_camera_motion and not scene.has_moving_geometry
+    assert len(set(scene.frame_state_keys)) == 1
+
+
+@pytest.mark.parametrize("external", [False, True])
+def test_gltf_with_data_uri_or_external_buffer(tmp_path, external):
+    b = basic_builder()
+    path = b.write(tmp_path / "scene.gltf", external_buffer=external)
+    text = path.read_text()
+    assert ("data:application/octet-stream;base64" in text) != external
+    scene = Scene.load(path)
+    assert scene.n_triangles == 2 and len(scene.light_defs) == 1
+
+
+def test_sampler_single_key_is_constant():
+    s = Sampler(np.array([0.5]), np.array([[1.0, 2.0, 3.0]]), "LINEAR", "translation")
+    for t in (-1, 0.5, 3):
+        np.testing.assert_array_equal(s.evaluate(t), [1, 2, 3])
