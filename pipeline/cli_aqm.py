@@ -1,0 +1,177 @@
+"""``loom aqm`` (compare two frames with the Animation Quality Metric) and ``loom bench aqm``.
+
+Thin wrappers: file I/O and options here, the metric in :mod:`pipeline.aqm`.
+"""
+from __future__ import annotations
+
+import os
+import statistics
+import time
+
+import click
+import numpy as np
+
+from .aqm import G_SP, AQM_SIZE, ViewingConditions, aqm, image_velocity, pixels_per_frame_to_deg_per_s
+from .aqm.visualize import difference_picture
+from .errors import LoomError
+
+_DEFAULT = ViewingConditions()
+
+
+def read_image(path: str, *, channels: str = "image") -> np.ndarray:
+    """Read an image file with OpenImageIO as float64 (H, W, C); LoomError naming the file if unreadable."""
+    import OpenImageIO as oiio
+
+    inp = oiio.ImageInput.open(path)
+    if inp is None:
+        raise LoomError(oiio.geterror().replace("\n", " ") or "cannot open", path=path, field="file")
+    try:
+        pixels = inp.read_image(oiio.FLOAT)
+        error = inp.geterror()
+    finally:
+        inp.close()
+    if pixels is None or error:
+        raise LoomError(f"cannot read pixels: {error.strip() or 'unknown error'}".replace("\n", " "),
+                        path=path, field="file")
+    pixels = np.asarray(pixels, dtype=np.float64)
+    if pixels.ndim == 2:
+        pixels = pixels[..., None]
+    if channels == "image":
+        if pixels.shape[2] == 2:
+            raise LoomError("expected 1 (luminance) or >= 3 (RGB) channels, got 2", path=path, field="channels")
+        return pixels[..., :3] if pixels.shape[2] >= 3 else pixels
+    return pixels[..., :2] if pixels.shape[2] >= 2 else pixels[..., 0]  # flow: (vx, vy) or speed
+
+
+def write_png(path: str, rgb8: np.ndarray) -> None:
+    """Write an 8-bit RGB image; LoomError naming the file on failure."""
+    import OpenImageIO as oiio
+
+    out = oiio.ImageOutput.create(path)
+    if out is None:
+        raise LoomError(oiio.geterror().replace("\n", " ") or "cannot create", path=path, field="file")
+    spec = oiio.ImageSpec(rgb8.shape[1], rgb8.shape[0], 3, oiio.UINT8)
+    ok = out.open(path, spec) and out.write_image(np.ascontiguousarray(rgb8))
+    error = out.geterror()
+    out.close()
+    if not ok:
+        raise LoomError(f"cannot write: {error}".replace("\n", " "), path=path, field="file")
+
+
+def _resolution(_ctx, _param, value: str) -> tuple[int, int]:
+    try:
+        w, h = (int(v) for v in value.lower().split("x"))
+    except ValueError:
+        raise click.BadParameter(f"expected WIDTHxHEIGHT, got {value!r}") from None
+    return w, h
+
+
+def viewing_options(f):
+    """The ViewingConditions options of ``loom aqm``."""
+    options = [
+        click.option("--display-width", type=float, default=_DEFAULT.display_width_m, show_default=True,
+                     help="Display width in metres."),
+        click.option("--display-resolution", default="{}x{}".format(*_DEFAULT.resolution), show_default=True,
+                     callback=_resolution, help="Display resolution WIDTHxHEIGHT in pixels."),
+        click.option("--viewing-distance", type=float, default=_DEFAULT.viewing_distance_m, show_default=True,
+                     help="Viewing distance in metres."),
+        click.option("--peak-luminance", type=float, default=_DEFAULT.peak_luminance, show_default=True,
+                     help="cd/m^2 shown for linear value 1.0."),
+        click.option("--black-level", type=float, default=_DEFAULT.black_level, show_default=True,
+                     help="cd/m^2 shown for linear value 0.0."),
+        click.option("--aqm-size", type=int, default=AQM_SIZE, show_default=True,
+                     help="Longer side of the images the AQM works on (§6)."),
+    ]
+    for option in reversed(options):
+        f = option(f)
+    return f
+
+
+def _viewing(display_width, display_resolution, viewing_distance, peak_luminance, black_level):
+    return ViewingConditions(display_width_m=display_width, resolution=display_resolution,
+                             viewing_distance_m=viewing_distance, peak_luminance=peak_luminance,
+                             black_level=black_level)
+
+
+@click.command("aqm")
+@click.argument("image_a", type=click.Path(dir_okay=False))
+@click.argument("image_b", type=click.Path(dir_okay=False))
+@click.option("--flow", "flow_path", type=click.Path(dir_okay=False), default=None,
+              help="Image velocity of A's pixels from camera motion: 2 channels (vx, vy) or 1 (speed).")
+@click.option("--flow-units", type=click.Choice(["deg/s", "px/frame"]), default="deg/s", show_default=True)
+@click.option("--fps", type=float, default=None, help="Frames per second (needed with --flow-units px/frame).")
+@click.option("--pursuit-gain", type=click.FloatRange(0.0, 1.0), default=G_SP, show_default=True,
+              help="Smooth-pursuit gain for the flow: 0 eye does not follow, 1 tracks it (Daly 1998: 0.82).")
+@viewing_options
+@click.option("--map", "map_path", type=click.Path(dir_okay=False), default=None,
+              help="Write M_AQM as a PNG: red where a difference is visible, over a grey A (Fig. 3d).")
+def aqm_command(image_a, image_b, flow_path, flow_units, fps, pursuit_gain, display_width, display_resolution,
+                viewing_distance, peak_luminance, black_level, aqm_size, map_path):
+    """Predict where a viewer sees a difference between linear-light frames IMAGE_A and IMAGE_B; print d_AQM."""
+    viewing = _viewing(display_width, display_resolution, viewing_distance, peak_luminance, black_level)
+    a = read_image(image_a)
+    b = read_image(image_b)
+    flow = None
+    if flow_path is not None:
+        flow = read_image(flow_path, channels="flow")
+        if flow_units == "px/frame":
+            if fps is None or not fps > 0:
+                raise LoomError("--flow-units px/frame needs a positive --fps", path=flow_path, field="fps")
+            flow = pixels_per_frame_to_deg_per_s(flow, fps, viewing.ppd)
+    result = aqm(a, b, flow=flow, viewing=viewing, pursuit_gain=pursuit_gain, aqm_size=aqm_size,
+                 names=(image_a, image_b), flow_name=flow_path or "flow")
+    h, w = result.map.shape
+    click.echo(f"d_AQM = {result.d_aqm:.3f} % of {h * w} pixels above 1 JND (P > {result.threshold}); "
+               f"AQM at {w}x{h}, {result.ppd:.2f} px/deg")
+    if map_path is not None:
+        write_png(map_path, difference_picture(a, result.visible))
+
+
+def _bench_pair(size: int, seed: int = 0):
+    """A 256x256 frame pair with Monte Carlo-like noise and the camera-pan flow of a receding floor."""
+    rng = np.random.default_rng(seed)
+    yy, xx = np.mgrid[0:size, 0:size] / size
+    base = 0.2 + 0.6 * xx * (0.5 + 0.5 * yy) + 0.1 * np.sin(2 * np.pi * 4 * yy)
+    a = base * rng.gamma(400, 1 / 400, size=(size, size))
+    b = base * rng.gamma(400, 1 / 400, size=(size, size))
+    depth = 2.0 + 8.0 * (1.0 - yy)
+    cam = np.eye(4)
+    moved = np.eye(4)
+    moved[0, 3] = -0.05  # camera moves 5 cm to the right per frame
+    flow = image_velocity(depth, cam, following=moved, previous=np.linalg.inv(moved), yfov=np.radians(40),
+                          fps=25.0, ppd=ViewingConditions().ppd)
+    return np.repeat(a[..., None], 3, axis=2), np.repeat(b[..., None], 3, axis=2), flow
+
+
+@click.command("aqm")
+@click.option("--repeat", type=click.IntRange(1, 1000), default=10, show_default=True,
+              help="Timed runs per variant (after one cold run).")
+def bench_aqm(repeat):
+    """Seconds per 256x256 frame pair of the AQM, without and with pixel flow (NumPy, one core)."""
+    pinned = hasattr(os, "sched_setaffinity")
+    if pinned:  # measure on one core, as the issue asks
+        cores = os.sched_getaffinity(0)
+        os.sched_setaffinity(0, {min(cores)})
+    try:
+        _run_bench(repeat)
+    finally:
+        if pinned:
+            os.sched_setaffinity(0, cores)
+
+
+def _run_bench(repeat: int) -> None:
+    a, b, flow = _bench_pair(AQM_SIZE)
+    speed = np.hypot(flow[..., 0], flow[..., 1])
+    click.echo(f"pair: {AQM_SIZE}x{AQM_SIZE}, Monte Carlo-like noise (400 samples), "
+               f"flow {speed.min():.1f}..{speed.max():.1f} deg/s")
+    for label, kwargs in (("no flow", {}), ("with flow", {"flow": flow})):
+        start = time.perf_counter()
+        d = aqm(a, b, **kwargs).d_aqm
+        cold = time.perf_counter() - start
+        times = []
+        for _ in range(repeat):
+            start = time.perf_counter()
+            aqm(a, b, **kwargs)
+            times.append(time.perf_counter() - start)
+        click.echo(f"aqm numpy {AQM_SIZE}x{AQM_SIZE} {label}: {statistics.median(times):.4f} s/pair median of "
+                   f"{repeat} (min {min(times):.4f}, cold {cold:.4f}); d_AQM = {d:.2f} %")
