@@ -10,7 +10,6 @@ import logging
 
 import numpy as np
 
-from ..errors import SceneError
 from .animation import INTERPOLATIONS, PATHS, Sampler
 from .camera import CameraDef
 from .gltf import GltfDocument

@@ -19,13 +19,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..errors import SceneError
-from .animation import INTERPOLATIONS, PATHS, Sampler, trs_matrix
+from .animation import Sampler, trs_matrix
 from .camera import Camera, CameraDef
 from .gltf import GltfDocument, read_gltf
-from .lights import Light, LightDef, light_def_from_gltf
-from .materials import DEFAULT_MATERIAL, Material, material_from_gltf
-from .timeline import DEFAULT_FPS, Timeline
+from .lights import Light, LightDef
+from .materials import Material
+from .timeline import Timeline
 
 log = logging.getLogger(__name__)
 
@@ -152,7 +151,7 @@ class Scene:
         return lights
 
     def _state_key(self, world: np.ndarray, lights: list[Light]) -> str:
-        h = hashlib.sha256()
+        h = hashlib.sha256(self.document.digest.encode())  # keys of different scenes never collide
         for inst in self.instances:
             h.update(np.round(world[inst.node], _STATE_DECIMALS).tobytes())
         for light in lights:

@@ -45,7 +45,7 @@ def test_cubicspline_is_hermite(tmp_path):
                        [[1, 0, 0], [1, 1, 1], [0, 0, 0]]], dtype=float)  # key 1
     scene, node = _animated_scene(tmp_path, "translation", [0, 2], values, "CUBICSPLINE")
     s, dt = 0.25, 2.0
-    h00, h10, h01, h11 = 2 * s**3 - 3 * s**2 + 1, s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
+    h10, h01, h11 = s**3 - 2 * s**2 + s, -2 * s**3 + 3 * s**2, s**3 - s**2
     x = h10 * dt * 1.0 + h01 * 1.0 + h11 * dt * 1.0
     yz = h01 * 1.0
     np.testing.assert_allclose(scene.world_matrices(0.5)[node][:3, 3], [x, yz, yz], atol=1e-6)

@@ -13,7 +13,7 @@ from click.testing import CliRunner
 from pipeline.cli import main
 from pipeline.errors import SceneError
 from pipeline.scene import Scene
-from tests.conftest import QUAD, QUAD_FACES, basic_builder
+from tests.conftest import QUAD, basic_builder
 
 
 def _glb_parts(builder):

@@ -75,15 +75,15 @@ def _add_aircraft(b: GltfBuilder) -> None:
         shapes.box((0.25, 0.04, 0.7), (-0.6, 0.0, 0.0)),           # tailplane
         shapes.box((0.25, 0.3, 0.04), (-0.6, 0.25, 0.0)),          # fin
     ])
-    spot = b.add_spot_light("aircraft_spot", (1.0, 0.95, 0.85), 12.0,
-                            inner_cone_angle=math.radians(35), outer_cone_angle=math.radians(50))
+    spot = b.add_spot_light("aircraft_spot", (1.0, 0.95, 0.85), 10.0,
+                            inner_cone_angle=math.radians(28), outer_cone_angle=math.radians(40))
     up = shapes.axis_angle((1, 0, 0), math.pi / 2)  # the light's -Z turned to +Y
     light_node = b.add_node("aircraft_spot", translation=(0.05, -0.38, 0.0), rotation=up, light=spot)
     mesh_node = b.add_node("aircraft_body", b.add_mesh("aircraft", *mesh, material=body))
     aircraft = b.add_node("aircraft", children=[mesh_node, light_node])
     keys = np.array([1, 45, 90, 135], dtype=float)
     times = [_seconds(f) for f in keys]
-    path = np.array([[1.0, 2.25, 2.7], [2.4, 2.25, 2.5], [3.9, 2.2, 2.5], [5.1, 2.25, 2.7]])
+    path = np.array([[1.0, 1.95, 2.7], [2.4, 1.95, 2.5], [3.9, 1.9, 2.5], [5.1, 1.95, 2.7]])
     b.add_animation("aircraft_flight", aircraft, "translation", times, path)
     bank = [shapes.axis_angle((1, 0, 0), a) for a in np.radians([6.0, -4.0, 4.0, -6.0])]
     b.add_animation("aircraft_flight", aircraft, "rotation", times, bank)
@@ -93,10 +93,10 @@ def _add_torus_corner(b: GltfBuilder) -> None:
     """The green torus, lit in the back-right corner by a fixed spot, leaving it from frame 46."""
     corner_target = np.array([5.3, 0.6, 0.7])
     eye = np.array([4.6, 2.9, 1.2])
-    spot = b.add_spot_light("corner_spot", (1.0, 0.97, 0.9), 60.0,
-                            inner_cone_angle=math.radians(18), outer_cone_angle=math.radians(26))
+    spot = b.add_spot_light("corner_spot", (1.0, 0.97, 0.9), 150.0,
+                            inner_cone_angle=math.radians(9), outer_cone_angle=math.radians(14))
     b.add_node("corner_spot", translation=eye, rotation=shapes.look_at(eye, corner_target), light=spot)
-    green = b.add_material("torus_green", (0.08, 0.75, 0.12))
+    green = b.add_material("torus_green", (0.05, 0.8, 0.1))
     torus = b.add_node("torus", b.add_mesh("torus", *shapes.torus(0.42, 0.14, 32, 12), material=green))
     times = [_seconds(f) for f in (1, 45, 90, 135)]
     positions = [[5.3, 0.57, 0.7], [5.3, 0.57, 0.7], [3.6, 0.57, 2.1], [3.6, 0.57, 2.1]]
@@ -116,7 +116,7 @@ def build() -> GltfBuilder:
                translation=(5.0, 0.35, 3.6))
     _add_aircraft(b)
     _add_torus_corner(b)
-    eye, target = (3.0, 1.9, 4.85), (3.0, 0.6, 1.4)
+    eye, target = (3.0, 2.6, 4.85), (3.0, 0.7, 1.2)
     camera = b.add_camera("camera", yfov=math.radians(62), znear=0.05, zfar=30.0)
     b.add_node("camera", camera=camera, translation=eye, rotation=shapes.look_at(eye, target))
     b.set_scene_extras({"photonloom": {"element_size": ELEMENT_SIZE, "fps": FPS, "frames": FRAMES}})
