@@ -343,6 +343,8 @@ class PhotonStore:
         return int(self._sources()[self._frame(frame_index)])
 
     def _meta(self, frame: int, batches) -> np.ndarray:
+        if not len(batches):
+            return np.zeros((0, len(BATCH_FIELDS)), np.uint64)
         rows = self._batch.get_orthogonal_selection((frame, list(batches), slice(None)))
         if rows.size and (rows[:, 0] != DONE_MAGIC).any():
             raise LoomError(f"frame {frame}: corrupt batch table", path=self.url)

@@ -1,0 +1,344 @@
+"""The photon store on real zarr directories: layout, round trips, idempotence, refusals."""
+from __future__ import annotations
+
+import json
+import time
+
+import numpy as np
+import pytest
+import zarr
+
+from photonstore_helpers import IDENTITY, contents, make_batch, snapshot, write_frame
+from pipeline.errors import LoomError
+from pipeline.store import (CATEGORIES, ELEMENT_MASK, RECORD_BYTES, FrameRecords, PhotonStore,
+                            sort_records)
+
+N_ELEMENTS = 500
+
+
+def create(url, n_frames=4, n_elements=N_ELEMENTS, **overrides) -> PhotonStore:
+    args = dict(IDENTITY, n_frames=n_frames, n_elements=n_elements,
+                frame_numbers=list(range(101, 101 + n_frames)), max_batches=4)
+    args.update(overrides)
+    return PhotonStore.create(url, **args)
+
+
+@pytest.fixture
+def store(tmp_path) -> PhotonStore:
+    return create(tmp_path / "run.zarr")
+
+
+def expected_sorted(batch: dict):
+    order = sort_records(batch["key"], batch["bary"], batch["energy"])
+    return batch["key"][order], batch["bary"][order], batch["energy"][order]
+
+
+def check_consistent(records: FrameRecords, n_elements: int) -> None:
+    """Sorted by element, offsets delimit each element, derived fields agree with the key."""
+    assert np.all(np.diff(records.element.astype(np.int64)) >= 0)
+    assert records.offsets[0] == 0 and records.offsets[-1] == len(records)
+    per_element = np.bincount(records.element, minlength=n_elements)
+    np.testing.assert_array_equal(np.diff(records.offsets), per_element)
+    np.testing.assert_array_equal(records.element, records.key & ELEMENT_MASK)
+    np.testing.assert_array_equal(records.direct, records.key >> 31 == 1)
+    np.testing.assert_array_equal(records.parity, (records.key >> 30) & 1)
+
+
+def test01_record_is_20_bytes_and_described(store):
+    assert RECORD_BYTES == 20
+    attrs = dict(zarr.open_group(store.url, mode="r").attrs)
+    assert attrs["record_layout"]["record_bytes"] == 20
+    assert attrs["format_version"] == 1 and attrs["frame_numbers"] == [101, 102, 103, 104]
+    assert {k: attrs[k] for k in IDENTITY} == IDENTITY
+
+
+@pytest.mark.parametrize("n", [0, 1, 20_000])
+def test02_round_trip(store, n):
+    batch = make_batch(1, 0, n, N_ELEMENTS)
+    assert store.write_batch(1, 0, **batch) is True
+    assert store.is_done(1, 0) and not store.is_done(1, 1) and store.done_batches(1) == [0]
+    got = store.read_frame(1)
+    key, bary, energy = expected_sorted(batch)
+    np.testing.assert_array_equal(got.key, key)
+    np.testing.assert_array_equal(np.stack([got.b1, got.b2], axis=1), bary)
+    np.testing.assert_array_equal(got.energy, energy)
+    check_consistent(got, N_ELEMENTS)
+    assert got.photons_emitted == store.photons_emitted(1) == batch["photons_emitted"]
+    np.testing.assert_array_equal(store.counts(frames=[1])[0], np.diff(got.offsets))
+    assert store.counts(frames=[0]).sum() == 0 and store.done_batches(0) == []
+
+
+def test03_merged_batches(store):
+    batches = write_frame(store.url, 2, [3000, 3000, 6000], N_ELEMENTS)
+    got = store.read_frame(2)
+    check_consistent(got, N_ELEMENTS)
+    assert got.batches == (0, 1, 2) and len(got) == 12000
+    assert got.photons_emitted == sum(b["photons_emitted"] for b in batches.values())
+    # Within an element, batch 0's records come first, then batch 1's, then batch 2's
+    parts = [store.read_frame(2, batches=[b]) for b in range(3)]
+    for e in (0, 1, 7, N_ELEMENTS - 1):
+        lo, hi = got.offsets[e], got.offsets[e + 1]
+        expect = np.concatenate([p.key[p.offsets[e]:p.offsets[e + 1]] for p in parts])
+        np.testing.assert_array_equal(got.key[lo:hi], expect)
+    sub = store.read_frame(2, batches=[0, 2])
+    assert len(sub) == 9000 and sub.photons_emitted == batches[0]["photons_emitted"] * 3
+    np.testing.assert_array_equal(store.counts(frames=[2])[0], np.diff(got.offsets))
+
+
+def test04_input_order_does_not_matter(tmp_path):
+    batch = make_batch(0, 0, 5000, 50)  # 100 hits per element: many equal (element, key) pairs
+    batch["bary"][::3] = 0  # and many records equal but for their energy
+    flipped = {k: v[::-1].copy() if isinstance(v, np.ndarray) else v for k, v in batch.items()}
+    a, b = create(tmp_path / "a", n_elements=50), create(tmp_path / "b", n_elements=50)
+    a.write_batch(0, 0, **batch)
+    b.write_batch(0, 0, **flipped)
+    assert contents(tmp_path / "a") == contents(tmp_path / "b")
+
+
+def test05_rewrite_is_idempotent_and_refuses_other_photons(store, tmp_path):
+    batch = make_batch(0, 0, 4000, N_ELEMENTS)
+    store.write_batch(0, 0, **batch)
+    before = snapshot(tmp_path / "run.zarr")
+    assert store.write_batch(0, 0, **batch) is False
+    assert snapshot(tmp_path / "run.zarr") == before  # not even rewritten: same inode and mtime
+    other = dict(batch, energy=batch["energy"] * np.float32(2))
+    with pytest.raises(LoomError, match="already done with different photons"):
+        store.write_batch(0, 0, **other)
+    assert snapshot(tmp_path / "run.zarr") == before
+
+
+def test06_append_leaves_earlier_batches_untouched(store, tmp_path):
+    write_frame(store.url, 0, [3000], N_ELEMENTS)
+    write_frame(store.url, 1, [3000], N_ELEMENTS)
+    before = snapshot(tmp_path / "run.zarr")
+    b1 = make_batch(0, 1, 6000, N_ELEMENTS, photon_start=1500)
+    store.write_batch(0, 1, **b1)
+    after = snapshot(tmp_path / "run.zarr")
+    assert {k: after[k] for k in before} == before  # same bytes, inode and mtime
+    new = sorted(set(after) - set(before))
+    assert new and all(k.startswith(("frames/0/1/", "counts/c/0/1/", "batch/c.0.1.")) for k in new)
+    assert store.done_batches(0) == [0, 1] and store.photons_emitted(0) == 1500 + 3000
+
+
+def test07_crash_before_done_marker(tmp_path):
+    """Records and counts written but no done marker: not done, invisible, completed by a rerun."""
+    crashed, clean = create(tmp_path / "crashed"), create(tmp_path / "clean")
+    batches = write_frame(crashed.url, 3, [2000], N_ELEMENTS)
+    write_frame(clean.url, 3, [2000, 2000], N_ELEMENTS)
+    second = make_batch(3, 1, 2000, N_ELEMENTS, photon_start=1000)
+    crashed._write_payload(crashed._prepare(3, 1, **{"key": second["key"], "bary": second["bary"],
+                                                     "energy": second["energy"],
+                                                     "photons_emitted": 1000,
+                                                     "photon_start": 1000}))
+    assert (tmp_path / "crashed/frames/3/1/key/c/0").exists()
+    assert not crashed.is_done(3, 1) and crashed.done_batches(3) == [0]
+    assert len(crashed.read_frame(3)) == 2000 and crashed.photons_emitted(3) == 1000
+    np.testing.assert_array_equal(crashed.counts(frames=[3])[0],
+                                  np.bincount(batches[0]["key"] & ELEMENT_MASK,
+                                              minlength=N_ELEMENTS))
+    with pytest.raises(LoomError, match="batch 1 is not done"):
+        crashed.write_batch(3, 2, **make_batch(3, 2, 10, N_ELEMENTS, photon_start=2000))
+    assert crashed.write_batch(3, 1, **second) is True
+    assert contents(tmp_path / "crashed") == contents(tmp_path / "clean")
+
+
+@pytest.mark.parametrize("scheme", ["file", "memory", "path"])
+def test08_urls(tmp_path, scheme):
+    url = {"file": (tmp_path / "u.zarr").as_uri(), "path": str(tmp_path / "u.zarr"),
+           "memory": f"memory://photonloom-test/{tmp_path.name}"}[scheme]
+    create(url)
+    write_frame(url, 1, [500, 500], N_ELEMENTS)
+    reopened = PhotonStore.open(url, **IDENTITY)
+    assert reopened.done_batches(1) == [0, 1] and len(reopened.read_frame(1)) == 1000
+    check_consistent(reopened.read_frame(1), N_ELEMENTS)
+    if scheme != "memory":
+        assert (tmp_path / "u.zarr/frames/1/1/key/zarr.json").exists()
+
+
+@pytest.mark.parametrize("attr, value", [("scene_hash", "scene-other"), ("config_hash", "cfg-9"),
+                                         ("seed", 8), ("n_elements", 501),
+                                         ("frame_numbers", [1, 2, 3, 4])])
+def test09_create_refuses_another_run(store, attr, value):
+    write_frame(store.url, 0, [100], N_ELEMENTS)
+    with pytest.raises(LoomError) as err:
+        create(store.url, **{attr: value})
+    message = str(err.value)
+    assert "\n" not in message and store.url in message and attr in message
+    assert create(store.url).done_batches(0) == [0]  # same identity: resumes
+
+
+@pytest.mark.parametrize("attr, value", [("scene_hash", "x"), ("config_hash", "y"), ("seed", 0)])
+def test10_open_refuses_another_run(store, attr, value):
+    with pytest.raises(LoomError, match=f"{attr}: store was made with {attr}="):
+        PhotonStore.open(store.url, **{attr: value})
+    assert PhotonStore.open(store.url, **IDENTITY).n_elements == N_ELEMENTS
+
+
+def test11_not_a_photon_store(tmp_path):
+    (tmp_path / "plain").mkdir()
+    (tmp_path / "plain/notes.txt").write_text("hello")
+    zarr.create_array(tmp_path / "array", shape=(3,), dtype="u1")
+    zarr.create_group(tmp_path / "group", attributes={"x": 1})
+    old = create(tmp_path / "old")
+    zarr.open_group(old.url, mode="r+").attrs.update({"format_version": 0})
+    cases = {"missing": "no photon store here", "plain": "not a zarr group",
+             "array": "is a zarr array", "group": "not a photon store",
+             "old": "format version 0"}
+    for name, message in cases.items():
+        with pytest.raises(LoomError, match=message):
+            PhotonStore.open(tmp_path / name)
+    assert not (tmp_path / "missing").exists()
+    for name in ("plain", "array", "group", "old"):
+        with pytest.raises(LoomError):
+            create(tmp_path / name)
+    assert (tmp_path / "plain/notes.txt").read_text() == "hello"
+
+
+def test12_interrupted_create_is_finished_by_create(tmp_path):
+    store = create(tmp_path / "s")
+    zarr.open_group(store.url, mode="r+").attrs.update({"complete": False})
+    with pytest.raises(LoomError, match="creation was interrupted"):
+        PhotonStore.open(store.url)
+    create(store.url)
+    assert PhotonStore.open(store.url).counts().shape == (4, N_ELEMENTS)
+
+
+def test13_unwritable_path(tmp_path):
+    (tmp_path / "afile").write_text("")  # works as root too, unlike chmod
+    with pytest.raises(LoomError, match="cannot create photon store") as err:
+        create(tmp_path / "afile/run.zarr")
+    assert "\n" not in str(err.value)
+
+
+def _bad(**changes):
+    batch = make_batch(0, 0, 50, N_ELEMENTS)
+    args = dict(frame_index=0, batch=0, **batch)
+    args.update(changes)
+    return args
+
+
+@pytest.mark.parametrize("args, message", [
+    (_bad(frame_index=-1), "frame_index -1 is out of range"),
+    (_bad(frame_index=4), r"frame_index 4 is out of range \(must be in \[0, 4\)\)"),
+    (_bad(batch=4), "batch 4 is out of range"),
+    (_bad(batch=1.0), "batch must be an integer"),
+    (_bad(bary=np.zeros((49, 2), np.uint16)), "differ in length: key 50, bary 49, energy 50"),
+    (_bad(bary=np.zeros((50, 3), np.uint16)), r"bary has shape \(50, 3\), expected \(n, 2\)"),
+    (_bad(bary=np.full((50, 2), 0.5)), "bary must be integers"),
+    (_bad(key=np.full(50, N_ELEMENTS, np.uint32)), "element id 500 >= n_elements 500"),
+    (_bad(key=np.full(50, -1)), "key has values outside uint32"),
+    (_bad(energy=np.full((50, 3), np.nan)), "energy must be finite and >= 0"),
+    (_bad(energy=np.full((50, 3), -1.0)), "energy must be finite and >= 0"),
+    (_bad(photon_start=25), "photon_start 25 is not contiguous: the previous batch ends at 0"),
+    (_bad(photons_emitted=0), "photons_emitted 0 is out of range"),
+    (_bad(batch=1), "batch 0 is not done; batches are written in order"),
+], ids=lambda v: v if isinstance(v, str) else "")
+def test14_bad_input(store, tmp_path, args, message):
+    with pytest.raises(LoomError, match=message) as err:
+        store.write_batch(**args)
+    assert "\n" not in str(err.value) and str(err.value).startswith(store.url)
+    assert not list((tmp_path / "run.zarr/frames").rglob("key"))
+    assert store.done_batches(0) == []
+
+
+def test15_bad_queries(store):
+    for call, message in [(lambda: store.counts(kind="diffuse"), "kind must be direct"),
+                          (lambda: store.counts(parity=2), "parity None, 0 or 1"),
+                          (lambda: store.counts(frames=[9]), "frame 9 is out of range"),
+                          (lambda: store.read_frame(0, batches=[0]), r"batch\(es\) \[0\] not done"),
+                          (lambda: PhotonStore.open(store.url, mode="w"), "mode must be")]:
+        with pytest.raises(LoomError, match=message):
+            call()
+
+
+def test16_read_only(store):
+    write_frame(store.url, 0, [100], N_ELEMENTS)
+    reader = PhotonStore.open(store.url, mode="r")
+    assert len(reader.read_frame(0)) == 100
+    with pytest.raises(LoomError, match="read-only"):
+        reader.write_batch(0, 1, **make_batch(0, 1, 10, N_ELEMENTS, photon_start=50))
+    with pytest.raises(LoomError, match="read-only"):
+        reader.share_frame(1, 0)
+
+
+def test17_parity_and_kind_split_add_up(store):
+    for f, sizes in enumerate([[4000], [2000, 2000, 4000], [], [1000, 3000]]):
+        write_frame(store.url, f, sizes, N_ELEMENTS)
+    table = {(k, p): store.counts(k, parity=p) for k in ("direct", "indirect", "all")
+             for p in (None, 0, 1)}
+    for k in ("direct", "indirect", "all"):
+        np.testing.assert_array_equal(table[k, 0] + table[k, 1], table[k, None])
+    np.testing.assert_array_equal(table["direct", None] + table["indirect", None],
+                                  table["all", None])
+    for f in range(4):
+        rec = store.read_frame(f)
+        for (k, p), counts in table.items():
+            keep = np.ones(len(rec), bool) if k == "all" else rec.direct == (k == "direct")
+            keep &= True if p is None else rec.parity == p
+            np.testing.assert_array_equal(counts[f], np.bincount(rec.element[keep],
+                                                                 minlength=N_ELEMENTS))
+    assert table["all", None][2].sum() == 0 and len(CATEGORIES) == 4
+    np.testing.assert_array_equal(store.counts(frames=[3, 1, 3]), table["all", None][[3, 1, 3]])
+    np.testing.assert_array_equal(store.batches_per_frame(), [1, 3, 0, 2])
+
+
+def test18_shared_frames(store):
+    write_frame(store.url, 0, [3000, 3000], N_ELEMENTS)
+    write_frame(store.url, 3, [100], N_ELEMENTS)
+    store.share_frame(1, 0)
+    store.share_frame(1, 0)  # recording it again is harmless (resume)
+    store.share_frame(2, 0)
+    reader = PhotonStore.open(store.url)
+    assert [reader.source_frame(f) for f in range(4)] == [0, 0, 0, 3]
+    np.testing.assert_array_equal(reader.read_frame(1).key, reader.read_frame(0).key)
+    assert reader.read_frame(2).source_frame == 0 and reader.done_batches(2) == [0, 1]
+    assert reader.photons_emitted(1) == reader.photons_emitted(0) and reader.is_done(1, 1)
+    table = reader.counts()
+    np.testing.assert_array_equal(table[1], table[0])
+    np.testing.assert_array_equal(reader.batches_per_frame(), [2, 2, 2, 1])
+    with pytest.raises(LoomError, match="frame 1 shares the photons of frame 0; write to 0"):
+        store.write_batch(1, 2, **make_batch(1, 2, 10, N_ELEMENTS, photon_start=3000))
+    for f, g, message in [(1, 3, "frame 1 already shares frame 0"), (3, 3, "its own photons"),
+                          (3, 1, "frame 1 itself shares frame 0; share with 0"),
+                          (0, 3, "other frames share frame 0"),
+                          (3, 0, "frame 3 already has photons of its own")]:
+        with pytest.raises(LoomError, match=message):
+            store.share_frame(f, g)
+
+
+def test19_atrium_size_count_table(tmp_path):
+    """300 frames x 45,000 elements, some frames with two batches: exact, and read quickly."""
+    n_frames, n_elements = 300, 45_000
+    store = create(tmp_path / "atrium", n_frames=n_frames, n_elements=n_elements)
+    expect = np.zeros((n_frames, n_elements), np.uint32)
+    rng = np.random.default_rng(3)
+    for f in range(n_frames):
+        start = 0
+        for b in range(2 if f % 10 == 0 else 1):
+            n = 200
+            key = rng.integers(0, n_elements, n).astype(np.uint32) | np.uint32(f % 2) << 31
+            store.write_batch(f, b, key=key, bary=np.zeros((n, 2), np.uint16),
+                              energy=np.ones((n, 3), np.float32), photons_emitted=100,
+                              photon_start=start)
+            start += 100
+            np.add.at(expect[f], key & ELEMENT_MASK, 1)
+    reader = PhotonStore.open(tmp_path / "atrium")
+    t0 = time.perf_counter()
+    table = reader.counts()
+    seconds = time.perf_counter() - t0
+    assert table.shape == (n_frames, n_elements) and table.dtype == np.uint32
+    np.testing.assert_array_equal(table, expect)
+    assert seconds < 5.0, f"count table took {seconds:.2f} s"
+    np.testing.assert_array_equal(reader.counts("direct", frames=range(0, 300, 2)),
+                                  np.zeros((150, n_elements), np.uint32))
+    np.testing.assert_array_equal(reader.counts("direct", frames=[299, 1]), expect[[299, 1]])
+
+
+def test20_batch_table_is_json_free_of_surprises(store, tmp_path):
+    """The done marker holds start, emitted, count and digest; zarr metadata stays valid JSON."""
+    write_frame(store.url, 0, [300, 300], N_ELEMENTS)
+    info = store.batch_info(0, 1)
+    assert info["photon_start"] == 150 and info["photons_emitted"] == 150
+    assert info["n_records"] == 300 and info["digest"] > 0 and store.batch_info(0, 2) is None
+    for path in (tmp_path / "run.zarr").rglob("zarr.json"):
+        json.loads(path.read_text())
