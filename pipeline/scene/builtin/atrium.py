@@ -94,7 +94,7 @@ def _add_gallery_and_stairs(b: GltfBuilder) -> None:
     for k, x in enumerate((4.0, 8.0, 12.0)):
         b.add_node(f"gallery_column_{k}", column, translation=(x, (GALLERY_Y - SLAB) / 2, GALLERY_Z - 0.4))
     pillar = b.add_mesh("hall_column", *shapes.box((0.6, HEIGHT, 0.6), cell=PANEL_CELL), material=concrete)
-    for k, x in enumerate((4.5, 11.5)):
+    for k, x in enumerate((5.5, 13.0)):
         b.add_node(f"hall_column_{k}", pillar, translation=(x, HEIGHT / 2, 7.0))
     # Built climbing along +z from the origin, then turned 180 degrees about y to climb towards -z.
     flight = shapes.stairs(STEPS, STAIR_WIDTH, RISE, RUN, cells_across=8, bottom=False)

@@ -82,8 +82,9 @@ def stairs(steps: int, width: float, rise: float, run: float, origin: Sequence[f
 
     Every face is cut into step-sized cells so the flight is made of small triangles: each riser
     (facing -z) and tread (facing +y) is cut ``cells_across`` times across the width, and the sides
-    are one column of rise-high cells per step. One quad closes the back (under the top landing),
-    and one the bottom unless ``bottom`` is False (a flight standing on a floor needs none).
+    are one column of rise-high cells per step. A grid of the same cells closes the back (under
+    the top landing), and one the bottom unless ``bottom`` is False (a flight standing on a floor
+    needs none).
     """
     o = np.asarray(origin, dtype=np.float64)
     X, up, ahead = np.array([width, 0.0, 0.0]), np.array([0.0, rise, 0.0]), np.array([0.0, 0.0, run])
@@ -96,9 +97,9 @@ def stairs(steps: int, width: float, rise: float, run: float, origin: Sequence[f
         parts.append(grid(o + k * ahead, ahead, column, 1, k + 1))                 # -x side
         parts.append(grid(o + X + k * ahead, column, ahead, k + 1, 1))             # +x side
     length, height = steps * ahead, steps * up
-    parts.append(quad(o + length, X, height))                                      # back, faces +z
+    parts.append(grid(o + length, X, height, cells_across, steps))                # back, faces +z
     if bottom:
-        parts.append(quad(o, X, length))                                           # bottom, faces -y
+        parts.append(grid(o, X, length, cells_across, steps))                     # bottom, faces -y
     return merge(parts)
 
 
