@@ -18,14 +18,20 @@ def grating(freq_cpd: float, ppd: float = GRATING_PPD, size: int = SIZE) -> np.n
 
 def threshold_contrast(freq_cpd: float, background: float, viewing: ViewingConditions, steps: int = 18,
                        **kwargs) -> float:
-    """Michelson contrast at which the AQM's peak detection probability crosses 0.75 (bisection in log c)."""
+    """Michelson contrast at which the AQM's peak detection probability crosses 0.75 (bisection in log c).
+
+    The peak is taken over the central half of the field: at the image borders the grating meets its
+    mirror image (metric.PAD_FRACTION), a different stimulus from the full-field grating of the CSF.
+    """
     pattern = grating(freq_cpd, viewing.ppd)
-    field = np.full((SIZE, SIZE), background)
+    size = pattern.shape[0]
+    field = np.full((size, size), background)
     lo, hi = -4.0, 0.0
     for _ in range(steps):
         mid = 0.5 * (lo + hi)
         result = aqm_luminance(field, background * (1 + 10**mid * pattern), viewing=viewing, **kwargs)
-        lo, hi = (lo, mid) if result.map.max() > 0.75 else (mid, hi)
+        centre = result.map[size // 4: -size // 4, size // 4: -size // 4]
+        lo, hi = (lo, mid) if centre.max() > 0.75 else (mid, hi)
     return 10**hi
 
 

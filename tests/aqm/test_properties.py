@@ -133,3 +133,12 @@ def test_viewing_farther_lowers_d_aqm(noisy_pair):
     near = aqm(*noisy_pair, viewing=ViewingConditions(viewing_distance_m=0.4)).d_aqm
     far = aqm(*noisy_pair, viewing=ViewingConditions(viewing_distance_m=1.5)).d_aqm
     assert far < near
+
+
+def test_image_borders_do_not_mask(shaded_scene):
+    """Noise along the left border (next to the bright right edge) is as visible as inside the frame."""
+    noisy = monte_carlo(shaded_scene, 200, seed=3)
+    visible = aqm(shaded_scene, noisy).visible
+    border, inside = visible[:, :8].mean(), visible[:, 8:64].mean()
+    assert inside > 0.2
+    assert border > 0.8 * inside

@@ -1,0 +1,90 @@
+"""Pixel flow from camera motion by 3-D warping (§6): image velocity in deg/s."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.aqm import image_velocity
+from pipeline.aqm.flow import focal_pixels, warp_displacement
+from pipeline.errors import LoomError
+
+YFOV = np.radians(45.0)
+SHAPE = (48, 64)
+
+
+def translation(x=0.0, y=0.0, z=0.0) -> np.ndarray:
+    m = np.eye(4)
+    m[:3, 3] = (x, y, z)
+    return m
+
+
+def yaw(angle: float) -> np.ndarray:
+    c, s = np.cos(angle), np.sin(angle)
+    m = np.eye(4)
+    m[0, 0], m[0, 2], m[2, 0], m[2, 2] = c, s, -s, c
+    return m
+
+
+@pytest.fixture
+def wall():
+    return np.full(SHAPE, 4.0)
+
+
+def test_still_camera_gives_no_flow(wall):
+    v = image_velocity(wall, np.eye(4), yfov=YFOV, fps=25, ppd=30, previous=np.eye(4), following=np.eye(4))
+    np.testing.assert_allclose(v, 0.0, atol=1e-9)
+
+
+@pytest.mark.parametrize("depth", [2.0, 8.0])
+def test_sideways_camera_motion_moves_pixels_by_parallax(depth):
+    """Camera moving right by t: points at depth z slide left by f t / z pixels (nearer is faster)."""
+    step = 0.1
+    moved = translation(x=-step)  # world-to-camera of a camera at x = +step
+    d = warp_displacement(np.full(SHAPE, depth), np.eye(4), moved, YFOV)
+    np.testing.assert_allclose(d[..., 0], -focal_pixels(SHAPE[0], YFOV) * step / depth, rtol=1e-9)
+    np.testing.assert_allclose(d[..., 1], 0.0, atol=1e-9)
+
+
+def test_velocity_in_degrees_per_second(wall):
+    step, fps, ppd = 0.1, 24.0, 30.0
+    v = image_velocity(wall, np.eye(4), yfov=YFOV, fps=fps, ppd=ppd, previous=translation(x=step),
+                       following=translation(x=-step))
+    expected = -focal_pixels(SHAPE[0], YFOV) * step / 4.0 * fps / ppd
+    np.testing.assert_allclose(v[..., 0], expected, rtol=1e-9)
+
+
+def test_translation_leaves_points_at_infinity_still():
+    sky = np.full(SHAPE, np.inf)
+    d = warp_displacement(sky, np.eye(4), translation(x=-1.0, z=2.0), YFOV)
+    np.testing.assert_allclose(d, 0.0, atol=1e-9)
+
+
+def test_pan_moves_every_depth_alike():
+    """A camera pan (rotation) gives the same flow at any depth; at the centre f tan(angle) pixels."""
+    angle = np.radians(1.0)
+    near = warp_displacement(np.full(SHAPE, 1.0), np.eye(4), yaw(angle), YFOV)
+    sky = warp_displacement(np.full(SHAPE, np.inf), np.eye(4), yaw(angle), YFOV)
+    np.testing.assert_allclose(near, sky, atol=1e-9)
+    centre = near[SHAPE[0] // 2, SHAPE[1] // 2, 0]
+    assert abs(centre) == pytest.approx(focal_pixels(SHAPE[0], YFOV) * np.tan(angle), rel=0.01)
+
+
+def test_point_behind_next_camera_uses_previous(wall):
+    """A camera passing the wall: pixels behind it take the other neighbour's motion."""
+    v = image_velocity(wall, np.eye(4), yfov=YFOV, fps=25, ppd=30, previous=translation(x=0.1),
+                       following=translation(z=10.0))
+    assert np.all(np.isfinite(v))
+    one_sided = image_velocity(wall, np.eye(4), yfov=YFOV, fps=25, ppd=30, previous=translation(x=0.1))
+    np.testing.assert_allclose(v, one_sided)
+
+
+@pytest.mark.parametrize("depth", [np.full(SHAPE, -1.0), np.full(SHAPE, np.nan), np.zeros(SHAPE)])
+def test_bad_depth_is_one_line_error(depth):
+    with pytest.raises(LoomError) as err:
+        image_velocity(depth, np.eye(4), yfov=YFOV, fps=25, ppd=30, following=np.eye(4))
+    assert "\n" not in str(err.value) and "depth" in str(err.value)
+
+
+def test_flow_needs_a_neighbour(wall):
+    with pytest.raises(LoomError):
+        image_velocity(wall, np.eye(4), yfov=YFOV, fps=25, ppd=30)
