@@ -25,10 +25,10 @@ import numpy as np
 
 from pipeline.scene.builtin import shapes
 from pipeline.scene.builtin.gltf_builder import GltfBuilder
+from pipeline.scene.timeline import Timeline
 
 ELEMENT_SIZE = 0.36
-FPS = 30
-FRAMES = 300
+TIMELINE = Timeline(fps=30, frames=300)
 WIDTH, HEIGHT, DEPTH = 16.0, 8.0, 12.0
 GALLERY_Y, GALLERY_Z, SLAB = 4.0, 4.0, 0.25
 SKYLIGHT_X, SKYLIGHT_Z = (6.0, 10.0), (5.0, 8.0)
@@ -39,18 +39,12 @@ STAIR_GAP = 0.02  # keeps the flight's back face off the slab's front face (no c
 SUN_DIRECTION = (0.35, -1.0, 0.45)  # the way sunlight travels
 
 
-def _seconds(frame: float) -> float:
-    """Time of 1-based ``frame``."""
-    return (frame - 1) / FPS
-
-
 def _add_hall(b: GltfBuilder) -> None:
     """Floor, walls and the roof around the skylight, all facing into the hall."""
     stone = b.add_material("floor_stone", (0.5, 0.48, 0.45))
     plaster = b.add_material("wall_plaster", (0.7, 0.68, 0.64))
     ochre = b.add_material("wall_ochre", (0.75, 0.5, 0.2))
     roof = b.add_material("roof_white", (0.75, 0.75, 0.75))
-    X, Y, Z = np.array([WIDTH, 0, 0]), np.array([0, HEIGHT, 0]), np.array([0, 0, DEPTH])
     (x0, x1), (z0, z1) = SKYLIGHT_X, SKYLIGHT_Z
     at_roof = lambda x, z: (x, HEIGHT, z)  # noqa: E731 - a point on the roof plane
     roof_parts = shapes.merge([  # four quads around the opening, facing down
@@ -66,12 +60,13 @@ def _add_hall(b: GltfBuilder) -> None:
         shapes.panel(at_roof(x0, z0), up, (x1 - x0, 0, 0), PANEL_CELL),
         shapes.panel(at_roof(x0, z1), (x1 - x0, 0, 0), up, PANEL_CELL),
     ])
+    shell = shapes.room_shell(WIDTH, HEIGHT, DEPTH, cell=PANEL_CELL)  # its ceiling is replaced by the roof
     surfaces = [
-        ("floor", shapes.panel((0, 0, 0), Z, X, PANEL_CELL), stone),
-        ("wall_left", shapes.panel((0, 0, 0), Y, Z, PANEL_CELL), plaster),
-        ("wall_right", shapes.panel((WIDTH, 0, 0), Z, Y, PANEL_CELL), ochre),
-        ("wall_back", shapes.panel((0, 0, 0), X, Y, PANEL_CELL), plaster),
-        ("wall_front", shapes.panel((0, 0, DEPTH), Y, X, PANEL_CELL), plaster),
+        ("floor", shell["floor"], stone),
+        ("wall_left", shell["wall_left"], plaster),
+        ("wall_right", shell["wall_right"], ochre),
+        ("wall_back", shell["wall_back"], plaster),
+        ("wall_front", shell["wall_front"], plaster),
         ("roof", roof_parts, roof),
         ("skylight_well", well, roof),
     ]
@@ -124,7 +119,7 @@ def _add_moving_objects(b: GltfBuilder) -> None:
     grey = b.add_material("shade_grey", (0.4, 0.4, 0.4))
 
     cart = b.add_node("cart", b.add_mesh("cart", *shapes.box((1.2, 0.8, 0.8), (0, 0.4, 0), cell=0.5), material=red))
-    keys = [_seconds(f) for f in (1, 100, 200, 300)]
+    keys = [TIMELINE.time(f) for f in (1, 100, 200, 300)]
     values = np.array([[3.0, 0.0, 10.0], [8.0, 0.0, 10.2], [12.5, 0.0, 9.6], [14.0, 0.0, 10.0]])
     tangents = np.array([[2.0, 0.0, 0.0], [1.8, 0.0, 0.0], [1.2, 0.0, -0.1], [0.5, 0.0, 0.0]])
     spline = np.stack([tangents, values, tangents], axis=1)  # in-tangent, value, out-tangent per key
@@ -134,20 +129,20 @@ def _add_moving_objects(b: GltfBuilder) -> None:
     b.add_node("plinth", plinth, translation=(8.0, 0.0, 7.0))
     sculpture = b.add_node("sculpture", b.add_mesh("sculpture", *shapes.torus(0.7, 0.18, 36, 12), material=blue),
                            translation=(8.0, 1.9, 7.0))
-    turn_keys = np.linspace(0.0, _seconds(FRAMES), 9)
+    turn_keys = np.linspace(0.0, TIMELINE.duration, 9)
     turns = [shapes.multiply_quaternions(shapes.axis_angle((0, 1, 0), a), shapes.axis_angle((1, 0, 0), math.pi / 2))
              for a in np.linspace(0.0, 2 * math.pi, 9)]
     b.add_animation("sculpture_turn", sculpture, "rotation", turn_keys, turns)
 
     lift = b.add_node("lift", b.add_mesh("lift", *shapes.box((1.5, 0.15, 1.5), cell=0.5), material=steel),
                       translation=(14.5, 0.1, 5.0))
-    lift_keys = [_seconds(f) for f in (1, 60, 130, 170, 240, 300)]
+    lift_keys = [TIMELINE.time(f) for f in (1, 60, 130, 170, 240, 300)]
     heights = [0.1, 0.1, GALLERY_Y, GALLERY_Y, 0.1, 0.1]
     b.add_animation("lift_ride", lift, "translation", lift_keys, [[14.5, h, 5.0] for h in heights])
 
     shade = b.add_node("skylight_shade", b.add_mesh("skylight_shade", *shapes.box((2.0, 0.05, 3.0), cell=0.5), material=grey))
     parked, covering = (3.0, HEIGHT - 0.2, 6.5), (9.0, HEIGHT - 0.2, 6.5)
-    b.add_animation("shade_steps", shade, "translation", [_seconds(f) for f in (1, 151, 226)],
+    b.add_animation("shade_steps", shade, "translation", [TIMELINE.time(f) for f in (1, 151, 226)],
                     [parked, covering, parked], interpolation="STEP")
 
 
@@ -156,7 +151,7 @@ def _add_camera(b: GltfBuilder) -> None:
     camera = b.add_camera("camera", yfov=math.radians(60), znear=0.05, zfar=60.0)
     path = [((14.0, 1.7, 11.5), (8.0, 2.5, 4.0)), ((11.0, 1.7, 11.0), (6.0, 3.0, 4.0)),
             ((7.0, 1.8, 11.2), (3.0, 3.5, 5.0)), ((5.0, 2.0, 11.5), (1.5, 4.0, 4.0))]
-    keys = np.linspace(0.0, _seconds(FRAMES), len(path))
+    keys = np.linspace(0.0, TIMELINE.duration, len(path))
     node = b.add_node("camera", camera=camera, translation=path[0][0], rotation=shapes.look_at(*path[0]))
     b.add_animation("camera_walk", node, "translation", keys, [eye for eye, _ in path])
     b.add_animation("camera_walk", node, "rotation", keys, [shapes.look_at(eye, at) for eye, at in path])
@@ -170,5 +165,6 @@ def build() -> GltfBuilder:
     _add_lights(b)
     _add_moving_objects(b)
     _add_camera(b)
-    b.set_scene_extras({"photonloom": {"element_size": ELEMENT_SIZE, "fps": FPS, "frames": FRAMES}})
+    b.set_scene_extras({"photonloom": {"element_size": ELEMENT_SIZE, "fps": TIMELINE.fps,
+                                       "frames": TIMELINE.frames}})
     return b

@@ -11,14 +11,12 @@ from __future__ import annotations
 
 import math
 
-import numpy as np
-
 from pipeline.scene.builtin import shapes
 from pipeline.scene.builtin.gltf_builder import GltfBuilder
+from pipeline.scene.timeline import Timeline
 
 ELEMENT_SIZE = 0.4
-FPS = 30
-FRAMES = 30
+TIMELINE = Timeline(fps=30, frames=30)
 LIGHT_SIZE = 0.3
 LIGHT_RADIANCE = 20.0
 
@@ -31,16 +29,10 @@ def build() -> GltfBuilder:
     green = b.add_material("green", (0.14, 0.45, 0.09))
     lamp = b.add_material("ceiling_lamp", (0.78, 0.78, 0.78), emissive=(1.0, 0.9, 0.75),
                           emissive_strength=LIGHT_RADIANCE)
-    X, Y, Z = np.eye(3)
-    walls = [
-        ("floor", shapes.quad((0, 0, 0), Z, X), white),
-        ("ceiling", shapes.quad((0, 1, 0), X, Z), white),
-        ("back_wall", shapes.quad((0, 0, 0), X, Y), white),
-        ("left_wall", shapes.quad((0, 0, 0), Y, Z), red),
-        ("right_wall", shapes.quad((1, 0, 0), Z, Y), green),
-    ]
-    for name, mesh, material in walls:
-        b.add_node(name, b.add_mesh(name, *mesh, material=material))
+    shell = shapes.room_shell(1.0, 1.0, 1.0)
+    for name, material in (("floor", white), ("ceiling", white), ("wall_back", white), ("wall_left", red),
+                           ("wall_right", green)):  # no front wall: the camera looks in
+        b.add_node(name, b.add_mesh(name, *shell[name], material=material))
     corner = 0.5 - LIGHT_SIZE / 2
     panel = shapes.quad((corner, 0.995, corner), (LIGHT_SIZE, 0, 0), (0, 0, LIGHT_SIZE))  # faces -y
     b.add_node("ceiling_lamp", b.add_mesh("ceiling_lamp", *panel, material=lamp))
@@ -51,12 +43,13 @@ def build() -> GltfBuilder:
     short = shapes.box((0.3, 0.3, 0.3), (0, 0.15, 0))
     block = b.add_node("moving_block", b.add_mesh("moving_block", *short, material=white),
                        translation=(0.35, 0.0, 0.7))
-    end = (FRAMES - 1) / FPS
+    end = TIMELINE.duration
     b.add_animation("block_slide", block, "translation", [0.0, end], [[0.35, 0.0, 0.7], [0.75, 0.0, 0.65]])
     b.add_animation("block_slide", block, "rotation", [0.0, end],
                     [shapes.axis_angle((0, 1, 0), 0.0), shapes.axis_angle((0, 1, 0), math.radians(-30))])
 
     camera = b.add_camera("camera", yfov=math.radians(40), znear=0.05, zfar=10.0)
     b.add_node("camera", camera=camera, translation=(0.5, 0.5, 2.3))
-    b.set_scene_extras({"photonloom": {"element_size": ELEMENT_SIZE, "fps": FPS, "frames": FRAMES}})
+    b.set_scene_extras({"photonloom": {"element_size": ELEMENT_SIZE, "fps": TIMELINE.fps,
+                                       "frames": TIMELINE.frames}})
     return b

@@ -25,17 +25,12 @@ import numpy as np
 
 from pipeline.scene.builtin import shapes
 from pipeline.scene.builtin.gltf_builder import GltfBuilder
+from pipeline.scene.timeline import Timeline
 
 ELEMENT_SIZE = 0.4
-FPS = 30
-FRAMES = 135
+TIMELINE = Timeline(fps=30, frames=135)
 WIDTH, HEIGHT, DEPTH = 6.0, 3.0, 5.0
 NICHE_X, NICHE_Z, SOFFIT_Y = 1.5, 1.6, 2.2
-
-
-def _seconds(frame: float) -> float:
-    """Time of 1-based ``frame``."""
-    return (frame - 1) / FPS
 
 
 def _add_shell(b: GltfBuilder) -> None:
@@ -45,15 +40,10 @@ def _add_shell(b: GltfBuilder) -> None:
     floor_grey = b.add_material("floor_grey", (0.55, 0.52, 0.48))
     red = b.add_material("wall_red", (0.75, 0.12, 0.10))
     blue = b.add_material("wall_blue", (0.12, 0.20, 0.70))
-    X, Y, Z = np.array([WIDTH, 0, 0]), np.array([0, HEIGHT, 0]), np.array([0, 0, DEPTH])
-    walls = [
-        ("floor", shapes.quad((0, 0, 0), Z, X), floor_grey),
-        ("ceiling", shapes.quad((0, HEIGHT, 0), X, Z), ceiling_white),
-        ("wall_left", shapes.quad((0, 0, 0), Y, Z), red),
-        ("wall_right", shapes.quad((WIDTH, 0, 0), Z, Y), white),
-        ("wall_back", shapes.quad((0, 0, 0), X, Y), white),
-        ("wall_front", shapes.quad((0, 0, DEPTH), Y, X), blue),
-    ]
+    materials = {"floor": floor_grey, "ceiling": ceiling_white, "wall_left": red, "wall_right": white,
+                 "wall_back": white, "wall_front": blue}
+    shell = shapes.room_shell(WIDTH, HEIGHT, DEPTH)
+    walls = [(name, shell[name], material) for name, material in materials.items()]
     # The niche: a partition, the soffit closing it at 2.2 m, a fascia above its opening. Single
     # quads suffice: surfaces reflect on both faces.
     niche = shapes.merge([
@@ -82,7 +72,7 @@ def _add_aircraft(b: GltfBuilder) -> None:
     mesh_node = b.add_node("aircraft_body", b.add_mesh("aircraft", *mesh, material=body))
     aircraft = b.add_node("aircraft", children=[mesh_node, light_node])
     keys = np.array([1, 45, 90, 135], dtype=float)
-    times = [_seconds(f) for f in keys]
+    times = [TIMELINE.time(f) for f in keys]
     path = np.array([[1.0, 1.95, 2.7], [2.4, 1.95, 2.5], [3.9, 1.9, 2.5], [5.1, 1.95, 2.7]])
     b.add_animation("aircraft_flight", aircraft, "translation", times, path)
     bank = [shapes.axis_angle((1, 0, 0), a) for a in np.radians([6.0, -4.0, 4.0, -6.0])]
@@ -98,7 +88,7 @@ def _add_torus_corner(b: GltfBuilder) -> None:
     b.add_node("corner_spot", translation=eye, rotation=shapes.look_at(eye, corner_target), light=spot)
     green = b.add_material("torus_green", (0.05, 0.8, 0.1))
     torus = b.add_node("torus", b.add_mesh("torus", *shapes.torus(0.42, 0.14, 32, 12), material=green))
-    times = [_seconds(f) for f in (1, 45, 90, 135)]
+    times = [TIMELINE.time(f) for f in (1, 45, 90, 135)]
     positions = [[5.3, 0.57, 0.7], [5.3, 0.57, 0.7], [3.6, 0.57, 2.1], [3.6, 0.57, 2.1]]
     tilt = shapes.axis_angle((1, 0, 0), math.pi / 2)  # ring stands vertical, its hole along z
     headings = np.radians([-45.0, -45.0, 30.0, 30.0])  # first facing the corner's diagonal
@@ -119,5 +109,6 @@ def build() -> GltfBuilder:
     eye, target = (3.0, 2.6, 4.85), (3.0, 0.7, 1.2)
     camera = b.add_camera("camera", yfov=math.radians(62), znear=0.05, zfar=30.0)
     b.add_node("camera", camera=camera, translation=eye, rotation=shapes.look_at(eye, target))
-    b.set_scene_extras({"photonloom": {"element_size": ELEMENT_SIZE, "fps": FPS, "frames": FRAMES}})
+    b.set_scene_extras({"photonloom": {"element_size": ELEMENT_SIZE, "fps": TIMELINE.fps,
+                                       "frames": TIMELINE.frames}})
     return b

@@ -64,6 +64,25 @@ def panel(corner: Sequence[float], edge_u: Sequence[float], edge_v: Sequence[flo
     return grid(corner, edge_u, edge_v, nu, nv)
 
 
+def room_shell(width: float, height: float, depth: float, cell: float | None = None) -> dict[str, TriangleMesh]:
+    """The six inner faces of the box [0, width] x [0, height] x [0, depth], each facing into it.
+
+    Keys: ``floor``, ``ceiling``, ``wall_left`` (x = 0), ``wall_right`` (x = width), ``wall_back``
+    (z = 0), ``wall_front`` (z = depth). Each is one quad, or a :func:`panel` with ``cell``.
+    """
+    X, Y, Z = np.array([width, 0.0, 0.0]), np.array([0.0, height, 0.0]), np.array([0.0, 0.0, depth])
+    face = quad if cell is None else (lambda c, u, v: panel(c, u, v, cell))
+    origin = np.zeros(3)
+    return {
+        "floor": face(origin, Z, X),
+        "ceiling": face(Y, X, Z),
+        "wall_left": face(origin, Y, Z),
+        "wall_right": face(X, Z, Y),
+        "wall_back": face(origin, X, Y),
+        "wall_front": face(Z, Y, X),
+    }
+
+
 def grid(corner: Sequence[float], edge_u: Sequence[float], edge_v: Sequence[float], nu: int, nv: int) -> TriangleMesh:
     """The parallelogram of :func:`quad` cut into nu x nv quads (for surfaces wanted finely meshed)."""
     c, u, v = (np.asarray(a, dtype=np.float64) for a in (corner, edge_u, edge_v))

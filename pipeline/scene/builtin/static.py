@@ -17,10 +17,10 @@ import numpy as np
 
 from pipeline.scene.builtin import shapes
 from pipeline.scene.builtin.gltf_builder import GltfBuilder
+from pipeline.scene.timeline import Timeline
 
 ELEMENT_SIZE = 0.6
-FPS = 30
-FRAMES = 30
+TIMELINE = Timeline(fps=30, frames=30)
 SIZE, HEIGHT = 4.0, 2.5
 
 
@@ -32,17 +32,8 @@ def build() -> GltfBuilder:
     wood = b.add_material("wood", (0.5, 0.33, 0.18))
     blue = b.add_material("blue", (0.12, 0.2, 0.65))
     metal = b.add_material("polished_metal", (0.9, 0.9, 0.9), metallic=1.0, roughness=0.05)
-    X, Y, Z = np.array([SIZE, 0, 0]), np.array([0, HEIGHT, 0]), np.array([0, 0, SIZE])
-    shell = [
-        ("floor", shapes.quad((0, 0, 0), Z, X), white),
-        ("ceiling", shapes.quad((0, HEIGHT, 0), X, Z), white),
-        ("wall_left", shapes.quad((0, 0, 0), Y, Z), yellow),
-        ("wall_right", shapes.quad((SIZE, 0, 0), Z, Y), white),
-        ("wall_back", shapes.quad((0, 0, 0), X, Y), white),
-        ("wall_front", shapes.quad((0, 0, SIZE), Y, X), white),
-    ]
-    for name, mesh, material in shell:
-        b.add_node(name, b.add_mesh(name, *mesh, material=material))
+    for name, mesh in shapes.room_shell(SIZE, HEIGHT, SIZE).items():
+        b.add_node(name, b.add_mesh(name, *mesh, material=yellow if name == "wall_left" else white))
     b.add_node("table", b.add_mesh("table", *shapes.box((1.2, 0.7, 0.8), (0, 0.35, 0)), material=wood),
                translation=(1.4, 0.0, 1.5))
     b.add_node("cube", b.add_mesh("cube", *shapes.box((0.5, 0.5, 0.5), (0, 0.25, 0)), material=blue),
@@ -62,8 +53,9 @@ def build() -> GltfBuilder:
     angles = np.radians(np.linspace(0.0, 90.0, 4))
     eyes = [centre + [1.7 * math.sin(a), 1.0, 1.7 * math.cos(a)] for a in angles]
     node = b.add_node("camera", camera=camera, translation=eyes[0], rotation=shapes.look_at(eyes[0], centre))
-    keys = np.linspace(0.0, (FRAMES - 1) / FPS, len(eyes))
+    keys = np.linspace(0.0, TIMELINE.duration, len(eyes))
     b.add_animation("camera_orbit", node, "translation", keys, eyes)
     b.add_animation("camera_orbit", node, "rotation", keys, [shapes.look_at(e, centre) for e in eyes])
-    b.set_scene_extras({"photonloom": {"element_size": ELEMENT_SIZE, "fps": FPS, "frames": FRAMES}})
+    b.set_scene_extras({"photonloom": {"element_size": ELEMENT_SIZE, "fps": TIMELINE.fps,
+                                       "frames": TIMELINE.frames}})
     return b
