@@ -15,8 +15,9 @@ import pygltflib
 import pytest
 
 from pipeline.errors import LoomError
+from pipeline.scene import Scene
 from pipeline.scene.builtin import BUILTIN_SCENES, write_builtin
-from pipeline.scene.builtin import room, shapes
+from pipeline.scene.builtin import atrium, room, shapes
 from pipeline.scene.builtin.element_estimate import GltfData, estimate_elements, world_triangles
 from pipeline.scene.builtin.gltf_builder import GltfBuilder
 
@@ -130,6 +131,47 @@ def test_room_shell_faces_into_the_room(written):
         tris = data.accessor(primitive.attributes.POSITION)[data.accessor(primitive.indices).reshape(-1, 3)]
         normals = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
         assert np.all(np.einsum("ij,ij->i", normals, centre - tris.mean(axis=1)) > 0), mesh.name
+
+
+def _unoccluded(state, points: np.ndarray, directions: np.ndarray, distances: np.ndarray) -> np.ndarray:
+    """Whether each ray from ``points`` along unit ``directions`` travels ``distances`` without a hit."""
+    from embreex import mesh_construction, rtcore_scene
+
+    scene = rtcore_scene.EmbreeScene()
+    mesh_construction.TriangleMesh(scene, state.vertices.astype(np.float32), state.faces.astype(np.int32))
+    origins = (points + 1e-3 * directions).astype(np.float32)
+    hits = scene.run(origins, directions.astype(np.float32), output=1)
+    return (hits["primID"] < 0) | (hits["tfar"] > distances - 2e-3)
+
+
+@pytest.mark.parametrize("frame", [1, 45, 68, 90, 135])
+def test_no_room_light_sees_into_the_niche(written, frame):
+    """The niche behind the partition is lit only indirectly, all through the animation."""
+    state = Scene.load(written("room")[0]).pose_frame(frame)
+    u, v, w = np.meshgrid(np.linspace(0.05, room.NICHE_X - 0.05, 6), np.linspace(0.05, room.SOFFIT_Y - 0.05, 6),
+                          np.linspace(0.05, room.NICHE_Z - 0.05, 6), indexing="ij")
+    points = np.stack([u, v, w], -1).reshape(-1, 3)
+    assert state.lights
+    for light in state.lights:
+        to_light = light.position - points
+        distance = np.linalg.norm(to_light, axis=1)
+        direction = to_light / distance[:, None]
+        in_cone = light.spot_falloff(np.einsum("ij,j->i", -direction, light.direction)) > 0
+        seen = in_cone & _unoccluded(state, points, direction, distance)
+        assert not seen.any(), f"{light.definition.name} lights the niche at {points[seen][0]}"
+
+
+def test_atrium_sun_enters_only_through_the_skylight(written):
+    state = Scene.load(written("atrium")[0]).pose_frame(1)
+    sun = next(light for light in state.lights if light.kind == "directional")
+    x, z = np.meshgrid(np.linspace(0.1, atrium.WIDTH - 0.1, 60), np.linspace(0.1, atrium.DEPTH - 0.1, 45))
+    floor = np.stack([x.ravel(), np.full(x.size, 1e-3), z.ravel()], -1)
+    towards_sun = np.broadcast_to(-sun.direction, floor.shape)
+    lit = _unoccluded(state, floor, towards_sun, np.full(len(floor), np.inf))
+    assert 20 < lit.sum() < 0.1 * len(floor)
+    crossing = floor[lit] + towards_sun[lit] * ((atrium.HEIGHT - floor[lit, 1]) / towards_sun[lit, 1])[:, None]
+    (x0, x1), (z0, z1) = atrium.SKYLIGHT_X, atrium.SKYLIGHT_Z
+    assert np.all((crossing[:, 0] > x0) & (crossing[:, 0] < x1) & (crossing[:, 2] > z0) & (crossing[:, 2] < z1))
 
 
 def test_atrium_exercises_every_interpolation_and_has_small_stair_triangles(written):
