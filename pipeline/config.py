@@ -73,5 +73,15 @@ class RenderConfig:
     @property
     def hash(self) -> str:
         """Stable 16-hex-digit digest of every field (sorted JSON)."""
-        blob = json.dumps(self.to_dict(), sort_keys=True).encode()
-        return hashlib.sha256(blob).hexdigest()[:16]
+        return _digest(self.to_dict())
+
+    def photon_hash(self, element_size: float) -> str:
+        """Digest of what the photons depend on: the resolved element size and the tracer's
+        settings (the seed is stored on its own). The photon store is keyed by it, so changing
+        k_sigma or d_thr reuses the photons while changing element_size refuses the store."""
+        return _digest({"element_size": float(element_size), "max_depth": self.max_depth})
+
+
+def _digest(data: dict) -> str:
+    blob = json.dumps(data, sort_keys=True).encode()
+    return hashlib.sha256(blob).hexdigest()[:16]

@@ -54,10 +54,29 @@ class Light:
         d = self.definition
         cos_outer = np.cos(d.outer_cone)
         cos_inner = np.cos(d.inner_cone)
-        scale = 1.0 / max(1e-3, cos_inner - cos_outer)
-        offset = -cos_outer * scale
-        t = np.clip(cos_angle * scale + offset, 0.0, 1.0)
+        t = np.clip((cos_angle - cos_outer) / (cos_inner - cos_outer), 0.0, 1.0)
         return t * t
+
+    def range_window(self, distance: np.ndarray) -> np.ndarray:
+        """The specification's recommended range cut-off, clamp(1 - (d/range)^4, 0, 1)^2; 1 without range."""
+        r = self.definition.range
+        if r is None or self.kind == "directional":
+            return np.ones_like(np.asarray(distance, dtype=np.float64))
+        w = np.clip(1.0 - (np.asarray(distance, dtype=np.float64) / r) ** 4, 0.0, 1.0)
+        return w * w
+
+    def power(self, scene_radius: float) -> np.ndarray:
+        """RGB radiant flux (W) leaving the light; a directional light's flux is its irradiance over
+        the disk of ``scene_radius`` that covers the scene, which is what the photons carry."""
+        d = self.definition
+        if d.kind == "point":
+            return 4.0 * np.pi * d.radiant
+        if d.kind == "spot":
+            # 2*pi * integral of the fall-off over cos(theta): full inside the inner cone, and
+            # the squared ramp integrates to (cos_inner - cos_outer) / 3 between the cones
+            ci, co = np.cos(d.inner_cone), np.cos(d.outer_cone)
+            return 2.0 * np.pi * ((1.0 - ci) + (ci - co) / 3.0) * d.radiant
+        return np.pi * scene_radius**2 * d.radiant
 
     def state(self) -> np.ndarray:
         """Numbers that fully describe the light's effect at this instant (for state keys)."""

@@ -1,0 +1,84 @@
+"""Ray casting with Embree (embreex) over a posed frame's source triangles, cached per process.
+
+An Embree scene cannot be pickled, so each worker process builds one per distinct frame *state
+key* and keeps the most recent few (frames with camera-only motion share one). embreex has no
+ray ``tnear`` (it is fixed at 0), so secondary rays start offset along the surface normal
+(:func:`offset_origins`); see shared/notes/ecosystem.md §4.
+"""
+from __future__ import annotations
+
+from collections import OrderedDict
+
+import numpy as np
+from embreex import mesh_construction, rtcore_scene
+
+from pipeline.scene import FrameState
+
+MISS = -1
+_CACHE_SIZE = 4
+
+
+class RayCaster:
+    """Closest-hit and occlusion queries against one frame state's triangles."""
+
+    def __init__(self, state: FrameState):
+        self.state_key = state.state_key
+        self._scene = rtcore_scene.EmbreeScene()
+        mesh_construction.TriangleMesh(self._scene, np.ascontiguousarray(state.vertices, np.float32),
+                                       np.ascontiguousarray(state.faces, np.int32))
+        tri = state.vertices.astype(np.float64)[state.faces]
+        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        self.triangle_area = 0.5 * np.linalg.norm(n, axis=1)
+        self.normals = n / (2.0 * self.triangle_area[:, None])  # unit, counter-clockwise front face
+        lo, hi = state.vertices.min(0), state.vertices.max(0)
+        self.center = (lo + hi).astype(np.float64) / 2
+        self.radius = float(np.linalg.norm(hi - lo)) / 2
+        # Self-intersection offset: relative to the scene size, well above float32 resolution.
+        self.epsilon = max(self.radius, 1e-3) * 2e-5
+        self.rays_cast = 0
+        # Commit the BVH now (embreex commits lazily on the first query).
+        self._scene.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32))
+
+    def intersect(self, origins: np.ndarray, directions: np.ndarray):
+        """Closest hits: (triangle or -1, u, v, distance) for float rays (n, 3)."""
+        if len(origins) == 0:
+            e = np.empty(0)
+            return np.empty(0, np.int64), e, e, e
+        out = self._scene.run(np.ascontiguousarray(origins, np.float32),
+                              np.ascontiguousarray(directions, np.float32), output=1)
+        self.rays_cast += len(origins)
+        return (out["primID"].astype(np.int64), out["u"].astype(np.float64), out["v"].astype(np.float64),
+                out["tfar"].astype(np.float64))
+
+    def occluded(self, origins: np.ndarray, directions: np.ndarray, distances: np.ndarray) -> np.ndarray:
+        """True where something lies between ``origins`` and ``distances`` along ``directions``."""
+        if len(origins) == 0:
+            return np.empty(0, bool)
+        d = np.ascontiguousarray(distances, np.float32).copy()  # embreex overwrites dists in place
+        out = self._scene.run(np.ascontiguousarray(origins, np.float32),
+                              np.ascontiguousarray(directions, np.float32), query="OCCLUDED", dists=d)
+        self.rays_cast += len(origins)
+        return np.asarray(out) != MISS
+
+    def offset_origins(self, points: np.ndarray, triangles: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """Move hit points off their surface, to the side ``directions`` leave towards."""
+        n = self.normals[triangles]
+        side = np.sign(np.einsum("ij,ij->i", n, directions))[:, None]
+        side[side == 0] = 1.0
+        return points + n * side * self.epsilon
+
+
+_casters: OrderedDict[str, RayCaster] = OrderedDict()
+
+
+def caster_for(state: FrameState) -> RayCaster:
+    """This process's :class:`RayCaster` for ``state``, built once per distinct state key."""
+    caster = _casters.get(state.state_key)
+    if caster is None:
+        caster = RayCaster(state)
+        _casters[state.state_key] = caster
+        while len(_casters) > _CACHE_SIZE:
+            _casters.popitem(last=False)
+    else:
+        _casters.move_to_end(state.state_key)
+    return caster
