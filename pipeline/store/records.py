@@ -1,0 +1,140 @@
+"""The photon hit record: its 20-byte layout, validation, total order and per-element tables.
+
+Pure NumPy, no zarr: what a batch of records must satisfy before the store writes it.
+"""
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..errors import LoomError
+
+ELEMENT_BITS = 30
+ELEMENT_MASK = (1 << ELEMENT_BITS) - 1  # key bits 0-29: element id
+PARITY_BIT = np.uint32(1 << 30)  # key bit 30: photon index is odd
+DIRECT_BIT = np.uint32(1 << 31)  # key bit 31: first hit from a light
+BARY_SCALE = 65535  # b1, b2 fixed point; b0 = 1 - b1 - b2
+FIELDS = (("key", np.uint32, 1), ("bary", np.uint16, 2), ("energy", np.float32, 3))
+RECORD_BYTES = 20
+assert sum(np.dtype(t).itemsize * k for _, t, k in FIELDS) == RECORD_BYTES, "record is 20 bytes"
+CATEGORIES = ("indirect_even", "indirect_odd", "direct_even", "direct_odd")  # key >> 30
+
+
+@dataclass(frozen=True)
+class FrameRecords:
+    """One frame's records merged over batches: element-major, batch order within an element."""
+
+    frame_index: int
+    source_frame: int  # frame whose photons these are (== frame_index unless shared)
+    batches: tuple[int, ...]
+    key: np.ndarray  # u32 (n,)
+    element: np.ndarray  # u32 (n,)
+    direct: np.ndarray  # bool (n,)
+    parity: np.ndarray  # u8 (n,), 1 = odd photon index
+    b1: np.ndarray  # u16 (n,), /65535
+    b2: np.ndarray  # u16 (n,)
+    energy: np.ndarray  # f32 (n, 3)
+    offsets: np.ndarray  # i64 (n_elements + 1,): element e is [offsets[e], offsets[e + 1])
+    photons_emitted: int
+
+    def __len__(self) -> int:
+        return int(self.key.shape[0])
+
+    @classmethod
+    def merge(cls, frame_index: int, source_frame: int, batches, parts, n_elements: int,
+              photons_emitted: int) -> FrameRecords:
+        """Merge element-sorted batches ``parts`` [(key, bary, energy, offsets)] in batch order."""
+        key = np.concatenate([p[0] for p in parts] or [np.zeros(0, np.uint32)])
+        bary = np.concatenate([p[1] for p in parts] or [np.zeros((0, 2), np.uint16)])
+        energy = np.concatenate([p[2] for p in parts] or [np.zeros((0, 3), np.float32)])
+        offsets = sum((p[3] for p in parts), np.zeros(n_elements + 1, np.int64))
+        order = np.argsort(key & np.uint32(ELEMENT_MASK), kind="stable")  # keeps batch order
+        key, bary, energy = key[order], bary[order], energy[order]
+        return cls(frame_index, source_frame, tuple(batches), key, key & np.uint32(ELEMENT_MASK),
+                   (key & DIRECT_BIT) != 0, ((key & PARITY_BIT) != 0).astype(np.uint8),
+                   bary[:, 0].copy(), bary[:, 1].copy(), energy, offsets, photons_emitted)
+
+
+@dataclass(frozen=True)
+class SortedBatch:
+    """A validated batch in the store's total order, with its per-element tables."""
+
+    key: np.ndarray
+    bary: np.ndarray
+    energy: np.ndarray
+    offsets: np.ndarray  # i64 (n_elements + 1,)
+    counts: np.ndarray  # u64 (4, n_elements), this batch only, rows in CATEGORIES order
+
+    def digest(self, *extra: int) -> int:
+        """64-bit BLAKE2b of the records (and ``extra`` integers): the batch's fingerprint."""
+        h = hashlib.blake2b(digest_size=8)
+        for part in (self.key, self.bary, self.energy, np.array(extra, np.int64)):
+            h.update(np.ascontiguousarray(part).tobytes())
+        return int.from_bytes(h.digest(), "little")
+
+
+def as_int(value, name: str, where: str, lo: int, hi: int | None = None) -> int:
+    """``value`` as an int in [lo, hi), or a one-line LoomError."""
+    if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
+        raise LoomError(f"{name} must be an integer, got {value!r}", path=where)
+    value = int(value)
+    if value < lo or (hi is not None and value >= hi):
+        bound = f"in [{lo}, {hi})" if hi is not None else f">= {lo}"
+        raise LoomError(f"{name} {value} is out of range (must be {bound})", path=where)
+    return value
+
+
+def as_array(value, name: str, shape_tail: tuple, dtype, where: str) -> np.ndarray:
+    """Check shape and convert to ``dtype`` without wrapping, rounding or NaN."""
+    arr = np.asarray(value)
+    if arr.ndim != 1 + len(shape_tail) or arr.shape[1:] != shape_tail:
+        want = "(n" + "".join(f", {k}" for k in shape_tail) + ")"
+        raise LoomError(f"{name} has shape {arr.shape}, expected {want}", path=where)
+    if np.dtype(dtype).kind == "u":
+        if arr.dtype.kind not in "ui" and arr.size:
+            raise LoomError(f"{name} must be integers, got {arr.dtype}", path=where)
+        if arr.size and (arr.min() < 0 or arr.max() > np.iinfo(dtype).max):
+            raise LoomError(f"{name} has values outside {np.dtype(dtype).name}", path=where)
+    elif arr.size and (arr.dtype.kind not in "fiu" or not np.isfinite(arr).all()
+                       or (arr < 0).any()):
+        raise LoomError(f"{name} must be finite and >= 0", path=where)
+    return np.ascontiguousarray(arr, dtype=dtype)
+
+
+def sort_records(key: np.ndarray, bary: np.ndarray, energy: np.ndarray) -> np.ndarray:
+    """Permutation into the total order (element, key, b1, b2, energy bits): input-order free."""
+    element = (key & ELEMENT_MASK).astype(np.uint64)
+    primary = ((element << np.uint64(2) | (key >> np.uint32(30)).astype(np.uint64)) << np.uint64(32)
+               | bary[:, 0].astype(np.uint64) << np.uint64(16) | bary[:, 1].astype(np.uint64))
+    order = np.argsort(primary, kind="stable")
+    ranked = primary[order]
+    if ranked.size > 1 and (ranked[1:] == ranked[:-1]).any():  # ties: break by energy bits
+        bits = energy.view(np.uint32)
+        order = np.lexsort((bits[:, 2], bits[:, 1], bits[:, 0], primary))
+    return order
+
+
+def prepare_records(key, bary, energy, n_elements: int, where: str) -> SortedBatch:
+    """Validate one batch's arrays, sort them and count hits per element and category."""
+    key = as_array(key, "key", (), np.uint32, where)
+    bary = as_array(bary, "bary", (2,), np.uint16, where)
+    energy = as_array(energy, "energy", (3,), np.float32, where)
+    n = key.shape[0]
+    if bary.shape[0] != n or energy.shape[0] != n:
+        raise LoomError(f"record arrays differ in length: key {n}, bary {bary.shape[0]}, "
+                        f"energy {energy.shape[0]}", path=where)
+    element = key & np.uint32(ELEMENT_MASK)
+    if n and int(element.max()) >= n_elements:
+        raise LoomError(f"element id {int(element.max())} >= n_elements {n_elements}", path=where)
+
+    # Sort into the total order, then count per element and category
+    order = sort_records(key, bary, energy)
+    key, bary, energy, element = key[order], bary[order], energy[order], element[order]
+    category = (key >> np.uint32(30)).astype(np.int64)
+    counts = np.bincount(category * n_elements + element, minlength=len(CATEGORIES) * n_elements)
+    counts = counts.reshape(len(CATEGORIES), n_elements).astype(np.uint64)
+    offsets = np.zeros(n_elements + 1, dtype=np.int64)
+    np.cumsum(counts.sum(axis=0), out=offsets[1:])
+    return SortedBatch(key, bary, energy, offsets, counts)
