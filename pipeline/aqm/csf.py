@@ -113,13 +113,16 @@ def velocity_bank(shape: tuple[int, int], ppd: float) -> np.ndarray:
 
 
 def luminance_coordinate(adaptation: np.ndarray) -> np.ndarray:
-    """Fractional index into LUMINANCE_LEVELS of each pixel's adaptation luminance (log10 spacing)."""
-    return np.clip(np.log10(adaptation) - np.log10(LUMINANCE_LEVELS[0]), 0.0, len(LUMINANCE_LEVELS) - 1.0)
+    """Fractional index into LUMINANCE_LEVELS of each pixel's adaptation luminance (log10 spacing).
+
+    Rounded to 1e-6 so FFT round-off on a uniform field does not call in a neighbouring filter.
+    """
+    return np.round(np.clip(np.log10(adaptation) - np.log10(LUMINANCE_LEVELS[0]), 0.0, len(LUMINANCE_LEVELS) - 1.0), 6)
 
 
 def velocity_coordinate(v_retinal: np.ndarray) -> np.ndarray:
-    """Fractional index into VELOCITY_LEVELS of each pixel's retinal velocity (log2 spacing)."""
-    return np.clip(np.log2(v_retinal / V_DRIFT), 0.0, len(VELOCITY_LEVELS) - 1.0)
+    """Fractional index into VELOCITY_LEVELS of each pixel's retinal velocity (log2 spacing), rounded to 1e-6."""
+    return np.round(np.clip(np.log2(v_retinal / V_DRIFT), 0.0, len(VELOCITY_LEVELS) - 1.0), 6)
 
 
 def space_variant_filter(spectrum: np.ndarray, shape: tuple[int, int], bank: np.ndarray,

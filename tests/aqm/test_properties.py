@@ -23,8 +23,10 @@ def noisy_pair(shaded_scene):
     return monte_carlo(shaded_scene, 400, seed=1), monte_carlo(shaded_scene, 400, seed=2)
 
 
-def test_identical_images_give_zero(shaded_scene):
-    result = aqm(shaded_scene, shaded_scene.copy())
+@pytest.mark.parametrize("speed", [None, 5.0])
+def test_identical_images_give_zero(shaded_scene, speed):
+    flow = None if speed is None else np.full(shaded_scene.shape[:2], speed)
+    result = aqm(shaded_scene, shaded_scene.copy(), flow=flow)
     assert result.d_aqm == 0.0
     assert not result.map.any()
 
