@@ -4,14 +4,16 @@ Layout (metres, y up): a 6 x 3 x 5 box, x in [0, 6], z in [0, 5]. Red wall at x 
 z = 5 (behind the camera), the floor, ceiling, back wall (z = 0) and right wall (x = 6) white-ish.
 In the back-left corner a niche (x < 1.5, z < 1.6, under a soffit at 2.2 m) opens towards +z; a
 full-height partition at x = 1.5 hides it from every light, so it is lit only indirectly.
-A polished metal sphere stands on the floor near the right wall (specular paths).
+A polished metal sphere stands on the floor under the flight path (specular paths).
 
 Lights and motion, in three 45-frame segments:
-- ``aircraft``: a white fuselage-and-wings body flying across the room at 2.25 m (x 1.0 -> 5.1,
-  slight bank). A spot light 0.3 m under it, pointing up, lights only its underside; the light the
-  underside reflects makes a moving highlight on the floor (Fig. 3). Its cone (50 deg) sees only
-  upward directions, so it never lights the niche.
-- ``corner_spot``: a fixed ceiling spot aimed into the back-right corner. The saturated green
+- ``aircraft``: a white fuselage-and-wings body flying across the room at about 1.95 m (x 1.0 ->
+  5.1, z 2.5-2.7, slight roll). A spot light (10 W/sr, 40 deg cone) travels 0.38 m under it,
+  pointing up, and lights only its underside; the light the underside reflects makes a moving
+  highlight on the floor below (Fig. 3). The cone sees only steep upward directions, so it never
+  lights the niche.
+- ``corner_spot``: a fixed ceiling spot (150 W/sr, 14 deg cone) aimed into the back-right corner,
+  narrow enough to light mainly the torus there. The saturated green
   ``torus`` stands there, strongly lit, for frames 1-45 (green colour bleeding on the white walls
   and floor, Fig. 1), moves out of the cone during frames 46-90 (the bleeding fades), and rests in
   the room's middle for frames 91-135 while the aircraft finishes its flight.
@@ -57,7 +59,7 @@ def _add_shell(b: GltfBuilder) -> None:
 
 
 def _add_aircraft(b: GltfBuilder) -> None:
-    """The aircraft with its upward spot light as a child, flying along +x at 2.25 m."""
+    """The aircraft with its upward spot light as a child, flying along +x at about 1.95 m."""
     body = b.add_material("aircraft_white", (0.8, 0.8, 0.8))
     mesh = shapes.merge([
         shapes.box((1.4, 0.26, 0.28)),                              # fuselage along x
@@ -103,7 +105,7 @@ def build() -> GltfBuilder:
     _add_shell(b)
     metal = b.add_material("polished_metal", (0.9, 0.9, 0.92), metallic=1.0, roughness=0.05)
     b.add_node("metal_sphere", b.add_mesh("metal_sphere", *shapes.uv_sphere(0.35, 10, 20), material=metal),
-               translation=(5.0, 0.35, 3.6))
+               translation=(2.0, 0.35, 3.2))
     _add_aircraft(b)
     _add_torus_corner(b)
     eye, target = (3.0, 2.6, 4.85), (3.0, 0.7, 1.2)
