@@ -55,8 +55,9 @@ Modules: ``records`` (the record, validation, total order; pure NumPy), ``photon
 from .photon_store import (BATCH_FIELDS, DONE_MAGIC, FORMAT, FORMAT_VERSION, RECORD_CHUNK,
                            PhotonStore)
 from .records import (BARY_SCALE, CATEGORIES, DIRECT_BIT, ELEMENT_BITS, ELEMENT_MASK, PARITY_BIT,
-                      RECORD_BYTES, FrameRecords, sort_records)
+                      RECORD_BYTES, FrameRecords, pack_key, records_digest, sort_records)
 
 __all__ = ["BARY_SCALE", "BATCH_FIELDS", "CATEGORIES", "DIRECT_BIT", "DONE_MAGIC", "ELEMENT_BITS",
            "ELEMENT_MASK", "FORMAT", "FORMAT_VERSION", "PARITY_BIT", "RECORD_BYTES",
-           "RECORD_CHUNK", "FrameRecords", "PhotonStore", "sort_records"]
+           "RECORD_CHUNK", "FrameRecords", "PhotonStore", "pack_key", "records_digest",
+           "sort_records"]

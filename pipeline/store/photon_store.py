@@ -16,7 +16,7 @@ from zarr.storage import FsspecStore, LocalStore
 
 from ..errors import LoomError
 from .records import (BARY_SCALE, CATEGORIES, ELEMENT_MASK, FIELDS, RECORD_BYTES, FrameRecords,
-                      SortedBatch, as_int, prepare_records)
+                      SortedBatch, as_int, prepare_records, records_digest)
 
 FORMAT = "photonloom.photons"
 FORMAT_VERSION = 1
@@ -385,6 +385,16 @@ class PhotonStore:
         meta = self._meta(g, chosen)
         parts = [self._read_batch(g, b, int(row[3])) for b, row in zip(chosen, meta)]
         return FrameRecords.merge(f, g, chosen, parts, self.n_elements, int(meta[:, 2].sum()))
+
+    def verify_batch(self, frame_index: int, batch: int) -> bool:
+        """Re-read a done batch and check its records against the digest in its done marker."""
+        info = self.batch_info(frame_index, batch)
+        if info is None:
+            return False
+        f = self.source_frame(frame_index)
+        key, bary, energy, _ = self._read_batch(f, int(batch), info["n_records"])
+        return records_digest(key, bary, energy, info["photon_start"],
+                              info["photons_emitted"]) == info["digest"]
 
     def _read_batch(self, f: int, b: int, n: int):
         base = self._root[f"frames/{f}/{b}"]

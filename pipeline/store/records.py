@@ -22,6 +22,24 @@ assert sum(np.dtype(t).itemsize * k for _, t, k in FIELDS) == RECORD_BYTES, "rec
 CATEGORIES = ("indirect_even", "indirect_odd", "direct_even", "direct_odd")  # key >> 30
 
 
+def pack_key(element, photon_index, direct) -> np.ndarray:
+    """u32 keys from element ids, photon indices (only their parity is kept) and direct flags."""
+    element = np.asarray(element)
+    if element.size and (element.min() < 0 or element.max() > ELEMENT_MASK):
+        raise LoomError(f"element ids must be in [0, {ELEMENT_MASK}]")
+    parity = (np.asarray(photon_index) & 1).astype(np.uint32)
+    return (element.astype(np.uint32) | parity << np.uint32(30)
+            | np.asarray(direct, dtype=bool).astype(np.uint32) << np.uint32(31))
+
+
+def records_digest(key: np.ndarray, bary: np.ndarray, energy: np.ndarray, *extra: int) -> int:
+    """64-bit BLAKE2b of sorted records (and ``extra`` integers): a batch's fingerprint."""
+    h = hashlib.blake2b(digest_size=8)
+    for part in (key, bary, energy, np.array(extra, np.int64)):
+        h.update(np.ascontiguousarray(part).tobytes())
+    return int.from_bytes(h.digest(), "little")
+
+
 @dataclass(frozen=True)
 class FrameRecords:
     """One frame's records merged over batches: element-major, batch order within an element."""
@@ -68,11 +86,7 @@ class SortedBatch:
     counts: np.ndarray  # u64 (4, n_elements), this batch only, rows in CATEGORIES order
 
     def digest(self, *extra: int) -> int:
-        """64-bit BLAKE2b of the records (and ``extra`` integers): the batch's fingerprint."""
-        h = hashlib.blake2b(digest_size=8)
-        for part in (self.key, self.bary, self.energy, np.array(extra, np.int64)):
-            h.update(np.ascontiguousarray(part).tobytes())
-        return int.from_bytes(h.digest(), "little")
+        return records_digest(self.key, self.bary, self.energy, *extra)
 
 
 def as_int(value, name: str, where: str, lo: int, hi: int | None = None) -> int:

@@ -9,7 +9,7 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.store import PhotonStore
+from pipeline.store import PhotonStore, pack_key
 
 IDENTITY = dict(scene_hash="scene-abc", config_hash="cfg-123", seed=7)
 
@@ -23,7 +23,7 @@ def make_batch(frame: int, batch: int, n: int, n_elements: int, *, photon_start:
     element = rng.choice(n_elements, n, p=lit / lit.sum()).astype(np.uint32)
     photon = photon_start + rng.integers(0, max(n, 1), n)  # several hits per photon index
     direct = rng.random(n) < 0.4
-    key = element | (photon % 2).astype(np.uint32) << 30 | direct.astype(np.uint32) << 31
+    key = pack_key(element, photon, direct)
     b1 = rng.integers(0, 65536, n)
     b2 = (rng.random(n) * (65535 - b1)).astype(np.int64)
     bary = np.stack([b1, b2], axis=1).astype(np.uint16)

@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import pickle
 import time
 
 import numpy as np
@@ -11,7 +12,7 @@ import zarr
 from photonstore_helpers import IDENTITY, contents, make_batch, snapshot, write_frame
 from pipeline.errors import LoomError
 from pipeline.store import (CATEGORIES, ELEMENT_MASK, RECORD_BYTES, FrameRecords, PhotonStore,
-                            sort_records)
+                            pack_key, sort_records)
 
 N_ELEMENTS = 500
 
@@ -342,3 +343,26 @@ def test20_batch_table_is_json_free_of_surprises(store, tmp_path):
     assert info["n_records"] == 300 and info["digest"] > 0 and store.batch_info(0, 2) is None
     for path in (tmp_path / "run.zarr").rglob("zarr.json"):
         json.loads(path.read_text())
+
+
+def test21_pack_key_bits():
+    key = pack_key([0, 5, (1 << 30) - 1], [7, 8, 9], [True, False, False])
+    np.testing.assert_array_equal(key, [(1 << 31) | (1 << 30), 5, (1 << 30) | ((1 << 30) - 1)])
+    assert key.dtype == np.uint32
+    with pytest.raises(LoomError, match="element ids must be in"):
+        pack_key([1 << 30], [0], [False])
+
+
+def test22_verify_batch_detects_changed_records(store):
+    write_frame(store.url, 1, [2000], N_ELEMENTS)
+    assert store.verify_batch(1, 0) and not store.verify_batch(1, 1)
+    energy = zarr.open_array(store.url, path="frames/1/0/energy", mode="r+")
+    energy[0, 0] = energy[0, 0] + 1
+    assert not store.verify_batch(1, 0)
+
+
+def test23_pickles_by_url(store):
+    write_frame(store.url, 0, [100], N_ELEMENTS)
+    clone = pickle.loads(pickle.dumps(store))
+    assert clone.url == store.url and clone.mode == "r+" and clone.done_batches(0) == [0]
+    assert "frames=4" in repr(clone)

@@ -95,6 +95,7 @@ def test02_writer_killed_mid_write(tmp_path, delay):
     start = 0
     for b in done:
         start += assert_batch_intact(store, 0, b, start, sizes[b])
+        assert store.verify_batch(0, b)
     assert store.photons_emitted(0) == start
 
     # Resume: done batches are skipped, the interrupted one is rewritten in place
