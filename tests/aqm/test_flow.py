@@ -3,8 +3,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from aqm_data import SIZE, monte_carlo
 
-from pipeline.aqm import image_velocity
+from pipeline.aqm import ViewingConditions, aqm, image_velocity
 from pipeline.aqm.flow import focal_pixels, warp_displacement
 from pipeline.errors import LoomError
 
@@ -88,3 +89,15 @@ def test_bad_depth_is_one_line_error(depth):
 def test_flow_needs_a_neighbour(wall):
     with pytest.raises(LoomError):
         image_velocity(wall, np.eye(4), yfov=YFOV, fps=25, ppd=30)
+
+
+def test_camera_flow_lowers_d_aqm_of_untracked_noise(shaded_scene):
+    """Noise on a floor sliding past a moving camera is less visible than on a still frame (§6)."""
+    viewing = ViewingConditions()
+    depth = np.broadcast_to(np.linspace(10.0, 2.0, SIZE)[:, None], (SIZE, SIZE))
+    flow = image_velocity(depth, np.eye(4), yfov=YFOV, fps=25, ppd=viewing.ppd, previous=translation(x=0.05),
+                          following=translation(x=-0.05))
+    a, b = monte_carlo(shaded_scene, 800, 1), monte_carlo(shaded_scene, 800, 2)
+    still = aqm(a, b, viewing=viewing).d_aqm
+    moving = aqm(a, b, flow=flow, viewing=viewing, pursuit_gain=0.0).d_aqm
+    assert 0 < moving < still
