@@ -53,6 +53,7 @@ def _make_store(url, read_only: bool):
 
 
 def _list_dir(store, prefix: str) -> list[str]:
+    # zarr 3.1 has no public sync listing; zarr.core.sync.sync is what its own sync API uses
     async def collect() -> list[str]:
         return [name async for name in store.list_dir(prefix)]
     return sync(collect())
@@ -231,11 +232,13 @@ class PhotonStore:
         return rows.reshape(-1, len(BATCH_FIELDS))
 
     def is_done(self, frame_index: int, batch: int) -> bool:
+        """Whether (frame, batch) has its done marker: a rerun of the task can be skipped."""
         f = self.source_frame(frame_index)
         b = as_int(batch, "batch", self.url, 0, self.max_batches)
         return bool(self._batch[f, b, 0] == DONE_MAGIC)
 
     def done_batches(self, frame_index: int) -> list[int]:
+        """Done batches of a frame (of its source frame, if shared): always 0..k-1."""
         f = self.source_frame(frame_index)
         return [int(b) for b in np.flatnonzero(self._done_table()[f])]
 
@@ -349,6 +352,7 @@ class PhotonStore:
         self._counts[p.frame, p.batch] = running.astype(np.uint32)
 
     def _mark_done(self, p: _Prepared) -> None:
+        """Write the batch's row of the batch table: its own chunk, so it lands whole."""
         self._batch[p.frame, p.batch] = p.row  # one chunk, one atomic write: the batch is done
 
     def share_frame(self, frame_index: int, source_frame_index: int) -> None:
@@ -408,6 +412,8 @@ class PhotonStore:
         """u32 (len(frames), n_elements) hit counts over done batches, without reading records.
 
         ``kind`` is "direct", "indirect" or "all"; ``parity`` 0/1 keeps even/odd photons only.
+        ``frames`` (default all) may repeat or be shared frames. One chunk read per frame: the
+        running counts at its last done batch.
         """
         if kind not in ("direct", "indirect", "all") or parity not in (None, 0, 1):
             raise LoomError(f"counts(kind={kind!r}, parity={parity!r}): kind must be direct, "
