@@ -34,20 +34,22 @@ def make_batch(frame: int, batch: int, n: int, n_elements: int, *, photon_start:
                 photon_start=photon_start)
 
 
-def write_frame(url: str, frame: int, sizes: list[int], n_elements: int) -> dict:
-    """Write batches 0..len(sizes)-1 of a frame in order; returns the batches written."""
+def write_frame(url: str, frame: int, sizes: list[int], n_elements: int,
+                only: list[int] | None = None) -> dict:
+    """Write batches 0..len(sizes)-1 of a frame in order (or just ``only``); returns them."""
     store = PhotonStore.open(url, mode="r+", **IDENTITY)
     start, written = 0, {}
     for b, n in enumerate(sizes):
         batch = make_batch(frame, b, n, n_elements, photon_start=start)
-        store.write_batch(frame, b, **batch)
+        if only is None or b in only:
+            store.write_batch(frame, b, **batch)
+            written[b] = batch
         start += batch["photons_emitted"]
-        written[b] = batch
     return written
 
 
 def write_frame_task(args) -> int:
-    """multiprocessing entry point: (url, frame, sizes, n_elements) -> pid."""
+    """multiprocessing entry point: (url, frame, sizes, n_elements, only) -> pid."""
     write_frame(*args)
     return os.getpid()
 

@@ -39,16 +39,19 @@ def assert_batch_intact(store: PhotonStore, frame: int, batch: int, start: int, 
 
 
 def test01_concurrent_writers_in_processes(tmp_path):
-    """Three spawned processes write six frames (two batches each) into shared tables at once."""
-    plan = [(f, [3000 + 500 * f, 4000]) for f in range(6)]
+    """Three spawned processes write six frames into the shared tables at once, each task twice
+    (as a Dask retry of a presumed-dead worker would): batch 0 of every frame, then batch 1."""
+    plan = {f: [3000 + 500 * f, 4000] for f in range(6)}
     shared = create(tmp_path / "shared.zarr", 6)
     serial = create(tmp_path / "serial.zarr", 6)
+    pids = set()
     with multiprocessing.get_context("spawn").Pool(3) as pool:
-        pids = pool.map(write_frame_task, [(shared, f, sizes, N_ELEMENTS) for f, sizes in plan],
-                        chunksize=1)
-    assert len(set(pids)) > 1
+        for b in (0, 1):
+            tasks = [(shared, f, sizes, N_ELEMENTS, [b]) for f, sizes in plan.items()] * 2
+            pids.update(pool.map(write_frame_task, tasks[::1 - 2 * b], chunksize=1))
+    assert len(pids) > 1
     store = PhotonStore.open(shared, **IDENTITY)
-    for f, sizes in plan:
+    for f, sizes in plan.items():
         assert store.done_batches(f) == [0, 1]
         start = 0
         for b, n in enumerate(sizes):
