@@ -55,6 +55,41 @@ def info_command(scene_file: str, camera: str | None, element_size: float | None
         click.echo(line)
 
 
+def _scheduler_options(f):
+    f = click.option("--workers", type=int, default=None,
+                     help="Worker processes for --scheduler local (default: one per core).")(f)
+    f = click.option("--scheduler", default="local", show_default=True,
+                     help="local (embedded LocalCluster), synchronous, or a scheduler address "
+                          "such as tcp://127.0.0.1:8786.")(f)
+    return f
+
+
+@main.command("shoot")
+@click.argument("scene_file", type=click.Path(dir_okay=False))
+@click.option("--frames", default=None, help="Farm range: 1-100, 1-100x2, 1,5,10-20 (default: all).")
+@click.option("--photons", type=int, default=40_000, show_default=True, help="Photons per frame (N_frame).")
+@click.option("--store", "store_url", required=True, help="Photon store: a directory or an fsspec URL.")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--element-size", type=float, default=None, help="Element edge bound (default: the scene's).")
+@click.option("--max-depth", type=int, default=8, show_default=True, help="Maximum photon bounces.")
+@click.option("--quiet", is_flag=True, help="No progress bar.")
+@_scheduler_options
+def shoot_command(scene_file, frames, photons, store_url, seed, element_size, max_depth, quiet,
+                  scheduler, workers) -> None:
+    """Trace photons for every frame of SCENE_FILE into a photon store (resumable)."""
+    from .config import RenderConfig
+    from .shoot import shoot
+
+    config = RenderConfig(seed=seed, element_size=element_size, max_depth=max_depth)
+    summary = shoot(scene_file, frames=frames, n_photons=photons, store_url=store_url, config=config,
+                    scheduler=scheduler, workers=workers, progress=not quiet)
+    click.echo(
+        f"shot {summary['frames']} frames ({summary['traced_frames']} traced, {summary['shared_frames']} "
+        f"sharing a traced frame's photons): {summary['tasks']} batches run, {summary['skipped']} already "
+        f"done; {summary['photons']:,} photons, {summary['records']:,} records, {summary['rays']:,} rays "
+        f"in {summary['seconds']:.1f} s -> {store_url}")
+
+
 @main.group()
 def bench() -> None:
     """Benchmarks (speed is measured here, never in tests)."""

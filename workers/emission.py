@@ -115,30 +115,30 @@ def emit(table: EmitterTable, state: FrameState, caster: RayCaster, n: int, rng:
             dirs[sel] = d
             weights[sel] = table.flux[choice[sel]]
             continue
-        lights = [state.lights[i] for i in src]
-        pos = np.array([li.position for li in lights])
-        axis = np.array([li.direction for li in lights])
-        radiant = np.array([li.radiant for li in lights])
-        if k == POINT:
-            d = around(np.tile([0.0, 0.0, 1.0], (len(sel), 1)), 1.0 - 2.0 * u1[sel], 2.0 * np.pi * u2[sel])
-            origins[sel], dirs[sel] = pos, d
-            weights[sel] = radiant * 4.0 * np.pi
-        elif k == SPOT:
-            cos_outer = np.array([np.cos(li.definition.outer_cone) for li in lights])
-            cos_t = 1.0 - u1[sel] * (1.0 - cos_outer)
-            d = around(axis, cos_t, 2.0 * np.pi * u2[sel])
-            falloff = np.array([li.spot_falloff(c) for li, c in zip(lights, cos_t)])
-            omega = 2.0 * np.pi * (1.0 - cos_outer)
-            origins[sel], dirs[sel] = pos, d
-            weights[sel] = radiant * (falloff * omega)[:, None]
-        else:  # DIRECTIONAL
-            radius = caster.radius * 1.01
-            r = radius * np.sqrt(u1[sel])
-            phi = 2.0 * np.pi * u2[sel]
-            t, b = _orthonormal_basis(axis)
-            disk = t * (r * np.cos(phi))[:, None] + b * (r * np.sin(phi))[:, None]
-            origins[sel] = caster.center + disk - axis * radius * 1.05
-            dirs[sel] = axis
-            weights[sel] = radiant * np.pi * radius**2
+        for light_index in np.unique(src):
+            light = state.lights[light_index]
+            one = sel[src == light_index]
+            m = len(one)
+            if k == POINT:
+                dirs[one] = around(np.tile([0.0, 0.0, 1.0], (m, 1)), 1.0 - 2.0 * u1[one], 2.0 * np.pi * u2[one])
+                origins[one] = light.position
+                weights[one] = light.radiant * 4.0 * np.pi
+            elif k == SPOT:
+                cos_outer = np.cos(light.definition.outer_cone)
+                cos_t = 1.0 - u1[one] * (1.0 - cos_outer)
+                dirs[one] = around(np.tile(light.direction, (m, 1)), cos_t, 2.0 * np.pi * u2[one])
+                omega = 2.0 * np.pi * (1.0 - cos_outer)
+                origins[one] = light.position
+                weights[one] = light.radiant * (light.spot_falloff(cos_t) * omega)[:, None]
+            else:  # DIRECTIONAL
+                radius = caster.radius * 1.01
+                r = radius * np.sqrt(u1[one])
+                phi = 2.0 * np.pi * u2[one]
+                axis = np.tile(light.direction, (m, 1))
+                t, b = _orthonormal_basis(axis)
+                disk = t * (r * np.cos(phi))[:, None] + b * (r * np.sin(phi))[:, None]
+                origins[one] = caster.center + disk - axis * radius * 1.05
+                dirs[one] = axis
+                weights[one] = light.radiant * np.pi * radius**2
     weights /= prob[:, None]
     return origins, dirs, weights, choice

@@ -1,0 +1,98 @@
+"""Where tasks run: an embedded LocalCluster (default), the synchronous scheduler, or a farm.
+
+Workers run one thread each: Embree and PoCL start their own all-core thread pools, and
+``cl.Kernel`` is not safe for concurrent use (shared/notes/ecosystem.md §2). ``run_tasks`` submits
+plain functions with readable keys, retries failed tasks, and shows a progress bar on stderr.
+"""
+from __future__ import annotations
+
+import os
+from contextlib import contextmanager
+from typing import Callable, Iterable, Iterator
+
+from tqdm import tqdm
+
+from .errors import LoomError
+
+# Environment for worker processes: one thread per library, so processes x 1 thread fill the machine.
+WORKER_ENV = {
+    "OMP_NUM_THREADS": "1",
+    "OPENBLAS_NUM_THREADS": "1",
+    "MKL_NUM_THREADS": "1",
+    "POCL_MAX_PTHREAD_COUNT": "1",
+    "POCL_CPU_MAX_CU_COUNT": "1",
+}
+TASK_RETRIES = 3
+
+
+@contextmanager
+def connect(scheduler: str = "local", workers: int | None = None) -> Iterator[object | None]:
+    """Yield a ``distributed.Client`` (or None for ``synchronous``) for the duration of a run.
+
+    ``local`` starts a LocalCluster of worker processes sized to the machine (``workers`` or one
+    per core); ``synchronous`` runs tasks in this process; anything else is a scheduler address.
+    """
+    if scheduler == "synchronous":
+        yield None
+        return
+    import logging
+
+    import dask
+    from distributed import Client, LocalCluster
+
+    logging.getLogger("distributed").setLevel(logging.WARNING)
+
+    if scheduler == "local":
+        n = workers or os.cpu_count() or 1
+        with dask.config.set({"distributed.nanny.pre-spawn-environ": WORKER_ENV,
+                              "distributed.worker.daemon": False}):
+            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                   dashboard_address=None, silence_logs=logging.WARNING)
+            client = Client(cluster)
+        try:
+            yield client
+        finally:
+            client.close()
+            cluster.close()
+        return
+    if "://" not in scheduler:
+        raise LoomError(f"{scheduler!r} is not local, synchronous or a scheduler address like "
+                        "tcp://127.0.0.1:8786", field="--scheduler")
+    try:
+        client = Client(scheduler, timeout="20s")
+    except OSError as err:
+        raise LoomError(f"cannot reach the scheduler: {err}", field="--scheduler") from None
+    try:
+        yield client
+    finally:
+        client.close()
+
+
+def run_tasks(client, func: Callable, calls: Iterable[tuple[str, dict]], *, desc: str,
+              progress: bool = True) -> dict[str, object]:
+    """Run ``func(**kwargs)`` for every ``(key, kwargs)`` and return ``{key: result}``.
+
+    On a cluster, tasks are submitted with their key (a readable label that also makes a
+    resubmission of the same work reuse it) and ``TASK_RETRIES`` retries; results are collected as
+    they complete, with a tqdm bar on stderr.
+    """
+    calls = list(calls)
+    results: dict[str, object] = {}
+    bar = tqdm(total=len(calls), desc=desc, unit="task", disable=not progress or not calls,
+               dynamic_ncols=True, leave=False)
+    try:
+        if client is None:
+            for key, kwargs in calls:
+                results[key] = func(**kwargs)
+                bar.update()
+            return results
+        from distributed import as_completed
+
+        futures = [client.submit(func, key=key, retries=TASK_RETRIES, pure=False, **kwargs)
+                   for key, kwargs in calls]
+        for future, result in as_completed(futures, with_results=True):
+            results[future.key] = result
+            bar.update()
+        return results
+    finally:
+        bar.close()

@@ -1,0 +1,120 @@
+"""The photon-shooting stage: plan (frame, batch) tasks, fan them out, record what is shared.
+
+Frames with equal state key (camera-only motion) share one photon set: the first frame of the
+timeline with that key is traced, and the others are recorded as its sharers in the store
+(`PhotonStore.share_frame`). A frame's photons arrive in batches: shooting N photons for a frame
+that already holds D < N adds one batch of N - D (N_frame doubles in §5.2.3); a frame with D >= N
+needs nothing. Every task is skipped when its batch is already done, so a rerun resumes.
+"""
+from __future__ import annotations
+
+import os
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+from .cluster import connect, run_tasks
+from .config import RenderConfig
+from .errors import LoomError
+from .scene import ElementMesh, Scene
+from .store import PhotonStore
+
+
+@dataclass
+class ShootPlan:
+    scene: Scene
+    elements: ElementMesh
+    frames: list[int]  # requested frames
+    sources: dict[int, int]  # frame -> frame whose photons it uses (itself when traced)
+    config: RenderConfig
+    n_photons: int
+
+    @property
+    def traced_frames(self) -> list[int]:
+        return sorted({self.sources[f] for f in self.frames})
+
+
+def check_store_location(url: str) -> None:
+    """Refuse a store location we cannot write before anything is traced or written."""
+    if "://" in url and not url.startswith("file://"):
+        return  # remote stores are checked by zarr when created
+    path = Path(url[len("file://"):] if url.startswith("file://") else url)
+    if path.exists() and not path.is_dir():
+        raise LoomError("exists and is not a directory", path=str(path), field="--store")
+    parent = path if path.exists() else path.parent
+    while not parent.exists() and parent != parent.parent:
+        parent = parent.parent
+    if not os.access(parent, os.W_OK):
+        raise LoomError(f"is not writable ({parent} does not allow writing)", path=str(path), field="--store")
+
+
+def plan(scene: Scene, frames_spec: str | None, n_photons: int, config: RenderConfig) -> ShootPlan:
+    if not isinstance(n_photons, int) or n_photons <= 0:
+        raise LoomError(f"must be a positive number of photons per frame, got {n_photons}", field="--photons")
+    frames = scene.timeline.select(frames_spec)
+    elements = ElementMesh.build(scene, config.element_size)
+    keys = scene.frame_state_keys
+    first_with_key: dict[str, int] = {}
+    for f, k in zip(scene.timeline.all_frames(), keys):
+        first_with_key.setdefault(k, f)
+    sources = {f: first_with_key[keys[f - 1]] for f in scene.timeline.all_frames()}
+    return ShootPlan(scene, elements, frames, sources, config, n_photons)
+
+
+def open_store(p: ShootPlan, url: str) -> PhotonStore:
+    """Create (or reopen, refusing another scene or config) the run's store and record sharing."""
+    tl = p.scene.timeline
+    store = PhotonStore.create(
+        url, n_frames=tl.frames, n_elements=p.elements.n_elements, frame_numbers=tl.all_frames(),
+        scene_hash=p.scene.scene_hash, config_hash=p.config.photon_hash(p.elements.element_size),
+        seed=p.config.seed)
+    for f in p.frames:
+        src = p.sources[f]
+        if src != f and store.source_frame(f - 1) != src - 1:
+            store.share_frame(f - 1, src - 1)
+    return store
+
+
+def tasks(p: ShootPlan, store: PhotonStore, url: str) -> list[tuple[str, dict]]:
+    """(key, kwargs) of every batch still to trace."""
+    out = []
+    cfg8 = p.config.photon_hash(p.elements.element_size)[:8]
+    for f in p.traced_frames:
+        done = store.done_batches(f - 1)
+        have = store.photons_emitted(f - 1)
+        if have >= p.n_photons:
+            continue
+        batch = len(done)
+        out.append((f"shoot-{cfg8}-s{p.config.seed}-f{f:05d}-b{batch:02d}", dict(
+            store_url=url, scene_path=str(p.scene.path), scene_hash=p.scene.scene_hash,
+            element_size=p.elements.element_size, frame=f, frame_index=f - 1, batch=batch,
+            n_photons=p.n_photons - have, photon_start=have, seed=p.config.seed,
+            max_depth=p.config.max_depth)))
+    return out
+
+
+def shoot(scene_path: str, *, frames: str | None, n_photons: int, store_url: str,
+          config: RenderConfig = RenderConfig(), scheduler: str = "local", workers: int | None = None,
+          progress: bool = True) -> dict:
+    """Trace every requested frame's photons into the store; returns a summary of the run."""
+    from workers.photons import shoot_task
+
+    scene = Scene.load(scene_path)
+    p = plan(scene, frames, n_photons, config)
+    check_store_location(store_url)
+    store = open_store(p, store_url)
+    todo = tasks(p, store, store_url)
+    t0 = time.perf_counter()
+    results = {}
+    if todo:
+        with connect(scheduler, workers) as client:
+            results = run_tasks(client, shoot_task, todo, desc="shoot", progress=progress)
+    elapsed = time.perf_counter() - t0
+    traced = [r for r in results.values() if not r.get("skipped")]
+    return {
+        "frames": len(p.frames), "traced_frames": len(p.traced_frames),
+        "shared_frames": sum(1 for f in p.frames if p.sources[f] != f),
+        "tasks": len(todo), "skipped": len(p.traced_frames) - len(traced),
+        "photons": sum(r["photons"] for r in traced), "records": sum(r["records"] for r in traced),
+        "rays": sum(r["rays"] for r in traced), "seconds": elapsed,
+    }
