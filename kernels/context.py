@@ -1,0 +1,57 @@
+"""One OpenCL context, queue and built program per process, on a CPU device, cached on disk.
+
+Platform choice is explicit (shared/notes/ecosystem.md §3): ``PYOPENCL_CTX`` if set, else the
+first platform whose name or version mentions PoCL, else any CPU device. PoCL caches compiled
+kernels under ``POCL_CACHE_DIR`` (default ``~/.cache/pocl/kcache``); pyopencl's own invoker cache
+lives under ``XDG_CACHE_HOME``. Programs are built once per process and source text, and kernels
+are fetched once (``prg.name`` would build a new ``cl.Kernel`` on every access).
+"""
+from __future__ import annotations
+
+import os
+from functools import lru_cache
+from pathlib import Path
+
+import pyopencl as cl
+
+from pipeline.errors import LoomError
+
+SOURCE_DIR = Path(__file__).resolve().parent
+
+
+@lru_cache(maxsize=1)
+def device_context() -> tuple[cl.Context, cl.CommandQueue]:
+    """The process's OpenCL context and in-order queue."""
+    if os.environ.get("PYOPENCL_CTX"):
+        ctx = cl.create_some_context(interactive=False)
+        return ctx, cl.CommandQueue(ctx)
+    try:
+        platforms = cl.get_platforms()
+    except cl.Error as err:
+        raise LoomError(f"no OpenCL platform ({err}); install Debian's pocl-opencl-icd (make setup)",
+                        field="opencl") from None
+    ranked = sorted(platforms, key=lambda p: 0 if "pocl" in (p.name + p.version).lower() else 1)
+    for platform in ranked:
+        try:
+            devices = platform.get_devices(device_type=cl.device_type.CPU)
+        except cl.Error:
+            continue
+        if devices:
+            ctx = cl.Context([devices[0]])
+            return ctx, cl.CommandQueue(ctx)
+    raise LoomError("no OpenCL CPU device found; install Debian's pocl-opencl-icd (make setup)",
+                    field="opencl")
+
+
+@lru_cache(maxsize=None)
+def program(name: str, options: tuple[str, ...] = ()) -> cl.Program:
+    """Build ``kernels/<name>.cl`` (with ``kernels/`` on the include path) once per process."""
+    ctx, _ = device_context()
+    source = (SOURCE_DIR / f"{name}.cl").read_text()
+    return cl.Program(ctx, source).build(options=["-I", str(SOURCE_DIR), *options])
+
+
+@lru_cache(maxsize=None)
+def kernel(program_name: str, kernel_name: str, options: tuple[str, ...] = ()) -> cl.Kernel:
+    """A kernel object, fetched once (not thread-safe: workers run one thread each)."""
+    return cl.Kernel(program(program_name, options), kernel_name)
