@@ -1,0 +1,56 @@
+"""Illumination maps from one frame's own photons (§4; dept.md §1.2).
+
+Each diffuse photon hit in element t = (v0, v1, v2) with barycentrics (b0, b1, b2) adds b_k x energy
+to the accumulator S of vertex v_k; the vertex irradiance is E_v = S_v / (N x A_v) with N the photons
+emitted for the frame and A_v the area of v's hat basis function (a third of its elements' areas).
+Record energies are photon weights (flux x N, pipeline/store), so S / N is flux and E is W/m^2.
+Indirect hits (not the first hit from a light) give the indirect map the compositor reads; direct
+hits give a mesh-based direct estimate used only for eye adaptation (§4).
+
+:func:`vertex_irradiance` is the NumPy reference of the temporal gather (kernels/, issue 5) for a
+one-frame window: keep its signature and arithmetic (float64, np.bincount) as they are.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.store import BARY_SCALE
+
+
+def vertex_irradiance(element, b1, b2, energy, elements_mesh, vertex_areas, n_emitted) -> np.ndarray:
+    """(V, 3) float64 vertex irradiance E_v = S_v / (N A_v), S_v = sum_j b_k(j) energy_j (dept.md §1.2).
+
+    ``element`` (n,) element ids; ``b1``, ``b2`` (n,) barycentrics of the element's vertices 1 and 2,
+    either u16 fixed point (/65535, as stored) or floats; b0 = 1 - b1 - b2. ``energy`` (n, 3) photon
+    weights. ``elements_mesh`` an ElementMesh or its (E, 3) ``element_vertices``; ``vertex_areas`` (V,)
+    hat-function areas; ``n_emitted`` photons emitted. Vertices of zero area (or N = 0) get 0.
+    """
+    ev = np.asarray(getattr(elements_mesh, "element_vertices", elements_mesh))
+    areas = np.asarray(vertex_areas, dtype=np.float64)
+    n_vertices = areas.shape[0]
+    element = np.asarray(element, dtype=np.int64)
+    w1, w2 = (_bary(b) for b in (b1, b2))
+    w0 = 1.0 - w1 - w2
+    e = np.asarray(energy, dtype=np.float64).reshape(-1, 3)
+
+    # Splat every hit onto its element's three vertices, accumulating in float64
+    verts = ev[element].astype(np.int64)  # (n, 3)
+    idx = verts.T.ravel()  # vertex 0 of every hit, then vertex 1, then vertex 2
+    weight = np.concatenate([w0, w1, w2])
+    s = np.empty((n_vertices, 3), dtype=np.float64)
+    for c in range(3):
+        s[:, c] = np.bincount(idx, weights=weight * np.tile(e[:, c], 3), minlength=n_vertices)
+
+    denom = float(n_emitted) * areas
+    out = np.zeros_like(s)
+    ok = denom > 0
+    out[ok] = s[ok] / denom[ok, None]
+    return out
+
+
+def _bary(b) -> np.ndarray:
+    """Barycentrics as float64: u16 fixed point is divided by BARY_SCALE, floats pass through."""
+    b = np.asarray(b)
+    if b.dtype.kind in "ui":
+        return b.astype(np.float64) / BARY_SCALE
+    return b.astype(np.float64)
