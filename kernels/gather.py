@@ -1,0 +1,226 @@
+"""Illumination reconstruction from photon records over temporal windows (§4, §5.2.4, §5.2.3).
+
+Three steps, each an OpenCL kernel in ``gather.cl`` with a NumPy float64 twin here:
+
+1. ``element_sums``: per (frame g, element e, parity p, corner k) the sums over e's records of g
+   ``T_rgb = sum b_k * energy`` and ``T_Q = sum b_k^2 * Y^2`` (Y = Rec. 709 luminance of the
+   energy; Q feeds the variance estimate of the adaptive filter, dept.md §1.3). Each record is
+   read once in total, however many windows use its frame.
+2. ``window_flux``: for output frame f and element e with window W = [f - back, f + fwd]
+   (kernels/temporal.py) the pooled flux per corner ``U = sum_{g in W} T_g / sum_{g in W} N_g``
+   (``U_Q = sum T_Q / (sum N_g)^2``). Every photon of the window counts once against all photons
+   emitted in the window's frames: photons are normalised by the frames collected, and frames with
+   different N_frame (§5.2.3) are pooled at their photon weight. With the parity split each half
+   is normalised by half the photons, so I1 and I2 (§5.2.3) both estimate the full irradiance.
+3. ``vertex_flux``: element corners -> vertices in a fixed order (a CSR vertex -> element-corner
+   map), ``S_v = sum U``; irradiance ``E_v = S_v / A_v`` (dept.md §1.2; for a one-frame window
+   exactly the E_v = S_v / (N A_v) of workers/reconstruct.py).
+
+Window sums by prefix sums (the default, ``method="prefix"``): the table of step 1 over a
+contiguous frame range is turned, in place, into prefix sums over frames, so a window sum is the
+difference of two rows whatever the window's length. ``method="direct"`` adds the window's rows
+in order instead. Both cost one pass over the records; the prefix form reads 2 rows per element
+instead of up to F_max + 1 (``loom bench temporal`` measures both; see the README). Cancellation
+is harmless in float64: a difference of prefix sums of at most a few hundred frames loses
+~1e-13 relative to the frame range's total.
+
+No atomics anywhere: every output is written by one work item adding in a fixed order, so
+results are bitwise repeatable (shared/notes/ecosystem.md §3).
+"""
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+
+from pipeline.errors import LoomError
+
+from .context import device_context, kernel
+
+KINDS = {"indirect": 1, "direct": 2, "all": 3}
+LUMA = (0.2126, 0.7152, 0.0722)  # Rec. 709
+BARY_SCALE = 65535.0
+SLOTS = 12  # 3 corners x (R, G, B, Q)
+
+
+def _concat_frames(frames):
+    """Concatenate per-frame element-sorted records into one segment list (frame-major)."""
+    frames = list(frames)
+    if not frames:
+        raise LoomError("no frames of records to gather")
+    n_elements = len(frames[0].offsets) - 1
+    key = np.concatenate([np.asarray(r.key, np.uint32) for r in frames])
+    b1 = np.concatenate([np.asarray(r.b1, np.uint16) for r in frames])
+    b2 = np.concatenate([np.asarray(r.b2, np.uint16) for r in frames])
+    energy = np.concatenate([np.asarray(r.energy, np.float32).reshape(-1, 3) for r in frames])
+    parts, base = [np.zeros(1, np.int64)], 0
+    for r in frames:
+        off = np.asarray(r.offsets, np.int64)
+        if len(off) != n_elements + 1 or off[0] != 0 or off[-1] != len(r.key):
+            raise LoomError("records' offsets do not match their element count")
+        parts.append(off[1:] + base)
+        base += int(off[-1])
+    return key, b1, b2, energy, np.concatenate(parts), len(frames), n_elements
+
+
+def element_sums_cl(frames, *, kind: str = "indirect", split_parity: bool = False) -> np.ndarray:
+    """Step 1 on PoCL for a list of frames' records (objects with ``key``, ``b1``, ``b2``,
+    ``energy``, ``offsets`` sorted by element, like the store's FrameRecords).
+
+    Returns (J, E, P, 3, 4) float64: per frame, element, parity (P = 2 with ``split_parity``,
+    even then odd photons; else 1), corner k and (R, G, B, Q).
+    """
+    key, b1, b2, energy, offsets, n_frames, n_elements = _concat_frames(frames)
+    n_parity = 2 if split_parity else 1
+    out = np.zeros((n_frames, n_elements, n_parity, 3, 4))
+    n_segments = n_frames * n_elements
+    if n_segments == 0:
+        return out
+    ctx, queue = device_context()
+    mf = cl.mem_flags
+
+    def upload(a):
+        return cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a if a.size else np.zeros(1, a.dtype))
+
+    d_out = cl.Buffer(ctx, mf.WRITE_ONLY, size=out.nbytes)
+    kernel("gather", "element_sums")(
+        queue, (n_segments,), None, upload(key), upload(b1), upload(b2), upload(energy),
+        upload(offsets), np.int64(n_segments), np.uint32(KINDS[kind]), np.int32(n_parity), d_out)
+    cl.enqueue_copy(queue, out, d_out)
+    return out
+
+
+def element_sums_reference(frames, *, kind: str = "indirect", split_parity: bool = False) -> np.ndarray:
+    """NumPy twin of :func:`element_sums_cl`."""
+    key, b1, b2, energy, offsets, n_frames, n_elements = _concat_frames(frames)
+    n_parity = 2 if split_parity else 1
+    segment = np.repeat(np.arange(n_frames * n_elements), np.diff(offsets))
+    direct = (key >> 31).astype(bool)
+    keep = (direct & bool(KINDS[kind] & 2)) | (~direct & bool(KINDS[kind] & 1))
+    parity = ((key >> 30) & 1).astype(np.int64) if split_parity else np.zeros(len(key), np.int64)
+    w1 = b1.astype(np.float64) / BARY_SCALE
+    w2 = b2.astype(np.float64) / BARY_SCALE
+    w = np.stack([1.0 - w1 - w2, w1, w2], axis=1)  # (n, 3)
+    e64 = energy.astype(np.float64)
+    y = e64 @ np.array(LUMA)
+    values = np.concatenate([w[:, :, None] * e64[:, None, :], (w * w * (y * y)[:, None])[:, :, None]],
+                            axis=2)  # (n, 3 corners, 4)
+    bins = (segment * n_parity + parity)[keep]
+    flat = np.zeros((n_frames * n_elements * n_parity, 12))
+    for j in range(12):
+        flat[:, j] = np.bincount(bins, weights=values.reshape(-1, 12)[keep, j],
+                                 minlength=flat.shape[0])
+    return flat.reshape(n_frames, n_elements, n_parity, 3, 4)
+
+
+def vertex_slots(element_vertices: np.ndarray, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
+    """CSR vertex -> element corners: ``slots[voffsets[v]:voffsets[v+1]]`` are the
+    ``element * 3 + corner`` of vertex v, ascending."""
+    flat = np.asarray(element_vertices, np.int64).reshape(-1)
+    order = np.argsort(flat, kind="stable")
+    voffsets = np.concatenate([[0], np.cumsum(np.bincount(flat, minlength=n_vertices))]).astype(np.int64)
+    return voffsets, order.astype(np.int32)
+
+
+def _check_windows(sums, n_emitted, back, fwd, rows):
+    sums = np.ascontiguousarray(sums, np.float64)
+    if sums.ndim != 5 or sums.shape[3:] != (3, 4):
+        raise LoomError(f"sums must be (frames, elements, parity, 3, 4), got {sums.shape}")
+    n_emitted = np.asarray(n_emitted, np.float64).reshape(-1)
+    back = np.ascontiguousarray(back, np.uint8)
+    fwd = np.ascontiguousarray(fwd, np.uint8)
+    rows = np.asarray(rows, np.int64).reshape(-1)
+    n_rows, n_elements = sums.shape[:2]
+    if n_emitted.shape[0] != n_rows or back.shape != (len(rows), n_elements) or fwd.shape != back.shape:
+        raise LoomError("sums, n_emitted, back/fwd and rows disagree in shape")
+    if len(rows) and ((rows[:, None] - back < 0).any() or (rows[:, None] + fwd >= n_rows).any()):
+        raise LoomError("a window reaches outside the frames of the sums table")
+    return sums, n_emitted, back, fwd, rows
+
+
+def window_flux_cl(sums, n_emitted, back, fwd, rows, element_vertices, n_vertices: int,
+                   *, method: str = "prefix") -> np.ndarray:
+    """Steps 2 and 3 on PoCL: per output frame the vertex flux (R, G, B, Q).
+
+    Parameters
+    ----------
+    sums : (J, E, P, 3, 4) element sums of J consecutive frames (:func:`element_sums_cl`).
+    n_emitted : (J,) photons emitted in each of those frames.
+    back, fwd : (n_out, E) windows of the output frames (kernels/temporal.py).
+    rows : (n_out,) row of each output frame in ``sums``.
+    element_vertices : (E, 3) vertex ids; ``n_vertices`` V.
+    method : "prefix" (difference of prefix sums) or "direct" (window rows added in order).
+
+    Returns
+    -------
+    (n_out, P, V, 4) float64: RGB ``S_v`` (energy / photons emitted) and the variance term
+    ``sum b^2 Y^2 / N^2``. Irradiance is ``S_v / A_v`` (:func:`irradiance`).
+    """
+    sums, n_emitted, back, fwd, rows = _check_windows(sums, n_emitted, back, fwd, rows)
+    if method not in ("prefix", "direct"):
+        raise LoomError(f"method must be prefix or direct, got {method!r}")
+    n_rows, n_elements, n_parity = sums.shape[:3]
+    out = np.zeros((len(rows), n_parity, n_vertices, 4))
+    if len(rows) == 0 or n_elements == 0:
+        return out
+    ctx, queue = device_context()
+    mf = cl.mem_flags
+    width = n_elements * n_parity * SLOTS
+    prefix = method == "prefix"
+    if prefix:
+        table = np.empty((n_rows + 1) * width)
+        table[:width] = 0.0
+        table[width:] = sums.reshape(-1)
+        d_table = cl.Buffer(ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=table)
+        kernel("gather", "prefix_frames")(queue, (width,), None, d_table, np.int32(n_rows), np.int64(width))
+    else:
+        d_table = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=sums)
+    cum_n = np.concatenate([[0.0], np.cumsum(n_emitted)])
+    d_cum = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=cum_n)
+    voffsets, slots = vertex_slots(element_vertices, n_vertices)
+    d_voff = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=voffsets)
+    d_slots = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=slots if slots.size else np.zeros(1, np.int32))
+    d_back = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=back)
+    d_fwd = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=fwd)
+    d_flux = cl.Buffer(ctx, mf.READ_WRITE, size=8 * width)
+    d_out = cl.Buffer(ctx, mf.WRITE_ONLY, size=max(8, out[0].nbytes))
+    k_window, k_vertex = kernel("gather", "window_flux"), kernel("gather", "vertex_flux")
+    for i, row in enumerate(rows):
+        k_window(queue, (n_elements,), None, d_table, d_cum, d_back, d_fwd,
+                 np.int64(i * n_elements), np.int32(row), np.int32(n_elements), np.int32(n_parity),
+                 np.int32(prefix), d_flux)
+        if n_vertices:
+            k_vertex(queue, (n_vertices,), None, d_flux, d_voff, d_slots, np.int32(n_vertices),
+                     np.int32(n_parity), d_out)
+            cl.enqueue_copy(queue, out[i], d_out)
+    return out
+
+
+def window_flux_reference(sums, n_emitted, back, fwd, rows, element_vertices, n_vertices: int) -> np.ndarray:
+    """NumPy twin of :func:`window_flux_cl`: window rows added directly, corners scattered
+    with ``np.bincount``."""
+    sums, n_emitted, back, fwd, rows = _check_windows(sums, n_emitted, back, fwd, rows)
+    n_rows, n_elements, n_parity = sums.shape[:3]
+    ev = np.asarray(element_vertices, np.int64).reshape(n_elements, 3)
+    out = np.zeros((len(rows), n_parity, n_vertices, 4))
+    for i, row in enumerate(rows):
+        lo, hi = row - back[i].astype(np.int64), row + fwd[i].astype(np.int64) + 1
+        total = np.zeros((n_elements, n_parity, 3, 4))
+        for g in range(int(lo.min(initial=row)), int(hi.max(initial=row + 1))):
+            inside = (lo <= g) & (g < hi)
+            total[inside] += sums[g, inside]
+        cum_n = np.concatenate([[0.0], np.cumsum(n_emitted)])
+        n_sum = ((cum_n[hi] - cum_n[lo]) / n_parity)[:, None, None]
+        total[..., :3] /= n_sum[..., None]
+        total[..., 3] /= n_sum ** 2
+        for p in range(n_parity):
+            for c in range(4):
+                out[i, p, :, c] = np.bincount(ev.reshape(-1), weights=total[:, p, :, c].reshape(-1),
+                                              minlength=n_vertices)
+    return out
+
+
+def irradiance(flux: np.ndarray, vertex_areas: np.ndarray) -> np.ndarray:
+    """E_v = S_v / A_v (dept.md §1.2), RGB, for vertex flux ``(..., V, 4)``; 0 where A_v = 0."""
+    areas = np.asarray(vertex_areas, np.float64)
+    safe = np.where(areas > 0, areas, 1.0)
+    return np.where((areas > 0)[..., None], flux[..., :3] / safe[..., None], 0.0)
