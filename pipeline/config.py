@@ -27,6 +27,12 @@ class RenderConfig:
     smoothing_frames: int = 3  # frames averaged for mu and x, §5.1
     min_extent: int = 3  # minimal temporal extent in frames, always collected, §5.1
 
+    # --- adaptive spatial filter (§5.2.5, Volevich et al. 2000; kernels/filter.py) ----------
+    filter_photons: float = 25.0  # n_eff below which a vertex is filtered; target r = 1/sqrt(n), §5.2.5
+    filter_rings: int = 3  # h_max: largest support, in element rings over the same surface, §5.2.5
+    filter_z: float = 2.5  # bias test: stop growing h where a ring differs by > z sigma, dept.md §1.5
+    filter_angle: float = 30.0  # degrees; neighbours' normals within this of the vertex's, dept.md §1.5
+
     # --- segment adjustment loops (§5.2) ---------------------------------------------------
     fmax_initial: int = 15  # initial F_max, frames in a segment, §5.2.1 and §6
     p_thr: float = 0.40  # p_thr, share of elements whose photons stay valid, §5.2.2
@@ -44,6 +50,10 @@ class RenderConfig:
             "k_sigma": self.k_sigma > 0,
             "smoothing_frames": self.smoothing_frames >= 1 and self.smoothing_frames % 2 == 1,
             "min_extent": self.min_extent >= 1,
+            "filter_photons": self.filter_photons > 0,
+            "filter_rings": 1 <= self.filter_rings <= 255,
+            "filter_z": self.filter_z > 0,
+            "filter_angle": 0 < self.filter_angle <= 180,
             "fmax_initial": self.fmax_initial >= 0,
             "p_thr": 0.0 <= self.p_thr <= 1.0,
             "e_max": self.e_max > 0,
