@@ -90,6 +90,40 @@ def shoot_command(scene_file, frames, photons, store_url, seed, element_size, ma
         f"in {summary['seconds']:.1f} s -> {store_url}")
 
 
+@main.command("render")
+@click.argument("scene_file", type=click.Path(dir_okay=False))
+@click.option("--frames", default=None, help="Farm range: 1-100, 1-100x2, 1,5,10-20 (default: all).")
+@click.option("--out", "out_dir", required=True, type=click.Path(), help="Output directory.")
+@click.option("--resolution", default="640x480", show_default=True, help="WIDTHxHEIGHT in pixels.")
+@click.option("--spp", type=int, default=4, show_default=True, help="Jittered camera samples per pixel.")
+@click.option("--photons", type=int, default=40_000, show_default=True, help="Photons per frame (N_frame).")
+@click.option("--store", "store_url", default=None, help="Photon store (default: OUT/photons.zarr).")
+@click.option("--camera", default=None, help="Camera or camera-node name (default: the first camera).")
+@click.option("--seed", type=int, default=0, show_default=True)
+@click.option("--max-depth", type=int, default=4, show_default=True, help="Mirror/glossy reflections per path.")
+@click.option("--quiet", is_flag=True, help="No progress bars.")
+@_scheduler_options
+def render_command(scene_file, frames, out_dir, resolution, spp, photons, store_url, camera, seed,
+                   max_depth, quiet, scheduler, workers) -> None:
+    """Render frames of SCENE_FILE: photons, illumination maps, EXR/PNG frames, preview.mp4."""
+    from .config import RenderConfig
+    from .render import RenderSettings, parse_resolution, render
+
+    width, height = parse_resolution(resolution)
+    settings = RenderSettings(width=width, height=height, spp=spp, max_depth=max_depth)
+    report = render(scene_file, frames=frames, out_dir=out_dir, settings=settings, n_photons=photons,
+                    store_url=store_url, camera=camera, config=RenderConfig(seed=seed),
+                    scheduler=scheduler, workers=workers, progress=not quiet)
+    t, r = report["times_s"], report["rays"]
+    click.echo(f"rendered {len(report['rendered'])} frames ({len(report['skipped'])} already done) "
+               f"at {width}x{height}, {spp} spp in {t['total_s']:.1f} s (shoot {t['shoot_s']:.1f}, "
+               f"illuminate {t['illuminate_s']:.1f}, composite {t['composite_s']:.1f}, "
+               f"video {t['video_s']:.1f})")
+    click.echo("rays: " + ", ".join(f"{k} {v:,}" for k, v in r.items()))
+    click.echo(f"frames: {out_dir}/beauty.####.exr, .png  video: {report['video']}  "
+               f"report: {out_dir}/report.json")
+
+
 @main.group()
 def bench() -> None:
     """Benchmarks (speed is measured here, never in tests)."""

@@ -54,3 +54,62 @@ def _bary(b) -> np.ndarray:
     if b.dtype.kind in "ui":
         return b.astype(np.float64) / BARY_SCALE
     return b.astype(np.float64)
+
+
+def mesh_adaptation(state, elements, irradiance: np.ndarray, aspect: float) -> float:
+    """Adaptation luminance of a frame from its mesh-based lighting (§4), in radiance units.
+
+    Vertex radiance rho/pi x E (+ emission) of the vertices inside the camera's view frustum,
+    log-averaged (Ward 1994) with weights A_v / d^2, the solid angle a vertex's area subtends.
+    Occlusion is ignored: this is the mesh-level estimate the paper adapts to, not the image.
+    """
+    from pipeline.tonemap import log_average, luminance
+
+    inst_mat = np.zeros(len(state.instance_matrices), np.int64)
+    inst_mat[state.triangle_instance] = state.triangle_material
+    mat = inst_mat[elements.vertex_instance]
+    albedo = np.array([m.albedo for m in state.materials])[mat]
+    emission = np.array([m.emission for m in state.materials])[mat]
+    radiance = luminance(albedo / np.pi * irradiance + emission)
+
+    pos = elements.vertex_positions(state)
+    cam = state.camera
+    local = (pos - cam.position) @ (cam.to_world[:3, :3] / np.linalg.norm(cam.to_world[:3, :3], axis=0))
+    depth = -local[:, 2]
+    tan_y = np.tan(cam.definition.yfov / 2.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        seen = ((depth > 0) & (np.abs(local[:, 1]) <= tan_y * depth)
+                & (np.abs(local[:, 0]) <= tan_y * aspect * depth))
+    if not seen.any():
+        seen[:] = True  # nothing in view: adapt to the whole scene
+    weight = elements.vertex_areas(state)[seen] / np.maximum((local[seen] ** 2).sum(axis=1), 1e-12)
+    return log_average(radiance[seen], weight)
+
+
+def illuminate_task(*, store_url: str, scene_path: str, scene_hash: str, camera: str | None,
+                    element_size: float, frame: int, aspect: float) -> dict:
+    """Dask task: a frame's indirect and direct maps into the store, and its adaptation luminance.
+
+    Plain arguments in, a small dict out; recomputable, so a rerun overwrites the same chunks.
+    """
+    import time
+
+    from pipeline.store import PhotonStore
+    from pipeline.store.illumination import IlluminationMaps
+
+    from .scene_cache import load_elements, load_scene
+
+    t0 = time.perf_counter()
+    scene = load_scene(scene_path, scene_hash, camera)
+    elements = load_elements(scene_path, scene_hash, element_size)
+    state = scene.pose_frame(frame)
+    records = PhotonStore.open(store_url).read_frame(frame - 1)
+    areas = elements.vertex_areas(state)
+    maps = {}
+    for name, sel in (("indirect", ~records.direct), ("direct", records.direct)):
+        maps[name] = vertex_irradiance(records.element[sel], records.b1[sel], records.b2[sel],
+                                       records.energy[sel], elements, areas, records.photons_emitted)
+    adaptation = mesh_adaptation(state, elements, maps["indirect"] + maps["direct"], aspect)
+    IlluminationMaps.open(store_url, mode="r+").write_frame(frame - 1, adaptation=adaptation, **maps)
+    return {"frame": frame, "adaptation": adaptation, "records": len(records),
+            "photons": records.photons_emitted, "seconds": time.perf_counter() - t0}

@@ -1,0 +1,136 @@
+"""Frame files through OpenImageIO and the preview video through imageio-ffmpeg.
+
+* ``beauty.####.exr``: linear Rec.709, half float, zip-compressed, one multichannel image with
+  channels ``R,G,B,A`` (beauty) then ``albedo.R..``, ``direct.R..``, ``indirect.R..``, and metadata
+  ``photonloom:*`` (scene, frame, camera, photons, config and render hashes).
+* ``beauty.####.png``: the tone-mapped 8-bit sRGB picture.
+* ``preview.mp4``: H.264 (yuv420p) from the PNGs, one video frame per rendered frame.
+
+Every file is written under a temporary name in its directory and moved into place with
+``os.replace``, so a killed task leaves either the old file or the new one, never a torn one
+(OIIO picks its writer by extension, hence ``ImageOutput.create(format)``; ecosystem.md §5).
+"""
+from __future__ import annotations
+
+import os
+from pathlib import Path
+
+import numpy as np
+import OpenImageIO as oiio
+
+LAYERS = ("albedo", "direct", "indirect")  # the order OpenEXR stores them in (sorted names)
+EXR_CHANNELS = ("R", "G", "B", "A") + tuple(f"{layer}.{c}" for layer in LAYERS for c in "RGB")
+LINEAR = "lin_rec709_scene"  # OIIO 3.2 colour interop id of linear Rec.709
+SRGB = "srgb_rec709_scene"
+META_PREFIX = "photonloom:"
+
+
+def frame_paths(out_dir, frame: int) -> tuple[Path, Path]:
+    """The EXR and PNG of a frame (4-digit zero padding, ``####`` in farm notation)."""
+    out = Path(out_dir)
+    return out / f"beauty.{frame:04d}.exr", out / f"beauty.{frame:04d}.png"
+
+
+def _partial(path: Path) -> Path:
+    return path.with_name(f".{path.name}.{os.getpid()}.partial")
+
+
+def _write(path: Path, fmt: str, spec: oiio.ImageSpec, pixels: np.ndarray) -> None:
+    tmp = _partial(path)
+    out = oiio.ImageOutput.create(fmt)
+    if out is None:
+        raise RuntimeError(f"OpenImageIO has no {fmt} writer: {oiio.geterror()}")
+    try:
+        if not out.open(str(tmp), spec) or not out.write_image(pixels):
+            raise OSError(f"cannot write {path}: {out.geterror()}")
+    finally:
+        out.close()
+    os.replace(tmp, path)
+
+
+def write_exr(path, beauty, alpha, layers: dict, metadata: dict) -> None:
+    """Write the multichannel half-float EXR atomically (channels :data:`EXR_CHANNELS`)."""
+    h, w = alpha.shape
+    pixels = np.concatenate([beauty, alpha[..., None]] + [layers[name] for name in LAYERS], axis=2)
+    spec = oiio.ImageSpec(w, h, len(EXR_CHANNELS), "half")
+    spec.channelnames = EXR_CHANNELS
+    spec.alpha_channel = 3
+    spec.attribute("compression", "zip")
+    spec.attribute("oiio:ColorSpace", LINEAR)
+    spec.attribute("DateTime", "")  # no wall-clock stamp: equal renders give equal files
+    for key, value in metadata.items():
+        spec.attribute(META_PREFIX + key, value if isinstance(value, (int, float)) else str(value))
+    _write(Path(path), "openexr", spec, np.ascontiguousarray(pixels, np.float32))
+
+
+def write_png(path, rgb8: np.ndarray) -> None:
+    """Write an 8-bit sRGB PNG atomically."""
+    h, w = rgb8.shape[:2]
+    spec = oiio.ImageSpec(w, h, 3, "uint8")
+    spec.attribute("oiio:ColorSpace", SRGB)
+    _write(Path(path), "png", spec, np.ascontiguousarray(rgb8, np.uint8))
+
+
+def read_exr(path) -> tuple[dict, dict]:
+    """({channel name: (H, W) float32}, {metadata key without prefix: value}) of an EXR."""
+    buf = oiio.ImageBuf(str(path))
+    if buf.has_error:
+        raise OSError(buf.geterror())
+    spec = buf.spec()
+    pixels = buf.get_pixels(oiio.FLOAT)
+    if buf.has_error or pixels is None:
+        raise OSError(buf.geterror())
+    channels = {name: pixels[..., i] for i, name in enumerate(spec.channelnames)}
+    meta = {a.name[len(META_PREFIX):]: a.value for a in spec.extra_attribs
+            if a.name.startswith(META_PREFIX)}
+    return channels, meta
+
+
+def frame_is_valid(exr, png, width: int, height: int, render_hash: str) -> bool:
+    """Whether a frame is done: both files exist, decode, have the expected size and channels,
+    and the EXR was made with ``render_hash`` (the same scene, settings and photons)."""
+    if not (Path(exr).is_file() and Path(png).is_file()):
+        return False
+    try:
+        channels, meta = read_exr(exr)
+        img = oiio.ImageBuf(str(png))
+        spec = img.spec()
+        ok_png = (not img.has_error and (spec.width, spec.height, spec.nchannels) == (width, height, 3)
+                  and img.get_pixels(oiio.UINT8) is not None and not img.has_error)
+    except OSError:
+        return False
+    first = next(iter(channels.values()), None)
+    return (ok_png and set(channels) == set(EXR_CHANNELS) and first is not None
+            and first.shape == (height, width) and meta.get("render_hash") == render_hash)
+
+
+def read_png(path) -> np.ndarray:
+    buf = oiio.ImageBuf(str(path))
+    pixels = buf.get_pixels(oiio.UINT8)
+    if buf.has_error or pixels is None:
+        raise OSError(buf.geterror())
+    return pixels
+
+
+def write_video(pngs, path, fps: float) -> int:
+    """Assemble the PNGs into an H.264 MP4 atomically; returns the number of frames written."""
+    import imageio_ffmpeg
+
+    path = Path(path)
+    frames = [read_png(p) for p in pngs]
+    if not frames:
+        return 0
+    h, w = frames[0].shape[:2]
+    size = (w + w % 2, h + h % 2)  # yuv420p needs even sizes: repeat the last row/column
+    tmp = _partial(path)
+    writer = imageio_ffmpeg.write_frames(str(tmp), size, fps=fps, macro_block_size=1, quality=8,
+                                         output_params=["-f", "mp4"], ffmpeg_log_level="error")
+    writer.send(None)
+    try:
+        for f in frames:
+            f = np.pad(f, ((0, size[1] - h), (0, size[0] - w), (0, 0)), mode="edge")
+            writer.send(np.ascontiguousarray(f))
+    finally:
+        writer.close()
+    os.replace(tmp, path)
+    return len(frames)

@@ -1,0 +1,108 @@
+"""Illumination maps in the run's photon store: per frame, vertex irradiance of the element mesh.
+
+Arrays under ``illumination/`` in the photon store's zarr group (layout of the rest in
+``pipeline.store``)::
+
+    illumination/
+      indirect    (F, V, 3) f32, chunk (1, V, 3): irradiance from indirect photon hits (W/m^2)
+      direct      (F, V, 3) f32, chunk (1, V, 3): mesh-based direct estimate (eye adaptation, §4)
+      adaptation  (F,) f64, chunk (1,), fill NaN: the frame's adaptation luminance L_wa
+
+Everything here is recomputed from the photons, so a rewrite simply overwrites. Only the
+coordinator creates the arrays (:meth:`IlluminationMaps.create`); a frame task writes its own
+chunks, one writer each, and ``adaptation`` last: a finite value there means the frame is done.
+LocalStore writes every chunk through temp file + rename, so a chunk is whole or absent.
+"""
+from __future__ import annotations
+
+import os
+
+import numpy as np
+import zarr
+import zarr.errors
+
+from ..errors import LoomError
+from .photon_store import _codec, _make_store
+
+GROUP = "illumination"
+MAPS = ("indirect", "direct")
+
+
+class IlluminationMaps:
+    """The illumination arrays of one photon store (``url``)."""
+
+    def __init__(self, group: zarr.Group, url: str):
+        self.url = url
+        self._group = group
+        try:
+            self._maps = {name: group[name] for name in MAPS}
+            self._adaptation = group["adaptation"]
+        except KeyError as err:
+            raise LoomError(f"illumination maps are missing array {err}", path=url) from None
+        self.n_frames, self.n_vertices = self._maps["indirect"].shape[:2]
+
+    @classmethod
+    def create(cls, url, *, n_frames: int, n_vertices: int) -> IlluminationMaps:
+        """Make (or reuse, when the shapes fit) the arrays in the photon store at ``url``."""
+        where = os.fspath(url)
+        root = _root(where, "r+")
+        group = root.require_group(GROUP)
+        shape = (n_frames, n_vertices, 3)
+        fits = all(name in group and group[name].shape == shape for name in MAPS) \
+            and "adaptation" in group and group["adaptation"].shape == (n_frames,)
+        if not fits:
+            for name in MAPS:
+                group.create_array(name, shape=shape, chunks=(1, n_vertices, 3), dtype="float32",
+                                   fill_value=0.0, compressors=_codec(), overwrite=True)
+            group.create_array("adaptation", shape=(n_frames,), chunks=(1,), dtype="float64",
+                               fill_value=np.nan, overwrite=True)
+        return cls(group, where)
+
+    @classmethod
+    def open(cls, url, mode: str = "r") -> IlluminationMaps:
+        where = os.fspath(url)
+        root = _root(where, mode)
+        if GROUP not in root:
+            raise LoomError("the photon store has no illumination maps yet", path=where)
+        return cls(root[GROUP], where)
+
+    def write_frame(self, frame_index: int, *, indirect: np.ndarray, direct: np.ndarray,
+                    adaptation: float) -> None:
+        """Write one frame's maps, then its adaptation luminance (the done marker)."""
+        f = self._index(frame_index)
+        for name, data in (("indirect", indirect), ("direct", direct)):
+            data = np.asarray(data, dtype=np.float32)
+            if data.shape != (self.n_vertices, 3) or not np.isfinite(data).all():
+                raise LoomError(f"{name} map must be finite ({self.n_vertices}, 3), got {data.shape}",
+                                path=self.url)
+            self._maps[name][f] = data
+        if not np.isfinite(adaptation) or adaptation <= 0:
+            raise LoomError(f"adaptation luminance {adaptation!r} must be positive", path=self.url)
+        self._adaptation[f] = float(adaptation)
+
+    def read(self, frame_index: int, name: str = "indirect") -> np.ndarray:
+        """(V, 3) float32 map of a done frame."""
+        f = self._index(frame_index)
+        if not self.is_done(f):
+            raise LoomError(f"frame index {f} has no illumination map", path=self.url)
+        return self._maps[name][f]
+
+    def adaptation(self) -> np.ndarray:
+        """(F,) adaptation luminance of every frame, NaN where not done."""
+        return self._adaptation[...]
+
+    def is_done(self, frame_index: int) -> bool:
+        return bool(np.isfinite(self._adaptation[self._index(frame_index)]))
+
+    def _index(self, frame_index) -> int:
+        f = int(frame_index)
+        if not 0 <= f < self.n_frames:
+            raise LoomError(f"frame index {f} out of range [0, {self.n_frames})", path=self.url)
+        return f
+
+
+def _root(where: str, mode: str) -> zarr.Group:
+    try:
+        return zarr.open_group(store=_make_store(where, read_only=mode == "r"), mode=mode)
+    except (zarr.errors.GroupNotFoundError, FileNotFoundError):
+        raise LoomError("no photon store here", path=where) from None
