@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from kernels.philox import EMISSION_STREAM, uniforms
 from pipeline.scene import FrameState
 
 from .raycast import RayCaster
@@ -89,14 +90,18 @@ def cosine_hemisphere(normals: np.ndarray, rng: np.random.Generator) -> np.ndarr
     return around(normals, np.sqrt(1.0 - u1), 2.0 * np.pi * u2)
 
 
-def emit(table: EmitterTable, state: FrameState, caster: RayCaster, n: int, rng: np.random.Generator):
-    """``n`` photons: origins (n, 3), unit directions (n, 3), RGB weights (n, 3), emitter ids (n,)."""
-    choice = np.minimum(np.searchsorted(table.cdf, rng.random(n), side="right"), len(table.cdf) - 1)
+def emit(table: EmitterTable, state: FrameState, caster: RayCaster, photon: np.ndarray, key: tuple[int, int]):
+    """Photons with indices ``photon``: origins (n, 3), unit directions (n, 3), RGB weights (n, 3),
+    emitter ids (n,). Random numbers are Philox words of (photon, EMISSION_STREAM + j) under ``key``."""
+    n = len(photon)
+    w0 = uniforms(photon, EMISSION_STREAM, key)
+    u4 = uniforms(photon, EMISSION_STREAM + 1, key)[:, 0]
+    choice = np.minimum(np.searchsorted(table.cdf, w0[:, 0], side="right"), len(table.cdf) - 1)
     prob = table.probability[choice]
     origins = np.empty((n, 3))
     dirs = np.empty((n, 3))
     weights = np.empty((n, 3))
-    u1, u2, u3, u4 = (rng.random(n) for _ in range(4))
+    u1, u2, u3 = w0[:, 1], w0[:, 2], w0[:, 3]
     kind = table.kind[choice]
 
     for k in (POINT, SPOT, DIRECTIONAL, AREA):

@@ -1,0 +1,198 @@
+"""One photon bounce after the hits are known: record, Russian roulette, next direction.
+
+``scatter_reference`` (NumPy, float64) and :class:`ScatterCL` (``scatter.cl`` on PoCL) compute the
+same thing from the same Philox numbers (kernels/philox.py); the tracer in workers/photons.py uses
+either. Per hit on triangle t with material m, photon index i, bounce d:
+
+* diffuse: record (element, b1, b2, weight) with the element located as ElementMesh.locate does;
+  key bit 30 = i odd, bit 31 = (d == 0); the next direction is cosine-weighted about the normal
+  facing the incoming ray (Malley's method; pbrt-v4 §A.5.3).
+* mirror: next direction is the reflection of the incoming one.
+* glossy: a normalised Phong lobe about the mirror direction, pdf (e+1)/(2 pi) cos^e, sampled as
+  cos = u^(1/(e+1)); the weight gains rho (e+2)/(e+1) cos_o (BRDF x cos / pdf, Lafortune and
+  Willems 1994); directions below the surface end the path.
+* Russian roulette: survive with q = max(albedo), weight x albedo / q (Arvo and Kirk 1990).
+
+Words of Philox counter (i_lo, i_hi, d, 0) under key (seed, frame): x -> roulette, y, z -> direction.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .philox import uniforms
+
+KIND_CODE = {"diffuse": 0, "mirror": 1, "glossy": 2}
+WORK_GROUP = 64
+PARITY_BIT = np.uint32(1 << 30)
+DIRECT_BIT = np.uint32(1 << 31)
+
+
+@dataclass
+class SceneTables:
+    """Per-frame-state tables the bounce needs (uploaded once per state to the device)."""
+
+    corners: np.ndarray  # (F, 9) float32 world corners
+    normals: np.ndarray  # (F, 3) float64 unit counter-clockwise normals
+    tri_mat: np.ndarray  # (F,) int32
+    tri_n: np.ndarray  # (F,) int32 element split factor
+    tri_offset: np.ndarray  # (F,) int64 first element
+    albedo: np.ndarray  # (M, 3) float64
+    kind: np.ndarray  # (M,) int32
+    exponent: np.ndarray  # (M,) float64
+    epsilon: float
+
+
+@dataclass
+class Hits:
+    """The bounce's input: hits of live photons."""
+
+    tri: np.ndarray  # int32
+    u: np.ndarray  # float32 (Embree barycentrics)
+    v: np.ndarray  # float32
+    dirs: np.ndarray  # (m, 3) float32 incoming directions
+    beta: np.ndarray  # (m, 3) float64 weights
+    photon: np.ndarray  # int64 photon indices
+
+
+@dataclass
+class Bounce:
+    """The bounce's output, one row per input hit (``recorded`` and ``alive`` select)."""
+
+    key: np.ndarray  # uint32
+    bary: np.ndarray  # (m, 2) uint16
+    energy: np.ndarray  # (m, 3) float32
+    recorded: np.ndarray  # bool
+    origins: np.ndarray  # (m, 3) float32
+    dirs: np.ndarray  # (m, 3) float32
+    beta: np.ndarray  # (m, 3) float64
+    alive: np.ndarray  # bool
+
+
+def _basis_around(axis, cos_t, phi):
+    sign = np.where(axis[:, 2] >= 0, 1.0, -1.0)
+    a = -1.0 / (sign + axis[:, 2])
+    b = axis[:, 0] * axis[:, 1] * a
+    t = np.stack([1 + sign * axis[:, 0] ** 2 * a, sign * b, -sign * axis[:, 0]], axis=1)
+    bt = np.stack([b, sign + axis[:, 1] ** 2 * a, -axis[:, 1]], axis=1)
+    sin_t = np.sqrt(np.clip(1.0 - cos_t**2, 0.0, 1.0))
+    return t * (sin_t * np.cos(phi))[:, None] + bt * (sin_t * np.sin(phi))[:, None] + axis * cos_t[:, None]
+
+
+def scatter_reference(tables: SceneTables, hits: Hits, depth: int, key: tuple[int, int]) -> Bounce:
+    """NumPy twin of ``scatter.cl`` (see the module docstring)."""
+    m_count = len(hits.tri)
+    t = hits.tri.astype(np.int64)
+    m = tables.tri_mat[t]
+    kind = tables.kind[m]
+    u, v = hits.u.astype(np.float64), hits.v.astype(np.float64)
+    c = tables.corners[t].astype(np.float64).reshape(-1, 3, 3)
+    p = (1 - u - v)[:, None] * c[:, 0] + u[:, None] * c[:, 1] + v[:, None] * c[:, 2]
+    n = tables.normals[t]
+    d = hits.dirs.astype(np.float64)
+    facing = np.where((np.einsum("ij,ij->i", n, d) < 0)[:, None], n, -n)
+    beta = hits.beta.copy()
+
+    # Record diffuse hits (same arithmetic as ElementMesh.locate)
+    recorded = kind == 0
+    ns = tables.tri_n[t].astype(np.int64)
+    x = np.clip(u, 0, 1) * ns
+    y = np.clip(v, 0, 1) * ns
+    a = np.clip(np.floor(x).astype(np.int64), 0, ns - 1)
+    b = np.clip(np.floor(y).astype(np.int64), 0, ns - 1 - a)
+    fx, fy = x - a, y - b
+    up = (fx + fy <= 1.0) | (a + b >= ns - 1)
+    local = np.where(up, a * ns - a * (a - 1) // 2 + b, ns * (ns + 1) // 2 + a * (ns - 1) - a * (a - 1) // 2 + b)
+    b1 = np.clip(np.where(up, fx, fx + fy - 1.0), 0.0, 1.0)
+    b2 = np.clip(np.where(up, fy, 1.0 - fx), 0.0, 1.0 - b1)
+    key_out = (tables.tri_offset[t] + local).astype(np.uint32)
+    key_out |= np.where(hits.photon % 2 == 1, PARITY_BIT, np.uint32(0))
+    if depth == 0:
+        key_out |= DIRECT_BIT
+    bary = np.stack([np.rint(b1 * 65535.0), np.rint(b2 * 65535.0)], 1).astype(np.uint16)
+    energy = beta.astype(np.float32)
+    key_out[~recorded] = 0
+    bary[~recorded] = 0
+    energy[~recorded] = 0
+
+    # Russian roulette and the next direction
+    w = uniforms(hits.photon, depth, key)
+    rho = tables.albedo[m]
+    q = rho.max(axis=1)
+    survive = w[:, 0] < q
+    beta = beta * rho / np.where(q > 0, q, 1.0)[:, None]
+    mirror = d - 2.0 * np.einsum("ij,ij->i", d, facing)[:, None] * facing
+    nd = np.empty((m_count, 3))
+    diffuse = kind == 0
+    nd[diffuse] = _basis_around(facing[diffuse], np.sqrt(1.0 - w[diffuse, 1]), 2.0 * np.pi * w[diffuse, 2])
+    nd[kind == 1] = mirror[kind == 1]
+    glossy = kind == 2
+    if glossy.any():
+        e = tables.exponent[m[glossy]]
+        cos_a = w[glossy, 1] ** (1.0 / (e + 1.0))
+        g = _basis_around(mirror[glossy], cos_a, 2.0 * np.pi * w[glossy, 2])
+        cos_o = np.einsum("ij,ij->i", g, facing[glossy])
+        beta[glossy] *= (np.maximum(cos_o, 0.0) * (e + 2.0) / (e + 1.0))[:, None]
+        survive[glossy] &= cos_o > 0
+        nd[glossy] = g
+    side = np.where(np.einsum("ij,ij->i", n, nd) < 0, -1.0, 1.0)
+    origins = (p + n * (side * tables.epsilon)[:, None]).astype(np.float32)
+    return Bounce(key_out, bary, energy, recorded, origins, nd.astype(np.float32), beta, survive)
+
+
+class ScatterCL:
+    """``scatter.cl`` with the scene tables resident on the device; one instance per frame state."""
+
+    def __init__(self, tables: SceneTables):
+        import pyopencl as cl
+
+        from .context import device_context, kernel
+
+        self._cl = cl
+        self.ctx, self.queue = device_context()
+        self.kernel = kernel("scatter", "scatter")
+        self.tables = tables
+        flags = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
+        self._tables = [cl.Buffer(self.ctx, flags, hostbuf=np.ascontiguousarray(a)) for a in (
+            tables.corners.astype(np.float32), tables.normals.astype(np.float64),
+            tables.tri_mat.astype(np.int32), tables.tri_n.astype(np.int32),
+            tables.tri_offset.astype(np.int64), tables.albedo.astype(np.float64),
+            tables.kind.astype(np.int32), tables.exponent.astype(np.float64))]
+
+    def __call__(self, hits: Hits, depth: int, key: tuple[int, int]) -> Bounce:
+        cl = self._cl
+        m = len(hits.tri)
+        # A fixed work-group size: PoCL specialises (and compiles) a kernel per local size, so a
+        # size chosen per launch would recompile for every new wavefront length. The inputs are
+        # padded to whole work-groups with copies of row 0, whose outputs are dropped.
+        padded = max(-(-m // WORK_GROUP) * WORK_GROUP, WORK_GROUP)
+        ro = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
+        inputs = [cl.Buffer(self.ctx, ro, hostbuf=_pad(a, padded)) for a in (
+            hits.tri.astype(np.int32), hits.u.astype(np.float32), hits.v.astype(np.float32),
+            hits.dirs.astype(np.float32), hits.beta.astype(np.float64), hits.photon.astype(np.int64))]
+        out = Bounce(np.empty(padded, np.uint32), np.empty((padded, 2), np.uint16),
+                     np.empty((padded, 3), np.float32), np.empty(padded, np.uint8),
+                     np.empty((padded, 3), np.float32), np.empty((padded, 3), np.float32),
+                     np.empty((padded, 3), np.float64), np.empty(padded, np.uint8))
+        fields = ("key", "bary", "energy", "recorded", "origins", "dirs", "beta", "alive")
+        wo = cl.mem_flags.WRITE_ONLY
+        outputs = [cl.Buffer(self.ctx, wo, size=max(getattr(out, f).nbytes, 1)) for f in fields]
+        self.kernel.set_args(np.int32(depth), np.uint32(key[0] & 0xFFFFFFFF), np.uint32(key[1] & 0xFFFFFFFF),
+                             np.float64(self.tables.epsilon), *inputs, *self._tables, *outputs)
+        cl.enqueue_nd_range_kernel(self.queue, self.kernel, (padded,), (WORK_GROUP,))
+        for f, buf in zip(fields, outputs):
+            cl.enqueue_copy(self.queue, getattr(out, f), buf)
+        self.queue.finish()
+        return Bounce(out.key[:m], out.bary[:m], out.energy[:m], out.recorded[:m].view(bool),
+                      out.origins[:m], out.dirs[:m], out.beta[:m], out.alive[:m].view(bool))
+
+
+def _pad(a: np.ndarray, rows: int) -> np.ndarray:
+    """``a`` with its first row repeated up to ``rows`` rows (a valid input whose output is dropped)."""
+    a = np.ascontiguousarray(a)
+    if len(a) == rows:
+        return a
+    if len(a) == 0:
+        return np.zeros((rows,) + a.shape[1:], a.dtype)
+    return np.concatenate([a, np.repeat(a[:1], rows - len(a), axis=0)])

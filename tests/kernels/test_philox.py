@@ -1,0 +1,54 @@
+"""Philox4x32-10: Random123's known answers, and the OpenCL version equals the NumPy one."""
+from __future__ import annotations
+
+import numpy as np
+import pyopencl as cl
+import pytest
+
+from kernels.context import device_context
+from kernels.philox import philox4x32_10, uniforms
+
+# Known-answer vectors of Random123 (kat_vectors, philox4x32_10)
+KAT = [
+    ((0, 0, 0, 0), (0, 0), (0x6627E8D5, 0xE169C58D, 0xBC57AC4C, 0x9B00DBD8)),
+    ((0xFFFFFFFF,) * 4, (0xFFFFFFFF, 0xFFFFFFFF), (0x408F276D, 0x41C83B0E, 0xA20BC7C6, 0x6D5451FD)),
+    ((0x243F6A88, 0x85A308D3, 0x13198A2E, 0x03707344), (0xA4093822, 0x299F31D0),
+     (0xD16CFE09, 0x94FDCCEB, 0x5001E420, 0x24126EA1)),
+]
+
+
+@pytest.mark.parametrize("counter, key, expected", KAT)
+def test_known_answers(counter, key, expected):
+    out = philox4x32_10(np.array([counter], np.uint32), key)[0]
+    assert tuple(int(x) for x in out) == expected
+
+
+def test_opencl_equals_numpy(rng):
+    ctx, queue = device_context()
+    src = """
+    #include "philox.cl"
+    __kernel void draw(__global const uint4 *c, const uint k0, const uint k1, __global uint4 *out) {
+        size_t i = get_global_id(0);
+        out[i] = philox4x32_10(c[i], (uint2)(k0, k1));
+    }"""
+    from kernels.context import SOURCE_DIR
+
+    prg = cl.Program(ctx, src).build(options=["-I", str(SOURCE_DIR)])
+    counters = rng.integers(0, 2**32, size=(4096, 4), dtype=np.uint64).astype(np.uint32)
+    counters[:3] = [c for c, _, _ in KAT]
+    buf = cl.Buffer(ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=counters)
+    out = np.empty_like(counters)
+    out_buf = cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY, out.nbytes)
+    cl.Kernel(prg, "draw")(queue, (len(counters),), None, buf, np.uint32(0xDEADBEEF), np.uint32(7), out_buf)
+    cl.enqueue_copy(queue, out, out_buf)
+    np.testing.assert_array_equal(out, philox4x32_10(counters, (0xDEADBEEF, 7)))
+
+
+def test_uniforms_are_uniform_and_in_range():
+    u = uniforms(np.arange(200_000), 3, (1, 2))
+    assert u.min() >= 0.0 and u.max() < 1.0
+    hist, _ = np.histogram(u.ravel(), bins=20, range=(0, 1))
+    expected = u.size / 20
+    chi2 = ((hist - expected) ** 2 / expected).sum()
+    assert chi2 < 45.3  # 99.9th percentile of chi-squared with 19 degrees of freedom
+    assert not np.array_equal(uniforms(np.arange(10), 3, (1, 2)), uniforms(np.arange(10), 4, (1, 2)))

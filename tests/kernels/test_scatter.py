@@ -1,0 +1,84 @@
+"""The photon bounce kernel (scatter.cl) equals its NumPy twin on random and adversarial hits."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kernels.scatter import DIRECT_BIT, PARITY_BIT, Hits, SceneTables, ScatterCL, scatter_reference
+
+
+def _tables(rng, n_tri=50, kinds=(0, 1, 2)) -> SceneTables:
+    corners = rng.normal(size=(n_tri, 9)).astype(np.float32)
+    c = corners.astype(np.float64).reshape(-1, 3, 3)
+    nrm = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    n_mat = 6
+    albedo = rng.random((n_mat, 3))
+    albedo[0] = 0.0  # a black material: Russian roulette always ends the path
+    albedo[1] = 1.0
+    return SceneTables(corners=corners, normals=nrm, tri_mat=rng.integers(0, n_mat, n_tri).astype(np.int32),
+                       tri_n=rng.integers(1, 40, n_tri).astype(np.int32),
+                       tri_offset=np.concatenate([[0], np.cumsum(rng.integers(1, 1600, n_tri - 1))]).astype(np.int64),
+                       albedo=albedo, kind=np.array([kinds[i % len(kinds)] for i in range(n_mat)], np.int32),
+                       exponent=np.array([1.0, 2.0, 10.0, 100.0, 1e4, 0.5]), epsilon=1e-4)
+
+
+def _hits(rng, tables, m) -> Hits:
+    tri = rng.integers(0, len(tables.tri_mat), m).astype(np.int32)
+    u, v = rng.random(m), rng.random(m)
+    flip = u + v > 1
+    u[flip], v[flip] = 1 - u[flip], 1 - v[flip]
+    # adversarial barycentrics: corners, edges, and the float32 rounding just outside
+    edge_u = np.array([0, 1, 0, 0.5, 1 + 1e-7, 0])[:m]
+    edge_v = np.array([0, 0, 1, 0.5, 0, 1 + 1e-7])[:m]
+    u[: len(edge_u)], v[: len(edge_v)] = edge_u, edge_v
+    d = rng.normal(size=(m, 3))
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    photon = rng.integers(0, 2**40, m)
+    photon[: min(m, 2)] = [0, 2**33 + 1][: min(m, 2)]
+    return Hits(tri, u.astype(np.float32), v.astype(np.float32), d.astype(np.float32),
+                rng.random((m, 3)) * 10.0, photon.astype(np.int64))
+
+
+@pytest.mark.parametrize("depth", [0, 1, 7])
+@pytest.mark.parametrize("m", [1, 63, 64, 1000, 5000])
+def test_kernel_equals_reference(rng, depth, m):
+    tables = _tables(rng)
+    hits = _hits(rng, tables, m)
+    cl = ScatterCL(tables)(hits, depth, (123, 456))
+    ref = scatter_reference(tables, hits, depth, (123, 456))
+    for name in ("key", "bary", "energy", "recorded", "alive"):
+        np.testing.assert_array_equal(getattr(cl, name), getattr(ref, name), err_msg=name)
+    for name in ("origins", "dirs", "beta"):
+        np.testing.assert_allclose(getattr(cl, name), getattr(ref, name), rtol=1e-6, atol=1e-6, err_msg=name)
+    assert (((cl.key[cl.recorded] & DIRECT_BIT) != 0) == (depth == 0)).all()
+    odd = (hits.photon % 2 == 1) & cl.recorded
+    assert ((cl.key[odd] & PARITY_BIT) != 0).all()
+
+
+def test_bounce_properties(rng):
+    tables = _tables(rng, kinds=(0, 1, 2))
+    hits = _hits(rng, tables, 20_000)
+    out = scatter_reference(tables, hits, 2, (5, 6))
+    kind = tables.kind[tables.tri_mat[hits.tri]]
+    n = tables.normals[hits.tri]
+    facing = np.where((np.einsum("ij,ij->i", n, hits.dirs) < 0)[:, None], n, -n)
+    # unit directions leaving on the facing side (diffuse and mirror); black surfaces absorb
+    np.testing.assert_allclose(np.linalg.norm(out.dirs, axis=1), 1.0, atol=1e-5)
+    leaving = np.einsum("ij,ij->i", out.dirs, facing)
+    assert (leaving[(kind != 2)] > -1e-6).all()
+    assert not out.alive[tables.tri_mat[hits.tri] == 0].any()
+    # the mirror keeps the angle to the normal
+    mirror = kind == 1
+    np.testing.assert_allclose(leaving[mirror], -np.einsum("ij,ij->i", hits.dirs, facing)[mirror], atol=1e-5)
+    # element ids stay inside their source triangle's range
+    local = out.key[out.recorded] & np.uint32((1 << 30) - 1)
+    t = hits.tri[out.recorded]
+    assert (local >= tables.tri_offset[t]).all()
+    assert (local < tables.tri_offset[t] + tables.tri_n[t].astype(np.int64) ** 2).all()
+
+
+def test_record_constants_match_the_store():
+    from pipeline.store import DIRECT_BIT as STORE_DIRECT, PARITY_BIT as STORE_PARITY
+
+    assert DIRECT_BIT == STORE_DIRECT and PARITY_BIT == STORE_PARITY
