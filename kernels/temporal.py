@@ -153,7 +153,7 @@ def windows_reference(counts, n_emitted, *, fmax: int, mode: str = "adaptive", k
     half_fmax, half_lo, half_hi, adaptive = _extents(fmax, mode, min_extent)
     back = np.zeros((f1 - f0, n_elements), np.uint8)
     fwd = np.zeros((f1 - f0, n_elements), np.uint8)
-    if adaptive and n_elements:
+    if adaptive:
         rate = smoothed_rates_reference(counts, n_emitted, smoothing_frames)
         q = inverse_budget(n_emitted, smoothing_frames)
     k = float(k_sigma)

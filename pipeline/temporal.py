@@ -1,0 +1,132 @@
+"""Spatiotemporal illumination maps from a photon store (§5.1, §5.2.4, §5.2.5).
+
+What the render pipeline calls to turn stored photons into per-frame vertex irradiance:
+
+1. windows   from the store's frames x elements count table (never the records), per frame and
+             element, Condition (1) (kernels/temporal.py), ``mode`` adaptive | fixed | off;
+2. gather    per frame the element sums of its records, once (kernels/gather.py); per output
+             frame the window sums by prefix sums over frames, pooled over the photons emitted
+             in the window, distributed to the vertices;
+3. filter    optionally the adaptive object-space filter for vertices that collected too few
+             photons (kernels/filter.py, §5.2.5).
+
+Windows never cross a frame without photons: each maximal run of consecutive frames that have
+photons is its own animation, with its own ends. Frames sharing another frame's photons
+(camera-only motion) count as frames with those photons.
+
+Memory: output frames are processed in chunks of consecutive frames; a chunk holds the element
+sums of its frames and their windows' reach (F_max/2 each side): (chunk + F_max) x E x 12 doubles
+per photon parity, about 330 MB for ATRIUM (45,000 elements, F_max = 44, chunk 32).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Iterator
+
+import numpy as np
+
+from kernels.filter import adaptive_filter_cl, neighbourhood
+from kernels.gather import element_sums_cl, irradiance, window_flux_cl
+from kernels.temporal import MODES, windows_cl
+
+from .config import RenderConfig
+from .errors import LoomError
+
+
+@dataclass(frozen=True)
+class FrameIllumination:
+    """One frame's reconstructed indirect (or ``kind``) lighting."""
+
+    frame_index: int  # store frame index (0-based)
+    irradiance: np.ndarray  # (V, 3) float64 W/m^2, or (2, V, 3) even/odd halves with split_parity
+    back: np.ndarray  # (E,) uint8: element e collected frames [f - back, f + fwd]
+    fwd: np.ndarray  # (E,) uint8
+    rings: np.ndarray | None  # (P, V) uint8 filter support taken (0: unfiltered), None: no filter
+
+
+def _runs(has_photons: np.ndarray) -> list[tuple[int, int]]:
+    """Maximal [start, stop) runs of frames with photons."""
+    edges = np.flatnonzero(np.diff(np.concatenate([[0], has_photons.astype(np.int8), [0]])))
+    return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
+
+
+def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames, *, mode: str, fmax: int,
+                       config: RenderConfig) -> tuple[np.ndarray, np.ndarray]:
+    """(len(frames), E) back and fwd windows of the requested frame indices, per run of frames
+    with photons (a requested frame without photons is an error)."""
+    frames = np.asarray(frames, np.int64)
+    n_emitted = np.asarray(n_emitted, np.float64)
+    back = np.zeros((len(frames), counts.shape[1]), np.uint8)
+    fwd = np.zeros_like(back)
+    missing = frames[n_emitted[frames] <= 0] if len(frames) else frames
+    if len(missing):
+        raise LoomError(f"frame index(es) {missing[:5].tolist()} have no photons; shoot them first")
+    for start, stop in _runs(n_emitted > 0):
+        inside = np.flatnonzero((frames >= start) & (frames < stop))
+        if not len(inside):
+            continue
+        lo, hi = int(frames[inside].min()), int(frames[inside].max()) + 1
+        b, w = windows_cl(counts[start:stop], n_emitted[start:stop], fmax=fmax, mode=mode,
+                          k_sigma=config.k_sigma, smoothing_frames=config.smoothing_frames,
+                          min_extent=config.min_extent, frames=(lo - start, hi - start))
+        back[inside] = b[frames[inside] - lo]
+        fwd[inside] = w[frames[inside] - lo]
+    return back, fwd
+
+
+def illumination_maps(store, elements, scene, frames=None, *, mode: str = "adaptive", fmax: int | None = None,
+                      config: RenderConfig = RenderConfig(), kind: str = "indirect",
+                      split_parity: bool = False, spatial_filter: bool = False,
+                      chunk: int = 32) -> Iterator[FrameIllumination]:
+    """Yield the illumination of every requested frame, in frame order.
+
+    Parameters
+    ----------
+    store : PhotonStore (pipeline/store) of the scene's photons.
+    elements : the ElementMesh the photons were bucketed on; ``scene`` poses frames (vertex areas).
+    frames : store frame indices (0-based; default all).
+    mode : "adaptive" (Condition (1), §5.1), "fixed" (+-F_max/2 always, §6 Fig. 3b) or "off".
+    fmax : F_max in frames (default ``config.fmax_initial``).
+    kind : records and counts used: "indirect" (the map the compositor reads), "direct" or "all".
+    split_parity : also give the even/odd half-photon maps I1, I2 (§5.2.3) instead of the full map.
+    spatial_filter : apply the adaptive filter of §5.2.5 with ``config.filter_*``.
+    """
+    if mode not in MODES:
+        raise LoomError(f"must be one of {', '.join(MODES)}, got {mode!r}", field="--temporal")
+    fmax = config.fmax_initial if fmax is None else int(fmax)
+    frames = np.arange(store.n_frames) if frames is None else np.unique(np.asarray(frames, np.int64))
+    if len(frames) and (frames.min() < 0 or frames.max() >= store.n_frames):
+        raise LoomError(f"frame indices must be in [0, {store.n_frames})")
+    if store.n_elements != elements.n_elements:
+        raise LoomError(f"store has {store.n_elements} elements, the element mesh {elements.n_elements}")
+    n_emitted = np.array([store.photons_emitted(f) for f in range(store.n_frames)], np.float64)
+    counts = store.counts(kind=kind)
+    back, fwd = collection_windows(counts, n_emitted, frames, mode=mode, fmax=fmax, config=config)
+    hood = (neighbourhood(elements.element_vertices, elements.vertex_local, elements.vertex_instance,
+                          max_rings=config.filter_rings, max_angle=config.filter_angle)
+            if spatial_filter else None)
+    sums: dict[int, np.ndarray] = {}  # element sums per frame index, kept across chunks
+    for start in range(0, len(frames), chunk):
+        part = np.arange(start, min(start + chunk, len(frames)))
+        f = frames[part]
+        lo = int((f[:, None] - back[part]).min())
+        hi = int((f[:, None] + fwd[part]).max()) + 1
+        for g in [g for g in sums if g < lo]:
+            del sums[g]
+        todo = [g for g in range(lo, hi) if g not in sums]
+        for i in range(0, len(todo), 16):
+            batch = todo[i:i + 16]
+            got = element_sums_cl([store.read_frame(g) for g in batch], kind=kind, split_parity=split_parity)
+            sums.update(zip(batch, got))
+        table = np.stack([sums[g] for g in range(lo, hi)])
+        flux = window_flux_cl(table, n_emitted[lo:hi], back[part], fwd[part], f - lo,
+                              elements.element_vertices, elements.n_vertices)
+        for i, (frame_index, j) in enumerate(zip(f.tolist(), part.tolist())):
+            areas = elements.vertex_areas(scene.pose_frame(store.frame_numbers[frame_index]))
+            rings = None
+            if hood is not None:
+                irr, rings = adaptive_filter_cl(flux[i], areas, hood, photons=config.filter_photons,
+                                                z=config.filter_z)
+            else:
+                irr = irradiance(flux[i], areas)
+            yield FrameIllumination(frame_index, irr if split_parity else irr[0], back[j], fwd[j], rings)

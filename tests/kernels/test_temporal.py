@@ -1,0 +1,139 @@
+"""Temporal windows (Condition (1), §5.1): the PoCL kernel equals its NumPy twin exactly, on random
+and adversarial count tables, and the windows behave as the paper describes."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kernels.temporal import windows_cl, windows_reference
+from pipeline.errors import LoomError
+
+MODES = ("adaptive", "fixed", "off")
+
+
+def both(counts, n, **kw):
+    a = windows_cl(counts, n, **kw)
+    b = windows_reference(counts, n, **kw)
+    np.testing.assert_array_equal(a[0], b[0])
+    np.testing.assert_array_equal(a[1], b[1])
+    return a
+
+
+def poisson_table(rng, frames, elements, scale=4.0):
+    lam = rng.gamma(0.7, scale, elements)
+    return rng.poisson(np.broadcast_to(lam, (frames, elements))).astype(np.uint32)
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test01_random_tables_match_reference(rng, mode):
+    counts = poisson_table(rng, 50, 700)
+    counts[25:, :200] *= 3  # a lighting change half-way for some elements
+    n = np.full(50, 40_000.0)
+    n[30:] = 80_000.0  # N_frame doubles (§5.2.3)
+    counts[30:] *= 2
+    for fmax, k in ((30, 2.0), (7, 1.0), (44, 3.0)):
+        both(counts, n, fmax=fmax, mode=mode, k_sigma=k)
+    both(counts, n, fmax=30, mode=mode, smoothing_frames=5, min_extent=4, frames=(10, 20))
+
+
+@pytest.mark.parametrize("mode", MODES)
+def test02_adversarial_tables_match_reference(rng, mode):
+    n = np.full(12, 1000.0)
+    cases = {
+        "all zero": np.zeros((12, 50), np.uint32),
+        "one frame": poisson_table(rng, 1, 50),
+        "near 2^31": (np.uint32(2**31 - 5) - rng.integers(0, 3, (12, 50))).astype(np.uint32),
+        "max u32": np.full((12, 50), 2**32 - 1, np.uint32),
+        "never hit": np.concatenate([poisson_table(rng, 12, 25), np.zeros((12, 25), np.uint32)], 1),
+        "no elements": np.zeros((12, 0), np.uint32),
+    }
+    for name, counts in cases.items():
+        nn = n[: counts.shape[0]]
+        for fmax in (0, 2, 30, 500):  # 500: F_max far longer than the animation
+            back, fwd = both(counts, nn, fmax=fmax, mode=mode)
+            f = np.arange(counts.shape[0])[:, None]
+            assert (back <= np.minimum(fmax // 2, f)).all(), name
+            assert (fwd <= np.minimum(fmax // 2, counts.shape[0] - 1 - f)).all(), name
+
+
+def test03_static_lighting_collects_everything_and_zero_counts_pass():
+    counts = np.zeros((40, 3), np.uint32)
+    counts[:, 1] = 100  # constant count: x == mu
+    back, fwd = both(counts, np.full(40, 1e4), fmax=30)
+    f = np.arange(40)[:, None]
+    np.testing.assert_array_equal(back, np.broadcast_to(np.minimum(15, f), back.shape))
+    np.testing.assert_array_equal(fwd, np.broadcast_to(np.minimum(15, 39 - f), fwd.shape))
+
+
+def test04_a_step_stops_the_walk_in_one_direction_only():
+    counts = np.full((41, 1), 100, np.uint32)
+    counts[26:] = 200  # lighting doubles at frame 26: far outside 100 +- 2 * 10
+    back, fwd = both(counts, np.full(41, 1e4), fmax=30)
+    # Frame 20: mu = 100; x at 25 is (100+100+200)/3 = 133 > 120: forward stops after frame 24
+    assert fwd[20, 0] == 4 and back[20, 0] == 15
+    # Fixed mode collects the invalid photons anyway (Fig. 3b)
+    back_f, fwd_f = both(counts, np.full(41, 1e4), fmax=30, mode="fixed")
+    assert fwd_f[20, 0] == 15
+
+
+def test05_min_extent_is_always_taken():
+    counts = np.zeros((20, 1), np.uint32)
+    counts[::2] = 1000  # flickers wildly: every neighbour fails Condition (1)
+    counts[1::2] = 0
+    back, fwd = both(counts, np.full(20, 1e4), fmax=30, smoothing_frames=1)
+    assert (back[1:-1] == 1).all() and (fwd[1:-1] == 1).all()
+    assert back[0, 0] == 0 and fwd[0, 0] == 1 and back[-1, 0] == 1 and fwd[-1, 0] == 0
+    back5, fwd5 = both(counts, np.full(20, 1e4), fmax=30, smoothing_frames=1, min_extent=6)
+    assert back5[10, 0] == 2 and fwd5[10, 0] == 3
+    back0, fwd0 = both(counts, np.full(20, 1e4), fmax=0, smoothing_frames=1)  # capped by F_max/2
+    assert (back0 == 0).all() and (fwd0 == 0).all()
+
+
+def test06_counts_are_compared_on_a_common_photon_budget():
+    # The element's lighting is constant, but N_frame doubles at frame 20 and so do its counts
+    counts = np.full((40, 1), 50, np.uint32)
+    counts[20:] = 100
+    n = np.full(40, 1e4)
+    n[20:] = 2e4
+    back, fwd = both(counts, n, fmax=30)
+    assert fwd[15, 0] == 15 and back[25, 0] == 15
+    # Without the budget scaling the raw counts would look like a lighting change
+    back_raw, fwd_raw = both(counts, np.full(40, 1e4), fmax=30)
+    assert fwd_raw[15, 0] < 15
+
+
+def test07_sigma_grows_for_frames_with_fewer_photons():
+    # mu = 100 at frame 10 with N = 1e4; frames from 11 on shoot a quarter of the photons and
+    # their scaled count is 100 * 1.3 = 130. sigma(g) = sqrt(100 * 4) = 20: 130 is inside 100 +- 40,
+    # whereas with the same N everywhere (sigma = 10) it is outside 100 +- 20.
+    counts = np.full((30, 1), 100, np.uint32)
+    counts[11:] = 33  # 33 * 4 = 132 on frame 10's budget
+    n = np.full(30, 1e4)
+    n[11:] = 2500.0
+    back, fwd = both(counts, n, fmax=30, smoothing_frames=1)
+    assert fwd[10, 0] == 15
+    counts_same = counts.copy()
+    counts_same[11:] = 132
+    back2, fwd2 = both(counts_same, np.full(30, 1e4), fmax=30, smoothing_frames=1)
+    assert fwd2[10, 0] == 1  # only the minimal extent
+
+
+def test08_bitwise_repeatable(rng):
+    counts = poisson_table(rng, 60, 2000)
+    n = rng.integers(5000, 50000, 60).astype(float)
+    first = windows_cl(counts, n, fmax=44)
+    for _ in range(2):
+        again = windows_cl(counts, n, fmax=44)
+        assert first[0].tobytes() == again[0].tobytes() and first[1].tobytes() == again[1].tobytes()
+
+
+def test09_refuses_bad_input():
+    counts = np.zeros((5, 3), np.uint32)
+    with pytest.raises(LoomError, match="needs photons"):
+        windows_cl(counts, [1, 1, 0, 1, 1], fmax=4)
+    with pytest.raises(LoomError, match="temporal mode"):
+        windows_cl(counts, np.ones(5), fmax=4, mode="sometimes")
+    with pytest.raises(LoomError, match="F_max"):
+        windows_cl(counts, np.ones(5), fmax=600)
+    with pytest.raises(LoomError, match="frames"):
+        windows_reference(counts, np.ones(5), fmax=4, frames=(2, 9))
