@@ -128,6 +128,22 @@ def render_command(scene_file, frames, out_dir, resolution, spp, photons, store_
 def bench() -> None:
     """Benchmarks (speed is measured here, never in tests)."""
 
+
+@bench.command("photons")
+@click.argument("scenes", nargs=-1)
+@click.option("--photons", type=int, default=200_000, show_default=True, help="Photons per worker.")
+@click.option("--workers", type=int, default=None, help="Worker processes (default: one per core).")
+@click.option("--memory-photons", type=int, default=1_000_000, show_default=True,
+              help="Photons of the frame whose peak memory is measured.")
+def bench_photons(scenes, photons, workers, memory_photons) -> None:
+    """Photon tracing throughput vs raw Embree (default scenes: room atrium)."""
+    import os
+
+    from .benchmarks.photons import run
+
+    run(list(scenes) or ["room", "atrium"], photons=photons, workers=workers or os.cpu_count() or 1,
+        memory_photons=memory_photons, echo=click.echo)
+
 from .cli_aqm import aqm_command, bench_aqm  # noqa: E402
 main.add_command(aqm_command, "aqm")
 bench.add_command(bench_aqm, "aqm")

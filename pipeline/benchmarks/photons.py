@@ -1,0 +1,121 @@
+"""``loom bench photons``: tracer throughput against raw Embree on the same frame, in one run.
+
+For each scene, ``workers`` processes run at once (like Dask workers, one thread each). Each
+traces ``photons`` photons of one frame, then casts as many incoherent rays (uniform origins in
+the scene's bounds, uniform directions) straight through embreex on the same Embree scene. The
+ratio of the tracer's rays/s to raw rays/s is the overhead of everything that is not Embree.
+Records are then written to a photon store on disk (records/s, bytes per record), and one more
+process traces 1,000,000 photons to measure peak memory per worker.
+"""
+from __future__ import annotations
+
+import os
+import resource
+import tempfile
+import time
+from concurrent.futures import ProcessPoolExecutor
+from multiprocessing import get_context
+from pathlib import Path
+
+import numpy as np
+
+from ..cluster import WORKER_ENV
+
+
+def _load(scene_path: str):
+    from pipeline.scene import ElementMesh, Scene
+
+    scene = Scene.load(scene_path)
+    return scene, ElementMesh.build(scene)
+
+
+def _worker(scene_path: str, frame: int, n_photons: int, photon_start: int) -> dict:
+    """Trace, then cast raw rays, in this process; returns timings."""
+    from workers.photons import trace_batch
+    from workers.raycast import caster_for
+
+    scene, elements = _load(scene_path)
+    state = scene.pose_frame(frame)
+    caster = caster_for(state)
+    trace_batch(state, elements, n_photons=2000, photon_start=10**9, seed=0, frame=frame, max_depth=8)  # warm-up
+    t0 = time.perf_counter()
+    batch = trace_batch(state, elements, n_photons=n_photons, photon_start=photon_start, seed=0,
+                        frame=frame, max_depth=8)
+    trace_s = time.perf_counter() - t0
+    rng = np.random.default_rng(photon_start)
+    lo, hi = state.vertices.min(0), state.vertices.max(0)
+    n_raw = batch.rays_cast
+    origins = (lo + rng.random((n_raw, 3)) * (hi - lo)).astype(np.float32)
+    dirs = rng.normal(size=(n_raw, 3))
+    dirs = (dirs / np.linalg.norm(dirs, axis=1, keepdims=True)).astype(np.float32)
+    t0 = time.perf_counter()
+    for lo_i in range(0, n_raw, 1 << 17):  # the tracer's wavefront size
+        caster.intersect(origins[lo_i:lo_i + (1 << 17)], dirs[lo_i:lo_i + (1 << 17)])
+    raw_s = time.perf_counter() - t0
+    return {"trace_s": trace_s, "rays": batch.rays_cast, "records": len(batch.key), "raw_s": raw_s,
+            "raw_rays": n_raw}
+
+
+def _memory_worker(scene_path: str, frame: int, n_photons: int, store_url: str) -> dict:
+    """Trace and store one frame of ``n_photons``; peak resident memory of this process."""
+    from pipeline.config import RenderConfig
+    from pipeline.store import PhotonStore
+    from workers.photons import trace_batch
+
+    scene, elements = _load(scene_path)
+    state = scene.pose_frame(frame)
+    batch = trace_batch(state, elements, n_photons=n_photons, photon_start=0, seed=0, frame=frame, max_depth=8)
+    store = PhotonStore.create(store_url, n_frames=scene.timeline.frames, n_elements=elements.n_elements,
+                               frame_numbers=scene.timeline.all_frames(), scene_hash=scene.scene_hash,
+                               config_hash=RenderConfig().photon_hash(elements.element_size), seed=0)
+    t0 = time.perf_counter()
+    store.write_batch(frame - 1, 0, key=batch.key, bary=batch.bary, energy=batch.energy,
+                      photons_emitted=n_photons, photon_start=0)
+    write_s = time.perf_counter() - t0
+    batch_dir = Path(store_url) / "frames" / str(frame - 1) / "0"
+    on_disk = sum(f.stat().st_size for f in batch_dir.rglob("*") if f.is_file())
+    return {"records": len(batch.key), "write_s": write_s, "bytes": on_disk,
+            "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
+
+
+def run(scene_names: list[str], *, photons: int, workers: int, memory_photons: int, echo) -> list[dict]:
+    from pipeline.scene.builtin import BUILTIN_SCENES, write_builtin
+
+    os.environ.update(WORKER_ENV)  # inherited by the spawned workers: one thread each
+    results = []
+    with tempfile.TemporaryDirectory(prefix="loom-bench-") as tmp:
+        for name in scene_names:
+            path = write_builtin(name, Path(tmp) / f"{name}.glb") if name in BUILTIN_SCENES else Path(name)
+            scene, elements = _load(str(path))
+            frame = (scene.timeline.frames + 1) // 2
+            ctx = get_context("spawn")
+            with ProcessPoolExecutor(workers, mp_context=ctx) as pool:
+                t0 = time.perf_counter()
+                parts = list(pool.map(_worker, [str(path)] * workers, [frame] * workers,
+                                      [photons] * workers, [i * photons for i in range(workers)]))
+                wall = time.perf_counter() - t0
+            with ProcessPoolExecutor(1, mp_context=ctx) as pool:
+                mem = pool.submit(_memory_worker, str(path), frame, memory_photons,
+                                  str(Path(tmp) / f"{name}.zarr")).result()
+            rays_s = sum(p["rays"] / p["trace_s"] for p in parts)
+            raw_s = sum(p["raw_rays"] / p["raw_s"] for p in parts)
+            row = {
+                "scene": name, "elements": elements.n_elements, "triangles": scene.n_triangles,
+                "frame": frame, "workers": workers,
+                "photons_per_s": sum(photons / p["trace_s"] for p in parts),
+                "tracer_rays_per_s": rays_s, "raw_embree_rays_per_s": raw_s, "ratio": rays_s / raw_s,
+                "records_per_photon": sum(p["records"] for p in parts) / (photons * workers),
+                "records_written_per_s": mem["records"] / mem["write_s"],
+                "bytes_per_record_on_disk": mem["bytes"] / max(mem["records"], 1),
+                "peak_rss_mb_at_photons": (memory_photons, mem["peak_rss_mb"]),
+                "wall_s": wall,
+            }
+            results.append(row)
+            echo(
+                f"{name:8s} {elements.n_elements:6d} elements, frame {frame}, {workers} worker(s): "
+                f"{row['photons_per_s']:,.0f} photons/s, tracer {rays_s:,.0f} rays/s vs raw Embree "
+                f"{raw_s:,.0f} rays/s = {100 * row['ratio']:.0f}%; "
+                f"{row['records_written_per_s']:,.0f} records/s written, "
+                f"{row['bytes_per_record_on_disk']:.1f} bytes/record on disk (20 raw); "
+                f"peak {mem['peak_rss_mb']:.0f} MB per worker at {memory_photons:,} photons")
+    return results
