@@ -1,0 +1,157 @@
+"""Gather (§4, §5.2.4): element sums, window sums and vertex flux on PoCL equal their NumPy twins
+within 1e-6 relative, a one-frame window is workers/reconstruct.py's vertex_irradiance, and
+repeated runs are bitwise identical."""
+from __future__ import annotations
+
+from types import SimpleNamespace
+
+import numpy as np
+import pytest
+
+from kernels.gather import (element_sums_cl, element_sums_reference, irradiance, window_flux_cl,
+                            window_flux_reference)
+from pipeline.errors import LoomError
+from workers.reconstruct import vertex_irradiance
+
+RTOL = 1e-6
+
+
+def frame_records(rng, n_records, n_elements, *, hit=None, energy_scale=1.0):
+    """Element-sorted random records; ``hit`` restricts the elements that get photons."""
+    pool = np.arange(n_elements) if hit is None else np.asarray(hit)
+    element = np.sort(rng.choice(pool, n_records)) if n_records and len(pool) else np.zeros(0, np.int64)
+    key = (element.astype(np.uint32) | rng.integers(0, 2, n_records).astype(np.uint32) << np.uint32(30)
+           | rng.integers(0, 2, n_records).astype(np.uint32) << np.uint32(31))
+    b1 = rng.integers(0, 32768, n_records).astype(np.uint16)
+    b2 = (rng.random(n_records) * (65535 - b1)).astype(np.uint16)
+    energy = (rng.random((n_records, 3)) * energy_scale).astype(np.float32)
+    offsets = np.concatenate([[0], np.cumsum(np.bincount(element, minlength=n_elements))])
+    return SimpleNamespace(key=key, b1=b1, b2=b2, energy=energy, offsets=offsets,
+                           element=element, direct=(key >> 31).astype(bool))
+
+
+def mesh(rng, n_elements, n_vertices):
+    ev = np.stack([rng.choice(n_vertices, 3, replace=False) for _ in range(n_elements)]).astype(np.int32)
+    return ev
+
+
+def close(a, b):
+    np.testing.assert_allclose(a, b, rtol=RTOL, atol=RTOL * max(1e-300, float(np.abs(b).max(initial=0))))
+
+
+@pytest.mark.parametrize("kind", ["indirect", "direct", "all"])
+@pytest.mark.parametrize("split", [False, True])
+def test01_element_sums_match_reference(rng, kind, split):
+    frames = [frame_records(rng, int(rng.integers(0, 4000)), 300) for _ in range(7)]
+    frames.append(frame_records(rng, 0, 300))  # a frame without records
+    frames.append(frame_records(rng, 500, 300, hit=[7]))  # every photon in one element
+    got = element_sums_cl(frames, kind=kind, split_parity=split)
+    want = element_sums_reference(frames, kind=kind, split_parity=split)
+    assert got.shape == (9, 300, 2 if split else 1, 3, 4)
+    close(got, want)
+    if split:  # the halves add up to the whole
+        close(got.sum(axis=2), element_sums_cl(frames, kind=kind)[:, :, 0])
+
+
+def test02_element_sums_adversarial(rng):
+    huge = frame_records(rng, 3000, 50, energy_scale=3e38)  # energies near float32's maximum
+    tiny = frame_records(rng, 3000, 50, energy_scale=1e-38)
+    never = frame_records(rng, 3000, 50, hit=np.arange(25))  # elements 25.. never hit
+    for frames in ([huge], [tiny], [never], [frame_records(rng, 0, 0)]):
+        got = element_sums_cl(frames, kind="all", split_parity=True)
+        want = element_sums_reference(frames, kind="all", split_parity=True)
+        assert np.isfinite(got).all()
+        close(got, want)
+    assert (element_sums_cl([never], kind="all")[0, 25:] == 0).all()
+
+
+def random_windows(rng, n_out, n_elements, rows, n_rows):
+    back = np.minimum(rng.integers(0, 20, (n_out, n_elements)), rows[:, None]).astype(np.uint8)
+    fwd = np.minimum(rng.integers(0, 20, (n_out, n_elements)), n_rows - 1 - rows[:, None]).astype(np.uint8)
+    return back, fwd
+
+
+@pytest.mark.parametrize("method", ["prefix", "direct"])
+@pytest.mark.parametrize("split", [False, True])
+def test03_window_flux_matches_reference(rng, method, split):
+    n_rows, n_elements, n_vertices = 40, 400, 260
+    frames = [frame_records(rng, int(rng.integers(0, 3000)), n_elements) for _ in range(n_rows)]
+    sums = element_sums_cl(frames, split_parity=split)
+    n = rng.integers(10_000, 80_000, n_rows).astype(float)
+    rows = np.array([0, 1, 17, 20, 38, 39])
+    back, fwd = random_windows(rng, len(rows), n_elements, rows, n_rows)
+    ev = mesh(rng, n_elements, n_vertices)
+    got = window_flux_cl(sums, n, back, fwd, rows, ev, n_vertices, method=method)
+    want = window_flux_reference(sums, n, back, fwd, rows, ev, n_vertices)
+    assert got.shape == (len(rows), 2 if split else 1, n_vertices, 4)
+    close(got, want)
+
+
+def test04_one_frame_window_is_vertex_irradiance(rng):
+    n_elements, n_vertices = 500, 300
+    ev = mesh(rng, n_elements, n_vertices)
+    areas = rng.random(n_vertices) + 0.1
+    areas[:5] = 0.0  # vertices of zero area get 0, as in vertex_irradiance
+    frames = [frame_records(rng, 6000, n_elements) for _ in range(3)]
+    sums = element_sums_cl(frames, kind="indirect")
+    n = np.array([40_000.0, 41_000.0, 39_000.0])
+    zero = np.zeros((1, n_elements), np.uint8)
+    flux = window_flux_cl(sums, n, zero, zero, [1], ev, n_vertices)
+    got = irradiance(flux[0, 0], areas)
+    r = frames[1]
+    ind = ~r.direct
+    want = vertex_irradiance(r.element[ind], r.b1[ind], r.b2[ind], r.energy[ind], ev, areas, n[1])
+    close(got, want)
+
+
+def test05_window_pools_photons_of_all_its_frames(rng):
+    # A window over three frames equals vertex_irradiance of their records pooled, over sum N
+    n_elements, n_vertices = 200, 150
+    ev = mesh(rng, n_elements, n_vertices)
+    areas = rng.random(n_vertices) + 0.5
+    frames = [frame_records(rng, 2000, n_elements) for _ in range(3)]
+    n = np.array([10_000.0, 20_000.0, 40_000.0])
+    sums = element_sums_cl(frames, kind="all")
+    one = np.ones((1, n_elements), np.uint8)
+    got = irradiance(window_flux_cl(sums, n, one, one, [1], ev, n_vertices)[0, 0], areas)
+    cat = lambda name: np.concatenate([getattr(r, name) for r in frames])  # noqa: E731
+    want = vertex_irradiance(cat("element"), cat("b1"), cat("b2"), cat("energy"), ev, areas, n.sum())
+    close(got, want)
+
+
+def test06_parity_halves_estimate_the_whole(rng):
+    n_elements, n_vertices = 300, 200
+    frames = [frame_records(rng, 4000, n_elements) for _ in range(5)]
+    ev = mesh(rng, n_elements, n_vertices)
+    n = np.full(5, 30_000.0)
+    back = np.full((1, n_elements), 2, np.uint8)
+    halves = window_flux_cl(element_sums_cl(frames, split_parity=True), n, back, back, [2], ev, n_vertices)
+    whole = window_flux_cl(element_sums_cl(frames), n, back, back, [2], ev, n_vertices)
+    # Each half is normalised by half the photons: their mean is the full map
+    close(halves[0, :, :, :3].mean(axis=0), whole[0, 0, :, :3])
+
+
+def test07_bitwise_repeatable(rng):
+    n_elements, n_vertices = 2000, 1200
+    frames = [frame_records(rng, 20_000, n_elements) for _ in range(10)]
+    ev = mesh(rng, n_elements, n_vertices)
+    n = np.full(10, 2e4)
+    rows = np.arange(2, 8)
+    back, fwd = random_windows(rng, len(rows), n_elements, rows, 10)
+    first_sums = element_sums_cl(frames, split_parity=True)
+    first = window_flux_cl(first_sums, n, back, fwd, rows, ev, n_vertices)
+    for _ in range(2):
+        sums = element_sums_cl(frames, split_parity=True)
+        assert sums.tobytes() == first_sums.tobytes()
+        assert window_flux_cl(sums, n, back, fwd, rows, ev, n_vertices).tobytes() == first.tobytes()
+
+
+def test08_refuses_windows_outside_the_table(rng):
+    frames = [frame_records(rng, 100, 10) for _ in range(3)]
+    sums = element_sums_cl(frames)
+    ev = mesh(rng, 10, 8)
+    two = np.full((1, 10), 2, np.uint8)
+    with pytest.raises(LoomError, match="outside"):
+        window_flux_cl(sums, np.ones(3), two, two, [1], ev, 8)
+    with pytest.raises(LoomError, match="prefix or direct"):
+        window_flux_cl(sums, np.ones(3), two * 0, two * 0, [1], ev, 8, method="sorted")
