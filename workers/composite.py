@@ -295,7 +295,9 @@ def _area(sh: _Shading, key, counter, depth, p, facing, tri, rays) -> np.ndarray
             continue
         d = np.ascontiguousarray(to_light[sel])
         origin = sh.caster.offset_origins(p[sel], tri[sel], d)
-        blocked = sh.caster.occluded(origin, d, dist[sel] * (1.0 - 1e-4))
+        # stop short of the emitter itself: the length from the offset origin less 2 epsilon
+        reach = np.sqrt(((y[sel] - origin) ** 2).sum(axis=1)) - 2.0 * sh.caster.epsilon
+        blocked = sh.caster.occluded(origin, d, np.maximum(reach, 0.0))
         rays["area"] += len(sel)
         sel = sel[~blocked]
         pdf = sh.area_prob[pick[sel]] / sh.caster.triangle_area[lt[sel]]
