@@ -147,3 +147,6 @@ def bench_photons(scenes, photons, workers, memory_photons) -> None:
 from .cli_aqm import aqm_command, bench_aqm  # noqa: E402
 main.add_command(aqm_command, "aqm")
 bench.add_command(bench_aqm, "aqm")
+
+from .benchmarks.frame import bench_frame  # noqa: E402
+bench.add_command(bench_frame, "frame")

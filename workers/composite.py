@@ -55,11 +55,21 @@ def frame_key(seed: int, frame: int) -> int:
     return int(_mix64(k ^ np.uint64(frame & _M64))[0])
 
 
+def _hash(key: int, counter: np.ndarray, dim: int) -> np.ndarray:
+    x = _mix64(counter.astype(np.uint64) ^ np.uint64(key))
+    return _mix64(x + np.uint64((dim * 0x9E3779B97F4A7C15) & _M64))
+
+
 def uniform(key: int, counter: np.ndarray, dim: int) -> np.ndarray:
     """float64 in [0, 1) for each counter (pixel x spp + sample) and a dimension number."""
-    x = _mix64(counter.astype(np.uint64) ^ np.uint64(key))
-    x = _mix64(x + np.uint64((dim * 0x9E3779B97F4A7C15) & _M64))
-    return (x >> np.uint64(11)).astype(np.float64) * (1.0 / (1 << 53))
+    return (_hash(key, counter, dim) >> np.uint64(11)).astype(np.float64) * (1.0 / (1 << 53))
+
+
+def uniform_pair(key: int, counter: np.ndarray, dim: int) -> tuple[np.ndarray, np.ndarray]:
+    """Two float64 in [0, 1) with 32 random bits each, from one hash (dimension ``dim``)."""
+    x = _hash(key, counter, dim)
+    scale = 1.0 / (1 << 32)
+    return (x >> np.uint64(32)).astype(np.float64) * scale, (x & np.uint64(0xFFFFFFFF)).astype(np.float64) * scale
 
 
 # --- the frame ----------------------------------------------------------------------------------
@@ -76,47 +86,54 @@ class FrameImage:
 
 
 class _Shading:
-    """Per-frame tables the wavefront reads: materials, normals, lights, emitters, the map."""
+    """Per-frame tables the wavefront reads, per source triangle (one gather per hit): kind,
+    albedo, emission, normal; the lights, the emitters' sampling table and the map."""
 
     def __init__(self, state: FrameState, elements: ElementMesh | None, irradiance, caster: RayCaster,
                  area_samples: int):
         mats = state.materials
-        self.albedo = np.array([m.albedo for m in mats], np.float64)
-        self.kind = np.array([_KIND[m.kind] for m in mats], np.int8)
-        self.exponent = np.array([m.phong_exponent for m in mats], np.float64)
-        self.emission = np.array([m.emission for m in mats], np.float64)
+        tri_mat = state.triangle_material.astype(np.int64)
+        self.kind = np.array([_KIND[m.kind] for m in mats], np.int8)[tri_mat]
+        self.albedo = np.array([m.albedo for m in mats], np.float32)[tri_mat]
+        self.diffuse_albedo = np.where((self.kind == 0)[:, None], self.albedo, np.float32(0))
+        self.exponent = np.array([m.phong_exponent for m in mats], np.float32)[tri_mat]
+        self.emission = np.array([m.emission for m in mats], np.float32)[tri_mat]
         self.emissive = self.emission.max(axis=1) > 0
-        self.tri_mat = state.triangle_material.astype(np.int64)
+        self.any_emissive = bool(self.emissive.any())
         self.caster = caster
-        self.normals = caster.normals
+        self.normals = caster.normals.astype(np.float32)
         self.lights = state.lights
         self.elements = elements
-        self.irradiance = None if irradiance is None else np.asarray(irradiance, np.float64)
+        self.element_irradiance = None  # (E, 3 vertices, 3) float32: one gather per hit
+        if irradiance is not None:
+            self.element_irradiance = np.asarray(irradiance, np.float32)[elements.element_vertices]
         self.area_samples = area_samples if len(state.emissive_triangles) else 0
         if self.area_samples:
             tris = state.emissive_triangles.astype(np.int64)
-            power = caster.triangle_area[tris] * self.emission[self.tri_mat[tris]].mean(axis=1)
+            power = caster.triangle_area[tris] * self.emission[tris].mean(axis=1)
             self.area_tris = tris[power > 0]
             power = power[power > 0]
-            self.area_cdf = np.cumsum(power) / power.sum()
-            self.area_cdf[-1] = 1.0
-            self.area_prob = power / power.sum()
-            self.area_corners = state.vertices.astype(np.float64)[state.faces[self.area_tris]]
             if not len(self.area_tris):
                 self.area_samples = 0
+                return
+            self.area_cdf = np.cumsum(power) / power.sum()
+            self.area_cdf[-1] = 1.0
+            self.area_pdf = power / power.sum() / caster.triangle_area[self.area_tris]  # per area
+            self.area_corners = state.vertices.astype(np.float32)[state.faces[self.area_tris]]
 
 
 def camera_rays(state: FrameState, width: int, height: int, px: np.ndarray, py: np.ndarray):
-    """World origins (3,) and unit directions (n, 3) through image points (px, py) in pixels,
-    x right and y down from the top-left corner; the camera looks down -Z, +Y up, yfov vertical."""
+    """World origin (3,) and unit float32 directions (n, 3) through image points (px, py) in
+    pixels, x right and y down from the top-left corner; the camera looks down -Z, +Y up, yfov
+    vertical, the aspect is the image's."""
     cam = state.camera
     tan_y = np.tan(cam.definition.yfov / 2.0)
-    x = (2.0 * px / width - 1.0) * tan_y * (width / height)
-    y = (1.0 - 2.0 * py / height) * tan_y
+    x = ((2.0 / width) * px - 1.0) * (tan_y * width / height)
+    y = (1.0 - (2.0 / height) * py) * tan_y
     rot = cam.to_world[:3, :3]
     rot = rot / np.linalg.norm(rot, axis=0)
-    d = x[:, None] * rot[:, 0] + y[:, None] * rot[:, 1] - rot[:, 2]
-    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    d = np.stack([x, y, -np.ones_like(x)], axis=1).astype(np.float32) @ rot.T.astype(np.float32)
+    d /= np.sqrt(np.einsum("ij,ij->i", d, d))[:, None]
     return cam.position, d
 
 
@@ -128,80 +145,95 @@ def render_frame(state: FrameState, elements: ElementMesh | None, irradiance, *,
     sh = _Shading(state, elements, irradiance, caster, area_samples)
     key = frame_key(seed, frame)
     n_pixels = width * height
-    layers = np.zeros((4, n_pixels, 3), np.float32)  # direct, indirect, albedo, (alpha, -, -)
+    layers = np.zeros((n_pixels, 3, 3), np.float32)  # direct, indirect, albedo
+    alpha = np.zeros(n_pixels, np.float32)
     rays = dict.fromkeys(RAY_KINDS, 0)
     chunk_pixels = max(1, CHUNK_RAYS // spp)
     for lo in range(0, n_pixels, chunk_pixels):
         hi = min(n_pixels, lo + chunk_pixels)
         counter = np.arange(lo * spp, hi * spp, dtype=np.int64)
-        out = _trace_samples(state, sh, key, counter, spp, width, height, max_depth, rays)
-        layers[:, lo:hi] = out.reshape(4, hi - lo, spp, 3).mean(axis=2)
+        out, cover = _trace_samples(state, sh, key, counter, spp, width, height, max_depth, rays)
+        if spp == 1:
+            layers[lo:hi], alpha[lo:hi] = out, cover
+        else:  # mean over each pixel's samples (consecutive counters), in a fixed order
+            layers[lo:hi] = out.reshape(hi - lo, spp, 3, 3).mean(axis=1)
+            alpha[lo:hi] = cover.reshape(hi - lo, spp).mean(axis=1)
     shape = (height, width, 3)
-    direct, indirect, albedo = (layers[i].reshape(shape) for i in range(3))
-    return FrameImage(direct + indirect, direct, indirect, albedo, layers[3, :, 0].reshape(shape[:2]),
-                      rays)
+    direct, indirect, albedo = (np.ascontiguousarray(layers[:, i]).reshape(shape) for i in range(3))
+    return FrameImage(direct + indirect, direct, indirect, albedo, alpha.reshape(shape[:2]), rays)
 
 
 def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_depth, rays):
-    """(4, n, 3) float64: direct, indirect, albedo and coverage of the samples ``counter``."""
+    """Direct, indirect and albedo (n, 3, 3) and coverage (n,) of the camera samples ``counter``."""
     n = len(counter)
-    out = np.zeros((4, n, 3))
+    out = np.zeros((n, 3, 3), np.float32)  # per sample: direct, indirect, albedo
+    cover = np.zeros(n, np.float32)
     pixel = counter // spp
-    px = pixel % width + uniform(key, counter, 0)
-    py = pixel // width + uniform(key, counter, 1)
-    origin, dirs = camera_rays(state, width, height, px, py)
-    origins = np.broadcast_to(origin, dirs.shape)
-    path = np.arange(n)  # sample index of every live ray
-    throughput = None  # None: all ones (camera rays)
+    jx, jy = uniform_pair(key, counter, 0)  # pixel jitter (dimensions 0 and 1)
+    origin, dirs = camera_rays(state, width, height, pixel % width + jx, pixel // width + jy)
+    origins = np.broadcast_to(origin.astype(np.float32), dirs.shape)
+    path = None  # sample index of every live ray; None while it is 0..n-1
+    throughput = None  # None while it is all ones (camera rays)
     for depth in range(max_depth + 1):
         tri, u, v, t = sh.caster.intersect(origins, dirs)
-        rays["camera" if depth == 0 else "reflection"] += len(path)
+        rays["camera" if depth == 0 else "reflection"] += len(tri)
         hit = tri >= 0
         if not hit.all():
-            tri, u, v, t, dirs, path = tri[hit], u[hit], v[hit], t[hit], dirs[hit], path[hit]
-            origins = origins[hit]
+            path = np.flatnonzero(hit) if path is None else path[hit]
+            tri, u, v, t, dirs, origins = tri[hit], u[hit], v[hit], t[hit], dirs[hit], origins[hit]
             throughput = None if throughput is None else throughput[hit]
-        if not len(path):
+        if not len(tri):
             break
-        points = origins + t[:, None] * dirs
-        m = sh.tri_mat[tri]
-        kind = sh.kind[m]
-        rho = sh.albedo[m]
+        points = origins + t.astype(np.float32)[:, None] * dirs
+        kind = sh.kind[tri]
+        rho = sh.albedo[tri]
         normal = sh.normals[tri]
         cos_in = np.einsum("ij,ij->i", normal, dirs)
-        facing = normal * np.where(cos_in < 0, 1.0, -1.0)[:, None]  # towards the viewer
+        facing = normal * np.where(cos_in < 0, np.float32(1), np.float32(-1))[:, None]  # to the viewer
+        acc = np.zeros((len(tri), 3, 3), np.float32)  # this depth's layers, scattered once
         if depth == 0:
-            out[2, path] = rho
-            out[3, path] = 1.0
+            acc[:, 2] = rho
+            _put(cover, path, 1.0)
 
         def add(layer, sel, value):
-            w = value if throughput is None else value * throughput[sel]
-            out[layer, path[sel]] += w
+            if sel is None:
+                acc[:, layer] += value
+            else:
+                acc[sel, layer] += value
 
         # Emitters seen from their front face
-        lit = sh.emissive[m] & (cos_in < 0)
-        if lit.any():
-            sel = np.flatnonzero(lit)
-            add(0, sel, sh.emission[m[sel]])
+        if sh.any_emissive:
+            lit = np.flatnonzero(sh.emissive[tri] & (cos_in < 0))
+            if len(lit):
+                add(0, lit, sh.emission[tri[lit]])
 
-        # Diffuse: direct light with shadow rays, indirect from the map; the path ends
-        diffuse = np.flatnonzero(kind == 0)
-        if len(diffuse):
-            p, f, tr = points[diffuse], facing[diffuse], tri[diffuse]
-            e_direct = _punctual(sh, p, f, tr, None, rays)
+        # Diffuse: direct light with shadow rays, indirect from the map; the path ends. Shaded
+        # over all hits (cheaper than gathering the diffuse ones when they are most of them):
+        # other hits get no shadow rays and a zero diffuse albedo.
+        diffuse = kind == 0
+        if diffuse.any():
+            active = None if diffuse.all() else diffuse
+            e_direct = _punctual(sh, points, facing, tri, None, rays, active)
             if sh.area_samples:
-                e_direct += _area(sh, key, counter[path[diffuse]], depth, p, f, tr, rays)
-            add(0, diffuse, rho[diffuse] / np.pi * e_direct)
-            if sh.irradiance is not None:
-                add(1, diffuse, rho[diffuse] / np.pi * _interpolate(sh, tr, u[diffuse], v[diffuse]))
+                c = counter if path is None else counter[path]
+                e_direct += _area(sh, key, c, depth, points, facing, tri, rays, active)
+            scale = (rho if active is None else sh.diffuse_albedo[tri]) * np.float32(1.0 / np.pi)
+            add(0, None, scale * e_direct)
+            if sh.element_irradiance is not None:
+                add(1, None, scale * _interpolate(sh, tri, u, v))
+            if active is None:
+                _put(out, path, acc if throughput is None else acc * throughput[:, None], True)
+                break
 
         # Glossy: exact highlights of punctual lights
         glossy = np.flatnonzero(kind == 2)
         if len(glossy):
             mirror_g = dirs[glossy] - 2.0 * cos_in[glossy, None] * normal[glossy]
-            lobe = (mirror_g, sh.exponent[m[glossy]])
+            lobe = (mirror_g, sh.exponent[tri[glossy]])
             add(0, glossy, rho[glossy] * _punctual(sh, points[glossy], facing[glossy], tri[glossy],
-                                                   lobe, rays))
+                                                   lobe, rays, None))
+
+        _put(out, path, acc if throughput is None else acc * throughput[:, None], True)
 
         # Mirror and glossy reflection continue the path
         spec = np.flatnonzero(kind != 0)
@@ -210,79 +242,111 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
         d = dirs[spec]
         refl = d - 2.0 * cos_in[spec, None] * normal[spec]
         weight = rho[spec]
-        g = kind[spec] == 2
-        if g.any():
-            gi = np.flatnonzero(g)
-            e = sh.exponent[m[spec[gi]]]
-            c = counter[path[spec[gi]]]
+        g = np.flatnonzero(kind[spec] == 2)
+        if len(g):
+            e = sh.exponent[tri[spec[g]]].astype(np.float64)
+            c = counter[spec[g] if path is None else path[spec[g]]]
             base = 2 + depth * _DIMS_PER_DEPTH
             cos_a = uniform(key, c, base) ** (1.0 / (e + 1.0))  # pdf (e+1)/(2 pi) cos^e
-            lobe_dir = around(refl[gi], cos_a, 2.0 * np.pi * uniform(key, c, base + 1))
-            cos_o = np.einsum("ij,ij->i", lobe_dir, facing[spec[gi]])
+            lobe_dir = around(refl[g].astype(np.float64), cos_a, 2.0 * np.pi * uniform(key, c, base + 1))
+            cos_o = np.einsum("ij,ij->i", lobe_dir, facing[spec[g]])
             # normalised Phong BRDF rho (e+2)/(2 pi) cos^e times cos_o over the pdf
-            weight[gi] *= (np.maximum(cos_o, 0.0) * (e + 2.0) / (e + 1.0))[:, None]
-            refl[gi] = lobe_dir
+            weight[g] *= (np.maximum(cos_o, 0.0) * (e + 2.0) / (e + 1.0))[:, None]
+            refl[g] = lobe_dir
         keep = weight.max(axis=1) > 0
         spec, refl, weight = spec[keep], refl[keep], weight[keep]
         throughput = weight if throughput is None else throughput[spec] * weight
-        origins = sh.caster.offset_origins(points[spec], tri[spec], refl)
-        dirs, path = refl, path[spec]
-    return out
+        origins = sh.caster.offset_origins(points[spec], tri[spec], refl).astype(np.float32)
+        dirs, path = refl, (spec if path is None else path[spec])
+    return out, cover
+
+
+def _put(target: np.ndarray, idx, value, accumulate: bool = False) -> None:
+    """target[idx] = value (or +=); idx None means all rows in order."""
+    if idx is None:
+        if accumulate:
+            target += value
+        else:
+            target[...] = value
+    elif accumulate:
+        target[idx] += value
+    else:
+        target[idx] = value
 
 
 def _interpolate(sh: _Shading, tri, u, v) -> np.ndarray:
     """Irradiance inside the hit element: barycentric blend of its three vertex values."""
     elem, b1, b2 = sh.elements.locate(tri, u, v)
-    corners = sh.elements.element_vertices[elem]
-    e = sh.irradiance
-    return ((1.0 - b1 - b2)[:, None] * e[corners[:, 0]] + b1[:, None] * e[corners[:, 1]]
-            + b2[:, None] * e[corners[:, 2]])
+    c = sh.element_irradiance[elem]  # (n, 3 vertices, 3)
+    b1 = b1.astype(np.float32)[:, None]
+    b2 = b2.astype(np.float32)[:, None]
+    return c[:, 0] + b1 * (c[:, 1] - c[:, 0]) + b2 * (c[:, 2] - c[:, 0])
 
 
-def _punctual(sh: _Shading, p, facing, tri, lobe, rays) -> np.ndarray:
+def _punctual(sh: _Shading, p, facing, tri, lobe, rays, active) -> np.ndarray:
     """Irradiance (lobe None) or glossy radiance over rho (lobe = (mirror dirs, exponents)) from
-    every point, spot and directional light, with shadow rays."""
-    total = np.zeros((len(p), 3))
+    every point, spot and directional light, with shadow rays. Points a light cannot reach (back
+    side, outside a spot's cone) and points not ``active`` (None: all are) are culled before any
+    square root or shadow ray."""
+    total = np.zeros((len(p), 3), np.float32)
     for light in sh.lights:
         if light.kind == "directional":
-            to_light = np.broadcast_to(-light.direction, p.shape)
-            dist = np.full(len(p), _FAR)
-            scale = np.ones(len(p))
+            to_light = (-light.direction).astype(np.float32)
+            cos_s = facing @ to_light
+            sel = np.flatnonzero(cos_s > 0 if active is None else (cos_s > 0) & active)
+            d = np.broadcast_to(to_light, (len(sel), 3))
+            dist = np.full(len(sel), _FAR)
+            cos_s = cos_s[sel]
+            scale = np.ones(len(sel), np.float32)
         else:
-            delta = light.position - p
+            delta = light.position.astype(np.float32) - p
+            ahead = np.einsum("ij,ij->i", facing, delta)  # cos x distance
+            keep = ahead > 0 if active is None else (ahead > 0) & active
+            if light.kind == "spot":  # inside the outer cone: proj > cos_outer x distance
+                proj = delta @ -light.direction.astype(np.float32)
+                dist2 = np.einsum("ij,ij->i", delta, delta)
+                keep &= (proj > 0) & (proj * proj > np.cos(light.definition.outer_cone) ** 2 * dist2)
+            sel = np.flatnonzero(keep)
+            delta = delta[sel]
             dist = np.sqrt(np.einsum("ij,ij->i", delta, delta))
-            to_light = delta / np.maximum(dist, 1e-30)[:, None]
-            scale = light.range_window(dist) / np.maximum(dist, 1e-30) ** 2
+            d = delta / dist[:, None]
+            cos_s = ahead[sel] / dist
+            scale = 1.0 / (dist * dist)
+            if light.definition.range is not None:
+                scale = scale * light.range_window(dist)
             if light.kind == "spot":
-                scale = scale * light.spot_falloff(-to_light @ light.direction)
-        cos_s = np.einsum("ij,ij->i", facing, to_light)
+                scale = scale * light.spot_falloff(proj[sel] / dist)
         if lobe is not None:  # normalised Phong: (e+2)/(2 pi) cos^e(angle to the mirror direction)
-            cos_r = np.maximum(np.einsum("ij,ij->i", lobe[0], to_light), 0.0)
-            scale = scale * (lobe[1] + 2.0) / (2.0 * np.pi) * cos_r ** lobe[1]
-        sel = np.flatnonzero((cos_s > 0) & (scale > 0))
+            e = lobe[1][sel]
+            cos_r = np.maximum(np.einsum("ij,ij->i", lobe[0][sel], d), 0.0)
+            scale = scale * (e + 2.0) / (2.0 * np.pi) * cos_r ** e
+        live = scale > 0
+        if not live.all():
+            sel, d, dist, cos_s, scale = sel[live], d[live], dist[live], cos_s[live], scale[live]
         if not len(sel):
             continue
-        d = np.ascontiguousarray(to_light[sel])
+        d = np.ascontiguousarray(d, np.float32)
         origin = sh.caster.offset_origins(p[sel], tri[sel], d)
-        blocked = sh.caster.occluded(origin, d, dist[sel] * (1.0 - 1e-5))
+        blocked = sh.caster.occluded(origin, d, dist * (1.0 - 1e-5))
         rays["shadow"] += len(sel)
-        sel = sel[~blocked]
-        total[sel] += (scale[sel] * cos_s[sel])[:, None] * light.radiant
+        free = ~blocked
+        total[sel[free]] += (scale[free] * cos_s[free]).astype(np.float32)[:, None] * \
+            light.radiant.astype(np.float32)
     return total
 
 
-def _area(sh: _Shading, key, counter, depth, p, facing, tri, rays) -> np.ndarray:
+def _area(sh: _Shading, key, counter, depth, p, facing, tri, rays, active) -> np.ndarray:
     """Irradiance from emissive triangles: ``area_samples`` samples per point, triangle chosen by
     power, point uniform on it (pbrt-v4 SampleUniformTriangle); E = L cos cos' / (d^2 pdf)."""
-    total = np.zeros((len(p), 3))
+    total = np.zeros((len(p), 3), np.float32)
     base = 2 + depth * _DIMS_PER_DEPTH + 2
     for s in range(sh.area_samples):
         u0, u1, u2 = (uniform(key, counter, base + 3 * s + j) for j in range(3))
         pick = np.minimum(np.searchsorted(sh.area_cdf, u0, side="right"), len(sh.area_cdf) - 1)
         su = np.sqrt(u1)
-        b1, b2 = su * (1.0 - u2), su * u2
+        b1, b2 = (su * (1.0 - u2)).astype(np.float32), (su * u2).astype(np.float32)
         c = sh.area_corners[pick]
-        y = (1.0 - b1 - b2)[:, None] * c[:, 0] + b1[:, None] * c[:, 1] + b2[:, None] * c[:, 2]
+        y = c[:, 0] + b1[:, None] * (c[:, 1] - c[:, 0]) + b2[:, None] * (c[:, 2] - c[:, 0])
         lt = sh.area_tris[pick]
         delta = y - p
         dist2 = np.einsum("ij,ij->i", delta, delta)
@@ -290,7 +354,8 @@ def _area(sh: _Shading, key, counter, depth, p, facing, tri, rays) -> np.ndarray
         to_light = delta / np.maximum(dist, 1e-30)[:, None]
         cos_s = np.einsum("ij,ij->i", facing, to_light)
         cos_l = -np.einsum("ij,ij->i", sh.normals[lt], to_light)  # front face only
-        sel = np.flatnonzero((cos_s > 0) & (cos_l > 0) & (lt != tri))
+        ok = (cos_s > 0) & (cos_l > 0) & (lt != tri)
+        sel = np.flatnonzero(ok if active is None else ok & active)
         if not len(sel):
             continue
         d = np.ascontiguousarray(to_light[sel])
@@ -300,10 +365,9 @@ def _area(sh: _Shading, key, counter, depth, p, facing, tri, rays) -> np.ndarray
         blocked = sh.caster.occluded(origin, d, np.maximum(reach, 0.0))
         rays["area"] += len(sel)
         sel = sel[~blocked]
-        pdf = sh.area_prob[pick[sel]] / sh.caster.triangle_area[lt[sel]]
-        g = cos_s[sel] * cos_l[sel] / (dist2[sel] * pdf)
-        total[sel] += g[:, None] * sh.emission[sh.tri_mat[lt[sel]]]
-    return total / sh.area_samples
+        g = cos_s[sel] * cos_l[sel] / (dist2[sel] * sh.area_pdf[pick[sel]])
+        total[sel] += g.astype(np.float32)[:, None] * sh.emission[lt[sel]]
+    return total / np.float32(sh.area_samples)
 
 
 def composite_task(*, scene_path: str, scene_hash: str, camera: str | None, element_size: float,

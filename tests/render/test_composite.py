@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from pipeline.scene import ElementMesh, Scene
-from workers.composite import camera_rays, frame_key, render_frame, uniform
+from workers.composite import camera_rays, frame_key, render_frame, uniform_pair
 
 from tests.render.scenes import EYE, LAMP, area_scene, mirror_scene, plane_scene
 
@@ -30,9 +30,8 @@ def _sample_points(state, width, height, spp, seed, frame):
     counter = np.arange(width * height * spp, dtype=np.int64)
     key = frame_key(seed, frame)
     pixel = counter // spp
-    px = pixel % width + uniform(key, counter, 0)
-    py = pixel // width + uniform(key, counter, 1)
-    origin, d = camera_rays(state, width, height, px, py)
+    jx, jy = uniform_pair(key, counter, 0)
+    origin, d = camera_rays(state, width, height, pixel % width + jx, pixel // width + jy)
     t = -origin[1] / d[:, 1]
     return (origin + t[:, None] * d).reshape(height, width, spp, 3)
 

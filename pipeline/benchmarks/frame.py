@@ -1,0 +1,99 @@
+"""``loom bench frame``: compositor milliseconds per frame, and its rays/s against raw embreex.
+
+For each scene (the built-in ROOM and ATRIUM, or the files given), one frame from the middle of
+the timeline is rendered at the given resolution and spp in this process, pinned to one core.
+The indirect map is a constant (the compositor's cost does not depend on its values). Raw
+embreex speed is measured in the same run on the same triangles: the frame's pixel-centre camera
+rays, cast in one ``EmbreeScene.run`` call. The compositor's rays/s counts every ray it casts
+(camera, shadow, area, reflection) over the whole frame time, so the ratio is the cost of
+everything that is not Embree. Target: at least 50 % of raw.
+"""
+from __future__ import annotations
+
+import os
+import statistics
+import tempfile
+import time
+from pathlib import Path
+
+import click
+import numpy as np
+
+
+def _raw_rays_per_second(state, width: int, height: int, repeat: int) -> float:
+    """Median rays/s of embreex alone on the frame's pixel-centre camera rays."""
+    from embreex import mesh_construction, rtcore_scene
+
+    from workers.composite import camera_rays
+
+    scene = rtcore_scene.EmbreeScene()
+    mesh_construction.TriangleMesh(scene, np.ascontiguousarray(state.vertices, np.float32),
+                                   np.ascontiguousarray(state.faces, np.int32))
+    py, px = np.mgrid[0:height, 0:width]
+    origin, d = camera_rays(state, width, height, px.ravel() + 0.5, py.ravel() + 0.5)
+    o = np.ascontiguousarray(np.broadcast_to(origin, d.shape), np.float32)
+    d = np.ascontiguousarray(d, np.float32)
+    scene.run(o[:1], d[:1])  # commit the BVH
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        scene.run(o, d, output=1)
+        times.append(time.perf_counter() - t0)
+    return len(d) / statistics.median(times)
+
+
+def bench_scene(path, *, width: int, height: int, spp: int, repeat: int) -> dict:
+    """Figures for one scene: ms/frame, rays per kind, compositor and raw rays/s."""
+    from pipeline.scene import ElementMesh, Scene
+    from workers.composite import render_frame
+    from workers.raycast import caster_for
+
+    scene = Scene.load(path)
+    frame = (scene.timeline.first + scene.timeline.last) // 2
+    state = scene.pose_frame(frame)
+    elements = ElementMesh.build(scene)
+    irradiance = np.full((elements.n_vertices, 3), 0.5)
+    caster = caster_for(state)
+    args = dict(width=width, height=height, spp=spp, seed=0, frame=frame, caster=caster)
+    img = render_frame(state, elements, irradiance, **args)  # warm-up
+    times = []
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        img = render_frame(state, elements, irradiance, **args)
+        times.append(time.perf_counter() - t0)
+    seconds = statistics.median(times)
+    rays = sum(img.rays.values())
+    raw = _raw_rays_per_second(state, width, height, repeat)
+    return {"scene": Path(path).stem, "frame": frame, "ms": seconds * 1e3, "rays": img.rays,
+            "rays_per_s": rays / seconds, "raw_rays_per_s": raw, "ratio": rays / seconds / raw}
+
+
+@click.command("frame")
+@click.argument("scenes", nargs=-1, type=click.Path(dir_okay=False))
+@click.option("--resolution", default="640x480", show_default=True)
+@click.option("--spp", type=int, default=1, show_default=True)
+@click.option("--repeat", type=int, default=3, show_default=True, help="Timed renders per scene (median).")
+def bench_frame(scenes, resolution, spp, repeat):
+    """Milliseconds per frame and rays/s vs raw embreex (default scenes: ROOM and ATRIUM)."""
+    from pipeline.render import RenderSettings, parse_resolution
+    from pipeline.scene.builtin import write_builtin
+
+    width, height = parse_resolution(resolution)
+    RenderSettings(width=width, height=height, spp=spp)  # validates spp
+    pinned = hasattr(os, "sched_setaffinity")
+    if pinned:  # one core for both measurements, like one Dask worker
+        cores = os.sched_getaffinity(0)
+        os.sched_setaffinity(0, {min(cores)})
+    try:
+        with tempfile.TemporaryDirectory() as tmp:
+            paths = list(scenes) or [write_builtin(n, Path(tmp) / f"{n}.glb") for n in ("room", "atrium")]
+            click.echo(f"compositor at {width}x{height}, {spp} spp, one core, median of {repeat}")
+            for path in paths:
+                r = bench_scene(path, width=width, height=height, spp=spp, repeat=repeat)
+                kinds = ", ".join(f"{k} {v:,}" for k, v in r["rays"].items())
+                click.echo(f"{r['scene']:>8} frame {r['frame']}: {r['ms']:7.1f} ms/frame  "
+                           f"{r['rays_per_s'] / 1e6:5.2f} Mrays/s vs raw embreex "
+                           f"{r['raw_rays_per_s'] / 1e6:5.2f} Mrays/s ({100 * r['ratio']:.0f} %)  [{kinds}]")
+    finally:
+        if pinned:
+            os.sched_setaffinity(0, cores)
