@@ -75,7 +75,7 @@ def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames, *, mod
 
 
 def illumination_maps(store, elements, scene, frames=None, *, mode: str = "adaptive", fmax: int | None = None,
-                      config: RenderConfig = RenderConfig(), kind: str = "indirect",
+                      config: RenderConfig = RenderConfig(), kind: str = "indirect", count_kind: str = "all",
                       split_parity: bool = False, spatial_filter: bool = False,
                       chunk: int = 32) -> Iterator[FrameIllumination]:
     """Yield the illumination of every requested frame, in frame order.
@@ -87,7 +87,10 @@ def illumination_maps(store, elements, scene, frames=None, *, mode: str = "adapt
     frames : store frame indices (0-based; default all).
     mode : "adaptive" (Condition (1), §5.1), "fixed" (+-F_max/2 always, §6 Fig. 3b) or "off".
     fmax : F_max in frames (default ``config.fmax_initial``).
-    kind : records and counts used: "indirect" (the map the compositor reads), "direct" or "all".
+    kind : records gathered: "indirect" (the map the compositor reads), "direct" or "all".
+    count_kind : photons whose counts drive Condition (1): "all" (default: every photon hit of an
+        element, as the paper's per-frame tables of §4; direct hits make lighting changes on moving
+        lit objects visible with more photons than the indirect ones alone), or "indirect"/"direct".
     split_parity : also give the even/odd half-photon maps I1, I2 (§5.2.3) instead of the full map.
     spatial_filter : apply the adaptive filter of §5.2.5 with ``config.filter_*``.
     """
@@ -100,7 +103,7 @@ def illumination_maps(store, elements, scene, frames=None, *, mode: str = "adapt
     if store.n_elements != elements.n_elements:
         raise LoomError(f"store has {store.n_elements} elements, the element mesh {elements.n_elements}")
     n_emitted = np.array([store.photons_emitted(f) for f in range(store.n_frames)], np.float64)
-    counts = store.counts(kind=kind)
+    counts = store.counts(kind=count_kind)
     back, fwd = collection_windows(counts, n_emitted, frames, mode=mode, fmax=fmax, config=config)
     hood = (neighbourhood(elements.element_vertices, elements.vertex_local, elements.vertex_instance,
                           max_rings=config.filter_rings, max_angle=config.filter_angle)
