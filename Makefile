@@ -29,10 +29,13 @@ test: setup
 test-all: setup
 	$(PY) -m pytest -m ''
 
+# The whole ROOM animation (135 frames) at 320x240, 2 spp, 40,000 photons a frame (the paper's N_frame).
 demo: setup
 	@mkdir -p $(DEMO)
 	$(LOOM) scene room -o $(DEMO)/room.glb
 	$(LOOM) info $(DEMO)/room.glb
+	$(LOOM) render $(DEMO)/room.glb --out $(DEMO)/room --resolution 320x240 --spp 2 --photons 40000
+	@echo "frames: $(DEMO)/room/beauty.####.exr and .png; video: $(DEMO)/room/preview.mp4"
 
 bench: setup
 	$(LOOM) bench --help
