@@ -21,11 +21,15 @@ def camera(b: GltfBuilder, eye, target, yfov: float = 0.8, up=(0.0, 0.0, -1.0)) 
 
 
 def plane_scene(path, *, light: str = "point", albedo=(0.5, 0.6, 0.7), occluder: bool = False,
-                frames: int = 1):
+                frames: int = 1, roughness: float | None = None):
     """A 20 x 20 diffuse plane at y = 0 under one light, seen from above; optionally an opaque
-    0.6 x 0.6 square at y = 1 under the lamp, and a few frames of a slowly moving camera."""
+    0.6 x 0.6 square at y = 1 under the lamp, a few frames of a slowly moving camera, or a glossy
+    metal plane of the given roughness."""
     b = GltfBuilder()
-    mat = b.add_material("plane", albedo)
+    if roughness is None:
+        mat = b.add_material("plane", albedo)
+    else:
+        mat = b.add_material("plane", albedo, metallic=1.0, roughness=roughness)
     b.add_node("plane", b.add_mesh("plane", quad_y(10.0), UP_FACES, material=mat))
     if light == "point":
         b.add_node("lamp", light=b.add_point_light("lamp", (1.0, 0.9, 0.8), 10.0), translation=tuple(LAMP))

@@ -66,6 +66,25 @@ def test_diffuse_plane_direct_radiance_is_analytic(tmp_path, light):
     assert img.rays["camera"] == W * H * SPP and img.rays["area"] == img.rays["reflection"] == 0
 
 
+def test_glossy_highlight_of_a_point_light_is_analytic(tmp_path):
+    rho, roughness = np.array([0.9, 0.8, 0.7]), 0.4
+    path = plane_scene(tmp_path / "g.glb", albedo=rho, roughness=roughness)
+    state, img, args = _render(path, max_depth=1)
+    p = _sample_points(state, **{k: args[k] for k in ("width", "height", "spp", "seed", "frame")})
+    view = (p - EYE) / np.linalg.norm(p - EYE, axis=-1, keepdims=True)
+    mirror = view * [1, -1, 1]  # reflected about the plane's normal +y
+    to_lamp = (LAMP - p) / np.linalg.norm(LAMP - p, axis=-1, keepdims=True)
+    e = 2.0 / (roughness ** 2) ** 2 - 2.0  # Phong exponent of the material mapping
+    brdf = (e + 2) / (2 * np.pi) * np.maximum((mirror * to_lamp).sum(-1), 0) ** e
+    expected = (brdf * _point_irradiance(p, LAMP, 1.0))[..., None] * rho * [10.0, 9.0, 8.0]
+    expected = expected.mean(axis=2)
+    bright = expected.max(axis=-1) > 0.01 * expected.max()
+    assert bright.sum() > 20
+    # the lobe samples of depth 1 leave the scene (nothing else to reflect): only the highlight
+    np.testing.assert_allclose(img.direct[bright], expected[bright], rtol=0.01)
+    assert img.rays["reflection"] > 0 and np.all(img.indirect == 0)
+
+
 def test_fully_occluded_pixels_have_no_direct_light(tmp_path):
     state, img, args = _render(plane_scene(tmp_path / "o.glb", occluder=True))
     p = _sample_points(state, **{k: args[k] for k in ("width", "height", "spp", "seed", "frame")})

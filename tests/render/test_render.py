@@ -118,3 +118,23 @@ def test_output_path_that_is_a_file_is_refused(tmp_path):
     assert result.exit_code == 2 and len(lines) == 1 and "--out" in lines[0]
     assert target.read_text() == "keep me"
     assert sorted(p.name for p in tmp_path.iterdir()) == ["s.glb", "taken"]
+
+
+def test_store_holds_each_frames_maps_from_its_own_photons(rendered):
+    from pipeline.scene import ElementMesh, Scene
+    from pipeline.store import PhotonStore
+    from pipeline.store.illumination import IlluminationMaps
+    from workers.reconstruct import vertex_irradiance
+
+    scene_path, out, report = rendered
+    scene = Scene.load(scene_path)
+    elements = ElementMesh.build(scene)
+    maps = IlluminationMaps.open(out / "photons.zarr")
+    assert maps.n_vertices == elements.n_vertices and np.all(maps.adaptation()[:3] > 0)
+    records = PhotonStore.open(out / "photons.zarr").read_frame(1)
+    areas = elements.vertex_areas(scene.pose_frame(2))
+    d = records.direct
+    want = vertex_irradiance(records.element[d], records.b1[d], records.b2[d], records.energy[d],
+                             elements, areas, records.photons_emitted)
+    np.testing.assert_allclose(maps.read(1, "direct"), want, rtol=1e-6)
+    assert want.max() > 0 and not maps.read(1, "indirect").any()
