@@ -102,9 +102,13 @@ def shoot_command(scene_file, frames, photons, store_url, seed, element_size, ma
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--max-depth", type=int, default=4, show_default=True, help="Mirror/glossy reflections per path.")
 @click.option("--quiet", is_flag=True, help="No progress bars.")
+@click.option("--temporal", type=click.Choice(["adaptive", "fixed", "off"]), default="adaptive", show_default=True,
+              help="Temporal photon collection of the indirect maps: Condition (1) windows (§5.1), "
+                   "always +-F_max/2 (§6), or each frame's own photons.")
+@click.option("--fmax", type=int, default=None, help="F_max, frames per segment (default: fmax_initial, 15).")
 @_scheduler_options
 def render_command(scene_file, frames, out_dir, resolution, spp, photons, store_url, camera, seed,
-                   max_depth, quiet, scheduler, workers) -> None:
+                   max_depth, quiet, temporal, fmax, scheduler, workers) -> None:
     """Render frames of SCENE_FILE: photons, illumination maps, EXR/PNG frames, preview.mp4."""
     from .config import RenderConfig
     from .render import RenderSettings, parse_resolution, render
@@ -113,7 +117,7 @@ def render_command(scene_file, frames, out_dir, resolution, spp, photons, store_
     settings = RenderSettings(width=width, height=height, spp=spp, max_depth=max_depth)
     report = render(scene_file, frames=frames, out_dir=out_dir, settings=settings, n_photons=photons,
                     store_url=store_url, camera=camera, config=RenderConfig(seed=seed),
-                    scheduler=scheduler, workers=workers, progress=not quiet)
+                    scheduler=scheduler, workers=workers, progress=not quiet, temporal=temporal, fmax=fmax)
     t, r = report["times_s"], report["rays"]
     click.echo(f"rendered {len(report['rendered'])} frames ({len(report['skipped'])} already done) "
                f"at {width}x{height}, {spp} spp in {t['total_s']:.1f} s (shoot {t['shoot_s']:.1f}, "

@@ -83,8 +83,12 @@ def check_out_dir(out: Path) -> None:
 def render(scene_path, *, frames: str | None, out_dir, settings: RenderSettings = RenderSettings(),
            n_photons: int = 40_000, store_url: str | None = None, camera: str | None = None,
            config: RenderConfig = RenderConfig(), scheduler: str = "local", workers: int | None = None,
-           progress: bool = True) -> dict:
-    """Render ``frames`` of a scene into ``out_dir``; returns the report (also ``report.json``)."""
+           progress: bool = True, temporal: str = "off", fmax: int | None = None) -> dict:
+    """Render ``frames`` of a scene into ``out_dir``; returns the report (also ``report.json``).
+
+    ``temporal`` (adaptive | fixed | off) and ``fmax`` (default ``config.fmax_initial``) choose the
+    temporal photon collection of the indirect maps (§5.1, §5.2.4; pipeline/temporal.py).
+    """
     from workers.composite import composite_task
     from workers.photons import shoot_task
     from workers.reconstruct import illuminate_task
@@ -101,6 +105,11 @@ def render(scene_path, *, frames: str | None, out_dir, settings: RenderSettings 
     store_url = store_url or str(out / "photons.zarr")
     check_store_location(store_url)
     cam_name = scene.nodes[scene.camera_node].name
+    if temporal not in ("adaptive", "fixed", "off"):
+        raise LoomError(f"must be adaptive, fixed or off, got {temporal!r}", field="--temporal")
+    fmax = config.fmax_initial if fmax is None else fmax
+    if not 0 <= fmax <= 510:
+        raise LoomError(f"must be in [0, 510] frames, got {fmax}", field="--fmax")
     t_start = time.perf_counter()
 
     out.mkdir(parents=True, exist_ok=True)
@@ -121,6 +130,8 @@ def render(scene_path, *, frames: str | None, out_dir, settings: RenderSettings 
                     width=settings.width, height=settings.height, spp=settings.spp,
                     max_depth=settings.max_depth, area_samples=settings.area_samples,
                     tonemap=settings.tonemap.to_dict())
+        if temporal != "off":  # keeps the hash of renders without temporal collection
+            base.update(temporal=temporal, fmax=fmax, temporal_config=config.hash)
         render_hash = _digest(base)
         done = {f for f in p.frames
                 if frame_is_valid(*frame_paths(out, f), settings.width, settings.height, render_hash)}
@@ -137,6 +148,9 @@ def render(scene_path, *, frames: str | None, out_dir, settings: RenderSettings 
                         [(f"illuminate-{render_hash[:8]}-f{f:05d}", dict(
                             common, frame=f, aspect=settings.width / settings.height)) for f in need],
                         desc="illuminate", progress=progress)
+        if temporal != "off" and need:  # indirect maps from temporal windows (pipeline/temporal.py)
+            from .temporal import write_temporal_maps
+            write_temporal_maps(store_url, scene, p.elements, need, mode=temporal, fmax=fmax, config=config)
         adaptation = {f: float(stored[f - 1]) for f in p.frames}
         adaptation.update({r["frame"]: r["adaptation"] for r in lit.values()})
         timing["illuminate_s"] = time.perf_counter() - t0
