@@ -103,6 +103,7 @@ class _Shading:
         self.caster = caster
         self.normals = caster.normals.astype(np.float32)
         self.lights = state.lights
+        self.reach = [_light_reach(state, light) for light in state.lights]
         self.elements = elements
         self.element_irradiance = None  # (E, 3 vertices, 3) float32: one gather per hit
         if irradiance is not None:
@@ -283,25 +284,51 @@ def _interpolate(sh: _Shading, tri, u, v) -> np.ndarray:
     return c[:, 0] + b1 * (c[:, 1] - c[:, 0]) + b2 * (c[:, 2] - c[:, 0])
 
 
+def _light_reach(state: FrameState, light) -> np.ndarray | None:
+    """(F,) bool: triangles a spot's cone or a light's range may touch (bounding spheres), so
+    hits elsewhere skip that light at once; None where every triangle may be reached."""
+    if light.kind == "directional" or (light.kind == "point" and light.definition.range is None):
+        return None
+    corners = state.vertices.astype(np.float64)[state.faces]
+    centre = corners.mean(axis=1)
+    radius = np.sqrt(((corners - centre[:, None]) ** 2).sum(axis=2)).max(axis=1) * 1.001 + 1e-9
+    v = centre - light.position
+    dist = np.sqrt((v * v).sum(axis=1))
+    reach = np.ones(len(centre), bool)
+    if light.definition.range is not None:
+        reach &= dist - radius < light.definition.range
+    if light.kind == "spot":
+        away = dist > radius
+        cos_axis = np.clip((v[away] @ light.direction) / dist[away], -1.0, 1.0)
+        gap = np.arccos(cos_axis) - np.arcsin(radius[away] / dist[away])
+        reach[np.flatnonzero(away)[gap > light.definition.outer_cone]] = False
+    return reach
+
+
 def _punctual(sh: _Shading, p, facing, tri, lobe, rays, active) -> np.ndarray:
     """Irradiance (lobe None) or glossy radiance over rho (lobe = (mirror dirs, exponents)) from
-    every point, spot and directional light, with shadow rays. Points a light cannot reach (back
-    side, outside a spot's cone) and points not ``active`` (None: all are) are culled before any
-    square root or shadow ray."""
+    every point, spot and directional light, with shadow rays. Points a light cannot reach (its
+    cone or range misses their triangle, back side, outside the cone) and points not ``active``
+    (None: all are) are culled before any square root or shadow ray."""
     total = np.zeros((len(p), 3), np.float32)
-    for light in sh.lights:
+    for light, reach in zip(sh.lights, sh.reach):
+        mask = active if reach is None else (reach[tri] if active is None else reach[tri] & active)
+        idx = None if mask is None else np.flatnonzero(mask)
+        if idx is not None and not len(idx):
+            continue
+        pp, ff = (p, facing) if idx is None else (p[idx], facing[idx])
         if light.kind == "directional":
             to_light = (-light.direction).astype(np.float32)
-            cos_s = facing @ to_light
-            sel = np.flatnonzero(cos_s > 0 if active is None else (cos_s > 0) & active)
+            cos_s = ff @ to_light
+            sel = np.flatnonzero(cos_s > 0)
             d = np.broadcast_to(to_light, (len(sel), 3))
             dist = np.full(len(sel), _FAR)
             cos_s = cos_s[sel]
             scale = np.ones(len(sel), np.float32)
         else:
-            delta = light.position.astype(np.float32) - p
-            ahead = np.einsum("ij,ij->i", facing, delta)  # cos x distance
-            keep = ahead > 0 if active is None else (ahead > 0) & active
+            delta = light.position.astype(np.float32) - pp
+            ahead = np.einsum("ij,ij->i", ff, delta)  # cos x distance
+            keep = ahead > 0
             if light.kind == "spot":  # inside the outer cone: proj > cos_outer x distance
                 proj = delta @ -light.direction.astype(np.float32)
                 dist2 = np.einsum("ij,ij->i", delta, delta)
@@ -316,6 +343,8 @@ def _punctual(sh: _Shading, p, facing, tri, lobe, rays, active) -> np.ndarray:
                 scale = scale * light.range_window(dist)
             if light.kind == "spot":
                 scale = scale * light.spot_falloff(proj[sel] / dist)
+        if idx is not None:
+            sel = idx[sel]
         if lobe is not None:  # normalised Phong: (e+2)/(2 pi) cos^e(angle to the mirror direction)
             e = lobe[1][sel]
             cos_r = np.maximum(np.einsum("ij,ij->i", lobe[0][sel], d), 0.0)

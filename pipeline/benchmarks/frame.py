@@ -4,7 +4,7 @@ For each scene (the built-in ROOM and ATRIUM, or the files given), one frame fro
 the timeline is rendered at the given resolution and spp in this process, pinned to one core.
 The indirect map is a constant (the compositor's cost does not depend on its values). Raw
 embreex speed is measured in the same run on the same triangles: the frame's pixel-centre camera
-rays, cast in one ``EmbreeScene.run`` call. The compositor's rays/s counts every ray it casts
+rays, cast in one ``EmbreeScene.run`` call, alternating with the compositor's renders. The compositor's rays/s counts every ray it casts
 (camera, shadow, area, reflection) over the whole frame time, so the ratio is the cost of
 everything that is not Embree. Target: at least 50 % of raw.
 """
@@ -20,8 +20,8 @@ import click
 import numpy as np
 
 
-def _raw_rays_per_second(state, width: int, height: int, repeat: int) -> float:
-    """Median rays/s of embreex alone on the frame's pixel-centre camera rays."""
+def _raw_caster(state, width: int, height: int):
+    """A function casting the frame's pixel-centre camera rays through embreex alone, once."""
     from embreex import mesh_construction, rtcore_scene
 
     from workers.composite import camera_rays
@@ -34,16 +34,15 @@ def _raw_rays_per_second(state, width: int, height: int, repeat: int) -> float:
     o = np.ascontiguousarray(np.broadcast_to(origin, d.shape), np.float32)
     d = np.ascontiguousarray(d, np.float32)
     scene.run(o[:1], d[:1])  # commit the BVH
-    times = []
-    for _ in range(repeat):
-        t0 = time.perf_counter()
-        scene.run(o, d, output=1)
-        times.append(time.perf_counter() - t0)
-    return len(d) / statistics.median(times)
+    return lambda: scene.run(o, d, output=1)
 
 
 def bench_scene(path, *, width: int, height: int, spp: int, repeat: int) -> dict:
-    """Figures for one scene: ms/frame, rays per kind, compositor and raw rays/s."""
+    """Figures for one scene: ms/frame, rays per kind, compositor and raw rays/s.
+
+    Compositor and raw casts alternate, ``repeat`` times each, so both see the same machine load;
+    the figures are medians, the ratio the median of the paired ratios.
+    """
     from pipeline.scene import ElementMesh, Scene
     from workers.composite import render_frame
     from workers.raycast import caster_for
@@ -56,23 +55,29 @@ def bench_scene(path, *, width: int, height: int, spp: int, repeat: int) -> dict
     caster = caster_for(state)
     args = dict(width=width, height=height, spp=spp, seed=0, frame=frame, caster=caster)
     img = render_frame(state, elements, irradiance, **args)  # warm-up
-    times = []
+    raw_cast = _raw_caster(state, width, height)
+    frame_s, raw_s = [], []
     for _ in range(repeat):
         t0 = time.perf_counter()
         img = render_frame(state, elements, irradiance, **args)
-        times.append(time.perf_counter() - t0)
-    seconds = statistics.median(times)
+        t1 = time.perf_counter()
+        raw_cast()
+        frame_s.append(t1 - t0)
+        raw_s.append(time.perf_counter() - t1)
     rays = sum(img.rays.values())
-    raw = _raw_rays_per_second(state, width, height, repeat)
+    n_raw = width * height
+    ratio = statistics.median((rays / f) / (n_raw / r) for f, r in zip(frame_s, raw_s))
+    seconds = statistics.median(frame_s)
     return {"scene": Path(path).stem, "frame": frame, "ms": seconds * 1e3, "rays": img.rays,
-            "rays_per_s": rays / seconds, "raw_rays_per_s": raw, "ratio": rays / seconds / raw}
+            "rays_per_s": rays / seconds, "raw_rays_per_s": n_raw / statistics.median(raw_s),
+            "ratio": ratio}
 
 
 @click.command("frame")
 @click.argument("scenes", nargs=-1, type=click.Path(dir_okay=False))
 @click.option("--resolution", default="640x480", show_default=True)
 @click.option("--spp", type=int, default=1, show_default=True)
-@click.option("--repeat", type=int, default=3, show_default=True, help="Timed renders per scene (median).")
+@click.option("--repeat", type=int, default=5, show_default=True, help="Timed renders per scene (median).")
 def bench_frame(scenes, resolution, spp, repeat):
     """Milliseconds per frame and rays/s vs raw embreex (default scenes: ROOM and ATRIUM)."""
     from pipeline.render import RenderSettings, parse_resolution
