@@ -8,14 +8,37 @@
 #define PHILOX_W0 0x9E3779B9u
 #define PHILOX_W1 0xBB67AE85u
 
+// One round on four scalar words: two 32x32 -> 64-bit products, a swap and a key xor. Scalars
+// only (no uint4), so that PoCL's loop vectoriser can widen the work-group loop.
+#define PHILOX_ROUND(c0, c1, c2, c3, k0, k1) do { \
+        const ulong p0_ = (ulong)PHILOX_M0 * (ulong)(c0); \
+        const ulong p1_ = (ulong)PHILOX_M1 * (ulong)(c2); \
+        const uint n0_ = (uint)(p1_ >> 32) ^ (c1) ^ (k0); \
+        const uint n2_ = (uint)(p0_ >> 32) ^ (c3) ^ (k1); \
+        (c1) = (uint)p1_; (c3) = (uint)p0_; (c0) = n0_; (c2) = n2_; \
+    } while (0)
+
+#define PHILOX_BUMP(k0, k1) do { (k0) += PHILOX_W0; (k1) += PHILOX_W1; } while (0)
+
+// Philox4x32-10 in place on the counter words c0..c3 with key (k0, k1) (key copied, not changed).
+#define PHILOX4X32_10(c0, c1, c2, c3, key0, key1) do { \
+        uint k0_ = (key0), k1_ = (key1); \
+        PHILOX_ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
+        PHILOX_ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
+        PHILOX_ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
+        PHILOX_ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
+        PHILOX_ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
+        PHILOX_ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
+        PHILOX_ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
+        PHILOX_ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
+        PHILOX_ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
+        PHILOX_ROUND(c0, c1, c2, c3, k0_, k1_); \
+    } while (0)
+
 inline uint4 philox4x32_10(uint4 c, uint2 k) {
-    for (int r = 0; r < 10; ++r) {
-        if (r > 0) { k.x += PHILOX_W0; k.y += PHILOX_W1; }
-        uint hi0 = mul_hi(PHILOX_M0, c.x), lo0 = PHILOX_M0 * c.x;
-        uint hi1 = mul_hi(PHILOX_M1, c.z), lo1 = PHILOX_M1 * c.z;
-        c = (uint4)(hi1 ^ c.y ^ k.x, lo1, hi0 ^ c.w ^ k.y, lo0);
-    }
-    return c;
+    uint c0 = c.x, c1 = c.y, c2 = c.z, c3 = c.w;
+    PHILOX4X32_10(c0, c1, c2, c3, k.x, k.y);
+    return (uint4)(c0, c1, c2, c3);
 }
 
 // A uint32 to a double in [0, 1) with 24 random bits: exact in float and double alike.

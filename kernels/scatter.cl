@@ -2,8 +2,11 @@
 // For every hit: record it if the surface is diffuse (element, element barycentrics, weight),
 // play Russian roulette on the albedo, and sample the next direction: cosine lobe (diffuse),
 // mirror, or normalised Phong lobe (glossy). Double precision throughout (PoCL CPU has fp64).
-// NumPy twin: kernels/scatter.py::scatter_reference. Formulas are documented there.
+// NumPy twin: kernels/scatter.py::scatter_reference; formulas are documented there.
+//
+// Written with scalars only (no double3/uint4) and selects instead of branches.
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
+#pragma OPENCL FP_CONTRACT OFF  // no fused multiply-add: the NumPy twin rounds every product
 #include "philox.cl"
 
 #define KIND_DIFFUSE 0
@@ -12,21 +15,8 @@
 #define PARITY_BIT 0x40000000u
 #define DIRECT_BIT 0x80000000u
 
-// Duff et al., "Building an orthonormal basis, revisited", JCGT 6(1), 2017.
-inline double3 around(double3 axis, double cos_t, double phi) {
-    double sign = axis.z >= 0.0 ? 1.0 : -1.0;
-    double a = -1.0 / (sign + axis.z);
-    double b = axis.x * axis.y * a;
-    double3 t = (double3)(1.0 + sign * axis.x * axis.x * a, sign * b, -sign * axis.x);
-    double3 bt = (double3)(b, sign + axis.y * axis.y * a, -axis.y);
-    double sin_t = sqrt(clamp(1.0 - cos_t * cos_t, 0.0, 1.0));
-    double c;
-    const double s = sincos(phi, &c);
-    return t * (sin_t * c) + bt * (sin_t * s) + axis * cos_t;
-}
-
 __kernel void scatter(
-    const int depth, const uint key0, const uint key1, const double epsilon,
+    const long count, const int depth, const uint key0, const uint key1, const double epsilon,
     __global const int *tri, __global const float *hit_u, __global const float *hit_v,
     __global const float *dir_in, __global const double *beta_in, __global const long *photon,
     __global const float *corners, __global const double *normals, __global const int *tri_mat,
@@ -37,71 +27,92 @@ __kernel void scatter(
     __global float *origin_out, __global float *dir_out, __global double *beta_out,
     __global uchar *alive)
 {
-    // The launch is padded to whole work-groups with harmless rows (the wrapper pads the inputs):
-    // no early return, and selects instead of branches, so PoCL can vectorise the work-group loop.
-    const size_t i = get_global_id(0);
-    const int t = tri[i];
+    // Launched on whole work-groups: the items past the end repeat the last row, writing the same
+    // values to the same places, which needs neither padding copies nor a branch.
+    const size_t i = min((long)get_global_id(0), count - 1);
+    const int hit = tri[i] >= 0;  // a miss (-1) records nothing and ends its path
+    const int t = hit ? tri[i] : 0;
     const int m = tri_mat[t];
     const int kind = mat_kind[m];
     const double u = (double)hit_u[i], v = (double)hit_v[i];
-    __global const float *c = corners + 9 * (size_t)t;
-    const double3 c0 = (double3)(c[0], c[1], c[2]);
-    const double3 c1 = (double3)(c[3], c[4], c[5]);
-    const double3 c2 = (double3)(c[6], c[7], c[8]);
-    const double3 p = (1.0 - u - v) * c0 + u * c1 + v * c2;
-    const double3 n = (double3)(normals[3 * t], normals[3 * t + 1], normals[3 * t + 2]);
-    const double3 d = (double3)(dir_in[3 * i], dir_in[3 * i + 1], dir_in[3 * i + 2]);
-    const double3 facing = dot(n, d) < 0.0 ? n : -n;
-    double3 beta = (double3)(beta_in[3 * i], beta_in[3 * i + 1], beta_in[3 * i + 2]);
+    const double w0 = 1.0 - u - v;
+    const size_t c9 = 9 * (size_t)t;
+    const double px = w0 * corners[c9] + u * corners[c9 + 3] + v * corners[c9 + 6];
+    const double py = w0 * corners[c9 + 1] + u * corners[c9 + 4] + v * corners[c9 + 7];
+    const double pz = w0 * corners[c9 + 2] + u * corners[c9 + 5] + v * corners[c9 + 8];
+    const double nx = normals[3 * t], ny = normals[3 * t + 1], nz = normals[3 * t + 2];
+    const double dx = dir_in[3 * i], dy = dir_in[3 * i + 1], dz = dir_in[3 * i + 2];
+    const double fs = nx * dx + ny * dy + nz * dz < 0.0 ? 1.0 : -1.0;  // normal facing the ray
+    const double fx_ = fs * nx, fy_ = fs * ny, fz_ = fs * nz;
+    double bx = beta_in[3 * i], by = beta_in[3 * i + 1], bz = beta_in[3 * i + 2];
     const long ph = photon[i];
 
     // Record a diffuse hit: locate the element (ElementMesh.locate) and its barycentrics
-    const int is_diffuse = kind == KIND_DIFFUSE;
+    const int is_diffuse = hit && kind == KIND_DIFFUSE;
     const long ns = tri_n[t];
     const double x = fmin(fmax(u, 0.0), 1.0) * (double)ns;
     const double y = fmin(fmax(v, 0.0), 1.0) * (double)ns;
     const long a = min(max((long)floor(x), 0L), ns - 1);
     const long b = min(max((long)floor(y), 0L), ns - 1 - a);
-    const double fx = x - (double)a, fy = y - (double)b;
-    const int up = (fx + fy <= 1.0) || (a + b >= ns - 1);
+    const double ex = x - (double)a, ey = y - (double)b;
+    const int up = (ex + ey <= 1.0) || (a + b >= ns - 1);
     const long cell = up ? a * ns - a * (a - 1) / 2 + b
                          : ns * (ns + 1) / 2 + a * (ns - 1) - a * (a - 1) / 2 + b;
-    const double b1 = fmin(fmax(up ? fx : fx + fy - 1.0, 0.0), 1.0);
-    const double b2 = fmin(fmax(up ? fy : 1.0 - fx, 0.0), 1.0 - b1);
+    const double b1 = fmin(fmax(up ? ex : ex + ey - 1.0, 0.0), 1.0);
+    const double b2 = fmin(fmax(up ? ey : 1.0 - ex, 0.0), 1.0 - b1);
     uint k = (uint)(tri_offset[t] + cell);
     k |= (ph & 1L) ? PARITY_BIT : 0u;
     k |= depth == 0 ? DIRECT_BIT : 0u;
     rec_key[i] = is_diffuse ? k : 0u;
     rec_bary[2 * i] = is_diffuse ? (ushort)rint(b1 * 65535.0) : (ushort)0;
     rec_bary[2 * i + 1] = is_diffuse ? (ushort)rint(b2 * 65535.0) : (ushort)0;
-    rec_energy[3 * i] = is_diffuse ? (float)beta.x : 0.0f;
-    rec_energy[3 * i + 1] = is_diffuse ? (float)beta.y : 0.0f;
-    rec_energy[3 * i + 2] = is_diffuse ? (float)beta.z : 0.0f;
+    rec_energy[3 * i] = is_diffuse ? (float)bx : 0.0f;
+    rec_energy[3 * i + 1] = is_diffuse ? (float)by : 0.0f;
+    rec_energy[3 * i + 2] = is_diffuse ? (float)bz : 0.0f;
     recorded[i] = (uchar)is_diffuse;
 
+    // Philox words of counter (photon, depth) under key (seed, frame): roulette, two for the direction
+    uint r0 = (uint)ph, r1 = (uint)(ph >> 32), r2 = (uint)depth, r3 = 0u;
+    PHILOX4X32_10(r0, r1, r2, r3, key0, key1);
+
     // Russian roulette on the albedo: survive with q = max channel, reweight by albedo / q
-    const uint4 w = philox4x32_10((uint4)((uint)ph, (uint)(ph >> 32), (uint)depth, 0u), (uint2)(key0, key1));
-    const double3 rho = (double3)(albedo[3 * m], albedo[3 * m + 1], albedo[3 * m + 2]);
-    const double q = fmax(rho.x, fmax(rho.y, rho.z));
-    int survive = philox_uniform(w.x) < q;
-    beta = beta * rho / (q > 0.0 ? q : 1.0);
+    const double ax = albedo[3 * m], ay = albedo[3 * m + 1], az = albedo[3 * m + 2];
+    const double q = fmax(ax, fmax(ay, az));
+    int survive = philox_uniform(r0) < q;
+    const double qs = q > 0.0 ? q : 1.0;
+    bx = bx * ax / qs; by = by * ay / qs; bz = bz * az / qs;
 
     // Next direction: cosine lobe about the facing normal, mirror, or Phong lobe about the mirror
-    const double3 mirror = d - 2.0 * dot(d, facing) * facing;
-    const double u1 = philox_uniform(w.y), u2 = philox_uniform(w.z);
+    const double dn = dx * fx_ + dy * fy_ + dz * fz_;
+    const double mx = dx - 2.0 * dn * fx_, my = dy - 2.0 * dn * fy_, mz = dz - 2.0 * dn * fz_;
+    const double u1 = philox_uniform(r1), u2 = philox_uniform(r2);
     const int is_glossy = kind == KIND_GLOSSY;
     const double e = mat_exp[m];
     const double cos_t = is_glossy ? pow(u1, 1.0 / (e + 1.0)) : sqrt(1.0 - u1);
-    const double3 axis = is_diffuse ? facing : mirror;
-    const double3 lobe = around(axis, cos_t, 2.0 * M_PI * u2);
-    const double3 nd = kind == KIND_MIRROR ? mirror : lobe;
-    const double cos_o = dot(nd, facing);
-    beta = is_glossy ? beta * (fmax(cos_o, 0.0) * (e + 2.0) / (e + 1.0)) : beta;
+    // Lobe axis and an orthonormal basis about it (Duff et al., JCGT 6(1), 2017)
+    const double zx = is_diffuse ? fx_ : mx, zy = is_diffuse ? fy_ : my, zz = is_diffuse ? fz_ : mz;
+    const double sgn = zz >= 0.0 ? 1.0 : -1.0;
+    const double ia = -1.0 / (sgn + zz);
+    const double ib = zx * zy * ia;
+    const double tx = 1.0 + sgn * zx * zx * ia, ty = sgn * ib, tz = -sgn * zx;
+    const double sx = ib, sy = sgn + zy * zy * ia, sz = -zy;
+    const double sin_t = sqrt(fmin(fmax(1.0 - cos_t * cos_t, 0.0), 1.0));
+    const double phi = 2.0 * M_PI * u2;
+    const double cp = cos(phi), sp = sin(phi);
+    const double lx = tx * (sin_t * cp) + sx * (sin_t * sp) + zx * cos_t;
+    const double ly = ty * (sin_t * cp) + sy * (sin_t * sp) + zy * cos_t;
+    const double lz = tz * (sin_t * cp) + sz * (sin_t * sp) + zz * cos_t;
+    const int is_mirror = kind == KIND_MIRROR;
+    const double ox = is_mirror ? mx : lx, oy = is_mirror ? my : ly, oz = is_mirror ? mz : lz;
+    const double cos_o = ox * fx_ + oy * fy_ + oz * fz_;
+    const double gw = is_glossy ? fmax(cos_o, 0.0) * (e + 2.0) / (e + 1.0) : 1.0;
+    bx *= gw; by *= gw; bz *= gw;
     survive = survive && (!is_glossy || cos_o > 0.0);
-    const double side = dot(n, nd) < 0.0 ? -1.0 : 1.0;
-    const double3 o = p + n * (side * epsilon);
-    origin_out[3 * i] = (float)o.x; origin_out[3 * i + 1] = (float)o.y; origin_out[3 * i + 2] = (float)o.z;
-    dir_out[3 * i] = (float)nd.x; dir_out[3 * i + 1] = (float)nd.y; dir_out[3 * i + 2] = (float)nd.z;
-    beta_out[3 * i] = beta.x; beta_out[3 * i + 1] = beta.y; beta_out[3 * i + 2] = beta.z;
-    alive[i] = (uchar)survive;
+    const double side = nx * ox + ny * oy + nz * oz < 0.0 ? -epsilon : epsilon;
+    origin_out[3 * i] = (float)(px + nx * side);
+    origin_out[3 * i + 1] = (float)(py + ny * side);
+    origin_out[3 * i + 2] = (float)(pz + nz * side);
+    dir_out[3 * i] = (float)ox; dir_out[3 * i + 1] = (float)oy; dir_out[3 * i + 2] = (float)oz;
+    beta_out[3 * i] = bx; beta_out[3 * i + 1] = by; beta_out[3 * i + 2] = bz;
+    alive[i] = (uchar)(survive && hit);
 }

@@ -48,7 +48,7 @@ class SceneTables:
 class Hits:
     """The bounce's input: hits of live photons."""
 
-    tri: np.ndarray  # int32
+    tri: np.ndarray  # int32, -1 for a miss
     u: np.ndarray  # float32 (Embree barycentrics)
     v: np.ndarray  # float32
     dirs: np.ndarray  # (m, 3) float32 incoming directions
@@ -81,9 +81,11 @@ def _basis_around(axis, cos_t, phi):
 
 
 def scatter_reference(tables: SceneTables, hits: Hits, depth: int, key: tuple[int, int]) -> Bounce:
-    """NumPy twin of ``scatter.cl`` (see the module docstring)."""
+    """NumPy twin of ``scatter.cl`` (see the module docstring). A miss (triangle -1) records
+    nothing and ends its path."""
     m_count = len(hits.tri)
-    t = hits.tri.astype(np.int64)
+    hit = hits.tri >= 0
+    t = np.where(hit, hits.tri, 0).astype(np.int64)
     m = tables.tri_mat[t]
     kind = tables.kind[m]
     u, v = hits.u.astype(np.float64), hits.v.astype(np.float64)
@@ -95,7 +97,7 @@ def scatter_reference(tables: SceneTables, hits: Hits, depth: int, key: tuple[in
     beta = hits.beta.copy()
 
     # Record diffuse hits (same arithmetic as ElementMesh.locate)
-    recorded = kind == 0
+    recorded = hit & (kind == 0)
     ns = tables.tri_n[t].astype(np.int64)
     x = np.clip(u, 0, 1) * ns
     y = np.clip(v, 0, 1) * ns
@@ -138,7 +140,7 @@ def scatter_reference(tables: SceneTables, hits: Hits, depth: int, key: tuple[in
         nd[glossy] = g
     side = np.where(np.einsum("ij,ij->i", n, nd) < 0, -1.0, 1.0)
     origins = (p + n * (side * tables.epsilon)[:, None]).astype(np.float32)
-    return Bounce(key_out, bary, energy, recorded, origins, nd.astype(np.float32), beta, survive)
+    return Bounce(key_out, bary, energy, recorded, origins, nd.astype(np.float32), beta, survive & hit)
 
 
 class ScatterCL:
@@ -163,36 +165,51 @@ class ScatterCL:
     def __call__(self, hits: Hits, depth: int, key: tuple[int, int]) -> Bounce:
         cl = self._cl
         m = len(hits.tri)
+        if m == 0:
+            return scatter_reference(self.tables, hits, depth, key)
         # A fixed work-group size: PoCL specialises (and compiles) a kernel per local size, so a
-        # size chosen per launch would recompile for every new wavefront length. The inputs are
-        # padded to whole work-groups with copies of row 0, whose outputs are dropped.
-        padded = max(-(-m // WORK_GROUP) * WORK_GROUP, WORK_GROUP)
-        ro = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
-        inputs = [cl.Buffer(self.ctx, ro, hostbuf=_pad(a, padded)) for a in (
-            hits.tri.astype(np.int32), hits.u.astype(np.float32), hits.v.astype(np.float32),
-            hits.dirs.astype(np.float32), hits.beta.astype(np.float64), hits.photon.astype(np.int64))]
-        out = Bounce(np.empty(padded, np.uint32), np.empty((padded, 2), np.uint16),
-                     np.empty((padded, 3), np.float32), np.empty(padded, np.uint8),
-                     np.empty((padded, 3), np.float32), np.empty((padded, 3), np.float32),
-                     np.empty((padded, 3), np.float64), np.empty(padded, np.uint8))
+        # size chosen per launch would recompile for every new wavefront length.
+        padded = -(-m // WORK_GROUP) * WORK_GROUP
+        inputs = [device_input(self.ctx, a) for a in (
+            hits.tri.astype(np.int32, copy=False), hits.u.astype(np.float32, copy=False),
+            hits.v.astype(np.float32, copy=False), hits.dirs.astype(np.float32, copy=False),
+            hits.beta.astype(np.float64, copy=False), hits.photon.astype(np.int64, copy=False))]
+        out = Bounce(np.empty(m, np.uint32), np.empty((m, 2), np.uint16), np.empty((m, 3), np.float32),
+                     np.empty(m, np.uint8), np.empty((m, 3), np.float32), np.empty((m, 3), np.float32),
+                     np.empty((m, 3), np.float64), np.empty(m, np.uint8))
         fields = ("key", "bary", "energy", "recorded", "origins", "dirs", "beta", "alive")
-        wo = cl.mem_flags.WRITE_ONLY
-        outputs = [cl.Buffer(self.ctx, wo, size=max(getattr(out, f).nbytes, 1)) for f in fields]
-        self.kernel.set_args(np.int32(depth), np.uint32(key[0] & 0xFFFFFFFF), np.uint32(key[1] & 0xFFFFFFFF),
-                             np.float64(self.tables.epsilon), *inputs, *self._tables, *outputs)
+        outputs = [device_output(self.ctx, getattr(out, f)) for f in fields]
+        self.kernel.set_args(np.int64(m), np.int32(depth), np.uint32(key[0] & 0xFFFFFFFF),
+                             np.uint32(key[1] & 0xFFFFFFFF), np.float64(self.tables.epsilon),
+                             *inputs, *self._tables, *outputs)
         cl.enqueue_nd_range_kernel(self.queue, self.kernel, (padded,), (WORK_GROUP,))
-        for f, buf in zip(fields, outputs):
-            cl.enqueue_copy(self.queue, getattr(out, f), buf)
-        self.queue.finish()
-        return Bounce(out.key[:m], out.bary[:m], out.energy[:m], out.recorded[:m].view(bool),
-                      out.origins[:m], out.dirs[:m], out.beta[:m], out.alive[:m].view(bool))
+        read_back(self.queue, [getattr(out, f) for f in fields], outputs)
+        out.recorded = out.recorded.view(bool)
+        out.alive = out.alive.view(bool)
+        return out
 
 
-def _pad(a: np.ndarray, rows: int) -> np.ndarray:
-    """``a`` with its first row repeated up to ``rows`` rows (a valid input whose output is dropped)."""
-    a = np.ascontiguousarray(a)
-    if len(a) == rows:
-        return a
-    if len(a) == 0:
-        return np.zeros((rows,) + a.shape[1:], a.dtype)
-    return np.concatenate([a, np.repeat(a[:1], rows - len(a), axis=0)])
+def device_input(ctx, a: np.ndarray):
+    """A read-only device buffer over the host array (PoCL's CPU device uses host memory directly)."""
+    import pyopencl as cl
+
+    return cl.Buffer(ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=np.ascontiguousarray(a))
+
+
+def device_output(ctx, a: np.ndarray):
+    """A write-only device buffer over the host array ``a``; :func:`read_back` makes it current."""
+    import pyopencl as cl
+
+    return cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=a)
+
+
+def read_back(queue, arrays, buffers) -> None:
+    """Wait for the kernel and make the host arrays behind ``buffers`` current (map, unmap)."""
+    import pyopencl as cl
+
+    for a, b in zip(arrays, buffers):
+        mapped, _ = cl.enqueue_map_buffer(queue, b, cl.map_flags.READ, 0, a.shape, a.dtype)
+        if mapped.__array_interface__["data"][0] != a.__array_interface__["data"][0]:
+            a[...] = mapped  # the runtime kept its own copy
+        mapped.base.release(queue)
+    queue.finish()

@@ -1,51 +1,29 @@
-"""Photon emission: choose lights in proportion to power and sample photon origins and directions.
+"""Emitters of a frame state: every light and emissive triangle, with its power and parameters.
 
 Every emitter (a punctual light, or one emissive triangle) gets a selection weight equal to its
-mean RGB flux. A photon's RGB *weight* is its sample's flux estimate divided by the selection
-probability, so that ``sum(weights) / N`` estimates the scene's total emitted flux whatever N is.
-Records store these weights; irradiance is ``sum(weight) / (N_emitted * area)`` (dept.md §1.1),
-which lets batches of different sizes be merged by dividing by the total photons emitted.
-
-Sampling (pbrt-v4 "Light Sources" and "Sampling Algorithms" chapters):
-  point        uniform sphere,                        weight I * 4 pi
-  spot         uniform in the outer cone's solid angle Omega, weight I * falloff(theta) * Omega
-  directional  uniform on a disk of the scene's bounding radius R facing the light, weight E * pi R^2
-  emissive     uniform on the triangle, cosine-weighted about its front normal, weight pi * L * A
+mean RGB flux (Light.power: point 4 pi I, spot 2 pi I x the fall-off integral, directional E x the
+area of the disk covering the scene, emissive pi L A). The sampling itself is in kernels/emit.py
+(an OpenCL kernel and its NumPy twin); this module turns a FrameState into their tables.
+Records store photon weights; irradiance is sum(weight) / (N_emitted x area) (dept.md §1.1).
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
-
 import numpy as np
 
-from kernels.philox import EMISSION_STREAM, uniforms
+from kernels.emit import AREA, DIRECTIONAL, POINT, SPOT, EmissionTables
 from pipeline.scene import FrameState
 
 from .raycast import RayCaster
 
-POINT, SPOT, DIRECTIONAL, AREA = 0, 1, 2, 3
+# Disk radius of directional lights, relative to the radius of the scene's bounds.
+DISK_MARGIN = 1.01
 
 
-@dataclass
-class EmitterTable:
-    kind: np.ndarray  # (K,) emitter kind
-    index: np.ndarray  # (K,) light index in state.lights, or global triangle for AREA
-    flux: np.ndarray  # (K, 3) RGB flux
-    cdf: np.ndarray  # (K,) cumulative selection probability
-
-    @property
-    def total_flux(self) -> np.ndarray:
-        return self.flux.sum(axis=0)
-
-    @property
-    def probability(self) -> np.ndarray:
-        return np.diff(np.concatenate([[0.0], self.cdf]))
-
-
-def emitter_table(state: FrameState, caster: RayCaster) -> EmitterTable:
+def emission_tables(state: FrameState, caster: RayCaster) -> EmissionTables:
+    """The emitter table (CDF by power) and per-light parameters of a posed frame."""
     kinds, index, flux = [], [], []
     code = {"point": POINT, "spot": SPOT, "directional": DIRECTIONAL}
-    radius = caster.radius * 1.01
+    radius = caster.radius * DISK_MARGIN
     for i, light in enumerate(state.lights):
         kinds.append(code[light.kind])
         index.append(i)
@@ -62,7 +40,18 @@ def emitter_table(state: FrameState, caster: RayCaster) -> EmitterTable:
         raise ValueError("the scene's lights emit no power")
     cdf = np.cumsum(weight) / weight.sum()
     cdf[-1] = 1.0
-    return EmitterTable(np.asarray(kinds, np.int8), np.asarray(index, np.int64), flux, cdf)
+    lights = state.lights
+    return EmissionTables(
+        cdf=cdf, prob=np.diff(np.concatenate([[0.0], cdf])), kind=np.asarray(kinds, np.int32),
+        index=np.asarray(index, np.int64), flux=flux,
+        light_pos=np.array([li.position for li in lights], np.float64).reshape(-1, 3),
+        light_dir=np.array([li.direction for li in lights], np.float64).reshape(-1, 3),
+        light_rad=np.array([li.radiant for li in lights], np.float64).reshape(-1, 3),
+        cos_outer=np.array([np.cos(li.definition.outer_cone) for li in lights], np.float64),
+        cos_inner=np.array([np.cos(li.definition.inner_cone) for li in lights], np.float64),
+        corners=state.vertices[state.faces].reshape(-1, 9).astype(np.float32),
+        normals=caster.normals, center=caster.center.astype(np.float64), radius=float(radius),
+        epsilon=float(caster.epsilon))
 
 
 def _orthonormal_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -88,62 +77,3 @@ def cosine_hemisphere(normals: np.ndarray, rng: np.random.Generator) -> np.ndarr
     """Cosine-weighted directions about unit ``normals`` (Malley's method)."""
     u1, u2 = rng.random(len(normals)), rng.random(len(normals))
     return around(normals, np.sqrt(1.0 - u1), 2.0 * np.pi * u2)
-
-
-def emit(table: EmitterTable, state: FrameState, caster: RayCaster, photon: np.ndarray, key: tuple[int, int]):
-    """Photons with indices ``photon``: origins (n, 3), unit directions (n, 3), RGB weights (n, 3),
-    emitter ids (n,). Random numbers are Philox words of (photon, EMISSION_STREAM + j) under ``key``."""
-    n = len(photon)
-    w0 = uniforms(photon, EMISSION_STREAM, key)
-    u4 = uniforms(photon, EMISSION_STREAM + 1, key)[:, 0]
-    choice = np.minimum(np.searchsorted(table.cdf, w0[:, 0], side="right"), len(table.cdf) - 1)
-    prob = table.probability[choice]
-    origins = np.empty((n, 3))
-    dirs = np.empty((n, 3))
-    weights = np.empty((n, 3))
-    u1, u2, u3 = w0[:, 1], w0[:, 2], w0[:, 3]
-    kind = table.kind[choice]
-
-    for k in (POINT, SPOT, DIRECTIONAL, AREA):
-        sel = np.flatnonzero(kind == k)
-        if not len(sel):
-            continue
-        src = table.index[choice[sel]]
-        if k == AREA:
-            tri = state.vertices.astype(np.float64)[state.faces[src]]
-            su = np.sqrt(u1[sel])
-            b1, b2 = su * (1 - u2[sel]), su * u2[sel]  # uniform on the triangle (pbrt-v4 SampleUniformTriangle)
-            p = (1 - b1 - b2)[:, None] * tri[:, 0] + b1[:, None] * tri[:, 1] + b2[:, None] * tri[:, 2]
-            normal = caster.normals[src]
-            d = around(normal, np.sqrt(1.0 - u3[sel]), 2.0 * np.pi * u4[sel])
-            origins[sel] = p + normal * caster.epsilon
-            dirs[sel] = d
-            weights[sel] = table.flux[choice[sel]]
-            continue
-        for light_index in np.unique(src):
-            light = state.lights[light_index]
-            one = sel[src == light_index]
-            m = len(one)
-            if k == POINT:
-                dirs[one] = around(np.tile([0.0, 0.0, 1.0], (m, 1)), 1.0 - 2.0 * u1[one], 2.0 * np.pi * u2[one])
-                origins[one] = light.position
-                weights[one] = light.radiant * 4.0 * np.pi
-            elif k == SPOT:
-                cos_outer = np.cos(light.definition.outer_cone)
-                cos_t = 1.0 - u1[one] * (1.0 - cos_outer)
-                dirs[one] = around(np.tile(light.direction, (m, 1)), cos_t, 2.0 * np.pi * u2[one])
-                omega = 2.0 * np.pi * (1.0 - cos_outer)
-                origins[one] = light.position
-                weights[one] = light.radiant * (light.spot_falloff(cos_t) * omega)[:, None]
-            else:  # DIRECTIONAL
-                radius = caster.radius * 1.01
-                r = radius * np.sqrt(u1[one])
-                phi = 2.0 * np.pi * u2[one]
-                axis = np.tile(light.direction, (m, 1))
-                t, b = _orthonormal_basis(axis)
-                disk = t * (r * np.cos(phi))[:, None] + b * (r * np.sin(phi))[:, None]
-                origins[one] = caster.center + disk - axis * radius * 1.05
-                dirs[one] = axis
-                weights[one] = light.radiant * np.pi * radius**2
-    weights /= prob[:, None]
-    return origins, dirs, weights, choice

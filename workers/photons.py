@@ -23,10 +23,11 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from kernels.emit import AREA, EmitCL, emit_reference
 from kernels.scatter import KIND_CODE, Hits, SceneTables, ScatterCL, scatter_reference
 from pipeline.scene import ElementMesh, FrameState
 
-from .emission import AREA, emit, emitter_table
+from .emission import emission_tables
 from .raycast import RayCaster, caster_for
 
 CHUNK = 1 << 17  # photons per wavefront: bounds memory per worker (about 0.5 GB at most)
@@ -61,23 +62,24 @@ def scene_tables(state: FrameState, elements: ElementMesh, caster: RayCaster) ->
 _scatterers: OrderedDict[tuple, object] = OrderedDict()
 
 
-def _scatterer(state: FrameState, elements: ElementMesh, caster: RayCaster, backend: str):
-    """The bounce function for a frame state, with its tables built (and uploaded) once per process."""
+def _kernels(state: FrameState, elements: ElementMesh, caster: RayCaster, backend: str):
+    """(emit, scatter, emission tables) for a frame state, built (and uploaded) once per process."""
     if backend not in BACKENDS:
         raise ValueError(f"backend must be one of {BACKENDS}, got {backend!r}")
     cache_key = (state.state_key, elements.element_size, elements.n_elements, backend)
-    fn = _scatterers.get(cache_key)
-    if fn is None:
+    found = _scatterers.get(cache_key)
+    if found is None:
         tables = scene_tables(state, elements, caster)
+        emission = emission_tables(state, caster)
         if backend == "opencl":
-            fn = ScatterCL(tables)
+            found = (EmitCL(emission), ScatterCL(tables), emission)
         else:
-            def fn(hits, depth, key, tables=tables):
-                return scatter_reference(tables, hits, depth, key)
-        _scatterers[cache_key] = fn
+            found = (lambda photon, key: emit_reference(emission, photon, key),
+                     lambda hits, depth, key: scatter_reference(tables, hits, depth, key), emission)
+        _scatterers[cache_key] = found
         while len(_scatterers) > 4:
             _scatterers.popitem(last=False)
-    return fn
+    return found
 
 
 def trace_batch(state: FrameState, elements: ElementMesh, *, n_photons: int, photon_start: int,
@@ -88,14 +90,13 @@ def trace_batch(state: FrameState, elements: ElementMesh, *, n_photons: int, pho
     if n_photons <= 0:
         raise ValueError(f"n_photons must be positive, got {n_photons}")
     caster = caster or caster_for(state)
-    scatter = _scatterer(state, elements, caster, backend)
+    emit, scatter, table = _kernels(state, elements, caster, backend)
     rays_before = caster.rays_cast
-    table = emitter_table(state, caster)
     key = (int(seed) & 0xFFFFFFFF, int(frame) & 0xFFFFFFFF)
     parts = []
     for lo in range(0, n_photons, CHUNK):
         photon = photon_start + lo + np.arange(min(CHUNK, n_photons - lo), dtype=np.int64)
-        parts.extend(_trace_wavefront(state, caster, table, scatter, photon, key, max_depth))
+        parts.extend(_trace_wavefront(state, caster, table, emit, scatter, photon, key, max_depth))
     if parts:
         key_out = np.concatenate([p[0] for p in parts])
         bary = np.concatenate([p[1] for p in parts])
@@ -107,27 +108,21 @@ def trace_batch(state: FrameState, elements: ElementMesh, *, n_photons: int, pho
                        {"records": len(key_out), "direct": direct})
 
 
-def _trace_wavefront(state, caster, table, scatter, photon, key, max_depth):
+def _trace_wavefront(state, caster, table, emit, scatter, photon, key, max_depth):
     """Yield (key, bary, energy) record arrays of one wavefront of photons, bounce by bounce."""
-    origins, dirs, beta, emitter = emit(table, state, caster, photon, key)
-    origins = origins.astype(np.float32)
-    dirs = dirs.astype(np.float32)
+    origins, dirs, beta, emitter = emit(photon, key)
     for depth in range(max_depth):
         if not len(photon):
             return
-        tri, u, v, dist = caster.intersect(origins, dirs)
-        if depth == 0:
+        tri, u, v, dist = caster.intersect_raw(origins, dirs)
+        if depth == 0 and any(li.definition.range is not None for li in state.lights):
             beta = beta * _range_window(state, table, emitter, dist)[:, None]
-        hit = np.flatnonzero(tri >= 0)
-        if not len(hit):
-            return
-        bounce = scatter(Hits(tri[hit].astype(np.int32), u[hit].astype(np.float32), v[hit].astype(np.float32),
-                              dirs[hit], beta[hit], photon[hit]), depth, key)
+        bounce = scatter(Hits(tri, u, v, dirs, beta, photon), depth, key)  # misses end there
         rec = np.flatnonzero(bounce.recorded)
         if len(rec):
             yield bounce.key[rec], bounce.bary[rec], bounce.energy[rec]
         live = np.flatnonzero(bounce.alive)
-        origins, dirs, beta, photon = bounce.origins[live], bounce.dirs[live], bounce.beta[live], photon[hit][live]
+        origins, dirs, beta, photon = bounce.origins[live], bounce.dirs[live], bounce.beta[live], photon[live]
 
 
 def _range_window(state: FrameState, table, emitter: np.ndarray, dist: np.ndarray) -> np.ndarray:

@@ -50,6 +50,13 @@ class RayCaster:
         return (out["primID"].astype(np.int64), out["u"].astype(np.float64), out["v"].astype(np.float64),
                 out["tfar"].astype(np.float64))
 
+    def intersect_raw(self, origins: np.ndarray, directions: np.ndarray):
+        """Closest hits as embreex returns them: (int32 triangle or -1, float32 u, v, distance)."""
+        out = self._scene.run(np.ascontiguousarray(origins, np.float32),
+                              np.ascontiguousarray(directions, np.float32), output=1)
+        self.rays_cast += len(origins)
+        return out["primID"], out["u"], out["v"], out["tfar"]
+
     def occluded(self, origins: np.ndarray, directions: np.ndarray, distances: np.ndarray) -> np.ndarray:
         """True where something lies between ``origins`` and ``distances`` along ``directions``."""
         if len(origins) == 0:

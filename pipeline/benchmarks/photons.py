@@ -29,8 +29,12 @@ def _load(scene_path: str):
     return scene, ElementMesh.build(scene)
 
 
+REPEATS = 3  # tracer and raw Embree alternate this many times; the best time of each counts
+
+
 def _worker(scene_path: str, frame: int, n_photons: int, photon_start: int) -> dict:
-    """Trace, then cast raw rays, in this process; returns timings."""
+    """Trace, then cast raw rays, alternately in this process; best-of-REPEATS timings (the
+    machine is shared, so the fastest run is the one least disturbed by other jobs)."""
     from workers.photons import trace_batch
     from workers.raycast import caster_for
 
@@ -38,20 +42,24 @@ def _worker(scene_path: str, frame: int, n_photons: int, photon_start: int) -> d
     state = scene.pose_frame(frame)
     caster = caster_for(state)
     trace_batch(state, elements, n_photons=2000, photon_start=10**9, seed=0, frame=frame, max_depth=8)  # warm-up
-    t0 = time.perf_counter()
-    batch = trace_batch(state, elements, n_photons=n_photons, photon_start=photon_start, seed=0,
-                        frame=frame, max_depth=8)
-    trace_s = time.perf_counter() - t0
-    rng = np.random.default_rng(photon_start)
-    lo, hi = state.vertices.min(0), state.vertices.max(0)
-    n_raw = batch.rays_cast
-    origins = (lo + rng.random((n_raw, 3)) * (hi - lo)).astype(np.float32)
-    dirs = rng.normal(size=(n_raw, 3))
-    dirs = (dirs / np.linalg.norm(dirs, axis=1, keepdims=True)).astype(np.float32)
-    t0 = time.perf_counter()
-    for lo_i in range(0, n_raw, 1 << 17):  # the tracer's wavefront size
-        caster.intersect(origins[lo_i:lo_i + (1 << 17)], dirs[lo_i:lo_i + (1 << 17)])
-    raw_s = time.perf_counter() - t0
+    trace_s = raw_s = float("inf")
+    origins = dirs = None
+    for _ in range(REPEATS):
+        t0 = time.perf_counter()
+        batch = trace_batch(state, elements, n_photons=n_photons, photon_start=photon_start, seed=0,
+                            frame=frame, max_depth=8)
+        trace_s = min(trace_s, time.perf_counter() - t0)
+        n_raw = batch.rays_cast
+        if origins is None:
+            rng = np.random.default_rng(photon_start)
+            lo, hi = state.vertices.min(0), state.vertices.max(0)
+            origins = (lo + rng.random((n_raw, 3)) * (hi - lo)).astype(np.float32)
+            dirs = rng.normal(size=(n_raw, 3))
+            dirs = (dirs / np.linalg.norm(dirs, axis=1, keepdims=True)).astype(np.float32)
+        t0 = time.perf_counter()
+        for lo_i in range(0, n_raw, 1 << 17):  # the tracer's wavefront size
+            caster.intersect_raw(origins[lo_i:lo_i + (1 << 17)], dirs[lo_i:lo_i + (1 << 17)])
+        raw_s = min(raw_s, time.perf_counter() - t0)
     return {"trace_s": trace_s, "rays": batch.rays_cast, "records": len(batch.key), "raw_s": raw_s,
             "raw_rays": n_raw}
 

@@ -1,0 +1,158 @@
+"""Photon emission: choose emitters in proportion to power, sample origin, direction and weight.
+
+``emit_reference`` (NumPy) and :class:`EmitCL` (``emit.cl``) compute the same numbers from the same
+Philox words: photon i draws (w0, u1, u2, u3) from counter (i, EMISSION_STREAM) and u4 from
+(i, EMISSION_STREAM + 1) under the key (seed, frame). The emitter is the first whose CDF exceeds
+w0. A photon's RGB *weight* is its sample's flux estimate over the selection probability, so
+sum(weights) / N estimates the total emitted flux whatever N is (workers/emission.py builds the
+tables; pbrt-v4 "Light Sources" for the sampling):
+
+  point        direction uniform on the sphere (cos = 1 - 2 u1),     weight I * 4 pi
+  spot         uniform in the outer cone's solid angle Omega,        weight I * falloff * Omega
+               (cos = 1 - u1 (1 - cos_outer); glTF fall-off ((cos - cos_o) / (cos_i - cos_o))^2 clamped)
+  directional  uniform on a disk of radius R facing the light, 1.05 R upstream of the scene centre,
+               weight E * pi R^2
+  emissive     uniform on the triangle (sqrt(u1) warp), cosine-weighted about its front normal,
+               weight pi * L * A (the emitter's flux)
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .philox import EMISSION_STREAM, uniforms
+from .scatter import WORK_GROUP, device_input, device_output, read_back
+
+POINT, SPOT, DIRECTIONAL, AREA = 0, 1, 2, 3
+
+
+@dataclass
+class EmissionTables:
+    cdf: np.ndarray  # (K,) cumulative selection probability, last = 1
+    prob: np.ndarray  # (K,) selection probability
+    kind: np.ndarray  # (K,) int32 POINT | SPOT | DIRECTIONAL | AREA
+    index: np.ndarray  # (K,) int64 light index, or global triangle for AREA
+    flux: np.ndarray  # (K, 3) emitter flux (used as the weight of AREA photons)
+    light_pos: np.ndarray  # (L, 3)
+    light_dir: np.ndarray  # (L, 3) unit direction the light points to
+    light_rad: np.ndarray  # (L, 3) radiant intensity or irradiance
+    cos_outer: np.ndarray  # (L,)
+    cos_inner: np.ndarray  # (L,)
+    corners: np.ndarray  # (F, 9) float32 world triangle corners
+    normals: np.ndarray  # (F, 3) unit front normals
+    center: np.ndarray  # (3,) centre of the scene's bounds
+    radius: float  # radius of the disk that covers the scene (directional lights)
+    epsilon: float  # offset of area-light origins off their surface
+
+
+def _basis(z):
+    sgn = np.where(z[:, 2] >= 0, 1.0, -1.0)
+    ia = -1.0 / (sgn + z[:, 2])
+    ib = z[:, 0] * z[:, 1] * ia
+    t = np.stack([1.0 + sgn * z[:, 0] * z[:, 0] * ia, sgn * ib, -sgn * z[:, 0]], 1)
+    s = np.stack([ib, sgn + z[:, 1] * z[:, 1] * ia, -z[:, 1]], 1)
+    return t, s
+
+
+def _around(z, cos_t, phi):
+    t, s = _basis(z)
+    sin_t = np.sqrt(np.minimum(np.maximum(1.0 - cos_t * cos_t, 0.0), 1.0))
+    cp, sp = np.cos(phi), np.sin(phi)
+    return t * (sin_t * cp)[:, None] + s * (sin_t * sp)[:, None] + z * cos_t[:, None]
+
+
+def emit_reference(t: EmissionTables, photon: np.ndarray, key: tuple[int, int]):
+    """NumPy twin of ``emit.cl``: origins (n,3) f32, directions (n,3) f32, weights (n,3) f64, emitter."""
+    n = len(photon)
+    w = uniforms(photon, EMISSION_STREAM, key)
+    u4 = uniforms(photon, EMISSION_STREAM + 1, key)[:, 0]
+    w0, u1, u2, u3 = w[:, 0], w[:, 1], w[:, 2], w[:, 3]
+    e = np.minimum(np.searchsorted(t.cdf, w0, side="right"), len(t.cdf) - 1)
+    kind, src = t.kind[e], t.index[e]
+    origins, dirs, weights = np.empty((n, 3)), np.empty((n, 3)), np.empty((n, 3))
+
+    a = kind == AREA
+    if a.any():
+        su = np.sqrt(u1[a])
+        b1, b2 = su * (1.0 - u2[a]), su * u2[a]
+        b0 = 1.0 - b1 - b2
+        c = t.corners[src[a]].astype(np.float64)
+        nrm = t.normals[src[a]]
+        dirs[a] = _around(nrm, np.sqrt(1.0 - u3[a]), 2.0 * np.pi * u4[a])
+        origins[a] = b0[:, None] * c[:, 0:3] + b1[:, None] * c[:, 3:6] + b2[:, None] * c[:, 6:9] + nrm * t.epsilon
+        weights[a] = t.flux[e[a]]
+    lights = ~a
+    li = src[lights]
+    pos, axis, rad = t.light_pos[li], t.light_dir[li], t.light_rad[li]
+    origins[lights] = pos
+    k = kind[lights]
+    sub_u1, sub_u2 = u1[lights], u2[lights]
+    d = np.empty((len(li), 3))
+    wgt = np.empty((len(li), 3))
+    p = k == POINT
+    d[p] = _around(np.tile([0.0, 0.0, 1.0], (p.sum(), 1)), 1.0 - 2.0 * sub_u1[p], 2.0 * np.pi * sub_u2[p])
+    wgt[p] = rad[p] * (4.0 * np.pi)
+    s = k == SPOT
+    co, ci = t.cos_outer[li[s]], t.cos_inner[li[s]]
+    cos_t = 1.0 - sub_u1[s] * (1.0 - co)
+    d[s] = _around(axis[s], cos_t, 2.0 * np.pi * sub_u2[s])
+    f = np.minimum(np.maximum((cos_t - co) / (ci - co), 0.0), 1.0)
+    wgt[s] = rad[s] * (f * f * (2.0 * np.pi * (1.0 - co)))[:, None]
+    dl = k == DIRECTIONAL
+    if dl.any():
+        r = t.radius * np.sqrt(sub_u1[dl])
+        phi = 2.0 * np.pi * sub_u2[dl]
+        tt, ss = _basis(axis[dl])
+        rc, rs = r * np.cos(phi), r * np.sin(phi)
+        sub = np.flatnonzero(lights)[dl]
+        origins[sub] = t.center + (tt * rc[:, None] + ss * rs[:, None]) - axis[dl] * (t.radius * 1.05)
+        d[dl] = axis[dl]
+        wgt[dl] = rad[dl] * (np.pi * t.radius * t.radius)
+    dirs[lights] = d
+    weights[lights] = wgt
+    weights /= t.prob[e][:, None]
+    return origins.astype(np.float32), dirs.astype(np.float32), weights, e.astype(np.int32)
+
+
+class EmitCL:
+    """``emit.cl`` with the emitter tables resident on the device; one instance per frame state."""
+
+    def __init__(self, tables: EmissionTables):
+        import pyopencl as cl
+
+        from .context import device_context, kernel
+
+        self._cl = cl
+        self.ctx, self.queue = device_context()
+        self.kernel = kernel("emit", "emit")
+        self.tables = tables
+        ro = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
+
+        def buf(a, dtype):
+            a = np.ascontiguousarray(a, dtype=dtype)
+            return cl.Buffer(self.ctx, ro, hostbuf=a if a.size else np.zeros(1, dtype))
+
+        self._tables = [buf(tables.cdf, np.float64), buf(tables.prob, np.float64), buf(tables.kind, np.int32),
+                        buf(tables.index, np.int64), buf(tables.flux, np.float64),
+                        buf(tables.light_pos, np.float64), buf(tables.light_dir, np.float64),
+                        buf(tables.light_rad, np.float64), buf(tables.cos_outer, np.float64),
+                        buf(tables.cos_inner, np.float64), buf(tables.corners, np.float32),
+                        buf(tables.normals, np.float64)]
+
+    def __call__(self, photon: np.ndarray, key: tuple[int, int]):
+        n = len(photon)
+        if n == 0:
+            return emit_reference(self.tables, photon, key)
+        padded = -(-n // WORK_GROUP) * WORK_GROUP
+        ph = device_input(self.ctx, photon.astype(np.int64, copy=False))
+        outs = [np.empty((n, 3), np.float32), np.empty((n, 3), np.float32),
+                np.empty((n, 3), np.float64), np.empty(n, np.int32)]
+        bufs = [device_output(self.ctx, o) for o in outs]
+        t = self.tables
+        self.kernel.set_args(np.int64(n), np.uint32(key[0] & 0xFFFFFFFF), np.uint32(key[1] & 0xFFFFFFFF),
+                             np.int32(len(t.cdf)), *(np.float64(c) for c in t.center),
+                             np.float64(t.radius), np.float64(t.epsilon), ph, *self._tables, *bufs)
+        self._cl.enqueue_nd_range_kernel(self.queue, self.kernel, (padded,), (WORK_GROUP,))
+        read_back(self.queue, outs, bufs)
+        return tuple(outs)
