@@ -106,12 +106,16 @@ def shoot_command(scene_file, frames, photons, store_url, seed, element_size, ma
               help="Temporal photon collection of the indirect maps: Condition (1) windows (§5.1), "
                    "always +-F_max/2 (§6), or each frame's own photons.")
 @click.option("--fmax", type=int, default=None, help="F_max, frames per segment (default: fmax_initial, 15).")
+@click.option("--verbose", is_flag=True, help="Log the rays of each kind cast for every frame.")
 @_scheduler_options
 def render_command(scene_file, frames, out_dir, resolution, spp, photons, store_url, camera, seed,
-                   max_depth, quiet, temporal, fmax, scheduler, workers) -> None:
+                   max_depth, quiet, temporal, fmax, verbose, scheduler, workers) -> None:
     """Render frames of SCENE_FILE: photons, illumination maps, EXR/PNG frames, preview.mp4."""
     from .config import RenderConfig
     from .render import RenderSettings, parse_resolution, render
+
+    if verbose:
+        logging.getLogger("pipeline.render").setLevel(logging.INFO)
 
     width, height = parse_resolution(resolution)
     settings = RenderSettings(width=width, height=height, spp=spp, max_depth=max_depth)
