@@ -158,3 +158,6 @@ bench.add_command(bench_aqm, "aqm")
 
 from .benchmarks.frame import bench_frame  # noqa: E402
 bench.add_command(bench_frame, "frame")
+
+from .benchmarks.temporal import bench_temporal  # noqa: E402
+bench.add_command(bench_temporal, "temporal")
