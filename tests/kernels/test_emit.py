@@ -1,0 +1,64 @@
+"""The emission kernel (emit.cl) equals its NumPy twin; emitted flux matches the lights' power."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kernels.emit import AREA, DIRECTIONAL, POINT, SPOT, EmissionTables, EmitCL, emit_reference
+
+
+def _tables(rng, kinds=(POINT, SPOT, DIRECTIONAL, AREA)) -> EmissionTables:
+    n_lights, n_tri = 6, 20
+    corners = rng.normal(size=(n_tri, 9)).astype(np.float32)
+    c = corners.astype(np.float64).reshape(-1, 3, 3)
+    nrm = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
+    nrm /= np.linalg.norm(nrm, axis=1, keepdims=True)
+    kind, index = [], []
+    for i in range(n_lights):
+        k = kinds[i % len(kinds)]
+        kind.append(k)
+        index.append(i if k != AREA else rng.integers(0, n_tri))
+    flux = rng.random((n_lights, 3)) * 10
+    w = flux.mean(1)
+    cdf = np.cumsum(w) / w.sum()
+    cdf[-1] = 1.0
+    dirs = rng.normal(size=(n_lights, 3))
+    dirs[0] = [0, 0, -1]  # straight down: the basis' sign switch
+    dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
+    outer = rng.uniform(0.2, 1.4, n_lights)
+    return EmissionTables(
+        cdf=cdf, prob=np.diff(np.concatenate([[0.0], cdf])), kind=np.array(kind, np.int32),
+        index=np.array(index, np.int64), flux=flux, light_pos=rng.normal(size=(n_lights, 3)), light_dir=dirs,
+        light_rad=rng.random((n_lights, 3)) * 5, cos_outer=np.cos(outer), cos_inner=np.cos(outer * 0.5),
+        corners=corners, normals=nrm, center=rng.normal(size=3), radius=3.0, epsilon=1e-4)
+
+
+@pytest.mark.parametrize("kinds", [(POINT,), (SPOT,), (DIRECTIONAL,), (AREA,), (POINT, SPOT, DIRECTIONAL, AREA)])
+@pytest.mark.parametrize("n", [1, 100, 4097])
+def test_kernel_equals_reference(rng, kinds, n):
+    tables = _tables(rng, kinds)
+    photon = rng.integers(0, 2**40, n).astype(np.int64)
+    cl = EmitCL(tables)(photon, (9, 4))
+    ref = emit_reference(tables, photon, (9, 4))
+    for a, b, name in zip(cl, ref, ("origins", "dirs", "weights", "emitter")):
+        np.testing.assert_array_equal(a, b, err_msg=name)
+
+
+def test_emitted_flux_is_unbiased(rng):
+    """Mean photon weight = total flux; directions are unit; spots stay inside their cone."""
+    tables = _tables(rng, (POINT, SPOT, DIRECTIONAL))
+    n = 400_000
+    origins, dirs, weights, emitter = emit_reference(tables, np.arange(n), (1, 1))
+    np.testing.assert_allclose(np.linalg.norm(dirs, axis=1), 1.0, atol=1e-6)
+    spot = tables.kind[emitter] == SPOT
+    light = tables.index[emitter[spot]]
+    cos = np.einsum("ij,ij->i", dirs[spot].astype(np.float64), tables.light_dir[light])
+    assert (cos >= tables.cos_outer[light] - 1e-6).all()
+    # expected flux: point 4 pi I, spot 2 pi I ((1 - ci) + (ci - co) / 3), directional pi R^2 E
+    ci, co = tables.cos_inner, tables.cos_outer
+    per_kind = {POINT: 4 * np.pi * np.ones_like(ci), SPOT: 2 * np.pi * ((1 - ci) + (ci - co) / 3),
+                DIRECTIONAL: np.pi * tables.radius**2 * np.ones_like(ci)}
+    expected = sum(tables.light_rad[i] * per_kind[k][i] for i, k in enumerate(tables.kind))
+    mean = weights.mean(axis=0)
+    se = weights.std(axis=0) / np.sqrt(n)
+    assert np.all(np.abs(mean - expected) < 4 * se)
