@@ -102,6 +102,7 @@ class _Shading:
         self.any_emissive = bool(self.emissive.any())
         self.caster = caster
         self.normals = caster.normals.astype(np.float32)
+        self.epsilon = np.float32(caster.epsilon)  # shadow-ray origin offset (workers/raycast.py)
         self.lights = state.lights
         self.reach = [_light_reach(state, light) for light in state.lights]
         self.elements = elements
@@ -355,7 +356,7 @@ def _punctual(sh: _Shading, p, facing, tri, lobe, rays, active) -> np.ndarray:
         if not len(sel):
             continue
         d = np.ascontiguousarray(d, np.float32)
-        origin = sh.caster.offset_origins(p[sel], tri[sel], d)
+        origin = p[sel] + facing[sel] * sh.epsilon  # the light is on the facing side
         blocked = sh.caster.occluded(origin, d, dist * (1.0 - 1e-5))
         rays["shadow"] += len(sel)
         free = ~blocked
@@ -388,7 +389,7 @@ def _area(sh: _Shading, key, counter, depth, p, facing, tri, rays, active) -> np
         if not len(sel):
             continue
         d = np.ascontiguousarray(to_light[sel])
-        origin = sh.caster.offset_origins(p[sel], tri[sel], d)
+        origin = p[sel] + facing[sel] * sh.epsilon  # the emitter is on the facing side
         # stop short of the emitter itself: the length from the offset origin less 2 epsilon
         reach = np.sqrt(((y[sel] - origin) ** 2).sum(axis=1)) - 2.0 * sh.caster.epsilon
         blocked = sh.caster.occluded(origin, d, np.maximum(reach, 0.0))
