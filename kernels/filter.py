@@ -129,6 +129,23 @@ def _check(flux, areas, hood: Neighbourhood, photons: float):
     return flux, areas, 1.0 / float(photons)
 
 
+_DEVICE_HOODS: dict[int, tuple[Neighbourhood, cl.Buffer, cl.Buffer]] = {}  # id -> rings on the device
+
+
+def _device_hood(ctx, hood: Neighbourhood) -> tuple[cl.Buffer, cl.Buffer]:
+    """The rings' device buffers, uploaded once per Neighbourhood (a frame loop reuses them)."""
+    cached = _DEVICE_HOODS.get(id(hood))
+    if cached is None or cached[0] is not hood:
+        if len(_DEVICE_HOODS) >= 4:
+            _DEVICE_HOODS.pop(next(iter(_DEVICE_HOODS)))
+        mf = cl.mem_flags
+        nbr = hood.nbr if hood.nbr.size else np.zeros(1, np.int32)
+        cached = (hood, cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(nbr)),
+                  cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=np.ascontiguousarray(hood.ring_start)))
+        _DEVICE_HOODS[id(hood)] = cached
+    return cached[1], cached[2]
+
+
 def adaptive_filter_cl(flux, areas, hood: Neighbourhood, *, photons: float = 25.0, z: float = 2.5):
     """Filtered irradiance on PoCL.
 
@@ -157,9 +174,10 @@ def adaptive_filter_cl(flux, areas, hood: Neighbourhood, *, photons: float = 25.
 
     d_out = cl.Buffer(ctx, mf.WRITE_ONLY, size=out.nbytes)
     d_rings = cl.Buffer(ctx, mf.WRITE_ONLY, size=rings.nbytes)
+    d_nbr, d_ring_start = _device_hood(ctx, hood)
     kernel("filter", "adaptive_filter")(
-        queue, (n_parity * n_vertices,), None, upload(flux), upload(areas), upload(hood.nbr),
-        upload(np.ascontiguousarray(hood.ring_start)), np.int32(n_vertices), np.int32(n_parity),
+        queue, (n_parity * n_vertices,), None, upload(flux), upload(areas), d_nbr, d_ring_start,
+        np.int32(n_vertices), np.int32(n_parity),
         np.int32(hood.max_rings), np.float64(tau2), np.float64(float(z) * float(z)), d_out, d_rings)
     cl.enqueue_copy(queue, out, d_out)
     cl.enqueue_copy(queue, rings, d_rings)

@@ -11,41 +11,43 @@
 #define DIRECT_BIT 0x80000000u
 #define PARITY_BIT 0x40000000u
 
-// Sums of segment s (a (frame, element) pair; records [offsets[s], offsets[s+1]), element-sorted):
-// out[s, p, k, c] = sum over its records of parity p of b_k * energy_c, and Q = b_k^2 * Y^2
-// (dept.md §1.2-1.3). `kinds`: bit 0 takes indirect records, bit 1 direct ones.
+// Sums of segment s (a (frame, element) pair; records [offsets[s], offsets[s+1]), element-sorted)
+// for parity p (work item (s, p)): out[out_base + (s * n_parity + p) * 12 + 4k + c] = sum over the
+// records of b_k * energy_c, and (c = 3) Q = sum b_k^2 * Y^2 (dept.md §1.2-1.3). With n_parity = 1
+// every record counts. `kinds`: bit 0 takes indirect records, bit 1 direct ones.
 __kernel void element_sums(__global const uint *key, __global const ushort *b1,
                            __global const ushort *b2, __global const float *energy,
                            __global const long *offsets, const long n_segments,
-                           const uint kinds, const int n_parity,
-                           __global double *out)  // (n_segments, n_parity, 12)
+                           const uint kinds, const int n_parity, const long out_base,
+                           __global double *out)
 {
-    const long s = get_global_id(0);
-    if (s >= n_segments) return;
-    double acc[2 * SLOTS];
-    for (int i = 0; i < 2 * SLOTS; ++i) acc[i] = 0.0;
+    const long gid = get_global_id(0);
+    if (gid >= n_segments * n_parity) return;
+    const long s = gid / n_parity;
+    const uint parity = (uint)(gid - s * n_parity);
+    double r0 = 0.0, g0 = 0.0, bl0 = 0.0, q0 = 0.0;
+    double r1 = 0.0, g1 = 0.0, bl1 = 0.0, q1 = 0.0;
+    double r2 = 0.0, g2 = 0.0, bl2 = 0.0, q2 = 0.0;
     const long end = offsets[s + 1];
     for (long r = offsets[s]; r < end; ++r) {
         const uint k = key[r];
         if (!(kinds & ((k & DIRECT_BIT) ? 2u : 1u))) continue;
-        const int p = (n_parity == 2 && (k & PARITY_BIT)) ? SLOTS : 0;
+        if (n_parity == 2 && ((k & PARITY_BIT) ? 1u : 0u) != parity) continue;
         const double w1 = (double)b1[r] / BARY_SCALE;
         const double w2 = (double)b2[r] / BARY_SCALE;
-        const double w[3] = {1.0 - w1 - w2, w1, w2};
+        const double w0 = 1.0 - w1 - w2;
         const double red = (double)energy[3 * r], green = (double)energy[3 * r + 1],
                      blue = (double)energy[3 * r + 2];
         const double y = 0.2126 * red + 0.7152 * green + 0.0722 * blue;  // Rec. 709 luminance
         const double y2 = y * y;
-        for (int c = 0; c < 3; ++c) {
-            double *a = acc + p + 4 * c;
-            a[0] += w[c] * red;
-            a[1] += w[c] * green;
-            a[2] += w[c] * blue;
-            a[3] += (w[c] * w[c]) * y2;
-        }
+        r0 += w0 * red; g0 += w0 * green; bl0 += w0 * blue; q0 += (w0 * w0) * y2;
+        r1 += w1 * red; g1 += w1 * green; bl1 += w1 * blue; q1 += (w1 * w1) * y2;
+        r2 += w2 * red; g2 += w2 * green; bl2 += w2 * blue; q2 += (w2 * w2) * y2;
     }
-    __global double *o = out + s * n_parity * SLOTS;
-    for (int i = 0; i < n_parity * SLOTS; ++i) o[i] = acc[i];
+    __global double *o = out + out_base + gid * SLOTS;
+    o[0] = r0; o[1] = g0; o[2] = bl0; o[3] = q0;
+    o[4] = r1; o[5] = g1; o[6] = bl1; o[7] = q1;
+    o[8] = r2; o[9] = g2; o[10] = bl2; o[11] = q2;
 }
 
 // In-place prefix sums over frames: rows 1..n_rows of `table` (row 0 all zero) become
@@ -61,53 +63,96 @@ __kernel void prefix_frames(__global double *table, const int n_rows, const long
     }
 }
 
-// One output frame's element-corner flux over each element's window [f - back, f + fwd]:
-// U = window sum / sum of N_g over the window (/ its square for Q). `rows` in the frame range
-// of the sums table: output frame f is row `row`. prefix != 0: table holds prefix sums (row 0 =
-// 0, row j+1 = sum of frames 0..j) and a window sum is a difference of two rows; prefix == 0:
-// table holds per-frame sums (row j = frame j) added in frame order.
-__kernel void window_flux(__global const double *table, __global const double *cum_n,
-                          __global const uchar *back, __global const uchar *fwd,
-                          const long window_base, const int row, const int n_elements,
-                          const int n_parity,
-                          const int prefix, __global double *flux)  // (E, n_parity, 12)
+// Sums of element e and parity p (work item e * n_parity + p) over frames 0..J-1 of the
+// records, accumulated over frames as they are made: table row j+1 = row j + sums of frame j,
+// row 0 = 0. Bitwise the same as element_sums followed by prefix_frames, without the table's
+// round trip through memory in between. Segments are (frame, element): offsets (J * E + 1).
+__kernel void sums_prefix(__global const uint *key, __global const ushort *b1,
+                          __global const ushort *b2, __global const float *energy,
+                          __global const long *offsets, const int n_frames, const int n_elements,
+                          const uint kinds, const int n_parity, __global double *table)
 {
-    const int e = get_global_id(0);
-    if (e >= n_elements) return;
-    const int lo = row - back[window_base + e], hi = row + fwd[window_base + e] + 1;  // frames [lo, hi)
-    const int width = n_parity * SLOTS;
-    const long stride = (long)n_elements * width;
-    const double n_sum = (cum_n[hi] - cum_n[lo]) / (double)n_parity;  // photons per half
-    __global double *o = flux + (long)e * width;
-    for (int i = 0; i < width; ++i) {
-        double total;
-        if (prefix) {
-            total = table[hi * stride + (long)e * width + i] - table[lo * stride + (long)e * width + i];
-        } else {
-            total = 0.0;
-            for (int g = lo; g < hi; ++g) total += table[g * stride + (long)e * width + i];
+    const long gid = get_global_id(0);
+    if (gid >= (long)n_elements * n_parity) return;
+    const long e = gid / n_parity;
+    const uint parity = (uint)(gid - e * n_parity);
+    const long stride = (long)n_elements * n_parity * SLOTS;
+    double run[SLOTS];
+    for (int c = 0; c < SLOTS; ++c) {
+        run[c] = 0.0;
+        table[gid * SLOTS + c] = 0.0;
+    }
+    for (int j = 0; j < n_frames; ++j) {
+        const long s = (long)j * n_elements + e;
+        double r0 = 0.0, g0 = 0.0, bl0 = 0.0, q0 = 0.0;
+        double r1 = 0.0, g1 = 0.0, bl1 = 0.0, q1 = 0.0;
+        double r2 = 0.0, g2 = 0.0, bl2 = 0.0, q2 = 0.0;
+        const long end = offsets[s + 1];
+        for (long r = offsets[s]; r < end; ++r) {
+            const uint k = key[r];
+            if (!(kinds & ((k & DIRECT_BIT) ? 2u : 1u))) continue;
+            if (n_parity == 2 && ((k & PARITY_BIT) ? 1u : 0u) != parity) continue;
+            const double w1 = (double)b1[r] / BARY_SCALE;
+            const double w2 = (double)b2[r] / BARY_SCALE;
+            const double w0 = 1.0 - w1 - w2;
+            const double red = (double)energy[3 * r], green = (double)energy[3 * r + 1],
+                         blue = (double)energy[3 * r + 2];
+            const double y = 0.2126 * red + 0.7152 * green + 0.0722 * blue;
+            const double y2 = y * y;
+            r0 += w0 * red; g0 += w0 * green; bl0 += w0 * blue; q0 += (w0 * w0) * y2;
+            r1 += w1 * red; g1 += w1 * green; bl1 += w1 * blue; q1 += (w1 * w1) * y2;
+            r2 += w2 * red; g2 += w2 * green; bl2 += w2 * blue; q2 += (w2 * w2) * y2;
         }
-        o[i] = (i % 4 == 3) ? total / (n_sum * n_sum) : total / n_sum;
+        run[0] += r0; run[1] += g0; run[2] += bl0; run[3] += q0;
+        run[4] += r1; run[5] += g1; run[6] += bl1; run[7] += q1;
+        run[8] += r2; run[9] += g2; run[10] += bl2; run[11] += q2;
+        __global double *o = table + (j + 1) * stride + gid * SLOTS;
+        for (int c = 0; c < SLOTS; ++c) o[c] = run[c];
     }
 }
 
-// Element corners -> vertices (Gouraud hat basis, dept.md §1.2): vertex v adds the flux of the
-// element corners in slots[voffsets[v] .. voffsets[v+1]) (element * 3 + corner, ascending).
-__kernel void vertex_flux(__global const double *flux, __global const long *voffsets,
-                          __global const int *slots, const int n_vertices, const int n_parity,
-                          __global double *out)  // (n_parity, V, 4)
+// Vertex flux of output frame i (work item (v, i)): vertex v adds, over the element corners in
+// slots[voffsets[v] .. voffsets[v+1]) (element * 3 + corner, ascending), the corner's window sum
+// over its element's window [f - back, f + fwd] divided by the photons emitted in the window,
+// U = sum / sum_g N_g (Q: / (sum_g N_g)^2), with N_g halved per parity. Output frame i is row
+// rows[i] of the table. prefix != 0: the table holds prefix sums (row 0 = 0, row j+1 = sum of
+// frames 0..j) and a window sum is the difference of two rows; prefix == 0: per-frame sums
+// (row j = frame j) added in frame order.
+__kernel void vertex_window_flux(__global const double *table, __global const double *cum_n,
+                                 __global const uchar *back, __global const uchar *fwd,
+                                 __global const int *rows, __global const long *voffsets,
+                                 __global const int *slots, const int n_vertices,
+                                 const int n_elements, const int n_parity, const int prefix,
+                                 __global double *out)  // (n_out, n_parity, V, 4)
 {
     const int v = get_global_id(0);
+    const int i = get_global_id(1);
     if (v >= n_vertices) return;
+    const int row = rows[i];
+    const long width = (long)n_parity * SLOTS;
+    const long stride = (long)n_elements * width;
     for (int p = 0; p < n_parity; ++p) {
         double a0 = 0.0, a1 = 0.0, a2 = 0.0, a3 = 0.0;
         for (long j = voffsets[v]; j < voffsets[v + 1]; ++j) {
             const int ek = slots[j];
             const int e = ek / 3, k = ek - 3 * (ek / 3);
-            __global const double *u = flux + ((long)e * n_parity + p) * SLOTS + 4 * k;
-            a0 += u[0]; a1 += u[1]; a2 += u[2]; a3 += u[3];
+            const long w = (long)i * n_elements + e;
+            const int lo = row - back[w], hi = row + fwd[w] + 1;  // frames [lo, hi)
+            const double n_sum = (cum_n[hi] - cum_n[lo]) / (double)n_parity;
+            const long base = (long)e * width + p * SLOTS + 4 * k;
+            double t[4];
+            for (int c = 0; c < 4; ++c) {
+                if (prefix) {
+                    t[c] = table[hi * stride + base + c] - table[lo * stride + base + c];
+                } else {
+                    t[c] = 0.0;
+                    for (int g = lo; g < hi; ++g) t[c] += table[g * stride + base + c];
+                }
+            }
+            a0 += t[0] / n_sum; a1 += t[1] / n_sum; a2 += t[2] / n_sum;
+            a3 += t[3] / (n_sum * n_sum);
         }
-        __global double *o = out + ((long)p * n_vertices + v) * 4;
+        __global double *o = out + (((long)i * n_parity + p) * n_vertices + v) * 4;
         o[0] = a0; o[1] = a1; o[2] = a2; o[3] = a3;
     }
 }

@@ -62,6 +62,27 @@ def _concat_frames(frames):
     return key, b1, b2, energy, np.concatenate(parts), len(frames), n_elements
 
 
+def _upload(ctx, a: np.ndarray) -> cl.Buffer:
+    mf = cl.mem_flags
+    return cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a if a.size else np.zeros(1, a.dtype))
+
+
+def _sums_into(d_out: cl.Buffer, out_base: int, frames, kind: str, n_parity: int) -> tuple[int, int]:
+    """Run ``element_sums`` for ``frames`` into ``d_out`` from element ``out_base`` on; returns
+    (frames, elements)."""
+    if kind not in KINDS:
+        raise LoomError(f"kind must be one of {', '.join(KINDS)}, got {kind!r}")
+    key, b1, b2, energy, offsets, n_frames, n_elements = _concat_frames(frames)
+    n_segments = n_frames * n_elements
+    if n_segments:
+        ctx, queue = device_context()
+        kernel("gather", "element_sums")(
+            queue, (n_segments * n_parity,), None, _upload(ctx, key), _upload(ctx, b1), _upload(ctx, b2),
+            _upload(ctx, energy), _upload(ctx, offsets), np.int64(n_segments), np.uint32(KINDS[kind]),
+            np.int32(n_parity), np.int64(out_base), d_out)
+    return n_frames, n_elements
+
+
 def element_sums_cl(frames, *, kind: str = "indirect", split_parity: bool = False) -> np.ndarray:
     """Step 1 on PoCL for a list of frames' records (objects with ``key``, ``b1``, ``b2``,
     ``energy``, ``offsets`` sorted by element, like the store's FrameRecords).
@@ -69,22 +90,16 @@ def element_sums_cl(frames, *, kind: str = "indirect", split_parity: bool = Fals
     Returns (J, E, P, 3, 4) float64: per frame, element, parity (P = 2 with ``split_parity``,
     even then odd photons; else 1), corner k and (R, G, B, Q).
     """
-    key, b1, b2, energy, offsets, n_frames, n_elements = _concat_frames(frames)
+    frames = list(frames)
     n_parity = 2 if split_parity else 1
-    out = np.zeros((n_frames, n_elements, n_parity, 3, 4))
-    n_segments = n_frames * n_elements
-    if n_segments == 0:
+    n_elements = len(frames[0].offsets) - 1 if frames else 0
+    out = np.zeros((len(frames), n_elements, n_parity, 3, 4))
+    if out.size == 0:
+        _concat_frames(frames)  # validates
         return out
     ctx, queue = device_context()
-    mf = cl.mem_flags
-
-    def upload(a):
-        return cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a if a.size else np.zeros(1, a.dtype))
-
-    d_out = cl.Buffer(ctx, mf.WRITE_ONLY, size=out.nbytes)
-    kernel("gather", "element_sums")(
-        queue, (n_segments,), None, upload(key), upload(b1), upload(b2), upload(energy),
-        upload(offsets), np.int64(n_segments), np.uint32(KINDS[kind]), np.int32(n_parity), d_out)
+    d_out = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, size=out.nbytes)
+    _sums_into(d_out, 0, frames, kind, n_parity)
     cl.enqueue_copy(queue, out, d_out)
     return out
 
@@ -121,20 +136,42 @@ def vertex_slots(element_vertices: np.ndarray, n_vertices: int) -> tuple[np.ndar
     return voffsets, order.astype(np.int32)
 
 
-def _check_windows(sums, n_emitted, back, fwd, rows):
-    sums = np.ascontiguousarray(sums, np.float64)
-    if sums.ndim != 5 or sums.shape[3:] != (3, 4):
-        raise LoomError(f"sums must be (frames, elements, parity, 3, 4), got {sums.shape}")
+def _check_window_args(n_rows: int, n_elements: int, n_emitted, back, fwd, rows):
     n_emitted = np.asarray(n_emitted, np.float64).reshape(-1)
     back = np.ascontiguousarray(back, np.uint8)
     fwd = np.ascontiguousarray(fwd, np.uint8)
     rows = np.asarray(rows, np.int64).reshape(-1)
-    n_rows, n_elements = sums.shape[:2]
     if n_emitted.shape[0] != n_rows or back.shape != (len(rows), n_elements) or fwd.shape != back.shape:
         raise LoomError("sums, n_emitted, back/fwd and rows disagree in shape")
     if len(rows) and ((rows[:, None] - back < 0).any() or (rows[:, None] + fwd >= n_rows).any()):
         raise LoomError("a window reaches outside the frames of the sums table")
-    return sums, n_emitted, back, fwd, rows
+    return n_emitted, back, fwd, rows
+
+
+def _check_windows(sums, n_emitted, back, fwd, rows):
+    sums = np.ascontiguousarray(sums, np.float64)
+    if sums.ndim != 5 or sums.shape[3:] != (3, 4):
+        raise LoomError(f"sums must be (frames, elements, parity, 3, 4), got {sums.shape}")
+    return (sums, *_check_window_args(sums.shape[0], sums.shape[1], n_emitted, back, fwd, rows))
+
+
+def _flux(d_table: cl.Buffer, prefix: bool, n_emitted, back, fwd, rows, element_vertices,
+          n_vertices: int, n_elements: int, n_parity: int) -> np.ndarray:
+    """Steps 2 and 3 from a device sums table (prefix or per-frame layout), all output frames
+    in one launch."""
+    ctx, queue = device_context()
+    out = np.zeros((len(rows), n_parity, n_vertices, 4))
+    if len(rows) == 0 or n_elements == 0 or n_vertices == 0:
+        return out
+    cum_n = np.concatenate([[0.0], np.cumsum(n_emitted)])
+    voffsets, slots = vertex_slots(element_vertices, n_vertices)
+    d_out = cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY, size=out.nbytes)
+    kernel("gather", "vertex_window_flux")(
+        queue, (n_vertices, len(rows)), None, d_table, _upload(ctx, cum_n), _upload(ctx, back),
+        _upload(ctx, fwd), _upload(ctx, rows.astype(np.int32)), _upload(ctx, voffsets), _upload(ctx, slots),
+        np.int32(n_vertices), np.int32(n_elements), np.int32(n_parity), np.int32(prefix), d_out)
+    cl.enqueue_copy(queue, out, d_out)
+    return out
 
 
 def window_flux_cl(sums, n_emitted, back, fwd, rows, element_vertices, n_vertices: int,
@@ -159,40 +196,44 @@ def window_flux_cl(sums, n_emitted, back, fwd, rows, element_vertices, n_vertice
     if method not in ("prefix", "direct"):
         raise LoomError(f"method must be prefix or direct, got {method!r}")
     n_rows, n_elements, n_parity = sums.shape[:3]
-    out = np.zeros((len(rows), n_parity, n_vertices, 4))
-    if len(rows) == 0 or n_elements == 0:
-        return out
     ctx, queue = device_context()
-    mf = cl.mem_flags
     width = n_elements * n_parity * SLOTS
     prefix = method == "prefix"
     if prefix:
-        table = np.empty((n_rows + 1) * width)
-        table[:width] = 0.0
+        table = np.zeros((n_rows + 1) * width)
         table[width:] = sums.reshape(-1)
-        d_table = cl.Buffer(ctx, mf.READ_WRITE | mf.COPY_HOST_PTR, hostbuf=table)
-        kernel("gather", "prefix_frames")(queue, (width,), None, d_table, np.int32(n_rows), np.int64(width))
+        d_table = _upload(ctx, table)
+        if width:
+            kernel("gather", "prefix_frames")(queue, (width,), None, d_table, np.int32(n_rows), np.int64(width))
     else:
-        d_table = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=sums)
-    cum_n = np.concatenate([[0.0], np.cumsum(n_emitted)])
-    d_cum = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=cum_n)
-    voffsets, slots = vertex_slots(element_vertices, n_vertices)
-    d_voff = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=voffsets)
-    d_slots = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=slots if slots.size else np.zeros(1, np.int32))
-    d_back = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=back)
-    d_fwd = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=fwd)
-    d_flux = cl.Buffer(ctx, mf.READ_WRITE, size=8 * width)
-    d_out = cl.Buffer(ctx, mf.WRITE_ONLY, size=max(8, out[0].nbytes))
-    k_window, k_vertex = kernel("gather", "window_flux"), kernel("gather", "vertex_flux")
-    for i, row in enumerate(rows):
-        k_window(queue, (n_elements,), None, d_table, d_cum, d_back, d_fwd,
-                 np.int64(i * n_elements), np.int32(row), np.int32(n_elements), np.int32(n_parity),
-                 np.int32(prefix), d_flux)
-        if n_vertices:
-            k_vertex(queue, (n_vertices,), None, d_flux, d_voff, d_slots, np.int32(n_vertices),
-                     np.int32(n_parity), d_out)
-            cl.enqueue_copy(queue, out[i], d_out)
-    return out
+        d_table = _upload(ctx, sums)
+    return _flux(d_table, prefix, n_emitted, back, fwd, rows, element_vertices, n_vertices, n_elements, n_parity)
+
+
+def gather_flux_cl(frames, n_emitted, back, fwd, rows, element_vertices, n_vertices: int, *,
+                   kind: str = "indirect", split_parity: bool = False) -> np.ndarray:
+    """Steps 1-3 on PoCL without leaving the device: the records of J consecutive frames
+    (``frames``, as for :func:`element_sums_cl`) are summed straight into a prefix-sum table,
+    then windows and vertices as :func:`window_flux_cl` (same arguments and result)."""
+    frames = list(frames)
+    n_parity = 2 if split_parity else 1
+    n_rows = len(frames)
+    n_elements = len(frames[0].offsets) - 1 if frames else 0
+    n_emitted, back, fwd, rows = _check_window_args(n_rows, n_elements, n_emitted, back, fwd, rows)
+    width = n_elements * n_parity * SLOTS
+    if width == 0:
+        return np.zeros((len(rows), n_parity, n_vertices, 4))
+    if kind not in KINDS:
+        raise LoomError(f"kind must be one of {', '.join(KINDS)}, got {kind!r}")
+    ctx, queue = device_context()
+    key, b1, b2, energy, offsets, _, _ = _concat_frames(frames)
+    d_table = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, size=8 * (n_rows + 1) * width)
+    kernel("gather", "sums_prefix")(
+        queue, (n_elements * n_parity,), None, _upload(ctx, key), _upload(ctx, b1), _upload(ctx, b2),
+        _upload(ctx, energy), _upload(ctx, offsets), np.int32(n_rows), np.int32(n_elements),
+        np.uint32(KINDS[kind]), np.int32(n_parity), d_table)
+    return _flux(d_table, True, n_emitted, back, fwd, rows, element_vertices, n_vertices, n_elements,
+                 n_parity)
 
 
 def window_flux_reference(sums, n_emitted, back, fwd, rows, element_vertices, n_vertices: int) -> np.ndarray:

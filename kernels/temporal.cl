@@ -27,15 +27,15 @@ __kernel void smooth_rates(__global const uint *counts,   // (F, E)
 }
 
 // Condition (1) at candidate frame g for the element whose mean mu was taken at frame f:
-// mu - k sigma <= x <= mu + k sigma, counts on frame f's photon budget N_f.
-// sigma^2 = mu * N_f * Q[g], Q[g] = mean of 1/N_j over g's smoothing frames (1 when every frame
-// shoots the same N); sigma = 1 where mu = 0 (§5.1).
+// mu - k sigma <= x <= mu + k sigma, i.e. (x - mu)^2 <= k^2 sigma^2 (no square root), counts on
+// frame f's photon budget N_f. sigma^2 = mu * N_f * Q[g], Q[g] = mean of 1/N_j over g's smoothing
+// frames (so sigma = sqrt(mu) when every frame shoots the same N); sigma = 1 where mu = 0 (§5.1).
 inline bool condition1(const double mu, const double n_f, const double rate_g, const double q_g,
-                       const double k_sigma)
+                       const double k2)
 {
-    const double x = n_f * rate_g;
-    const double sigma = mu > 0.0 ? sqrt(mu * (n_f * q_g)) : 1.0;
-    return (mu - k_sigma * sigma <= x) && (x <= mu + k_sigma * sigma);
+    const double d = n_f * rate_g - mu;
+    const double var = mu > 0.0 ? mu * (n_f * q_g) : 1.0;
+    return d * d <= k2 * var;
 }
 
 // Window [f - back, f + fwd] of every (frame f in [f0, f0 + n_out), element e).
@@ -47,7 +47,7 @@ __kernel void windows(__global const double *rate,      // (F, E) from smooth_ra
                       __global const double *q,         // (F,) mean 1/N over smoothing frames
                       const int n_frames, const int n_elements, const int f0, const int n_out,
                       const int half_fmax, const int half_lo, const int half_hi,
-                      const double k_sigma, const int adaptive,
+                      const double k2, const int adaptive,
                       __global uchar *back, __global uchar *fwd) // (n_out, E)
 {
     const long gid = get_global_id(0);
@@ -63,11 +63,11 @@ __kernel void windows(__global const double *rate,      // (F, E) from smooth_ra
         const double mu = n_f * rate[(long)f * n_elements + e];
         b = 0;
         while (b < max_back
-               && condition1(mu, n_f, rate[(long)(f - b - 1) * n_elements + e], q[f - b - 1], k_sigma))
+               && condition1(mu, n_f, rate[(long)(f - b - 1) * n_elements + e], q[f - b - 1], k2))
             ++b;
         w = 0;
         while (w < max_fwd
-               && condition1(mu, n_f, rate[(long)(f + w + 1) * n_elements + e], q[f + w + 1], k_sigma))
+               && condition1(mu, n_f, rate[(long)(f + w + 1) * n_elements + e], q[f + w + 1], k2))
             ++w;
         b = max(b, min(half_lo, max_back));
         w = max(w, min(half_hi, max_fwd));

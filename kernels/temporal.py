@@ -10,7 +10,7 @@ Condition (1), as implemented (paper symbols; ``s`` = ``smoothing_frames``, defa
     mu    = N_f R(f)                                 mean count at f ("three subsequent frames")
     x(g)  = N_f R(g)                                 same-width mean at the candidate frame g
     sigma = sqrt(mu N_f Q(g)),  Q(g) = mean over j in S(g) of 1 / N_j;  sigma = 1 where mu = 0
-    keep g while  mu - k sigma <= x(g) <= mu + k sigma
+    keep g while  mu - k sigma <= x(g) <= mu + k sigma,  evaluated as (x - mu)^2 <= k^2 sigma^2
 
 Walks run backward and forward from f independently and stop at the first failing frame, at
 F_max/2 frames and at the animation's ends. Afterwards at least ``min_extent`` frames centred on
@@ -125,7 +125,7 @@ def windows_cl(counts, n_emitted, *, fmax: int, mode: str = "adaptive", k_sigma:
     kernel("temporal", "windows")(
         queue, (back.size,), None, d_rate, d_n, d_q, np.int32(n_frames), np.int32(n_elements),
         np.int32(f0), np.int32(n_out), np.int32(half_fmax), np.int32(half_lo), np.int32(half_hi),
-        np.float64(k_sigma), np.int32(adaptive), d_back, d_fwd)
+        np.float64(float(k_sigma) * float(k_sigma)), np.int32(adaptive), d_back, d_fwd)
     cl.enqueue_copy(queue, back, d_back)
     cl.enqueue_copy(queue, fwd, d_fwd)
     return back, fwd
@@ -156,7 +156,7 @@ def windows_reference(counts, n_emitted, *, fmax: int, mode: str = "adaptive", k
     if adaptive:
         rate = smoothed_rates_reference(counts, n_emitted, smoothing_frames)
         q = inverse_budget(n_emitted, smoothing_frames)
-    k = float(k_sigma)
+    k2 = float(k_sigma) * float(k_sigma)
     for i, f in enumerate(range(f0, f1)):
         max_back, max_fwd = min(half_fmax, f), min(half_fmax, n_frames - 1 - f)
         if not adaptive:
@@ -169,9 +169,9 @@ def windows_reference(counts, n_emitted, *, fmax: int, mode: str = "adaptive", k
             alive = np.ones(n_elements, bool)
             for d in range(1, limit + 1):
                 g = f + step * d
-                x = n_f * rate[g]
-                sigma = np.where(mu > 0.0, np.sqrt(mu * (n_f * q[g])), 1.0)
-                ok = (mu - k * sigma <= x) & (x <= mu + k * sigma)
+                d = n_f * rate[g] - mu
+                var = np.where(mu > 0.0, mu * (n_f * q[g]), 1.0)
+                ok = d * d <= k2 * var  # mu - k sigma <= x <= mu + k sigma
                 alive &= ok
                 extent += alive
             out[i] = np.maximum(extent, min(least, limit))

@@ -4,9 +4,10 @@ What the render pipeline calls to turn stored photons into per-frame vertex irra
 
 1. windows   from the store's frames x elements count table (never the records), per frame and
              element, Condition (1) (kernels/temporal.py), ``mode`` adaptive | fixed | off;
-2. gather    per frame the element sums of its records, once (kernels/gather.py); per output
-             frame the window sums by prefix sums over frames, pooled over the photons emitted
-             in the window, distributed to the vertices;
+2. gather    per chunk of output frames the element sums of the records of every frame its
+             windows reach, turned into prefix sums over frames on the device; per output frame
+             the window sums as differences of prefix sums, pooled over the photons emitted in
+             the window, distributed to the vertices (kernels/gather.py);
 3. filter    optionally the adaptive object-space filter for vertices that collected too few
              photons (kernels/filter.py, §5.2.5).
 
@@ -16,7 +17,9 @@ photons is its own animation, with its own ends. Frames sharing another frame's 
 
 Memory: output frames are processed in chunks of consecutive frames; a chunk holds the element
 sums of its frames and their windows' reach (F_max/2 each side): (chunk + F_max) x E x 12 doubles
-per photon parity, about 330 MB for ATRIUM (45,000 elements, F_max = 44, chunk 32).
+per photon parity, about 450 MB for ATRIUM (43,000 elements, F_max = 44, chunk 64). Frames in the
+overlap of two chunks are summed twice ((chunk + F_max) / chunk = 1.7x the element sums), which
+costs less than keeping the sums of the whole animation or moving them through host memory.
 """
 from __future__ import annotations
 
@@ -26,7 +29,7 @@ from typing import Iterator
 import numpy as np
 
 from kernels.filter import adaptive_filter_cl, neighbourhood
-from kernels.gather import element_sums_cl, irradiance, window_flux_cl
+from kernels.gather import gather_flux_cl, irradiance
 from kernels.temporal import MODES, windows_cl
 
 from .config import RenderConfig
@@ -77,7 +80,7 @@ def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames, *, mod
 def illumination_maps(store, elements, scene, frames=None, *, mode: str = "adaptive", fmax: int | None = None,
                       config: RenderConfig = RenderConfig(), kind: str = "indirect", count_kind: str = "all",
                       split_parity: bool = False, spatial_filter: bool = False,
-                      chunk: int = 32) -> Iterator[FrameIllumination]:
+                      chunk: int = 64) -> Iterator[FrameIllumination]:
     """Yield the illumination of every requested frame, in frame order.
 
     Parameters
@@ -108,22 +111,18 @@ def illumination_maps(store, elements, scene, frames=None, *, mode: str = "adapt
     hood = (neighbourhood(elements.element_vertices, elements.vertex_local, elements.vertex_instance,
                           max_rings=config.filter_rings, max_angle=config.filter_angle)
             if spatial_filter else None)
-    sums: dict[int, np.ndarray] = {}  # element sums per frame index, kept across chunks
+    records: dict[int, object] = {}  # FrameRecords per frame index, kept across chunks
     for start in range(0, len(frames), chunk):
         part = np.arange(start, min(start + chunk, len(frames)))
         f = frames[part]
         lo = int((f[:, None] - back[part]).min())
         hi = int((f[:, None] + fwd[part]).max()) + 1
-        for g in [g for g in sums if g < lo]:
-            del sums[g]
-        todo = [g for g in range(lo, hi) if g not in sums]
-        for i in range(0, len(todo), 16):
-            batch = todo[i:i + 16]
-            got = element_sums_cl([store.read_frame(g) for g in batch], kind=kind, split_parity=split_parity)
-            sums.update(zip(batch, got))
-        table = np.stack([sums[g] for g in range(lo, hi)])
-        flux = window_flux_cl(table, n_emitted[lo:hi], back[part], fwd[part], f - lo,
-                              elements.element_vertices, elements.n_vertices)
+        for g in [g for g in records if g < lo]:
+            del records[g]
+        records.update({g: store.read_frame(g) for g in range(lo, hi) if g not in records})
+        flux = gather_flux_cl([records[g] for g in range(lo, hi)], n_emitted[lo:hi], back[part], fwd[part],
+                              f - lo, elements.element_vertices, elements.n_vertices, kind=kind,
+                              split_parity=split_parity)
         for i, (frame_index, j) in enumerate(zip(f.tolist(), part.tolist())):
             areas = elements.vertex_areas(scene.pose_frame(store.frame_numbers[frame_index]))
             rings = None

@@ -8,7 +8,7 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from kernels.gather import (element_sums_cl, element_sums_reference, irradiance, window_flux_cl,
+from kernels.gather import (element_sums_cl, element_sums_reference, gather_flux_cl, irradiance, window_flux_cl,
                             window_flux_reference)
 from pipeline.errors import LoomError
 from workers.reconstruct import vertex_irradiance
@@ -155,3 +155,19 @@ def test08_refuses_windows_outside_the_table(rng):
         window_flux_cl(sums, np.ones(3), two, two, [1], ev, 8)
     with pytest.raises(LoomError, match="prefix or direct"):
         window_flux_cl(sums, np.ones(3), two * 0, two * 0, [1], ev, 8, method="sorted")
+
+
+@pytest.mark.parametrize("split", [False, True])
+def test09_fused_gather_equals_the_steps(rng, split):
+    n_rows, n_elements, n_vertices = 12, 300, 200
+    frames = [frame_records(rng, int(rng.integers(0, 3000)), n_elements) for _ in range(n_rows)]
+    n = rng.integers(10_000, 80_000, n_rows).astype(float)
+    rows = np.arange(n_rows)
+    back, fwd = random_windows(rng, n_rows, n_elements, rows, n_rows)
+    ev = mesh(rng, n_elements, n_vertices)
+    fused = gather_flux_cl(frames, n, back, fwd, rows, ev, n_vertices, kind="all", split_parity=split)
+    steps = window_flux_cl(element_sums_cl(frames, kind="all", split_parity=split), n, back, fwd, rows, ev,
+                           n_vertices)
+    assert fused.tobytes() == steps.tobytes()
+    close(fused, window_flux_reference(element_sums_reference(frames, kind="all", split_parity=split), n,
+                                       back, fwd, rows, ev, n_vertices))
