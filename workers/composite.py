@@ -104,7 +104,12 @@ class _Shading:
         self.normals = caster.normals.astype(np.float32)
         self.epsilon = np.float32(caster.epsilon)  # shadow-ray origin offset (workers/raycast.py)
         self.lights = state.lights
-        self.reach = [_light_reach(state, light) for light in state.lights]
+        # Light culling cells: elements when there is an element mesh (small, so a spot's cone
+        # culls tightly), else source triangles; hits carry their cell id
+        corners = (elements.element_positions(state) if elements is not None
+                   else state.vertices.astype(np.float64)[state.faces])
+        centre, radius = _bounding_spheres(corners)
+        self.reach = [_light_reach(light, centre, radius) for light in state.lights]
         self.elements = elements
         self.element_irradiance = None  # (E, 3 vertices, 3) float32: one gather per hit
         if irradiance is not None:
@@ -165,6 +170,49 @@ def render_frame(state: FrameState, elements: ElementMesh | None, irradiance, *,
     return FrameImage(direct + indirect, direct, indirect, albedo, alpha.reshape(shape[:2]), rays)
 
 
+class _Hits:
+    """One depth's ray hits. Points and normals are computed only for the rows a step asks for
+    (None: all rows, cached), so hits no light reaches cost no geometry."""
+
+    def __init__(self, sh: _Shading, tri, u, v, origins, dirs, t):
+        self.tri, self.origins, self.dirs = tri, origins, dirs
+        self.cell, self.b1, self.b2 = tri, None, None  # light-culling cell of every hit
+        if sh.elements is not None:
+            self.cell, self.b1, self.b2 = sh.elements.locate(tri, u, v)
+        self.t = t.astype(np.float32)
+        self._normals = sh.normals
+        self._cache = {}
+
+    def _full(self, name, make):
+        if name not in self._cache:
+            self._cache[name] = make(None)
+        return self._cache[name]
+
+    def points(self, rows=None) -> np.ndarray:
+        if rows is None:
+            return self._full("points", lambda _: self.origins + self.t[:, None] * self.dirs)
+        return self.origins[rows] + self.t[rows, None] * self.dirs[rows]
+
+    def normal(self, rows=None) -> np.ndarray:
+        return self._normals[self.tri if rows is None else self.tri[rows]]
+
+    def cos_in(self, rows=None) -> np.ndarray:
+        """normal . ray direction (negative on the front face)."""
+        if rows is None:
+            return self._full("cos_in", lambda _: np.einsum("ij,ij->i", self.normal(), self.dirs))
+        return np.einsum("ij,ij->i", self.normal(rows), self.dirs[rows])
+
+    def facing(self, rows=None) -> np.ndarray:
+        """Unit normals turned towards the viewer (surfaces reflect on both faces)."""
+        if rows is None:
+            return self._full("facing", lambda _: self._facing(self.normal(), self.cos_in()))
+        return self._facing(self.normal(rows), self.cos_in(rows))
+
+    @staticmethod
+    def _facing(normal, cos_in):
+        return normal * np.where(cos_in < 0, np.float32(1), np.float32(-1))[:, None]
+
+
 def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_depth, rays):
     """Direct, indirect and albedo (n, 3, 3) and coverage (n,) of the camera samples ``counter``."""
     n = len(counter)
@@ -186,28 +234,19 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
             throughput = None if throughput is None else throughput[hit]
         if not len(tri):
             break
-        points = origins + t.astype(np.float32)[:, None] * dirs
+        hits = _Hits(sh, tri, u, v, origins, dirs, t)
         kind = sh.kind[tri]
         rho = sh.albedo[tri]
-        normal = sh.normals[tri]
-        cos_in = np.einsum("ij,ij->i", normal, dirs)
-        facing = normal * np.where(cos_in < 0, np.float32(1), np.float32(-1))[:, None]  # to the viewer
         acc = np.zeros((len(tri), 3, 3), np.float32)  # this depth's layers, scattered once
         if depth == 0:
             acc[:, 2] = rho
             _put(cover, path, 1.0)
 
-        def add(layer, sel, value):
-            if sel is None:
-                acc[:, layer] += value
-            else:
-                acc[sel, layer] += value
-
         # Emitters seen from their front face
         if sh.any_emissive:
-            lit = np.flatnonzero(sh.emissive[tri] & (cos_in < 0))
+            lit = np.flatnonzero(sh.emissive[tri] & (hits.cos_in() < 0))
             if len(lit):
-                add(0, lit, sh.emission[tri[lit]])
+                acc[lit, 0] += sh.emission[tri[lit]]
 
         # Diffuse: direct light with shadow rays, indirect from the map; the path ends. Shaded
         # over all hits (cheaper than gathering the diffuse ones when they are most of them):
@@ -215,14 +254,14 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
         diffuse = kind == 0
         if diffuse.any():
             active = None if diffuse.all() else diffuse
-            e_direct = _punctual(sh, points, facing, tri, None, rays, active)
+            e_direct = _punctual(sh, hits, None, None, rays, active)
             if sh.area_samples:
                 c = counter if path is None else counter[path]
-                e_direct += _area(sh, key, c, depth, points, facing, tri, rays, active)
+                e_direct += _area(sh, key, c, depth, hits, rays, active)
             scale = (rho if active is None else sh.diffuse_albedo[tri]) * np.float32(1.0 / np.pi)
-            add(0, None, scale * e_direct)
+            acc[:, 0] += scale * e_direct
             if sh.element_irradiance is not None:
-                add(1, None, scale * _interpolate(sh, tri, u, v))
+                acc[:, 1] += scale * _interpolate(sh, hits)
             if active is None:
                 _put(out, path, acc if throughput is None else acc * throughput[:, None], True)
                 break
@@ -230,10 +269,9 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
         # Glossy: exact highlights of punctual lights
         glossy = np.flatnonzero(kind == 2)
         if len(glossy):
-            mirror_g = dirs[glossy] - 2.0 * cos_in[glossy, None] * normal[glossy]
+            mirror_g = hits.dirs[glossy] - 2.0 * hits.cos_in(glossy)[:, None] * hits.normal(glossy)
             lobe = (mirror_g, sh.exponent[tri[glossy]])
-            add(0, glossy, rho[glossy] * _punctual(sh, points[glossy], facing[glossy], tri[glossy],
-                                                   lobe, rays, None))
+            acc[glossy, 0] += rho[glossy] * _punctual(sh, hits, glossy, lobe, rays, None)
 
         _put(out, path, acc if throughput is None else acc * throughput[:, None], True)
 
@@ -241,8 +279,7 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
         spec = np.flatnonzero(kind != 0)
         if depth == max_depth or not len(spec):
             break
-        d = dirs[spec]
-        refl = d - 2.0 * cos_in[spec, None] * normal[spec]
+        refl = dirs[spec] - 2.0 * hits.cos_in(spec)[:, None] * hits.normal(spec)
         weight = rho[spec]
         g = np.flatnonzero(kind[spec] == 2)
         if len(g):
@@ -251,14 +288,14 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
             base = 2 + depth * _DIMS_PER_DEPTH
             cos_a = uniform(key, c, base) ** (1.0 / (e + 1.0))  # pdf (e+1)/(2 pi) cos^e
             lobe_dir = around(refl[g].astype(np.float64), cos_a, 2.0 * np.pi * uniform(key, c, base + 1))
-            cos_o = np.einsum("ij,ij->i", lobe_dir, facing[spec[g]])
+            cos_o = np.einsum("ij,ij->i", lobe_dir, hits.facing(spec[g]))
             # normalised Phong BRDF rho (e+2)/(2 pi) cos^e times cos_o over the pdf
             weight[g] *= (np.maximum(cos_o, 0.0) * (e + 2.0) / (e + 1.0))[:, None]
             refl[g] = lobe_dir
         keep = weight.max(axis=1) > 0
         spec, refl, weight = spec[keep], refl[keep], weight[keep]
         throughput = weight if throughput is None else throughput[spec] * weight
-        origins = sh.caster.offset_origins(points[spec], tri[spec], refl).astype(np.float32)
+        origins = sh.caster.offset_origins(hits.points(spec), tri[spec], refl).astype(np.float32)
         dirs, path = refl, (spec if path is None else path[spec])
     return out, cover
 
@@ -276,23 +313,26 @@ def _put(target: np.ndarray, idx, value, accumulate: bool = False) -> None:
         target[idx] = value
 
 
-def _interpolate(sh: _Shading, tri, u, v) -> np.ndarray:
+def _interpolate(sh: _Shading, hits: _Hits) -> np.ndarray:
     """Irradiance inside the hit element: barycentric blend of its three vertex values."""
-    elem, b1, b2 = sh.elements.locate(tri, u, v)
-    c = sh.element_irradiance[elem]  # (n, 3 vertices, 3)
-    b1 = b1.astype(np.float32)[:, None]
-    b2 = b2.astype(np.float32)[:, None]
+    c = sh.element_irradiance[hits.cell]  # (n, 3 vertices, 3)
+    b1 = hits.b1.astype(np.float32)[:, None]
+    b2 = hits.b2.astype(np.float32)[:, None]
     return c[:, 0] + b1 * (c[:, 1] - c[:, 0]) + b2 * (c[:, 2] - c[:, 0])
 
 
-def _light_reach(state: FrameState, light) -> np.ndarray | None:
-    """(F,) bool: triangles a spot's cone or a light's range may touch (bounding spheres), so
-    hits elsewhere skip that light at once; None where every triangle may be reached."""
-    if light.kind == "directional" or (light.kind == "point" and light.definition.range is None):
-        return None
-    corners = state.vertices.astype(np.float64)[state.faces]
+def _bounding_spheres(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Centres and radii (slightly enlarged) of triangles given as (n, 3, 3) corners."""
     centre = corners.mean(axis=1)
     radius = np.sqrt(((corners - centre[:, None]) ** 2).sum(axis=2)).max(axis=1) * 1.001 + 1e-9
+    return centre, radius
+
+
+def _light_reach(light, centre: np.ndarray, radius: np.ndarray) -> np.ndarray | None:
+    """(n,) bool: cells (bounding spheres) a spot's cone or a light's range may touch, so hits
+    elsewhere skip that light at once; None when the light may reach everything."""
+    if light.kind == "directional" or (light.kind == "point" and light.definition.range is None):
+        return None
     v = centre - light.position
     dist = np.sqrt((v * v).sum(axis=1))
     reach = np.ones(len(centre), bool)
@@ -306,29 +346,31 @@ def _light_reach(state: FrameState, light) -> np.ndarray | None:
     return reach
 
 
-def _punctual(sh: _Shading, p, facing, tri, lobe, rays, active) -> np.ndarray:
-    """Irradiance (lobe None) or glossy radiance over rho (lobe = (mirror dirs, exponents)) from
-    every point, spot and directional light, with shadow rays. Points a light cannot reach (its
-    cone or range misses their triangle, back side, outside the cone) and points not ``active``
-    (None: all are) are culled before any square root or shadow ray."""
-    total = np.zeros((len(p), 3), np.float32)
+def _punctual(sh: _Shading, hits: _Hits, rows, lobe, rays, active) -> np.ndarray:
+    """Irradiance (lobe None) or glossy radiance over rho (lobe = (mirror dirs, exponents)) at
+    the hits ``rows`` (None: all) from every point, spot and directional light, with shadow rays.
+    Hits a light cannot reach (its cone or range misses their triangle, back side, outside the
+    cone) and hits not ``active`` (None: all are) are culled before any square root or ray."""
+    cell = hits.cell if rows is None else hits.cell[rows]
+    total = np.zeros((len(cell), 3), np.float32)
     for light, reach in zip(sh.lights, sh.reach):
-        mask = active if reach is None else (reach[tri] if active is None else reach[tri] & active)
-        idx = None if mask is None else np.flatnonzero(mask)
+        mask = active if reach is None else (reach[cell] if active is None else reach[cell] & active)
+        idx = None if mask is None else np.flatnonzero(mask)  # rows of ``total`` to consider
         if idx is not None and not len(idx):
             continue
-        pp, ff = (p, facing) if idx is None else (p[idx], facing[idx])
+        where = idx if rows is None else (rows if idx is None else rows[idx])  # rows of ``hits``
+        p, facing = hits.points(where), hits.facing(where)
         if light.kind == "directional":
             to_light = (-light.direction).astype(np.float32)
-            cos_s = ff @ to_light
+            cos_s = facing @ to_light
             sel = np.flatnonzero(cos_s > 0)
             d = np.broadcast_to(to_light, (len(sel), 3))
             dist = np.full(len(sel), _FAR)
             cos_s = cos_s[sel]
             scale = np.ones(len(sel), np.float32)
         else:
-            delta = light.position.astype(np.float32) - pp
-            ahead = np.einsum("ij,ij->i", ff, delta)  # cos x distance
+            delta = light.position.astype(np.float32) - p
+            ahead = np.einsum("ij,ij->i", facing, delta)  # cos x distance
             keep = ahead > 0
             if light.kind == "spot":  # inside the outer cone: proj > cos_outer x distance
                 proj = delta @ -light.direction.astype(np.float32)
@@ -344,15 +386,14 @@ def _punctual(sh: _Shading, p, facing, tri, lobe, rays, active) -> np.ndarray:
                 scale = scale * light.range_window(dist)
             if light.kind == "spot":
                 scale = scale * light.spot_falloff(proj[sel] / dist)
-        if idx is not None:
-            sel = idx[sel]
+        out_rows = sel if idx is None else idx[sel]
         if lobe is not None:  # normalised Phong: (e+2)/(2 pi) cos^e(angle to the mirror direction)
-            e = lobe[1][sel]
-            cos_r = np.maximum(np.einsum("ij,ij->i", lobe[0][sel], d), 0.0)
+            e = lobe[1][out_rows]
+            cos_r = np.maximum(np.einsum("ij,ij->i", lobe[0][out_rows], d), 0.0)
             scale = scale * (e + 2.0) / (2.0 * np.pi) * cos_r ** e
         live = scale > 0
         if not live.all():
-            sel, d, dist, cos_s, scale = sel[live], d[live], dist[live], cos_s[live], scale[live]
+            sel, out_rows, d, dist, cos_s, scale = (a[live] for a in (sel, out_rows, d, dist, cos_s, scale))
         if not len(sel):
             continue
         d = np.ascontiguousarray(d, np.float32)
@@ -360,14 +401,15 @@ def _punctual(sh: _Shading, p, facing, tri, lobe, rays, active) -> np.ndarray:
         blocked = sh.caster.occluded(origin, d, dist * (1.0 - 1e-5))
         rays["shadow"] += len(sel)
         free = ~blocked
-        total[sel[free]] += (scale[free] * cos_s[free]).astype(np.float32)[:, None] * \
+        total[out_rows[free]] += (scale[free] * cos_s[free]).astype(np.float32)[:, None] * \
             light.radiant.astype(np.float32)
     return total
 
 
-def _area(sh: _Shading, key, counter, depth, p, facing, tri, rays, active) -> np.ndarray:
-    """Irradiance from emissive triangles: ``area_samples`` samples per point, triangle chosen by
-    power, point uniform on it (pbrt-v4 SampleUniformTriangle); E = L cos cos' / (d^2 pdf)."""
+def _area(sh: _Shading, key, counter, depth, hits: _Hits, rays, active) -> np.ndarray:
+    """Irradiance from emissive triangles at every hit: ``area_samples`` samples each, triangle
+    chosen by power, point uniform on it (pbrt-v4 SampleUniformTriangle); E = L cos cos' / (d^2 pdf)."""
+    p, facing, tri = hits.points(), hits.facing(), hits.tri
     total = np.zeros((len(p), 3), np.float32)
     base = 2 + depth * _DIMS_PER_DEPTH + 2
     for s in range(sh.area_samples):
