@@ -41,7 +41,7 @@ class RenderConfig:
     aqm_size: int = 256  # AQM input size in pixels, §6
 
     # --- photon tracing (§4) ---------------------------------------------------------------
-    seed: int = 0  # run seed; photon batch b of frame f is seeded by (seed, f, b)
+    seed: int = 0  # run seed; photon i of frame f draws Philox words keyed by (seed, f), counter i
     max_depth: int = 8  # maximum photon bounces before termination
 
     def __post_init__(self) -> None:
