@@ -9,6 +9,7 @@ are fetched once (``prg.name`` would build a new ``cl.Kernel`` on every access).
 from __future__ import annotations
 
 import os
+import re
 from functools import lru_cache
 from pathlib import Path
 
@@ -43,12 +44,25 @@ def device_context() -> tuple[cl.Context, cl.CommandQueue]:
                     field="opencl")
 
 
+_INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.MULTILINE)
+
+
+def expanded_source(name: str, seen: frozenset[str] = frozenset()) -> str:
+    """``kernels/<name>.cl`` with its ``#include "x.cl"`` lines replaced by the files' text.
+
+    PoCL's kernel cache is keyed by the program text, so inlining the includes makes a change to
+    an included file rebuild every program that uses it (an include path would not)."""
+    if name in seen:
+        return ""
+    text = (SOURCE_DIR / f"{name}.cl").read_text()
+    return _INCLUDE.sub(lambda m: expanded_source(Path(m.group(1)).stem, seen | {name}), text)
+
+
 @lru_cache(maxsize=None)
 def program(name: str, options: tuple[str, ...] = ()) -> cl.Program:
-    """Build ``kernels/<name>.cl`` (with ``kernels/`` on the include path) once per process."""
+    """Build ``kernels/<name>.cl`` (includes inlined) once per process."""
     ctx, _ = device_context()
-    source = (SOURCE_DIR / f"{name}.cl").read_text()
-    return cl.Program(ctx, source).build(options=["-I", str(SOURCE_DIR), *options])
+    return cl.Program(ctx, expanded_source(name)).build(options=list(options))
 
 
 @lru_cache(maxsize=None)

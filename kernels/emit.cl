@@ -3,27 +3,13 @@
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #pragma OPENCL FP_CONTRACT OFF  // no fused multiply-add: the NumPy twin rounds every product
 #include "philox.cl"
+#include "sampling.cl"
 
 #define EMIT_POINT 0
 #define EMIT_SPOT 1
 #define EMIT_DIRECTIONAL 2
 #define EMIT_AREA 3
 #define EMISSION_STREAM 0xFFFF0000u
-
-// Direction at polar cos_t and azimuth phi about the unit axis (Duff et al., JCGT 6(1), 2017)
-inline void around(double zx, double zy, double zz, double cos_t, double phi,
-                   double *ox, double *oy, double *oz) {
-    const double sgn = zz >= 0.0 ? 1.0 : -1.0;
-    const double ia = -1.0 / (sgn + zz);
-    const double ib = zx * zy * ia;
-    const double tx = 1.0 + sgn * zx * zx * ia, ty = sgn * ib, tz = -sgn * zx;
-    const double sx = ib, sy = sgn + zy * zy * ia, sz = -zy;
-    const double sin_t = sqrt(fmin(fmax(1.0 - cos_t * cos_t, 0.0), 1.0));
-    const double cp = cos(phi), sp = sin(phi);
-    *ox = tx * (sin_t * cp) + sx * (sin_t * sp) + zx * cos_t;
-    *oy = ty * (sin_t * cp) + sy * (sin_t * sp) + zy * cos_t;
-    *oz = tz * (sin_t * cp) + sz * (sin_t * sp) + zz * cos_t;
-}
 
 __kernel void emit(
     const long count, const uint key0, const uint key1, const int n_emitters,
@@ -83,11 +69,8 @@ __kernel void emit(
             wr = rr * s; wg = rg * s; wb = rb * s;
         } else {  // directional: a disk of the scene's radius facing the light, upstream of the scene
             const double r = radius * sqrt(u1), phi = 2.0 * M_PI * u2;
-            const double sgn = az >= 0.0 ? 1.0 : -1.0;
-            const double ia = -1.0 / (sgn + az);
-            const double ib = ax * ay * ia;
-            const double tx = 1.0 + sgn * ax * ax * ia, ty = sgn * ib, tz = -sgn * ax;
-            const double sx = ib, sy = sgn + ay * ay * ia, sz = -ay;
+            double tx, ty, tz, sx, sy, sz;
+            orthonormal_basis(ax, ay, az, &tx, &ty, &tz, &sx, &sy, &sz);
             const double rc = r * cos(phi), rs = r * sin(phi), back = radius * 1.05;
             ox = cx + (tx * rc + sx * rs) - ax * back;
             oy = cy + (ty * rc + sy * rs) - ay * back;

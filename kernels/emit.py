@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .philox import EMISSION_STREAM, uniforms
+from .sampling import around, orthonormal_basis
 from .scatter import WORK_GROUP, device_input, device_output, read_back
 
 POINT, SPOT, DIRECTIONAL, AREA = 0, 1, 2, 3
@@ -46,22 +47,6 @@ class EmissionTables:
     epsilon: float  # offset of area-light origins off their surface
 
 
-def _basis(z):
-    sgn = np.where(z[:, 2] >= 0, 1.0, -1.0)
-    ia = -1.0 / (sgn + z[:, 2])
-    ib = z[:, 0] * z[:, 1] * ia
-    t = np.stack([1.0 + sgn * z[:, 0] * z[:, 0] * ia, sgn * ib, -sgn * z[:, 0]], 1)
-    s = np.stack([ib, sgn + z[:, 1] * z[:, 1] * ia, -z[:, 1]], 1)
-    return t, s
-
-
-def _around(z, cos_t, phi):
-    t, s = _basis(z)
-    sin_t = np.sqrt(np.minimum(np.maximum(1.0 - cos_t * cos_t, 0.0), 1.0))
-    cp, sp = np.cos(phi), np.sin(phi)
-    return t * (sin_t * cp)[:, None] + s * (sin_t * sp)[:, None] + z * cos_t[:, None]
-
-
 def emit_reference(t: EmissionTables, photon: np.ndarray, key: tuple[int, int]):
     """NumPy twin of ``emit.cl``: origins (n,3) f32, directions (n,3) f32, weights (n,3) f64, emitter."""
     n = len(photon)
@@ -79,7 +64,7 @@ def emit_reference(t: EmissionTables, photon: np.ndarray, key: tuple[int, int]):
         b0 = 1.0 - b1 - b2
         c = t.corners[src[a]].astype(np.float64)
         nrm = t.normals[src[a]]
-        dirs[a] = _around(nrm, np.sqrt(1.0 - u3[a]), 2.0 * np.pi * u4[a])
+        dirs[a] = around(nrm, np.sqrt(1.0 - u3[a]), 2.0 * np.pi * u4[a])
         origins[a] = b0[:, None] * c[:, 0:3] + b1[:, None] * c[:, 3:6] + b2[:, None] * c[:, 6:9] + nrm * t.epsilon
         weights[a] = t.flux[e[a]]
     lights = ~a
@@ -91,19 +76,19 @@ def emit_reference(t: EmissionTables, photon: np.ndarray, key: tuple[int, int]):
     d = np.empty((len(li), 3))
     wgt = np.empty((len(li), 3))
     p = k == POINT
-    d[p] = _around(np.tile([0.0, 0.0, 1.0], (p.sum(), 1)), 1.0 - 2.0 * sub_u1[p], 2.0 * np.pi * sub_u2[p])
+    d[p] = around(np.tile([0.0, 0.0, 1.0], (p.sum(), 1)), 1.0 - 2.0 * sub_u1[p], 2.0 * np.pi * sub_u2[p])
     wgt[p] = rad[p] * (4.0 * np.pi)
     s = k == SPOT
     co, ci = t.cos_outer[li[s]], t.cos_inner[li[s]]
     cos_t = 1.0 - sub_u1[s] * (1.0 - co)
-    d[s] = _around(axis[s], cos_t, 2.0 * np.pi * sub_u2[s])
+    d[s] = around(axis[s], cos_t, 2.0 * np.pi * sub_u2[s])
     f = np.minimum(np.maximum((cos_t - co) / (ci - co), 0.0), 1.0)
     wgt[s] = rad[s] * (f * f * (2.0 * np.pi * (1.0 - co)))[:, None]
     dl = k == DIRECTIONAL
     if dl.any():
         r = t.radius * np.sqrt(sub_u1[dl])
         phi = 2.0 * np.pi * sub_u2[dl]
-        tt, ss = _basis(axis[dl])
+        tt, ss = orthonormal_basis(axis[dl])
         rc, rs = r * np.cos(phi), r * np.sin(phi)
         sub = np.flatnonzero(lights)[dl]
         origins[sub] = t.center + (tt * rc[:, None] + ss * rs[:, None]) - axis[dl] * (t.radius * 1.05)

@@ -8,6 +8,7 @@
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #pragma OPENCL FP_CONTRACT OFF  // no fused multiply-add: the NumPy twin rounds every product
 #include "philox.cl"
+#include "sampling.cl"
 
 #define KIND_DIFFUSE 0
 #define KIND_MIRROR 1
@@ -89,19 +90,10 @@ __kernel void scatter(
     const int is_glossy = kind == KIND_GLOSSY;
     const double e = mat_exp[m];
     const double cos_t = is_glossy ? pow(u1, 1.0 / (e + 1.0)) : sqrt(1.0 - u1);
-    // Lobe axis and an orthonormal basis about it (Duff et al., JCGT 6(1), 2017)
+    // The lobe's axis: the facing normal (diffuse) or the mirror direction (glossy)
     const double zx = is_diffuse ? fx_ : mx, zy = is_diffuse ? fy_ : my, zz = is_diffuse ? fz_ : mz;
-    const double sgn = zz >= 0.0 ? 1.0 : -1.0;
-    const double ia = -1.0 / (sgn + zz);
-    const double ib = zx * zy * ia;
-    const double tx = 1.0 + sgn * zx * zx * ia, ty = sgn * ib, tz = -sgn * zx;
-    const double sx = ib, sy = sgn + zy * zy * ia, sz = -zy;
-    const double sin_t = sqrt(fmin(fmax(1.0 - cos_t * cos_t, 0.0), 1.0));
-    const double phi = 2.0 * M_PI * u2;
-    const double cp = cos(phi), sp = sin(phi);
-    const double lx = tx * (sin_t * cp) + sx * (sin_t * sp) + zx * cos_t;
-    const double ly = ty * (sin_t * cp) + sy * (sin_t * sp) + zy * cos_t;
-    const double lz = tz * (sin_t * cp) + sz * (sin_t * sp) + zz * cos_t;
+    double lx, ly, lz;
+    around(zx, zy, zz, cos_t, 2.0 * M_PI * u2, &lx, &ly, &lz);
     const int is_mirror = kind == KIND_MIRROR;
     const double ox = is_mirror ? mx : lx, oy = is_mirror ? my : ly, oz = is_mirror ? mz : lz;
     const double cos_o = ox * fx_ + oy * fy_ + oz * fz_;

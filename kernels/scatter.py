@@ -22,6 +22,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .philox import uniforms
+from .sampling import around
 
 KIND_CODE = {"diffuse": 0, "mirror": 1, "glossy": 2}
 WORK_GROUP = 64
@@ -68,16 +69,6 @@ class Bounce:
     dirs: np.ndarray  # (m, 3) float32
     beta: np.ndarray  # (m, 3) float64
     alive: np.ndarray  # bool
-
-
-def _basis_around(axis, cos_t, phi):
-    sign = np.where(axis[:, 2] >= 0, 1.0, -1.0)
-    a = -1.0 / (sign + axis[:, 2])
-    b = axis[:, 0] * axis[:, 1] * a
-    t = np.stack([1 + sign * axis[:, 0] ** 2 * a, sign * b, -sign * axis[:, 0]], axis=1)
-    bt = np.stack([b, sign + axis[:, 1] ** 2 * a, -axis[:, 1]], axis=1)
-    sin_t = np.sqrt(np.clip(1.0 - cos_t**2, 0.0, 1.0))
-    return t * (sin_t * np.cos(phi))[:, None] + bt * (sin_t * np.sin(phi))[:, None] + axis * cos_t[:, None]
 
 
 def scatter_reference(tables: SceneTables, hits: Hits, depth: int, key: tuple[int, int]) -> Bounce:
@@ -127,13 +118,13 @@ def scatter_reference(tables: SceneTables, hits: Hits, depth: int, key: tuple[in
     mirror = d - 2.0 * np.einsum("ij,ij->i", d, facing)[:, None] * facing
     nd = np.empty((m_count, 3))
     diffuse = kind == 0
-    nd[diffuse] = _basis_around(facing[diffuse], np.sqrt(1.0 - w[diffuse, 1]), 2.0 * np.pi * w[diffuse, 2])
+    nd[diffuse] = around(facing[diffuse], np.sqrt(1.0 - w[diffuse, 1]), 2.0 * np.pi * w[diffuse, 2])
     nd[kind == 1] = mirror[kind == 1]
     glossy = kind == 2
     if glossy.any():
         e = tables.exponent[m[glossy]]
         cos_a = w[glossy, 1] ** (1.0 / (e + 1.0))
-        g = _basis_around(mirror[glossy], cos_a, 2.0 * np.pi * w[glossy, 2])
+        g = around(mirror[glossy], cos_a, 2.0 * np.pi * w[glossy, 2])
         cos_o = np.einsum("ij,ij->i", g, facing[glossy])
         beta[glossy] *= (np.maximum(cos_o, 0.0) * (e + 2.0) / (e + 1.0))[:, None]
         survive[glossy] &= cos_o > 0

@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 
 from kernels.emit import AREA, DIRECTIONAL, POINT, SPOT, EmissionTables
+from kernels.sampling import around
 from pipeline.scene import FrameState
 
 from .raycast import RayCaster
@@ -52,25 +53,6 @@ def emission_tables(state: FrameState, caster: RayCaster) -> EmissionTables:
         corners=state.vertices[state.faces].reshape(-1, 9).astype(np.float32),
         normals=caster.normals, center=caster.center.astype(np.float64), radius=float(radius),
         epsilon=float(caster.epsilon))
-
-
-def _orthonormal_basis(n: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Tangents (t, b) for unit normals (n, 3): Duff et al., JCGT 6(1) 2017, "Building an
-    orthonormal basis, revisited"."""
-    sign = np.where(n[:, 2] >= 0, 1.0, -1.0)
-    a = -1.0 / (sign + n[:, 2])
-    b = n[:, 0] * n[:, 1] * a
-    t = np.stack([1 + sign * n[:, 0] ** 2 * a, sign * b, -sign * n[:, 0]], axis=1)
-    bt = np.stack([b, sign + n[:, 1] ** 2 * a, -n[:, 1]], axis=1)
-    return t, bt
-
-
-def around(axis: np.ndarray, cos_theta: np.ndarray, phi: np.ndarray) -> np.ndarray:
-    """Directions at polar angle acos(cos_theta) and azimuth phi about unit ``axis`` vectors."""
-    sin_theta = np.sqrt(np.clip(1.0 - cos_theta**2, 0.0, 1.0))
-    t, b = _orthonormal_basis(axis)
-    return (t * (sin_theta * np.cos(phi))[:, None] + b * (sin_theta * np.sin(phi))[:, None]
-            + axis * cos_theta[:, None])
 
 
 def cosine_hemisphere(normals: np.ndarray, rng: np.random.Generator) -> np.ndarray:
