@@ -59,9 +59,11 @@ def _bary(b) -> np.ndarray:
 def mesh_adaptation(state, elements, irradiance: np.ndarray, aspect: float) -> float:
     """Adaptation luminance of a frame from its mesh-based lighting (§4), in radiance units.
 
-    Vertex radiance rho/pi x E (+ emission) of the vertices inside the camera's view frustum,
-    log-averaged (Ward 1994) with weights A_v / d^2, the solid angle a vertex's area subtends.
-    Occlusion is ignored: this is the mesh-level estimate the paper adapts to, not the image.
+    Radiance rho/pi x E (+ emission) is averaged over each source triangle (area-weighted over its
+    elements): at the paper's photon counts many single vertices hold no photon, and their zeros
+    would drag a log-average to its floor. Then the log-average (Ward 1994) over the elements
+    inside the camera's view frustum, each with its triangle's radiance and weight A / d^2 (the
+    solid angle it subtends). Occlusion is ignored: a mesh-level estimate, not the image.
     """
     from pipeline.tonemap import log_average, luminance
 
@@ -70,20 +72,29 @@ def mesh_adaptation(state, elements, irradiance: np.ndarray, aspect: float) -> f
     mat = inst_mat[elements.vertex_instance]
     albedo = np.array([m.albedo for m in state.materials])[mat]
     emission = np.array([m.emission for m in state.materials])[mat]
-    radiance = luminance(albedo / np.pi * irradiance + emission)
+    vertex_radiance = luminance(albedo / np.pi * irradiance + emission)
 
-    pos = elements.vertex_positions(state)
+    # Per source triangle: area-weighted mean of its elements' radiance
+    area = elements.areas(state)
+    tri = elements.element_triangle
+    n_tri = len(state.faces)
+    element_radiance = vertex_radiance[elements.element_vertices].mean(axis=1)
+    tri_area = np.bincount(tri, weights=area, minlength=n_tri)
+    tri_sum = np.bincount(tri, weights=area * element_radiance, minlength=n_tri)
+    tri_radiance = np.divide(tri_sum, tri_area, out=np.zeros(n_tri), where=tri_area > 0)
+
+    # Elements in the view frustum, weighted by the solid angle they subtend
+    centre = elements.element_positions(state).mean(axis=1)
     cam = state.camera
-    local = (pos - cam.position) @ (cam.to_world[:3, :3] / np.linalg.norm(cam.to_world[:3, :3], axis=0))
+    local = (centre - cam.position) @ (cam.to_world[:3, :3] / np.linalg.norm(cam.to_world[:3, :3], axis=0))
     depth = -local[:, 2]
     tan_y = np.tan(cam.definition.yfov / 2.0)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        seen = ((depth > 0) & (np.abs(local[:, 1]) <= tan_y * depth)
-                & (np.abs(local[:, 0]) <= tan_y * aspect * depth))
+    seen = ((depth > 0) & (np.abs(local[:, 1]) <= tan_y * depth)
+            & (np.abs(local[:, 0]) <= tan_y * aspect * depth))
     if not seen.any():
         seen[:] = True  # nothing in view: adapt to the whole scene
-    weight = elements.vertex_areas(state)[seen] / np.maximum((local[seen] ** 2).sum(axis=1), 1e-12)
-    return log_average(radiance[seen], weight)
+    weight = area[seen] / np.maximum((local[seen] ** 2).sum(axis=1), 1e-12)
+    return log_average(tri_radiance[tri[seen]], weight)
 
 
 def illuminate_task(*, store_url: str, scene_path: str, scene_hash: str, camera: str | None,
