@@ -86,6 +86,18 @@ def read_exr(path) -> tuple[dict, dict]:
     return channels, meta
 
 
+def exr_metadata(path) -> dict:
+    """The ``photonloom:*`` metadata of an EXR (header only), {} if it cannot be read."""
+    inp = oiio.ImageInput.open(str(path))
+    if inp is None:
+        return {}
+    try:
+        return {a.name[len(META_PREFIX):]: a.value for a in inp.spec().extra_attribs
+                if a.name.startswith(META_PREFIX)}
+    finally:
+        inp.close()
+
+
 def frame_is_valid(exr, png, width: int, height: int, render_hash: str) -> bool:
     """Whether a frame is done: both files exist, decode, have the expected size and channels,
     and the EXR was made with ``render_hash`` (the same scene, settings and photons)."""

@@ -27,7 +27,7 @@ from pathlib import Path
 from .cluster import connect, run_tasks
 from .config import RenderConfig, _digest
 from .errors import LoomError
-from .images import frame_is_valid, frame_paths, write_video
+from .images import exr_metadata, frame_is_valid, frame_paths, write_video
 from .scene import Scene
 from .shoot import check_store_location, open_store, plan
 from .shoot import tasks as shoot_tasks
@@ -133,15 +133,19 @@ def render(scene_path, *, frames: str | None, out_dir, settings: RenderSettings 
         if temporal != "off":  # keeps the hash of renders without temporal collection
             base.update(temporal=temporal, fmax=fmax, temporal_config=config.hash)
         render_hash = _digest(base)
-        done = {f for f in p.frames
-                if frame_is_valid(*frame_paths(out, f), settings.width, settings.height, render_hash)}
+        done = {}  # frame -> its own (unsmoothed) adaptation luminance, from its EXR
+        for f in p.frames:
+            exr, png = frame_paths(out, f)
+            if frame_is_valid(exr, png, settings.width, settings.height, render_hash):
+                own = exr_metadata(exr).get("frame_adaptation")
+                if isinstance(own, float) and own > 0:
+                    done[f] = own
 
-        # 2. Illumination maps and adaptation (stored values reused for frames already done)
+        # 2. Illumination maps and adaptation (frames already done keep theirs)
         t0 = time.perf_counter()
-        maps = IlluminationMaps.create(store_url, n_frames=scene.timeline.frames,
-                                       n_vertices=p.elements.n_vertices)
-        stored = maps.adaptation()
-        need = [f for f in p.frames if f not in done or not stored[f - 1] > 0]
+        IlluminationMaps.create(store_url, n_frames=scene.timeline.frames,
+                                n_vertices=p.elements.n_vertices)
+        need = [f for f in p.frames if f not in done]
         common = dict(store_url=store_url, scene_path=str(scene.path), scene_hash=scene.scene_hash,
                       camera=camera, element_size=p.elements.element_size)
         lit = run_tasks(client, illuminate_task,
@@ -151,7 +155,7 @@ def render(scene_path, *, frames: str | None, out_dir, settings: RenderSettings 
         if temporal != "off" and need:  # indirect maps from temporal windows (pipeline/temporal.py)
             from .temporal import write_temporal_maps
             write_temporal_maps(store_url, scene, p.elements, need, mode=temporal, fmax=fmax, config=config)
-        adaptation = {f: float(stored[f - 1]) for f in p.frames}
+        adaptation = dict(done)
         adaptation.update({r["frame"]: r["adaptation"] for r in lit.values()})
         timing["illuminate_s"] = time.perf_counter() - t0
 
@@ -169,7 +173,8 @@ def render(scene_path, *, frames: str | None, out_dir, settings: RenderSettings 
             common, frame=f, width=settings.width, height=settings.height, spp=settings.spp,
             seed=config.seed, max_depth=settings.max_depth, area_samples=settings.area_samples,
             adaptation=smoothed[f], tonemap=settings.tonemap.to_dict(), out_dir=str(out),
-            metadata=dict(meta, photons=emitted[f], adaptation=smoothed[f])))
+            metadata=dict(meta, photons=emitted[f], adaptation=smoothed[f],
+                          frame_adaptation=adaptation[f])))
             for f in p.frames if f not in done]
         composited = run_tasks(client, composite_task, calls, desc="composite", progress=progress)
         timing["composite_s"] = time.perf_counter() - t0
