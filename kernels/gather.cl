@@ -17,7 +17,7 @@
 // every record counts. `kinds`: bit 0 takes indirect records, bit 1 direct ones.
 __kernel void element_sums(__global const uint *key, __global const ushort *b1,
                            __global const ushort *b2, __global const float *energy,
-                           __global const long *offsets, const long n_segments,
+                           __global const uint *offsets, const long n_segments,
                            const uint kinds, const int n_parity, const long out_base,
                            __global double *out)
 {
@@ -28,8 +28,8 @@ __kernel void element_sums(__global const uint *key, __global const ushort *b1,
     double r0 = 0.0, g0 = 0.0, bl0 = 0.0, q0 = 0.0;
     double r1 = 0.0, g1 = 0.0, bl1 = 0.0, q1 = 0.0;
     double r2 = 0.0, g2 = 0.0, bl2 = 0.0, q2 = 0.0;
-    const long end = offsets[s + 1];
-    for (long r = offsets[s]; r < end; ++r) {
+    const long end = (long)offsets[s + 1];
+    for (long r = (long)offsets[s]; r < end; ++r) {
         const uint k = key[r];
         if (!(kinds & ((k & DIRECT_BIT) ? 2u : 1u))) continue;
         if (n_parity == 2 && ((k & PARITY_BIT) ? 1u : 0u) != parity) continue;
@@ -50,16 +50,21 @@ __kernel void element_sums(__global const uint *key, __global const ushort *b1,
     o[8] = r2; o[9] = g2; o[10] = bl2; o[11] = q2;
 }
 
-// In-place prefix sums over frames: rows 1..n_rows of `table` (row 0 all zero) become
-// row[j] = row[j-1] + row[j]; one work item per column, rows in order.
-__kernel void prefix_frames(__global double *table, const int n_rows, const long width)
+// In-place prefix sums over frames of an element-major table (E, n_rows + 1, width): rows 1..n_rows
+// of every element become row[j] = row[j-1] + row[j] (row 0 all zero); one work item per
+// (element, column), rows in order.
+__kernel void prefix_frames(__global double *table, const int n_elements, const int n_rows,
+                            const int width)
 {
-    const long i = get_global_id(0);
-    if (i >= width) return;
+    const long gid = get_global_id(0);
+    if (gid >= (long)n_elements * width) return;
+    const long e = gid / width;
+    const long c = gid - e * width;
+    __global double *t = table + e * (n_rows + 1) * width + c;
     double run = 0.0;
     for (int j = 1; j <= n_rows; ++j) {
-        run += table[j * width + i];
-        table[j * width + i] = run;
+        run += t[j * width];
+        t[j * width] = run;
     }
 }
 
@@ -67,28 +72,31 @@ __kernel void prefix_frames(__global double *table, const int n_rows, const long
 // records, accumulated over frames as they are made: table row j+1 = row j + sums of frame j,
 // row 0 = 0. Bitwise the same as element_sums followed by prefix_frames, without the table's
 // round trip through memory in between. Segments are (frame, element): offsets (J * E + 1).
+// The table is element-major, (E, J + 1, n_parity, 12): an element's rows are contiguous, so
+// this kernel writes and vertex_window_flux reads memory in order.
 __kernel void sums_prefix(__global const uint *key, __global const ushort *b1,
                           __global const ushort *b2, __global const float *energy,
-                          __global const long *offsets, const int n_frames, const int n_elements,
+                          __global const uint *offsets, const int n_frames, const int n_elements,
                           const uint kinds, const int n_parity, __global double *table)
 {
     const long gid = get_global_id(0);
     if (gid >= (long)n_elements * n_parity) return;
     const long e = gid / n_parity;
     const uint parity = (uint)(gid - e * n_parity);
-    const long stride = (long)n_elements * n_parity * SLOTS;
+    const long width = (long)n_parity * SLOTS;
+    __global double *t = table + e * (n_frames + 1) * width + parity * SLOTS;
     double run[SLOTS];
     for (int c = 0; c < SLOTS; ++c) {
         run[c] = 0.0;
-        table[gid * SLOTS + c] = 0.0;
+        t[c] = 0.0;
     }
     for (int j = 0; j < n_frames; ++j) {
         const long s = (long)j * n_elements + e;
         double r0 = 0.0, g0 = 0.0, bl0 = 0.0, q0 = 0.0;
         double r1 = 0.0, g1 = 0.0, bl1 = 0.0, q1 = 0.0;
         double r2 = 0.0, g2 = 0.0, bl2 = 0.0, q2 = 0.0;
-        const long end = offsets[s + 1];
-        for (long r = offsets[s]; r < end; ++r) {
+        const long end = (long)offsets[s + 1];
+        for (long r = (long)offsets[s]; r < end; ++r) {
             const uint k = key[r];
             if (!(kinds & ((k & DIRECT_BIT) ? 2u : 1u))) continue;
             if (n_parity == 2 && ((k & PARITY_BIT) ? 1u : 0u) != parity) continue;
@@ -106,53 +114,56 @@ __kernel void sums_prefix(__global const uint *key, __global const ushort *b1,
         run[0] += r0; run[1] += g0; run[2] += bl0; run[3] += q0;
         run[4] += r1; run[5] += g1; run[6] += bl1; run[7] += q1;
         run[8] += r2; run[9] += g2; run[10] += bl2; run[11] += q2;
-        __global double *o = table + (j + 1) * stride + gid * SLOTS;
+        __global double *o = t + (j + 1) * width;
         for (int c = 0; c < SLOTS; ++c) o[c] = run[c];
     }
 }
 
-// Vertex flux of output frame i (work item (v, i)): vertex v adds, over the element corners in
-// slots[voffsets[v] .. voffsets[v+1]) (element * 3 + corner, ascending), the corner's window sum
-// over its element's window [f - back, f + fwd] divided by the photons emitted in the window,
-// U = sum / sum_g N_g (Q: / (sum_g N_g)^2), with N_g halved per parity. Output frame i is row
-// rows[i] of the table. prefix != 0: the table holds prefix sums (row 0 = 0, row j+1 = sum of
-// frames 0..j) and a window sum is the difference of two rows; prefix == 0: per-frame sums
-// (row j = frame j) added in frame order.
+// Vertex flux of every output frame i (work item v; frames in order, so an element's rows are
+// read while in cache): vertex v adds, over the element corners in slots[voffsets[v] ..
+// voffsets[v+1]) (element * 3 + corner, ascending), the corner's window sum over its element's
+// window [f - back, f + fwd] divided by the photons emitted in the window, U = sum / sum_g N_g
+// (Q: / (sum_g N_g)^2), with N_g halved per parity. Output frame i is row rows[i] of the
+// element-major table (E, n_table_rows, n_parity, 12). prefix != 0: prefix sums (row 0 = 0,
+// row j+1 = sum of frames 0..j) and a window sum is the difference of two rows; prefix == 0:
+// per-frame sums (row j = frame j) added in frame order.
 __kernel void vertex_window_flux(__global const double *table, __global const double *cum_n,
-                                 __global const uchar *back, __global const uchar *fwd,
+                                 __global const uchar *back, __global const uchar *fwd, // (E, n_out)
                                  __global const int *rows, __global const long *voffsets,
                                  __global const int *slots, const int n_vertices,
-                                 const int n_elements, const int n_parity, const int prefix,
-                                 __global double *out)  // (n_out, n_parity, V, 4)
+                                 const int n_elements, const int n_parity, const int n_table_rows,
+                                 const int n_out, const int prefix,
+                                 __global double *out)  // (V, n_out, n_parity, 4)
 {
     const int v = get_global_id(0);
-    const int i = get_global_id(1);
     if (v >= n_vertices) return;
-    const int row = rows[i];
     const long width = (long)n_parity * SLOTS;
-    const long stride = (long)n_elements * width;
-    for (int p = 0; p < n_parity; ++p) {
-        double a0 = 0.0, a1 = 0.0, a2 = 0.0, a3 = 0.0;
-        for (long j = voffsets[v]; j < voffsets[v + 1]; ++j) {
-            const int ek = slots[j];
-            const int e = ek / 3, k = ek - 3 * (ek / 3);
-            const long w = (long)i * n_elements + e;
-            const int lo = row - back[w], hi = row + fwd[w] + 1;  // frames [lo, hi)
-            const double n_sum = (cum_n[hi] - cum_n[lo]) / (double)n_parity;
-            const long base = (long)e * width + p * SLOTS + 4 * k;
-            double t[4];
-            for (int c = 0; c < 4; ++c) {
-                if (prefix) {
-                    t[c] = table[hi * stride + base + c] - table[lo * stride + base + c];
-                } else {
-                    t[c] = 0.0;
-                    for (int g = lo; g < hi; ++g) t[c] += table[g * stride + base + c];
+    const long j0 = voffsets[v], j1 = voffsets[v + 1];
+    for (int i = 0; i < n_out; ++i) {
+        const int row = rows[i];
+        for (int p = 0; p < n_parity; ++p) {
+            double a0 = 0.0, a1 = 0.0, a2 = 0.0, a3 = 0.0;
+            for (long j = j0; j < j1; ++j) {
+                const int ek = slots[j];
+                const int e = ek / 3, k = ek - 3 * (ek / 3);
+                const long w = (long)e * n_out + i;
+                const int lo = row - back[w], hi = row + fwd[w] + 1;  // frames [lo, hi)
+                const double inv_n = (double)n_parity / (cum_n[hi] - cum_n[lo]);  // 1 / photons
+                __global const double *te = table + (long)e * n_table_rows * width + p * SLOTS + 4 * k;
+                double t[4];
+                for (int c = 0; c < 4; ++c) {
+                    if (prefix) {
+                        t[c] = te[hi * width + c] - te[lo * width + c];
+                    } else {
+                        t[c] = 0.0;
+                        for (int g = lo; g < hi; ++g) t[c] += te[g * width + c];
+                    }
                 }
+                a0 += t[0] * inv_n; a1 += t[1] * inv_n; a2 += t[2] * inv_n;
+                a3 += t[3] * (inv_n * inv_n);
             }
-            a0 += t[0] / n_sum; a1 += t[1] / n_sum; a2 += t[2] / n_sum;
-            a3 += t[3] / (n_sum * n_sum);
+            __global double *o = out + (((long)v * n_out + i) * n_parity + p) * 4;
+            o[0] = a0; o[1] = a1; o[2] = a2; o[3] = a3;
         }
-        __global double *o = out + (((long)i * n_parity + p) * n_vertices + v) * 4;
-        o[0] = a0; o[1] = a1; o[2] = a2; o[3] = a3;
     }
 }

@@ -59,7 +59,9 @@ def _concat_frames(frames):
             raise LoomError("records' offsets do not match their element count")
         parts.append(off[1:] + base)
         base += int(off[-1])
-    return key, b1, b2, energy, np.concatenate(parts), len(frames), n_elements
+    if base >= 2**32:
+        raise LoomError(f"{base:,} records in one call; gather at most 2^32 - 1 at a time")
+    return key, b1, b2, energy, np.concatenate(parts).astype(np.uint32), len(frames), n_elements
 
 
 def _upload(ctx, a: np.ndarray) -> cl.Buffer:
@@ -155,23 +157,37 @@ def _check_windows(sums, n_emitted, back, fwd, rows):
     return (sums, *_check_window_args(sums.shape[0], sums.shape[1], n_emitted, back, fwd, rows))
 
 
+_TABLE: list = [None, 0]  # the device sums table, reused across calls (fresh pages cost faults)
+
+
+def _table_buffer(nbytes: int) -> cl.Buffer:
+    if _TABLE[1] < nbytes:
+        ctx, _ = device_context()
+        _TABLE[0], _TABLE[1] = None, 0
+        _TABLE[0], _TABLE[1] = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, size=nbytes), nbytes
+    return _TABLE[0]
+
+
 def _flux(d_table: cl.Buffer, prefix: bool, n_emitted, back, fwd, rows, element_vertices,
           n_vertices: int, n_elements: int, n_parity: int) -> np.ndarray:
-    """Steps 2 and 3 from a device sums table (prefix or per-frame layout), all output frames
-    in one launch."""
+    """Steps 2 and 3 from an element-major device sums table (E, rows, P, 12) in prefix
+    (len(n_emitted) + 1 rows) or per-frame (len(n_emitted) rows) layout, all output frames in
+    one launch."""
     ctx, queue = device_context()
-    out = np.zeros((len(rows), n_parity, n_vertices, 4))
+    # Vertex-major on the device: the frames of one vertex are neighbouring work items and writes
+    out = np.zeros((n_vertices, len(rows), n_parity, 4))
     if len(rows) == 0 or n_elements == 0 or n_vertices == 0:
-        return out
+        return np.moveaxis(out, 0, 2)
     cum_n = np.concatenate([[0.0], np.cumsum(n_emitted)])
     voffsets, slots = vertex_slots(element_vertices, n_vertices)
     d_out = cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY, size=out.nbytes)
     kernel("gather", "vertex_window_flux")(
-        queue, (n_vertices, len(rows)), None, d_table, _upload(ctx, cum_n), _upload(ctx, back),
-        _upload(ctx, fwd), _upload(ctx, rows.astype(np.int32)), _upload(ctx, voffsets), _upload(ctx, slots),
-        np.int32(n_vertices), np.int32(n_elements), np.int32(n_parity), np.int32(prefix), d_out)
+        queue, (n_vertices,), None, d_table, _upload(ctx, cum_n), _upload(ctx, np.ascontiguousarray(back.T)),
+        _upload(ctx, np.ascontiguousarray(fwd.T)), _upload(ctx, rows.astype(np.int32)), _upload(ctx, voffsets), _upload(ctx, slots),
+        np.int32(n_vertices), np.int32(n_elements), np.int32(n_parity), np.int32(len(n_emitted) + prefix),
+        np.int32(len(rows)), np.int32(prefix), d_out)
     cl.enqueue_copy(queue, out, d_out)
-    return out
+    return np.moveaxis(out, 0, 2)  # (n_out, P, V, 4), a view
 
 
 def window_flux_cl(sums, n_emitted, back, fwd, rows, element_vertices, n_vertices: int,
@@ -197,16 +213,14 @@ def window_flux_cl(sums, n_emitted, back, fwd, rows, element_vertices, n_vertice
         raise LoomError(f"method must be prefix or direct, got {method!r}")
     n_rows, n_elements, n_parity = sums.shape[:3]
     ctx, queue = device_context()
-    width = n_elements * n_parity * SLOTS
+    width = n_parity * SLOTS
     prefix = method == "prefix"
-    if prefix:
-        table = np.zeros((n_rows + 1) * width)
-        table[width:] = sums.reshape(-1)
-        d_table = _upload(ctx, table)
-        if width:
-            kernel("gather", "prefix_frames")(queue, (width,), None, d_table, np.int32(n_rows), np.int64(width))
-    else:
-        d_table = _upload(ctx, sums)
+    table = np.zeros((n_elements, n_rows + prefix, width))  # element-major
+    table[:, prefix:] = sums.reshape(n_rows, n_elements, width).transpose(1, 0, 2)
+    d_table = _upload(ctx, table)
+    if prefix and table.size:
+        kernel("gather", "prefix_frames")(queue, (n_elements * width,), None, d_table, np.int32(n_elements),
+                                          np.int32(n_rows), np.int32(width))
     return _flux(d_table, prefix, n_emitted, back, fwd, rows, element_vertices, n_vertices, n_elements, n_parity)
 
 
@@ -227,7 +241,7 @@ def gather_flux_cl(frames, n_emitted, back, fwd, rows, element_vertices, n_verti
         raise LoomError(f"kind must be one of {', '.join(KINDS)}, got {kind!r}")
     ctx, queue = device_context()
     key, b1, b2, energy, offsets, _, _ = _concat_frames(frames)
-    d_table = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, size=8 * (n_rows + 1) * width)
+    d_table = _table_buffer(8 * (n_rows + 1) * width)
     kernel("gather", "sums_prefix")(
         queue, (n_elements * n_parity,), None, _upload(ctx, key), _upload(ctx, b1), _upload(ctx, b2),
         _upload(ctx, energy), _upload(ctx, offsets), np.int32(n_rows), np.int32(n_elements),

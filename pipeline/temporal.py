@@ -17,8 +17,8 @@ photons is its own animation, with its own ends. Frames sharing another frame's 
 
 Memory: output frames are processed in chunks of consecutive frames; a chunk holds the element
 sums of its frames and their windows' reach (F_max/2 each side): (chunk + F_max) x E x 12 doubles
-per photon parity, about 450 MB for ATRIUM (43,000 elements, F_max = 44, chunk 64). Frames in the
-overlap of two chunks are summed twice ((chunk + F_max) / chunk = 1.7x the element sums), which
+per photon parity, about 590 MB for ATRIUM (43,000 elements, F_max = 44, chunk 96). Frames in the
+overlap of two chunks are summed twice ((chunk + F_max) / chunk = 1.5x the element sums), which
 costs less than keeping the sums of the whole animation or moving them through host memory.
 """
 from __future__ import annotations
@@ -80,7 +80,7 @@ def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames, *, mod
 def illumination_maps(store, elements, scene, frames=None, *, mode: str = "adaptive", fmax: int | None = None,
                       config: RenderConfig = RenderConfig(), kind: str = "indirect", count_kind: str = "all",
                       split_parity: bool = False, spatial_filter: bool = False,
-                      chunk: int = 64) -> Iterator[FrameIllumination]:
+                      chunk: int = 96) -> Iterator[FrameIllumination]:
     """Yield the illumination of every requested frame, in frame order.
 
     Parameters
