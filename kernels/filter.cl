@@ -9,12 +9,14 @@ inline double luma(const double r, const double g, const double b)
     return 0.2126 * r + 0.7152 * g + 0.0722 * b;  // Rec. 709
 }
 
-// flux (P, V, 4): RGB S and variance term Q per vertex (kernels/gather.py); areas (V,) A_v.
+// flux (L, V, 4): RGB S and variance term Q per vertex (kernels/gather.py) for L maps (frames x
+// parities); areas A_v, (V,) for all maps (areas_stride 0) or (L, V) (areas_stride V).
 // Neighbours of v: nbr[noff[v] .. noff[v+1]) ordered by ring, ring r (1..max_rings) starting at
 // ring_start[v * (max_rings + 1) + r - 1] and ending at ring_start[v * (max_rings + 1) + r].
-// Out: irradiance (P, V, 3) and the number of rings taken (P, V).
+// Out: irradiance (L, V, 3) and the number of rings taken (L, V).
 __kernel void adaptive_filter(__global const double *flux, __global const double *areas,
                               __global const int *nbr, __global const long *ring_start,
+                              const long areas_stride,
                               const int n_vertices, const int n_parity, const int max_rings,
                               const double tau2, const double z2,
                               __global double *out, __global uchar *rings)
@@ -24,6 +26,7 @@ __kernel void adaptive_filter(__global const double *flux, __global const double
     const int p = (int)(gid / n_vertices);
     const int v = (int)(gid - (long)p * n_vertices);
     __global const double *fp = flux + (long)p * n_vertices * 4;
+    areas += p * areas_stride;
     double s0 = fp[4 * v], s1 = fp[4 * v + 1], s2 = fp[4 * v + 2], q = fp[4 * v + 3];
     double a = areas[v];
     double y = luma(s0, s1, s2);

@@ -118,15 +118,18 @@ def neighbourhood(element_vertices, vertex_positions, vertex_instance, *, max_ri
 
 
 def _check(flux, areas, hood: Neighbourhood, photons: float):
-    flux = np.ascontiguousarray(flux, np.float64)
-    if flux.ndim == 2:
-        flux = flux[None]
+    """Flux as (L, V, 4) and areas as (V,) or (L, V); the leading shape of the results."""
+    flux = np.asarray(flux, np.float64)
+    lead = flux.shape[:-2]
     areas = np.ascontiguousarray(areas, np.float64)
-    if flux.ndim != 3 or flux.shape[1:] != (hood.n_vertices, 4) or areas.shape != (hood.n_vertices,):
-        raise LoomError(f"flux must be (P, V, 4) and areas (V,) with V = {hood.n_vertices}")
+    if flux.ndim < 2 or flux.shape[-2:] != (hood.n_vertices, 4) or areas.shape not in (
+            (hood.n_vertices,), flux.shape[:-1]):
+        raise LoomError(f"flux must be (..., V, 4) and areas (V,) or (..., V) with V = {hood.n_vertices}")
     if not photons > 0:
         raise LoomError(f"filter_photons must be positive, got {photons}", field="filter_photons")
-    return flux, areas, 1.0 / float(photons)
+    flux = np.ascontiguousarray(flux.reshape(-1, hood.n_vertices, 4))
+    areas = areas.reshape(-1, hood.n_vertices)
+    return flux, areas, 1.0 / float(photons), lead
 
 
 _DEVICE_HOODS: dict[int, tuple[Neighbourhood, cl.Buffer, cl.Buffer]] = {}  # id -> rings on the device
@@ -151,21 +154,22 @@ def adaptive_filter_cl(flux, areas, hood: Neighbourhood, *, photons: float = 25.
 
     Parameters
     ----------
-    flux : (P, V, 4) or (V, 4) vertex flux (R, G, B, Q) from kernels/gather.py.
-    areas : (V,) hat areas A_v of the frame.
+    flux : (..., V, 4) vertex flux (R, G, B, Q) from kernels/gather.py, e.g. (frames, P, V, 4):
+        all maps are filtered in one launch.
+    areas : (V,) hat areas A_v shared by all maps, or (..., V) one row per map.
     photons : n_eff target; tau = 1 / sqrt(photons) is the relative standard error aimed at.
     z : bias-test threshold in standard deviations.
 
     Returns
     -------
-    irradiance (P, V, 3) float64 and rings (P, V) uint8 (0: unfiltered).
+    irradiance (..., V, 3) float64 and rings (..., V) uint8 (0: unfiltered).
     """
-    flux, areas, tau2 = _check(flux, areas, hood, photons)
+    flux, areas, tau2, lead = _check(flux, areas, hood, photons)
     n_parity, n_vertices = flux.shape[:2]
     out = np.zeros((n_parity, n_vertices, 3))
     rings = np.zeros((n_parity, n_vertices), np.uint8)
     if n_vertices == 0:
-        return out, rings
+        return out.reshape(*lead, 0, 3), rings.reshape(*lead, 0)
     ctx, queue = device_context()
     mf = cl.mem_flags
 
@@ -177,11 +181,11 @@ def adaptive_filter_cl(flux, areas, hood: Neighbourhood, *, photons: float = 25.
     d_nbr, d_ring_start = _device_hood(ctx, hood)
     kernel("filter", "adaptive_filter")(
         queue, (n_parity * n_vertices,), None, upload(flux), upload(areas), d_nbr, d_ring_start,
-        np.int32(n_vertices), np.int32(n_parity),
+        np.int64(0 if areas.shape[0] == 1 else n_vertices), np.int32(n_vertices), np.int32(n_parity),
         np.int32(hood.max_rings), np.float64(tau2), np.float64(float(z) * float(z)), d_out, d_rings)
     cl.enqueue_copy(queue, out, d_out)
     cl.enqueue_copy(queue, rings, d_rings)
-    return out, rings
+    return out.reshape(*lead, n_vertices, 3), rings.reshape(*lead, n_vertices)
 
 
 def _luma(r, g, b):
@@ -190,12 +194,13 @@ def _luma(r, g, b):
 
 def adaptive_filter_reference(flux, areas, hood: Neighbourhood, *, photons: float = 25.0, z: float = 2.5):
     """NumPy twin of :func:`adaptive_filter_cl` (vectorised over vertices, rings in order)."""
-    flux, areas, tau2 = _check(flux, areas, hood, photons)
+    flux, areas_rows, tau2, lead = _check(flux, areas, hood, photons)
     z2 = float(z) * float(z)
     n_parity, n_vertices = flux.shape[:2]
     out = np.zeros((n_parity, n_vertices, 3))
     rings = np.zeros((n_parity, n_vertices), np.uint8)
     for p in range(n_parity):
+        areas = areas_rows[0 if areas_rows.shape[0] == 1 else p]
         s = [flux[p, :, c].copy() for c in range(4)]
         a = areas.copy()
         y = _luma(s[0], s[1], s[2])
@@ -227,4 +232,4 @@ def adaptive_filter_reference(flux, areas, hood: Neighbourhood, *, photons: floa
         ok = a > 0.0
         for c in range(3):
             out[p, ok, c] = s[c][ok] / a[ok]
-    return out, rings
+    return out.reshape(*lead, n_vertices, 3), rings.reshape(*lead, n_vertices)

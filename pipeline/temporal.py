@@ -123,15 +123,16 @@ def illumination_maps(store, elements, scene, frames=None, *, mode: str = "adapt
         flux = gather_flux_cl([records[g] for g in range(lo, hi)], n_emitted[lo:hi], back[part], fwd[part],
                               f - lo, elements.element_vertices, elements.n_vertices, kind=kind,
                               split_parity=split_parity)
+        areas = np.stack([elements.vertex_areas(scene.pose_frame(store.frame_numbers[g])) for g in f.tolist()])
+        rings = None
+        if hood is not None:  # every map of the chunk in one launch
+            irr, rings = adaptive_filter_cl(flux, np.broadcast_to(areas[:, None, :], flux.shape[:-1]), hood,
+                                            photons=config.filter_photons, z=config.filter_z)
+        else:
+            irr = irradiance(flux, areas[:, None, :])
         for i, (frame_index, j) in enumerate(zip(f.tolist(), part.tolist())):
-            areas = elements.vertex_areas(scene.pose_frame(store.frame_numbers[frame_index]))
-            rings = None
-            if hood is not None:
-                irr, rings = adaptive_filter_cl(flux[i], areas, hood, photons=config.filter_photons,
-                                                z=config.filter_z)
-            else:
-                irr = irradiance(flux[i], areas)
-            yield FrameIllumination(frame_index, irr if split_parity else irr[0], back[j], fwd[j], rings)
+            yield FrameIllumination(frame_index, irr[i] if split_parity else irr[i, 0], back[j], fwd[j],
+                                    None if rings is None else rings[i])
 
 
 def write_temporal_maps(store_url: str, scene, elements, frames, *, mode: str, fmax: int | None,

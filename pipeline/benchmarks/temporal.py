@@ -100,6 +100,31 @@ def _sums_prefix_seconds(frames, n_elements: int, repeat: int = 3) -> float:
     return best
 
 
+def _window_kernels(sums, n_emitted, back, fwd, rows, mesh, repeat: int = 3) -> tuple[float, float]:
+    """Best times of the vertex_window_flux kernel on device tables: prefix sums, direct sums."""
+    from kernels.context import device_context
+    from kernels.gather import _flux, _upload
+
+    ctx, queue = device_context()
+    n_rows, n_elements, n_parity = sums.shape[:3]
+    per_frame = np.ascontiguousarray(sums.reshape(n_rows, n_elements, -1).transpose(1, 0, 2))
+    prefix = np.zeros((n_elements, n_rows + 1, per_frame.shape[2]))
+    np.cumsum(per_frame, axis=1, out=prefix[:, 1:])
+    times = []
+    for table, is_prefix in ((prefix, True), (per_frame, False)):
+        d_table = _upload(ctx, table)
+        best = float("inf")
+        for _ in range(repeat):
+            queue.finish()
+            t0 = time.perf_counter()
+            _flux(d_table, is_prefix, n_emitted, back, fwd, rows, mesh.element_vertices, mesh.n_vertices,
+                  n_elements, n_parity)
+            best = min(best, time.perf_counter() - t0)
+        times.append(best)
+        del d_table
+    return times[0], times[1]
+
+
 def run(trace_frames: int = 3, numpy_frames: int = 4, echo=click.echo) -> dict:
     from kernels.filter import adaptive_filter_cl, adaptive_filter_reference, neighbourhood
     from kernels.gather import (element_sums_cl, element_sums_reference, gather_flux_cl, irradiance,
@@ -161,12 +186,18 @@ def run(trace_frames: int = 3, numpy_frames: int = 4, echo=click.echo) -> dict:
             _, dt = _timed(window_flux_cl, sums, n_emitted[lo:hi], back[out], fwd[out], out - lo,
                            mesh.element_vertices, mesh.n_vertices, method=method)
             t["flux_" + method] += dt
+        if lo <= N_FRAMES // 2 < hi:  # one chunk: prefix vs direct window sums, device tables only
+            t["kernel_prefix"], t["kernel_direct"] = _window_kernels(sums, n_emitted[lo:hi], back[out], fwd[out],
+                                                                     out - lo, mesh)
+            t["kernel_frames"] = len(out)
         del sums
-        for i in range(len(out)):
-            (_, rings), dt = _timed(adaptive_filter_cl, flux[i], areas, hood, photons=config.filter_photons)
-            t["filter"] += dt
-            filtered += int((rings > 0).sum())
+        (_, rings), dt = _timed(adaptive_filter_cl, flux, areas, hood, photons=config.filter_photons)
+        t["filter"] += dt
+        filtered += int((rings > 0).sum())
+    kernel_frames = t.pop("kernel_frames")
+    kernels_ms = {k: t.pop(k) / kernel_frames * 1e3 for k in ("kernel_prefix", "kernel_direct")}
     per_frame = {k: v / N_FRAMES * 1e3 for k, v in t.items()}
+    per_frame.update(kernels_ms)
     per_frame["windows"] = t_windows / N_FRAMES * 1e3
     total = per_frame["windows"] + per_frame["gather"] + per_frame["filter"]
     result = dict(elements=mesh.n_elements, vertices=mesh.n_vertices, frames=N_FRAMES, photons=N_PHOTONS,
@@ -214,8 +245,10 @@ def run(trace_frames: int = 3, numpy_frames: int = 4, echo=click.echo) -> dict:
          f"mean window {result['mean_window']:.1f} frames")
     echo(f"PoCL ms/frame: windows {pf['windows']:.2f}, gather {pf['gather']:.2f}, filter {pf['filter']:.2f} "
          f"({result['filtered_vertices']:,.0f} vertices filtered/frame; rings built once in {hood_s:.2f} s)")
-    echo(f"  gather in steps through host memory: element sums {pf['sums']:.2f}, window flux by prefix "
-         f"sums {pf['flux_prefix']:.2f}, by direct window sums {pf['flux_direct']:.2f}")
+    echo(f"  window sums on the device (vertex_window_flux alone, one chunk): prefix sums "
+         f"{pf['kernel_prefix']:.2f}, direct sums over the window {pf['kernel_direct']:.2f}")
+    echo(f"  gather in steps through host memory instead: element sums {pf['sums']:.2f}, window flux by "
+         f"prefix sums {pf['flux_prefix']:.2f}, by direct window sums {pf['flux_direct']:.2f}")
     echo(f"temporal processing {total:.2f} ms/frame = {100 * result['ratio']:.2f} % of photon tracing "
          f"({result['trace_ms']:.0f} ms/frame; target <= 5 %)")
     echo(f"records gathered: at {result['records_per_frame']:,.0f} records/frame (per-element work "

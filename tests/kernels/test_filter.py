@@ -147,3 +147,20 @@ def test06_bitwise_repeatable_and_refuses_bad_input(rng):
         adaptive_filter_cl(flux[:, :5], areas, hood)
     with pytest.raises(LoomError, match="filter_photons"):
         adaptive_filter_cl(flux, areas, hood, photons=0)
+
+
+def test07_many_maps_in_one_launch(rng):
+    pos, ev, inst = two_walls()
+    hood = neighbourhood(ev, pos, inst, max_rings=3)
+    areas = hat_areas(pos, ev)
+    flux = np.stack([np.concatenate([noisy_flux(rng, 1.0 + pos[:, 1], areas, 40.0) for _ in range(2)])
+                     for _ in range(3)])  # (frames, parity, V, 4)
+    per_map_areas = areas * (1.0 + 0.1 * np.arange(6)).reshape(3, 2, 1)
+    for a in (areas, per_map_areas):
+        got, rings = adaptive_filter_cl(flux, a, hood)
+        want, rings_ref = adaptive_filter_reference(flux, a, hood)
+        assert got.shape == (3, 2, len(pos), 3) and rings.shape == (3, 2, len(pos))
+        np.testing.assert_array_equal(rings, rings_ref)
+        np.testing.assert_allclose(got, want, rtol=1e-6, atol=1e-12)
+        one = adaptive_filter_cl(flux[2, 1], a if a.ndim == 1 else a[2, 1], hood)
+        assert one[0].tobytes() == got[2, 1].tobytes() and one[1].tobytes() == rings[2, 1].tobytes()

@@ -132,6 +132,19 @@ def test_c_adaptive_cuts_static_wall_flicker(room):
     assert flicker["off"] >= 3.0 * flicker["adaptive"]
 
 
+def test_spatial_filter_repairs_only_where_temporal_collection_falls_short(room):
+    """§5.2.5: the filter acts on vertices that collected too few photons; adaptive collection
+    leaves far fewer of them than each frame's own photons."""
+    share = {}
+    for mode in ("off", "adaptive"):
+        o = next(illumination_maps(room.store, room.mesh, room.scene, [room.index], mode=mode, fmax=FMAX,
+                                   spatial_filter=True))
+        assert o.rings.shape == (1, room.mesh.n_vertices) and np.isfinite(o.irradiance).all()
+        share[mode] = float((o.rings > 0).mean())
+    print("share of vertices filtered:", share)
+    assert share["adaptive"] < 0.5 * share["off"]
+
+
 @pytest.mark.slow
 def test_b_against_the_papers_2M_photon_reference(tmp_path):
     room = Room(tmp_path, 2_000_000)
