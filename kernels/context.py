@@ -69,3 +69,18 @@ def program(name: str, options: tuple[str, ...] = ()) -> cl.Program:
 def kernel(program_name: str, kernel_name: str, options: tuple[str, ...] = ()) -> cl.Kernel:
     """A kernel object, fetched once (not thread-safe: workers run one thread each)."""
     return cl.Kernel(program(program_name, options), kernel_name)
+
+
+_SCRATCH: dict[str, cl.Buffer] = {}
+
+
+def scratch(name: str, nbytes: int) -> cl.Buffer:
+    """A device buffer of at least ``nbytes`` kept per name for the process and reused by every
+    call (allocating hundreds of MB per call costs page faults on a CPU device). Its contents are
+    whatever the last user left; callers overwrite what they read."""
+    buf = _SCRATCH.get(name)
+    if buf is None or buf.size < nbytes:
+        _SCRATCH.pop(name, None)
+        ctx, _ = device_context()
+        buf = _SCRATCH[name] = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, size=max(int(nbytes), 8))
+    return buf

@@ -9,11 +9,13 @@ inline double luma(const double r, const double g, const double b)
     return 0.2126 * r + 0.7152 * g + 0.0722 * b;  // Rec. 709
 }
 
-// flux (L, V, 4): RGB S and variance term Q per vertex (kernels/gather.py) for L maps (frames x
-// parities); areas A_v, (V,) for all maps (areas_stride 0) or (L, V) (areas_stride V).
+// flux (V, L, 4), vertex-major as kernels/gather.py makes it: RGB S and variance term Q per
+// vertex for L maps (frames x parities); areas A_v, (V,) for all maps (areas_stride 0) or (L, V)
+// (areas_stride V). Work item (v, p) with p fastest: neighbouring work items read neighbouring
+// memory.
 // Neighbours of v: nbr[noff[v] .. noff[v+1]) ordered by ring, ring r (1..max_rings) starting at
 // ring_start[v * (max_rings + 1) + r - 1] and ending at ring_start[v * (max_rings + 1) + r].
-// Out: irradiance (L, V, 3) and the number of rings taken (L, V).
+// Out: irradiance (V, L, 3) and the number of rings taken (V, L).
 __kernel void adaptive_filter(__global const double *flux, __global const double *areas,
                               __global const int *nbr, __global const long *ring_start,
                               const long areas_stride,
@@ -23,11 +25,12 @@ __kernel void adaptive_filter(__global const double *flux, __global const double
 {
     const long gid = get_global_id(0);
     if (gid >= (long)n_parity * n_vertices) return;
-    const int p = (int)(gid / n_vertices);
-    const int v = (int)(gid - (long)p * n_vertices);
-    __global const double *fp = flux + (long)p * n_vertices * 4;
+    const int v = (int)(gid / n_parity);
+    const int p = (int)(gid - (long)v * n_parity);
+    const long step = (long)n_parity * 4;  // from one vertex to the next
+    __global const double *fp = flux + p * 4;
     areas += p * areas_stride;
-    double s0 = fp[4 * v], s1 = fp[4 * v + 1], s2 = fp[4 * v + 2], q = fp[4 * v + 3];
+    double s0 = fp[step * v], s1 = fp[step * v + 1], s2 = fp[step * v + 2], q = fp[step * v + 3];
     double a = areas[v];
     double y = luma(s0, s1, s2);
     int taken = 0;
@@ -39,7 +42,7 @@ __kernel void adaptive_filter(__global const double *flux, __global const double
         double t0 = 0.0, t1 = 0.0, t2 = 0.0, tq = 0.0, ta = 0.0;
         for (long j = lo; j < hi; ++j) {
             const int u = nbr[j];
-            t0 += fp[4 * u]; t1 += fp[4 * u + 1]; t2 += fp[4 * u + 2]; tq += fp[4 * u + 3];
+            t0 += fp[step * u]; t1 += fp[step * u + 1]; t2 += fp[step * u + 2]; tq += fp[step * u + 3];
             ta += areas[u];
         }
         // Bias test (dept.md §1.5 step 4): the ring's estimate must agree with the inner one

@@ -38,7 +38,7 @@ import pyopencl as cl
 
 from pipeline.errors import LoomError
 
-from .context import device_context, kernel
+from .context import device_context, kernel, scratch
 
 LUMA = (0.2126, 0.7152, 0.0722)  # Rec. 709, as kernels/gather.py
 
@@ -127,7 +127,8 @@ def _check(flux, areas, hood: Neighbourhood, photons: float):
         raise LoomError(f"flux must be (..., V, 4) and areas (V,) or (..., V) with V = {hood.n_vertices}")
     if not photons > 0:
         raise LoomError(f"filter_photons must be positive, got {photons}", field="filter_photons")
-    flux = np.ascontiguousarray(flux.reshape(-1, hood.n_vertices, 4))
+    # Vertex-major (V, L, 4): free for the gather's output, a copy otherwise
+    flux = np.ascontiguousarray(np.moveaxis(flux, -2, 0).reshape(hood.n_vertices, -1, 4))
     areas = areas.reshape(-1, hood.n_vertices)
     return flux, areas, 1.0 / float(photons), lead
 
@@ -165,19 +166,19 @@ def adaptive_filter_cl(flux, areas, hood: Neighbourhood, *, photons: float = 25.
     irradiance (..., V, 3) float64 and rings (..., V) uint8 (0: unfiltered).
     """
     flux, areas, tau2, lead = _check(flux, areas, hood, photons)
-    n_parity, n_vertices = flux.shape[:2]
-    out = np.zeros((n_parity, n_vertices, 3))
-    rings = np.zeros((n_parity, n_vertices), np.uint8)
-    if n_vertices == 0:
-        return out.reshape(*lead, 0, 3), rings.reshape(*lead, 0)
+    n_vertices, n_parity = flux.shape[:2]
+    out = np.empty((n_vertices, n_parity, 3))
+    rings = np.empty((n_vertices, n_parity), np.uint8)
+    if n_vertices == 0 or n_parity == 0:
+        return np.zeros((*lead, n_vertices, 3)), np.zeros((*lead, n_vertices), np.uint8)
     ctx, queue = device_context()
     mf = cl.mem_flags
 
     def upload(a):
         return cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=a if a.size else np.zeros(1, a.dtype))
 
-    d_out = cl.Buffer(ctx, mf.WRITE_ONLY, size=out.nbytes)
-    d_rings = cl.Buffer(ctx, mf.WRITE_ONLY, size=rings.nbytes)
+    d_out = scratch("filter.out", out.nbytes)
+    d_rings = scratch("filter.rings", rings.nbytes)
     d_nbr, d_ring_start = _device_hood(ctx, hood)
     kernel("filter", "adaptive_filter")(
         queue, (n_parity * n_vertices,), None, upload(flux), upload(areas), d_nbr, d_ring_start,
@@ -185,7 +186,8 @@ def adaptive_filter_cl(flux, areas, hood: Neighbourhood, *, photons: float = 25.
         np.int32(hood.max_rings), np.float64(tau2), np.float64(float(z) * float(z)), d_out, d_rings)
     cl.enqueue_copy(queue, out, d_out)
     cl.enqueue_copy(queue, rings, d_rings)
-    return out.reshape(*lead, n_vertices, 3), rings.reshape(*lead, n_vertices)
+    return (np.moveaxis(out.reshape(n_vertices, *lead, 3), 0, -2),
+            np.moveaxis(rings.reshape(n_vertices, *lead), 0, -1))
 
 
 def _luma(r, g, b):
@@ -195,6 +197,7 @@ def _luma(r, g, b):
 def adaptive_filter_reference(flux, areas, hood: Neighbourhood, *, photons: float = 25.0, z: float = 2.5):
     """NumPy twin of :func:`adaptive_filter_cl` (vectorised over vertices, rings in order)."""
     flux, areas_rows, tau2, lead = _check(flux, areas, hood, photons)
+    flux = np.moveaxis(flux, 0, 1)  # (L, V, 4)
     z2 = float(z) * float(z)
     n_parity, n_vertices = flux.shape[:2]
     out = np.zeros((n_parity, n_vertices, 3))

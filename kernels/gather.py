@@ -34,7 +34,7 @@ import pyopencl as cl
 
 from pipeline.errors import LoomError
 
-from .context import device_context, kernel
+from .context import device_context, kernel, scratch
 
 KINDS = {"indirect": 1, "direct": 2, "all": 3}
 LUMA = (0.2126, 0.7152, 0.0722)  # Rec. 709
@@ -157,17 +157,6 @@ def _check_windows(sums, n_emitted, back, fwd, rows):
     return (sums, *_check_window_args(sums.shape[0], sums.shape[1], n_emitted, back, fwd, rows))
 
 
-_TABLE: list = [None, 0]  # the device sums table, reused across calls (fresh pages cost faults)
-
-
-def _table_buffer(nbytes: int) -> cl.Buffer:
-    if _TABLE[1] < nbytes:
-        ctx, _ = device_context()
-        _TABLE[0], _TABLE[1] = None, 0
-        _TABLE[0], _TABLE[1] = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, size=nbytes), nbytes
-    return _TABLE[0]
-
-
 def _flux(d_table: cl.Buffer, prefix: bool, n_emitted, back, fwd, rows, element_vertices,
           n_vertices: int, n_elements: int, n_parity: int) -> np.ndarray:
     """Steps 2 and 3 from an element-major device sums table (E, rows, P, 12) in prefix
@@ -175,12 +164,12 @@ def _flux(d_table: cl.Buffer, prefix: bool, n_emitted, back, fwd, rows, element_
     one launch."""
     ctx, queue = device_context()
     # Vertex-major on the device: the frames of one vertex are neighbouring work items and writes
-    out = np.zeros((n_vertices, len(rows), n_parity, 4))
     if len(rows) == 0 or n_elements == 0 or n_vertices == 0:
-        return np.moveaxis(out, 0, 2)
+        return np.moveaxis(np.zeros((n_vertices, len(rows), n_parity, 4)), 0, 2)
+    out = np.empty((n_vertices, len(rows), n_parity, 4))
     cum_n = np.concatenate([[0.0], np.cumsum(n_emitted)])
     voffsets, slots = vertex_slots(element_vertices, n_vertices)
-    d_out = cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY, size=out.nbytes)
+    d_out = scratch("gather.vertex_flux", out.nbytes)
     kernel("gather", "vertex_window_flux")(
         queue, (n_vertices,), None, d_table, _upload(ctx, cum_n), _upload(ctx, np.ascontiguousarray(back.T)),
         _upload(ctx, np.ascontiguousarray(fwd.T)), _upload(ctx, rows.astype(np.int32)), _upload(ctx, voffsets), _upload(ctx, slots),
@@ -241,7 +230,7 @@ def gather_flux_cl(frames, n_emitted, back, fwd, rows, element_vertices, n_verti
         raise LoomError(f"kind must be one of {', '.join(KINDS)}, got {kind!r}")
     ctx, queue = device_context()
     key, b1, b2, energy, offsets, _, _ = _concat_frames(frames)
-    d_table = _table_buffer(8 * (n_rows + 1) * width)
+    d_table = scratch("gather.table", 8 * (n_rows + 1) * width)
     kernel("gather", "sums_prefix")(
         queue, (n_elements * n_parity,), None, _upload(ctx, key), _upload(ctx, b1), _upload(ctx, b2),
         _upload(ctx, energy), _upload(ctx, offsets), np.int32(n_rows), np.int32(n_elements),

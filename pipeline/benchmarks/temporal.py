@@ -82,13 +82,13 @@ class SyntheticPhotons:
 
 def _sums_prefix_seconds(frames, n_elements: int, repeat: int = 3) -> float:
     """Best time of the sums_prefix kernel alone (records already on the device)."""
-    from kernels.context import device_context, kernel
-    from kernels.gather import _concat_frames, _table_buffer, _upload
+    from kernels.context import device_context, kernel, scratch
+    from kernels.gather import _concat_frames, _upload
 
     ctx, queue = device_context()
     key, b1, b2, energy, offsets, n_frames, _ = _concat_frames(frames)
     args = [_upload(ctx, a) for a in (key, b1, b2, energy, offsets)]
-    table = _table_buffer(8 * (n_frames + 1) * n_elements * 12)
+    table = scratch("gather.table", 8 * (n_frames + 1) * n_elements * 12)
     best = float("inf")
     for _ in range(repeat):
         queue.finish()
