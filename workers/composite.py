@@ -146,8 +146,11 @@ def camera_rays(state: FrameState, width: int, height: int, px: np.ndarray, py: 
 
 def render_frame(state: FrameState, elements: ElementMesh | None, irradiance, *, width: int,
                  height: int, spp: int, seed: int, frame: int, max_depth: int = 4,
-                 area_samples: int = 2, caster: RayCaster | None = None) -> FrameImage:
-    """Render one frame; ``irradiance`` (V, 3) is the indirect map (None: no indirect light)."""
+                 area_samples: int = 2, caster: RayCaster | None = None,
+                 chunk_rays: int = CHUNK_RAYS) -> FrameImage:
+    """Render one frame; ``irradiance`` (V, 3) is the indirect map (None: no indirect light).
+
+    ``chunk_rays`` camera samples are traced together (memory bound); pixels do not depend on it."""
     caster = caster or caster_for(state)
     sh = _Shading(state, elements, irradiance, caster, area_samples)
     key = frame_key(seed, frame)
@@ -155,7 +158,7 @@ def render_frame(state: FrameState, elements: ElementMesh | None, irradiance, *,
     layers = np.zeros((n_pixels, 3, 3), np.float32)  # direct, indirect, albedo
     alpha = np.zeros(n_pixels, np.float32)
     rays = dict.fromkeys(RAY_KINDS, 0)
-    chunk_pixels = max(1, CHUNK_RAYS // spp)
+    chunk_pixels = max(1, chunk_rays // spp)
     for lo in range(0, n_pixels, chunk_pixels):
         hi = min(n_pixels, lo + chunk_pixels)
         counter = np.arange(lo * spp, hi * spp, dtype=np.int64)

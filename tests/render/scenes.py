@@ -68,13 +68,14 @@ def mirror_scene(path):
     return b.write(path)
 
 
-def area_scene(path, half: float = 0.5, height: float = 1.0, radiance: float = 3.0):
-    """A square emitter (side 2 x half, facing down) at ``height`` over a grey plane."""
+def area_scene(path, half: float = 0.5, height: float = 1.0, radiance: float = 3.0, eye=(0.0, 0.5, 0.0)):
+    """A square emitter (side 2 x half, facing down) at ``height`` over a grey plane, seen from
+    ``eye`` looking straight down through a narrow field of view."""
     b = GltfBuilder()
     grey = b.add_material("plane", (0.5, 0.5, 0.5))
     b.add_node("plane", b.add_mesh("plane", quad_y(10.0), UP_FACES, material=grey))
     glow = b.add_material("glow", (0.0, 0.0, 0.0), emissive=(1.0, 1.0, 1.0), emissive_strength=radiance)
     b.add_node("panel", b.add_mesh("panel", quad_y(half, height), np.array([0, 1, 2, 0, 2, 3]), material=glow))
-    camera(b, (0.0, 0.5, 0.0), (0.0, 0.0, 0.0), yfov=0.05)
+    camera(b, eye, (eye[0], 0.0, eye[2]), yfov=0.05)
     b.set_scene_extras({"photonloom": {"element_size": 2.0}})
     return b.write(path)

@@ -134,10 +134,19 @@ def test_indirect_is_the_interpolated_map(tmp_path):
     np.testing.assert_allclose(img.beauty, img.direct + img.indirect, rtol=1e-6)
 
 
-def test_same_inputs_give_identical_pixels(tmp_path):
-    path = plane_scene(tmp_path / "d.glb", occluder=True)
-    _, a, _ = _render(path)
-    _, b, _ = _render(path)
-    _, c, _ = _render(path, seed=4)
+def test_same_inputs_give_identical_pixels_whatever_the_chunking(tmp_path):
+    path = area_scene(tmp_path / "d.glb")  # random numbers in jitter and area-light samples
+    _, a, _ = _render(path, width=16, height=12)
+    _, b, _ = _render(path, width=16, height=12, chunk_rays=100)
+    _, c, _ = _render(path, width=16, height=12, seed=4)
     assert np.array_equal(a.beauty, b.beauty) and a.rays == b.rays
-    assert not np.array_equal(a.beauty, c.beauty)  # the seed moves the jitter
+    assert not np.array_equal(a.beauty, c.beauty)  # the seed moves the jitter and the samples
+
+
+def test_emitters_shine_from_their_front_face_only(tmp_path):
+    # The panel faces down: from above, the camera sees its back, which neither shows emission
+    # nor lights anything up there
+    _, img, _ = _render(area_scene(tmp_path / "e.glb", eye=(0.0, 2.0, 0.0)), width=8, height=8)
+    assert img.alpha.min() == 1 and np.all(img.beauty == 0)
+    _, below, _ = _render(area_scene(tmp_path / "f.glb", eye=(0.0, 0.99, 0.0)), width=8, height=8)
+    assert np.all(below.beauty > 0)  # from below the panel, the plane is lit
