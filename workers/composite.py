@@ -111,9 +111,11 @@ class _Shading:
         centre, radius = _bounding_spheres(corners)
         self.reach = [_light_reach(light, centre, radius) for light in state.lights]
         self.elements = elements
-        self.element_irradiance = None  # (E, 3 vertices, 3) float32: one gather per hit
+        self.element_irradiance = None  # (E, 3, 3) float32 [E0, E1 - E0, E2 - E0]: one gather a hit
         if irradiance is not None:
-            self.element_irradiance = np.asarray(irradiance, np.float32)[elements.element_vertices]
+            e = np.asarray(irradiance, np.float64)[elements.element_vertices]
+            self.element_irradiance = np.stack([e[:, 0], e[:, 1] - e[:, 0], e[:, 2] - e[:, 0]],
+                                               axis=1).astype(np.float32)
         self.area_samples = area_samples if len(state.emissive_triangles) else 0
         if self.area_samples:
             tris = state.emissive_triangles.astype(np.int64)
@@ -159,13 +161,17 @@ def render_frame(state: FrameState, elements: ElementMesh | None, irradiance, *,
     alpha = np.zeros(n_pixels, np.float32)
     rays = dict.fromkeys(RAY_KINDS, 0)
     chunk_pixels = max(1, chunk_rays // spp)
+    samples = None if spp == 1 else np.empty((chunk_pixels * spp, 3, 3), np.float32)
     for lo in range(0, n_pixels, chunk_pixels):
         hi = min(n_pixels, lo + chunk_pixels)
         counter = np.arange(lo * spp, hi * spp, dtype=np.int64)
-        out, cover = _trace_samples(state, sh, key, counter, spp, width, height, max_depth, rays)
-        if spp == 1:
-            layers[lo:hi], alpha[lo:hi] = out, cover
+        if spp == 1:  # samples are pixels: trace straight into the layers
+            alpha[lo:hi] = _trace_samples(state, sh, key, counter, spp, width, height, max_depth,
+                                          rays, layers[lo:hi])
         else:  # mean over each pixel's samples (consecutive counters), in a fixed order
+            out = samples[:len(counter)]
+            out.fill(0)
+            cover = _trace_samples(state, sh, key, counter, spp, width, height, max_depth, rays, out)
             layers[lo:hi] = out.reshape(hi - lo, spp, 3, 3).mean(axis=1)
             alpha[lo:hi] = cover.reshape(hi - lo, spp).mean(axis=1)
     shape = (height, width, 3)
@@ -216,10 +222,10 @@ class _Hits:
         return normal * np.where(cos_in < 0, np.float32(1), np.float32(-1))[:, None]
 
 
-def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_depth, rays):
-    """Direct, indirect and albedo (n, 3, 3) and coverage (n,) of the camera samples ``counter``."""
+def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_depth, rays, out):
+    """Add direct, indirect and albedo of the camera samples ``counter`` into ``out`` (n, 3, 3),
+    zero on entry; returns their coverage (n,)."""
     n = len(counter)
-    out = np.zeros((n, 3, 3), np.float32)  # per sample: direct, indirect, albedo
     cover = np.zeros(n, np.float32)
     pixel = counter // spp
     jx, jy = uniform_pair(key, counter, 0)  # pixel jitter (dimensions 0 and 1)
@@ -240,7 +246,10 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
         hits = _Hits(sh, tri, u, v, origins, dirs, t)
         kind = sh.kind[tri]
         rho = sh.albedo[tri]
-        acc = np.zeros((len(tri), 3, 3), np.float32)  # this depth's layers, scattered once
+        # This depth's layers: ``out`` itself while rays and samples correspond one to one,
+        # else scattered into it once
+        direct_out = path is None and throughput is None
+        acc = out if direct_out else np.zeros((len(tri), 3, 3), np.float32)
         if depth == 0:
             acc[:, 2] = rho
             _put(cover, path, 1.0)
@@ -266,7 +275,8 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
             if sh.element_irradiance is not None:
                 acc[:, 1] += scale * _interpolate(sh, hits)
             if active is None:
-                _put(out, path, acc if throughput is None else acc * throughput[:, None], True)
+                if not direct_out:
+                    _put(out, path, acc if throughput is None else acc * throughput[:, None], True)
                 break
 
         # Glossy: exact highlights of punctual lights
@@ -276,7 +286,8 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
             lobe = (mirror_g, sh.exponent[tri[glossy]])
             acc[glossy, 0] += rho[glossy] * _punctual(sh, hits, glossy, lobe, rays, None)
 
-        _put(out, path, acc if throughput is None else acc * throughput[:, None], True)
+        if not direct_out:
+            _put(out, path, acc if throughput is None else acc * throughput[:, None], True)
 
         # Mirror and glossy reflection continue the path
         spec = np.flatnonzero(kind != 0)
@@ -300,7 +311,7 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
         throughput = weight if throughput is None else throughput[spec] * weight
         origins = sh.caster.offset_origins(hits.points(spec), tri[spec], refl).astype(np.float32)
         dirs, path = refl, (spec if path is None else path[spec])
-    return out, cover
+    return cover
 
 
 def _put(target: np.ndarray, idx, value, accumulate: bool = False) -> None:
@@ -318,10 +329,10 @@ def _put(target: np.ndarray, idx, value, accumulate: bool = False) -> None:
 
 def _interpolate(sh: _Shading, hits: _Hits) -> np.ndarray:
     """Irradiance inside the hit element: barycentric blend of its three vertex values."""
-    c = sh.element_irradiance[hits.cell]  # (n, 3 vertices, 3)
+    c = sh.element_irradiance[hits.cell]  # (n, 3, 3): E0, E1 - E0, E2 - E0
     b1 = hits.b1.astype(np.float32)[:, None]
     b2 = hits.b2.astype(np.float32)[:, None]
-    return c[:, 0] + b1 * (c[:, 1] - c[:, 0]) + b2 * (c[:, 2] - c[:, 0])
+    return c[:, 0] + b1 * c[:, 1] + b2 * c[:, 2]
 
 
 def _bounding_spheres(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
