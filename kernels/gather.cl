@@ -11,6 +11,30 @@
 #define DIRECT_BIT 0x80000000u
 #define PARITY_BIT 0x40000000u
 
+// Adds the records [begin, end) of the kinds asked for (and, with n_parity = 2, of photon parity
+// `parity` only) to acc: acc[4k + c] += b_k * energy_c, acc[4k + 3] += b_k^2 * Y^2.
+inline void add_records(__global const uint *key, __global const ushort *b1,
+                        __global const ushort *b2, __global const float *energy, const long begin,
+                        const long end, const uint kinds, const int n_parity, const uint parity,
+                        double acc[SLOTS])
+{
+    for (long r = begin; r < end; ++r) {
+        const uint k = key[r];
+        if (!(kinds & ((k & DIRECT_BIT) ? 2u : 1u))) continue;
+        if (n_parity == 2 && ((k & PARITY_BIT) ? 1u : 0u) != parity) continue;
+        const double w1 = (double)b1[r] / BARY_SCALE;
+        const double w2 = (double)b2[r] / BARY_SCALE;
+        const double w0 = 1.0 - w1 - w2;
+        const double red = (double)energy[3 * r], green = (double)energy[3 * r + 1],
+                     blue = (double)energy[3 * r + 2];
+        const double y = 0.2126 * red + 0.7152 * green + 0.0722 * blue;  // Rec. 709 luminance
+        const double y2 = y * y;
+        acc[0] += w0 * red; acc[1] += w0 * green; acc[2] += w0 * blue; acc[3] += (w0 * w0) * y2;
+        acc[4] += w1 * red; acc[5] += w1 * green; acc[6] += w1 * blue; acc[7] += (w1 * w1) * y2;
+        acc[8] += w2 * red; acc[9] += w2 * green; acc[10] += w2 * blue; acc[11] += (w2 * w2) * y2;
+    }
+}
+
 // Sums of segment s (a (frame, element) pair; records [offsets[s], offsets[s+1]), element-sorted)
 // for parity p (work item (s, p)): out[out_base + (s * n_parity + p) * 12 + 4k + c] = sum over the
 // records of b_k * energy_c, and (c = 3) Q = sum b_k^2 * Y^2 (dept.md §1.2-1.3). With n_parity = 1
@@ -25,29 +49,11 @@ __kernel void element_sums(__global const uint *key, __global const ushort *b1,
     if (gid >= n_segments * n_parity) return;
     const long s = gid / n_parity;
     const uint parity = (uint)(gid - s * n_parity);
-    double r0 = 0.0, g0 = 0.0, bl0 = 0.0, q0 = 0.0;
-    double r1 = 0.0, g1 = 0.0, bl1 = 0.0, q1 = 0.0;
-    double r2 = 0.0, g2 = 0.0, bl2 = 0.0, q2 = 0.0;
-    const long end = (long)offsets[s + 1];
-    for (long r = (long)offsets[s]; r < end; ++r) {
-        const uint k = key[r];
-        if (!(kinds & ((k & DIRECT_BIT) ? 2u : 1u))) continue;
-        if (n_parity == 2 && ((k & PARITY_BIT) ? 1u : 0u) != parity) continue;
-        const double w1 = (double)b1[r] / BARY_SCALE;
-        const double w2 = (double)b2[r] / BARY_SCALE;
-        const double w0 = 1.0 - w1 - w2;
-        const double red = (double)energy[3 * r], green = (double)energy[3 * r + 1],
-                     blue = (double)energy[3 * r + 2];
-        const double y = 0.2126 * red + 0.7152 * green + 0.0722 * blue;  // Rec. 709 luminance
-        const double y2 = y * y;
-        r0 += w0 * red; g0 += w0 * green; bl0 += w0 * blue; q0 += (w0 * w0) * y2;
-        r1 += w1 * red; g1 += w1 * green; bl1 += w1 * blue; q1 += (w1 * w1) * y2;
-        r2 += w2 * red; g2 += w2 * green; bl2 += w2 * blue; q2 += (w2 * w2) * y2;
-    }
+    double acc[SLOTS];
+    for (int c = 0; c < SLOTS; ++c) acc[c] = 0.0;
+    add_records(key, b1, b2, energy, (long)offsets[s], (long)offsets[s + 1], kinds, n_parity, parity, acc);
     __global double *o = out + out_base + gid * SLOTS;
-    o[0] = r0; o[1] = g0; o[2] = bl0; o[3] = q0;
-    o[4] = r1; o[5] = g1; o[6] = bl1; o[7] = q1;
-    o[8] = r2; o[9] = g2; o[10] = bl2; o[11] = q2;
+    for (int c = 0; c < SLOTS; ++c) o[c] = acc[c];
 }
 
 // In-place prefix sums over frames of an element-major table (E, n_rows + 1, width): rows 1..n_rows
@@ -92,28 +98,11 @@ __kernel void sums_prefix(__global const uint *key, __global const ushort *b1,
     }
     for (int j = 0; j < n_frames; ++j) {
         const long s = (long)j * n_elements + e;
-        double r0 = 0.0, g0 = 0.0, bl0 = 0.0, q0 = 0.0;
-        double r1 = 0.0, g1 = 0.0, bl1 = 0.0, q1 = 0.0;
-        double r2 = 0.0, g2 = 0.0, bl2 = 0.0, q2 = 0.0;
-        const long end = (long)offsets[s + 1];
-        for (long r = (long)offsets[s]; r < end; ++r) {
-            const uint k = key[r];
-            if (!(kinds & ((k & DIRECT_BIT) ? 2u : 1u))) continue;
-            if (n_parity == 2 && ((k & PARITY_BIT) ? 1u : 0u) != parity) continue;
-            const double w1 = (double)b1[r] / BARY_SCALE;
-            const double w2 = (double)b2[r] / BARY_SCALE;
-            const double w0 = 1.0 - w1 - w2;
-            const double red = (double)energy[3 * r], green = (double)energy[3 * r + 1],
-                         blue = (double)energy[3 * r + 2];
-            const double y = 0.2126 * red + 0.7152 * green + 0.0722 * blue;
-            const double y2 = y * y;
-            r0 += w0 * red; g0 += w0 * green; bl0 += w0 * blue; q0 += (w0 * w0) * y2;
-            r1 += w1 * red; g1 += w1 * green; bl1 += w1 * blue; q1 += (w1 * w1) * y2;
-            r2 += w2 * red; g2 += w2 * green; bl2 += w2 * blue; q2 += (w2 * w2) * y2;
-        }
-        run[0] += r0; run[1] += g0; run[2] += bl0; run[3] += q0;
-        run[4] += r1; run[5] += g1; run[6] += bl1; run[7] += q1;
-        run[8] += r2; run[9] += g2; run[10] += bl2; run[11] += q2;
+        double acc[SLOTS];
+        for (int c = 0; c < SLOTS; ++c) acc[c] = 0.0;
+        add_records(key, b1, b2, energy, (long)offsets[s], (long)offsets[s + 1], kinds, n_parity, parity,
+                    acc);
+        for (int c = 0; c < SLOTS; ++c) run[c] += acc[c];
         __global double *o = t + (j + 1) * width;
         for (int c = 0; c < SLOTS; ++c) o[c] = run[c];
     }
