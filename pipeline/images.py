@@ -125,24 +125,23 @@ def read_png(path) -> np.ndarray:
 
 
 def write_video(pngs, path, fps: float) -> int:
-    """Assemble the PNGs into an H.264 MP4 atomically; returns the number of frames written."""
+    """Assemble the PNGs into an H.264 MP4 atomically, one at a time; returns the frame count."""
     import imageio_ffmpeg
 
-    path = Path(path)
-    frames = [read_png(p) for p in pngs]
-    if not frames:
+    path, pngs = Path(path), list(pngs)
+    if not pngs:
         return 0
-    h, w = frames[0].shape[:2]
+    h, w = read_png(pngs[0]).shape[:2]
     size = (w + w % 2, h + h % 2)  # yuv420p needs even sizes: repeat the last row/column
     tmp = _partial(path)
     writer = imageio_ffmpeg.write_frames(str(tmp), size, fps=fps, macro_block_size=1, quality=8,
                                          output_params=["-f", "mp4"], ffmpeg_log_level="error")
     writer.send(None)
     try:
-        for f in frames:
-            f = np.pad(f, ((0, size[1] - h), (0, size[0] - w), (0, 0)), mode="edge")
+        for png in pngs:
+            f = np.pad(read_png(png), ((0, size[1] - h), (0, size[0] - w), (0, 0)), mode="edge")
             writer.send(np.ascontiguousarray(f))
     finally:
         writer.close()
     os.replace(tmp, path)
-    return len(frames)
+    return len(pngs)
