@@ -1,10 +1,12 @@
 """``loom render``: shoot, illuminate and composite a scene's frames end to end on Dask.
 
-Stages, all on one Dask client (DESIGN.md data flow; this issue uses each frame's own photons):
+Stages, all on one Dask client (DESIGN.md data flow):
 
 1. shoot       (frame, batch) photon tasks into ``DIR/photons.zarr`` (pipeline/shoot.py), resumable;
-2. illuminate  per frame: vertex irradiance maps into the store and the frame's adaptation
-               luminance from its mesh-based lighting (workers/reconstruct.py);
+2. illuminate  per frame: vertex irradiance maps from the frame's own photons into the store and
+               the frame's adaptation luminance from its mesh-based lighting (workers/reconstruct.py);
+               with ``temporal`` adaptive or fixed, the indirect maps are then replaced by the
+               temporal gather (pipeline/temporal.py);
 3. adapt       the coordinator smooths adaptation over the frames in time (pipeline/tonemap.py),
                so each composite task gets its own value and exposure never jumps;
 4. composite   per frame: ray-traced direct and specular light plus the indirect map, EXR and PNG

@@ -9,6 +9,8 @@ hits give a mesh-based direct estimate used only for eye adaptation (§4).
 
 :func:`vertex_irradiance` is the NumPy reference of the temporal gather (kernels/, issue 5) for a
 one-frame window: keep its signature and arithmetic (float64, np.bincount) as they are.
+:func:`mesh_adaptation` turns a frame's maps into its adaptation luminance (pipeline/tonemap.py);
+:func:`illuminate_task` is the Dask task that writes both maps and that value for one frame.
 """
 from __future__ import annotations
 
