@@ -13,7 +13,7 @@ from .errors import LoomError
 
 
 class _LoomGroup(click.Group):
-    """Turns user-input errors into a one-line message and a non-zero exit."""
+    """Turns user-input errors, ours and click's usage errors alike, into one line and exit 2."""
 
     def invoke(self, ctx):
         try:
@@ -21,6 +21,25 @@ class _LoomGroup(click.Group):
         except LoomError as err:
             click.echo(f"loom: error: {err}", err=True)
             sys.exit(2)
+
+    def main(self, *args, **kwargs):
+        if kwargs.get("standalone_mode", True) is False:
+            return super().main(*args, **kwargs)
+        try:
+            return super().main(*args, standalone_mode=False, **kwargs)
+        except click.UsageError as err:
+            if isinstance(err, getattr(click.exceptions, "NoArgsIsHelpError", ())) and err.ctx is not None:
+                click.echo(err.ctx.get_help())  # a bare `loom` or `loom bench` asks for help
+                sys.exit(0)
+            where = f"{err.ctx.command_path}: " if err.ctx is not None else ""
+            click.echo(f"loom: error: {where}{err.format_message()} (see --help)", err=True)
+            sys.exit(err.exit_code)
+        except click.ClickException as err:
+            click.echo(f"loom: error: {err.format_message()}", err=True)
+            sys.exit(err.exit_code)
+        except click.exceptions.Abort:
+            click.echo("loom: aborted", err=True)
+            sys.exit(1)
 
 
 @click.group(cls=_LoomGroup)
@@ -32,7 +51,7 @@ def main() -> None:
 
 @main.command("scene")
 @click.argument("name")
-@click.option("-o", "--output", required=True, type=click.Path(dir_okay=False), help="The .glb (or .gltf) to write.")
+@click.option("-o", "--output", required=True, help="The .glb (or .gltf) to write; folders are made.")
 def scene_command(name: str, output: str) -> None:
     """Write the built-in scene NAME (room, atrium, cornell, static) as a glTF file."""
     from .scene.builtin import write_builtin

@@ -7,6 +7,7 @@ frames).
 """
 from __future__ import annotations
 
+import os
 from pathlib import Path
 from typing import Callable
 
@@ -29,4 +30,17 @@ def write_builtin(name: str, path: str | Path) -> Path:
     except KeyError:
         choices = ", ".join(sorted(BUILTIN_SCENES))
         raise LoomError(f"unknown built-in scene {name!r}; choose from {choices}", field="scene") from None
-    return build().write(path)
+    path = Path(path)
+    if path.suffix.lower() not in (".glb", ".gltf"):
+        raise LoomError("must end in .glb or .gltf", path=str(path), field="--output")
+    if path.is_dir():
+        raise LoomError("is a directory", path=str(path), field="--output")
+    try:
+        path.parent.mkdir(parents=True, exist_ok=True)
+        # Written under a temporary name and moved into place: a killed run leaves no torn file.
+        tmp = path.with_name(f".{path.stem}.partial{path.suffix}")
+        build().write(tmp)
+        os.replace(tmp, path)
+    except OSError as err:
+        raise LoomError(f"cannot write: {err.strerror or err}", path=str(path), field="--output") from None
+    return path
