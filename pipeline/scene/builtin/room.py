@@ -7,11 +7,13 @@ full-height partition at x = 1.5 hides it from every light, so it is lit only in
 A polished metal sphere stands on the floor under the flight path (specular paths).
 
 Lights and motion, in three 45-frame segments:
-- ``aircraft``: a white fuselage-and-wings body flying across the room at about 1.95 m (x 1.0 ->
-  5.1, z 2.5-2.7, slight roll). A spot light (10 W/sr, 40 deg cone) travels 0.38 m under it,
-  pointing up, and lights only its underside; the light the underside reflects makes a moving
-  highlight on the floor below (Fig. 3). The cone sees only steep upward directions, so it never
-  lights the niche.
+- ``aircraft``: a white fuselage-and-wings body flying one and a half laps of a 1.25 m circle
+  round the middle of the room at 1.35 m, banking into the turn, about 10 cm a frame. A spot
+  light (10 W/sr, 40 deg cone) travels 0.38 m under it, pointing up, and lights only its
+  underside; the light the underside reflects makes a highlight on the floor below that moves
+  about 1.5 m in 15 frames, so collecting +-15 frames of photons without regard to the change
+  washes it out (Fig. 3b) while adaptive collection keeps it (Fig. 3c). The cone sees only steep
+  upward directions, so it never lights the niche.
 - ``corner_spot``: a fixed ceiling spot (150 W/sr, 14 deg cone) aimed into the back-right corner,
   narrow enough to light mainly the torus there. The saturated green
   ``torus`` stands there, strongly lit, for frames 1-45 (green colour bleeding on the white walls
@@ -58,8 +60,12 @@ def _add_shell(b: GltfBuilder) -> None:
         b.add_node(name, b.add_mesh(name, positions, indices, material))
 
 
+FLIGHT_CENTRE, FLIGHT_RADIUS, FLIGHT_HEIGHT, FLIGHT_LAPS = (3.55, 2.6), 1.25, 1.35, 1.5
+FLIGHT_KEY_STEP = 5  # frames between the flight's keys (a 27-gon per 1.5 laps, close to the circle)
+
+
 def _add_aircraft(b: GltfBuilder) -> None:
-    """The aircraft with its upward spot light as a child, flying along +x at about 1.95 m."""
+    """The aircraft with its upward spot light as a child, circling the room's middle at 1.35 m."""
     body = b.add_material("aircraft_white", (0.8, 0.8, 0.8))
     mesh = shapes.merge([
         shapes.box((1.4, 0.26, 0.28)),                              # fuselage along x
@@ -73,12 +79,30 @@ def _add_aircraft(b: GltfBuilder) -> None:
     light_node = b.add_node("aircraft_spot", translation=(0.05, -0.38, 0.0), rotation=up, light=spot)
     mesh_node = b.add_node("aircraft_body", b.add_mesh("aircraft", *mesh, material=body))
     aircraft = b.add_node("aircraft", children=[mesh_node, light_node])
-    keys = np.array([1, 45, 90, 135], dtype=float)
+    keys = np.arange(1, TIMELINE.frames + 1, FLIGHT_KEY_STEP)
+    if keys[-1] != TIMELINE.frames:
+        keys = np.append(keys, TIMELINE.frames)
     times = [TIMELINE.time(f) for f in keys]
-    path = np.array([[1.0, 1.95, 2.7], [2.4, 1.95, 2.5], [3.9, 1.9, 2.5], [5.1, 1.95, 2.7]])
+    # Counter-clockwise seen from above: angle theta round the centre, position (cx + r cos, cz - r sin)
+    theta = 2.0 * math.pi * FLIGHT_LAPS * (keys - 1) / (TIMELINE.frames - 1)
+    cx, cz = FLIGHT_CENTRE
+    path = np.stack([cx + FLIGHT_RADIUS * np.cos(theta), np.full(len(keys), FLIGHT_HEIGHT),
+                     cz - FLIGHT_RADIUS * np.sin(theta)], axis=1)
     b.add_animation("aircraft_flight", aircraft, "translation", times, path)
-    bank = [shapes.axis_angle((1, 0, 0), a) for a in np.radians([6.0, -4.0, 4.0, -6.0])]
-    b.add_animation("aircraft_flight", aircraft, "rotation", times, bank)
+    # Nose (+x) along the tangent: a turn about +y by theta + 90 degrees; 12 degrees of bank inward.
+    bank = shapes.axis_angle((1, 0, 0), math.radians(12.0))
+    heading = [shapes.multiply_quaternions(shapes.axis_angle((0, 1, 0), t + math.pi / 2), bank) for t in theta]
+    b.add_animation("aircraft_flight", aircraft, "rotation", times, _continuous(heading))
+
+
+def _continuous(quaternions: list) -> np.ndarray:
+    """Flip signs so consecutive keys lie on the same hemisphere (slerp takes the short way anyway,
+    but CUBICSPLINE or other readers may not)."""
+    out = np.array(quaternions, dtype=np.float64)
+    for i in range(1, len(out)):
+        if np.dot(out[i], out[i - 1]) < 0:
+            out[i] = -out[i]
+    return out
 
 
 def _add_torus_corner(b: GltfBuilder) -> None:
