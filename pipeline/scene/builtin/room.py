@@ -19,7 +19,7 @@ Lights and motion, in three 45-frame segments:
   ``torus`` stands there, strongly lit, for frames 1-45 (green colour bleeding on the white walls
   and floor, Fig. 1), moves out of the cone during frames 46-90 (the bleeding fades), and rests in
   the room's middle for frames 91-135 while the aircraft finishes its flight.
-The camera is static at the front, seeing the floor highlight, the torus corner and the niche.
+The camera is static high at the front, looking down on the floor highlight, the torus corner and the niche.
 """
 from __future__ import annotations
 
@@ -132,8 +132,8 @@ def build() -> GltfBuilder:
                translation=(2.0, 0.35, 3.2))
     _add_aircraft(b)
     _add_torus_corner(b)
-    eye, target = (3.0, 2.6, 4.85), (3.0, 0.7, 1.2)
-    camera = b.add_camera("camera", yfov=math.radians(62), znear=0.05, zfar=30.0)
+    eye, target = (3.0, 2.9, 4.9), (3.2, 0.0, 1.5)
+    camera = b.add_camera("camera", yfov=math.radians(70), znear=0.05, zfar=30.0)
     b.add_node("camera", camera=camera, translation=eye, rotation=shapes.look_at(eye, target))
     b.set_scene_extras({"photonloom": {"element_size": ELEMENT_SIZE, "fps": TIMELINE.fps,
                                        "frames": TIMELINE.frames}})
