@@ -83,15 +83,16 @@ class RenderConfig:
     @property
     def hash(self) -> str:
         """Stable 16-hex-digit digest of every field (sorted JSON)."""
-        return _digest(self.to_dict())
+        return stable_digest(self.to_dict())
 
     def photon_hash(self, element_size: float) -> str:
         """Digest of what the photons depend on: the resolved element size and the tracer's
         settings (the seed is stored on its own). The photon store is keyed by it, so changing
         k_sigma or d_thr reuses the photons while changing element_size refuses the store."""
-        return _digest({"element_size": float(element_size), "max_depth": self.max_depth})
+        return stable_digest({"element_size": float(element_size), "max_depth": self.max_depth})
 
 
-def _digest(data: dict) -> str:
+def stable_digest(data: dict) -> str:
+    """16 hex digits of SHA-256 over sorted JSON: the same settings give the same digest anywhere."""
     blob = json.dumps(data, sort_keys=True).encode()
     return hashlib.sha256(blob).hexdigest()[:16]

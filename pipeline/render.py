@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 from .cluster import connect, run_tasks
-from .config import RenderConfig, _digest
+from .config import RenderConfig, stable_digest
 from .errors import LoomError
 from .images import exr_metadata, frame_is_valid, frame_paths, write_video
 from .scene import Scene
@@ -134,7 +134,7 @@ def render(scene_path, *, frames: str | None, out_dir, settings: RenderSettings 
                     tonemap=settings.tonemap.to_dict())
         if temporal != "off":  # keeps the hash of renders without temporal collection
             base.update(temporal=temporal, fmax=fmax, temporal_config=config.hash)
-        render_hash = _digest(base)
+        render_hash = stable_digest(base)
         done = {}  # frame -> its own (unsmoothed) adaptation luminance, from its EXR
         for f in p.frames:
             exr, png = frame_paths(out, f)

@@ -15,11 +15,14 @@ from .camera import CameraDef
 from .gltf import GltfDocument
 from .lights import light_def_from_gltf
 from .materials import DEFAULT_MATERIAL, material_from_gltf
-from .scene import _MODE_NAMES, _TRIANGLE_MODES, DEFAULT_ELEMENT_FRACTION, MeshInstance, Node, Scene
+from .scene import DEFAULT_ELEMENT_FRACTION, MeshInstance, Node, Scene
 from .timeline import DEFAULT_FPS, Timeline
 
 log = logging.getLogger(__name__)
 
+# Primitive modes (glTF §3.7.2.1): 4 TRIANGLES, 5 TRIANGLE_STRIP, 6 TRIANGLE_FAN.
+_TRIANGLE_MODES = {4, 5, 6}
+_MODE_NAMES = {0: "POINTS", 1: "LINES", 2: "LINE_LOOP", 3: "LINE_STRIP"}
 # Triangles whose area is below this fraction of the squared bounding-box diagonal are "zero-area".
 _ZERO_AREA = 1e-14
 

@@ -28,9 +28,6 @@ from .timeline import Timeline
 
 log = logging.getLogger(__name__)
 
-# Primitive modes (glTF §3.7.2.1): 4 TRIANGLES, 5 TRIANGLE_STRIP, 6 TRIANGLE_FAN.
-_TRIANGLE_MODES = {4, 5, 6}
-_MODE_NAMES = {0: "POINTS", 1: "LINES", 2: "LINE_LOOP", 3: "LINE_STRIP"}
 # State keys compare poses rounded to this many decimals, so that float noise from slerp of equal
 # keys does not make two identical poses look different.
 _STATE_DECIMALS = 7

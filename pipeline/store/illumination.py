@@ -22,7 +22,7 @@ import zarr
 import zarr.errors
 
 from ..errors import LoomError
-from .photon_store import _codec, _make_store
+from .photon_store import records_codec, make_store
 
 GROUP = "illumination"
 MAPS = ("indirect", "direct")
@@ -53,7 +53,7 @@ class IlluminationMaps:
         if not fits:
             for name in MAPS:
                 group.create_array(name, shape=shape, chunks=(1, n_vertices, 3), dtype="float32",
-                                   fill_value=0.0, compressors=_codec(), overwrite=True)
+                                   fill_value=0.0, compressors=records_codec(), overwrite=True)
             group.create_array("adaptation", shape=(n_frames,), chunks=(1,), dtype="float64",
                                fill_value=np.nan, overwrite=True)
         return cls(group, where)
@@ -103,6 +103,6 @@ class IlluminationMaps:
 
 def _root(where: str, mode: str) -> zarr.Group:
     try:
-        return zarr.open_group(store=_make_store(where, read_only=mode == "r"), mode=mode)
+        return zarr.open_group(store=make_store(where, read_only=mode == "r"), mode=mode)
     except (zarr.errors.GroupNotFoundError, FileNotFoundError):
         raise LoomError("no photon store here", path=where) from None

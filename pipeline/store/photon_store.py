@@ -26,7 +26,7 @@ RECORD_CHUNK = 1 << 20  # records per chunk of the per-batch arrays (20 MiB raw)
 _BATCH_CHUNK = re.compile(r"c\.(\d+)\.(\d+)\.0")  # chunk keys of batch/ ("." separator)
 
 
-def _codec() -> BloscCodec:
+def records_codec() -> BloscCodec:
     # Byte shuffle + zstd: sorted keys and small counts compress well; low level keeps writes fast.
     return BloscCodec(cname="zstd", clevel=3, shuffle="shuffle")
 
@@ -41,7 +41,7 @@ class _Prepared:
     row: np.ndarray  # u64 (5,) in BATCH_FIELDS order
 
 
-def _make_store(url, read_only: bool):
+def make_store(url, read_only: bool):
     """LocalStore for paths and file:// URLs (atomic renames), FsspecStore for other URLs."""
     text = os.fspath(url)
     if "://" not in text:
@@ -136,7 +136,7 @@ class PhotonStore:
                         n_frames=n_frames, n_elements=n_elements, frame_numbers=frame_numbers,
                         max_batches=max_batches)
         try:
-            store = _make_store(url, read_only=False)
+            store = make_store(url, read_only=False)
             root = _open_root(store, where, "r+")
             if root is not None:
                 _check_identity(dict(root.attrs), identity, where)
@@ -165,7 +165,7 @@ class PhotonStore:
 
     @staticmethod
     def _make_arrays(root: zarr.Group, n_frames: int, n_elements: int, max_batches: int) -> None:
-        common = dict(overwrite=True, compressors=_codec())
+        common = dict(overwrite=True, compressors=records_codec())
         root.create_array("batch", shape=(n_frames, max_batches, len(BATCH_FIELDS)),
                           chunks=(1, 1, len(BATCH_FIELDS)), dtype="uint64", fill_value=0,
                           chunk_key_encoding={"name": "default", "separator": "."}, **common)
@@ -186,7 +186,7 @@ class PhotonStore:
         if mode not in ("r", "r+"):
             raise LoomError(f"mode must be 'r' or 'r+', not {mode!r}", path=where)
         try:
-            store = _make_store(url, read_only=(mode == "r"))
+            store = make_store(url, read_only=(mode == "r"))
             root = _open_root(store, where, mode)
         except OSError as err:
             raise LoomError(f"cannot open photon store: {err.strerror or err}", path=where) from None
@@ -328,7 +328,7 @@ class PhotonStore:
             try:  # overwrite only an attempt of another shape (a non-deterministic tracer)
                 arr = self._root.create_array(path, shape=data.shape, chunks=chunks,
                                               dtype=data.dtype, fill_value=0,
-                                              compressors=_codec(), overwrite=arr is not None)
+                                              compressors=records_codec(), overwrite=arr is not None)
             except zarr.errors.ContainsArrayError:  # a duplicate writer made it just now
                 arr, fits = fitting()
                 if not fits:
