@@ -108,6 +108,33 @@ __kernel void sums_prefix(__global const uint *key, __global const ushort *b1,
     }
 }
 
+// The same table one frame at a time (one launch a frame), reading that frame's records where they
+// lie, so dense frames need no concatenation on the host: row j + 1 = row j + the sums of frame
+// j's records (records [offsets[e], offsets[e+1]) of element e); row 0 is zeroed with frame 0.
+// Bitwise equal to sums_prefix: the same terms added in the same order.
+__kernel void sums_prefix_step(__global const uint *key, __global const ushort *b1,
+                               __global const ushort *b2, __global const float *energy,
+                               __global const long *offsets, const int j, const int n_frames,
+                               const int n_elements, const uint kinds, const int n_parity,
+                               __global double *table)
+{
+    const long gid = get_global_id(0);
+    if (gid >= (long)n_elements * n_parity) return;
+    const long e = gid / n_parity;
+    const uint parity = (uint)(gid - e * n_parity);
+    const long width = (long)n_parity * SLOTS;
+    __global double *t = table + e * (n_frames + 1) * width + parity * SLOTS;
+    if (j == 0) {
+        for (int c = 0; c < SLOTS; ++c) t[c] = 0.0;
+    }
+    double acc[SLOTS];
+    for (int c = 0; c < SLOTS; ++c) acc[c] = 0.0;
+    add_records(key, b1, b2, energy, offsets[e], offsets[e + 1], kinds, n_parity, parity, acc);
+    __global const double *prev = t + (long)j * width;
+    __global double *o = t + (long)(j + 1) * width;
+    for (int c = 0; c < SLOTS; ++c) o[c] = prev[c] + acc[c];
+}
+
 // Vertex flux of every output frame i (work item v; frames in order, so an element's rows are
 // read while in cache): vertex v adds, over the element corners in slots[voffsets[v] ..
 // voffsets[v+1]) (element * 3 + corner, ascending), the corner's window sum over its element's

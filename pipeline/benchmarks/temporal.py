@@ -81,24 +81,27 @@ class SyntheticPhotons:
 
 
 def _sums_prefix_seconds(frames, n_elements: int, repeat: int = 3) -> float:
-    """Best time of the sums_prefix kernel alone (records already on the device)."""
+    """Best time of the gather's record kernel alone (sums_prefix_step, one launch a frame, the
+    buffers over the records made beforehand)."""
     from kernels.context import device_context, kernel, scratch
-    from kernels.gather import _concat_frames, _upload
+    from kernels.gather import _in_place
 
     ctx, queue = device_context()
-    key, b1, b2, energy, offsets, n_frames, _ = _concat_frames(frames)
-    args = [_upload(ctx, a) for a in (key, b1, b2, energy, offsets)]
-    table = scratch("gather.table", 8 * (n_frames + 1) * n_elements * 12)
+    bufs = [[_in_place(ctx, np.asarray(a, dt)) for a, dt in (
+        (r.key, np.uint32), (r.b1, np.uint16), (r.b2, np.uint16), (r.energy, np.float32),
+        (r.offsets, np.int64))] for r in frames]
+    table = scratch("gather.table", 8 * (len(frames) + 1) * n_elements * 12)
+    step = kernel("gather", "sums_prefix_step")
     best = float("inf")
     for _ in range(repeat):
         queue.finish()
         t0 = time.perf_counter()
-        kernel("gather", "sums_prefix")(queue, (n_elements,), None, *args, np.int32(n_frames),
-                                        np.int32(n_elements), np.uint32(3), np.int32(1), table)
+        for j, args in enumerate(bufs):
+            step(queue, (n_elements,), None, *args, np.int32(j), np.int32(len(frames)),
+                 np.int32(n_elements), np.uint32(3), np.int32(1), table)
         queue.finish()
         best = min(best, time.perf_counter() - t0)
     return best
-
 
 def _window_kernels(sums, n_emitted, back, fwd, rows, mesh, repeat: int = 3) -> tuple[float, float]:
     """Best times of the vertex_window_flux kernel on device tables: prefix sums, direct sums."""

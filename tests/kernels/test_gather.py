@@ -171,3 +171,18 @@ def test09_fused_gather_equals_the_steps(rng, split):
     assert fused.tobytes() == steps.tobytes()
     close(fused, window_flux_reference(element_sums_reference(frames, kind="all", split_parity=split), n,
                                        back, fwd, rows, ev, n_vertices))
+
+
+@pytest.mark.parametrize("split", [False, True])
+def test_gather_paths_give_the_same_bits(rng, split):
+    """Concatenated frames in one launch and one launch a frame fill the same prefix table."""
+    n_elements, n_vertices = 120, 90
+    frames = [frame_records(rng, int(rng.integers(0, 900)), n_elements) for _ in range(6)]
+    frames.append(frame_records(rng, 0, n_elements))
+    ev = mesh(rng, n_elements, n_vertices)
+    back = rng.integers(0, 4, (3, n_elements)).astype(np.uint8)
+    fwd = rng.integers(0, 3, (3, n_elements)).astype(np.uint8)
+    args = (frames, np.full(7, 1000.0), back, fwd, [3, 4, 3], ev, n_vertices)
+    one = gather_flux_cl(*args, kind="all", split_parity=split, step_per_frame=False)
+    each = gather_flux_cl(*args, kind="all", split_parity=split, step_per_frame=True)
+    assert one.tobytes() == each.tobytes()
