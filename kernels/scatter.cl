@@ -3,12 +3,9 @@
 // play Russian roulette on the albedo, and sample the next direction: cosine lobe (diffuse),
 // mirror, or normalised Phong lobe (glossy). Double precision throughout (PoCL CPU has fp64).
 // NumPy twin: kernels/scatter.py::scatter_reference; formulas are documented there.
-//
-// Written with scalars only (no double3/uint4) and selects instead of branches.
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #pragma OPENCL FP_CONTRACT OFF  // no fused multiply-add: the NumPy twin rounds every product
 #include "philox.cl"
-#include "sampling.cl"
 
 #define KIND_DIFFUSE 0
 #define KIND_MIRROR 1
@@ -16,10 +13,54 @@
 #define PARITY_BIT 0x40000000u
 #define DIRECT_BIT 0x80000000u
 
-__kernel void scatter(
+// Eight rays a work item, written on double8/long8/uint8 so that it runs in SIMD whatever the
+// compiler decides: PoCL's implicit work-group vectoriser gave up on the scalar version of this
+// kernel (its SLP pass packs x/y pairs first, and libm calls stop it), which then cost 3x as much.
+// Lane l of work item g is ray min(8 g + l, count - 1); past the end, lanes repeat the last ray and
+// write the same values. sin/cos come from polynomials (sincos8; twin sampling.py::sincos_poly) and
+// the Phong lobe's u^(1/(e+1)) from the host (scatter.py::glossy_cos), so that no libm call can
+// differ from the NumPy twin's.
+#define PIO2_HI 1.57079632673412561417e+00
+#define PIO2_LO 6.07710050650619224932e-11
+#define TWO_OVER_PI 6.36619772367581382433e-01
+
+#define G8(T, a, ix) ((T)(a[(ix).s0], a[(ix).s1], a[(ix).s2], a[(ix).s3], \
+                          a[(ix).s4], a[(ix).s5], a[(ix).s6], a[(ix).s7]))
+#define S8(a, ix, v) do { a[(ix).s0] = (v).s0; a[(ix).s1] = (v).s1; a[(ix).s2] = (v).s2; \
+                          a[(ix).s3] = (v).s3; a[(ix).s4] = (v).s4; a[(ix).s5] = (v).s5; \
+                          a[(ix).s6] = (v).s6; a[(ix).s7] = (v).s7; } while (0)
+
+#define PHILOX8_ROUND(c0, c1, c2, c3, k0, k1) do { \
+        const ulong8 p0_ = (ulong8)((ulong)PHILOX_M0) * convert_ulong8(c0); \
+        const ulong8 p1_ = (ulong8)((ulong)PHILOX_M1) * convert_ulong8(c2); \
+        const uint8 n0_ = convert_uint8(p1_ >> 32) ^ (c1) ^ (uint8)(k0); \
+        const uint8 n2_ = convert_uint8(p0_ >> 32) ^ (c3) ^ (uint8)(k1); \
+        (c1) = convert_uint8(p1_ & 0xFFFFFFFFUL); (c3) = convert_uint8(p0_ & 0xFFFFFFFFUL); \
+        (c0) = n0_; (c2) = n2_; \
+    } while (0)
+
+inline double8 uniform8(uint8 x) { return convert_double8(x >> 8) * (1.0 / 16777216.0); }
+
+inline void sincos8(const double8 phi, double8 *s, double8 *c) {
+    const double8 q = rint(phi * TWO_OVER_PI);
+    const double8 r = (phi - q * PIO2_HI) - q * PIO2_LO;
+    const double8 z = r * r;
+    const double8 sr = r + (z * r) * (-1.66666666666666324348e-01 + z * (8.33333333332248946124e-03
+        + z * (-1.98412698298579493134e-04 + z * (2.75573137070700676789e-06
+        + z * (-2.50507602534068634195e-08 + z * 1.58969099521155010221e-10)))));
+    const double8 cr = 1.0 - (0.5 * z - z * (z * (4.16666666666666019037e-02 + z * (-1.38888888888741095749e-03
+        + z * (2.48015872894767294178e-05 + z * (-2.75573143513906633035e-07
+        + z * (2.08757232129817482790e-09 + z * -1.13596475577881948265e-11)))))));
+    const long8 quadrant = convert_long8(q) & 3L;
+    *s = select(select(select(-cr, -sr, quadrant == 2L), cr, quadrant == 1L), sr, quadrant == 0L);
+    *c = select(select(select(sr, -cr, quadrant == 2L), -sr, quadrant == 1L), cr, quadrant == 0L);
+}
+
+__kernel void scatter8(
     const long count, const int depth, const uint key0, const uint key1, const double epsilon,
     __global const int *tri, __global const float *hit_u, __global const float *hit_v,
     __global const float *dir_in, __global const double *beta_in, __global const long *photon,
+    __global const double *glossy_cos,
     __global const float *corners, __global const double *normals, __global const int *tri_mat,
     __global const int *tri_n, __global const long *tri_offset,
     __global const double *albedo, __global const int *mat_kind, __global const double *mat_exp,
@@ -28,83 +69,114 @@ __kernel void scatter(
     __global float *origin_out, __global float *dir_out, __global double *beta_out,
     __global uchar *alive)
 {
-    // Launched on whole work-groups: the items past the end repeat the last row, writing the same
-    // values to the same places, which needs neither padding copies nor a branch.
-    const size_t i = min((long)get_global_id(0), count - 1);
-    const int hit = tri[i] >= 0;  // a miss (-1) records nothing and ends its path
-    const int t = hit ? tri[i] : 0;
-    const int m = tri_mat[t];
-    const int kind = mat_kind[m];
-    const double u = (double)hit_u[i], v = (double)hit_v[i];
-    const double w0 = 1.0 - u - v;
-    const size_t c9 = 9 * (size_t)t;
-    const double px = w0 * corners[c9] + u * corners[c9 + 3] + v * corners[c9 + 6];
-    const double py = w0 * corners[c9 + 1] + u * corners[c9 + 4] + v * corners[c9 + 7];
-    const double pz = w0 * corners[c9 + 2] + u * corners[c9 + 5] + v * corners[c9 + 8];
-    const double nx = normals[3 * t], ny = normals[3 * t + 1], nz = normals[3 * t + 2];
-    const double dx = dir_in[3 * i], dy = dir_in[3 * i + 1], dz = dir_in[3 * i + 2];
-    const double fs = nx * dx + ny * dy + nz * dz < 0.0 ? 1.0 : -1.0;  // normal facing the ray
-    const double fx_ = fs * nx, fy_ = fs * ny, fz_ = fs * nz;
-    double bx = beta_in[3 * i], by = beta_in[3 * i + 1], bz = beta_in[3 * i + 2];
-    const long ph = photon[i];
+    const long8 i = min((long8)(8 * (long)get_global_id(0)) + (long8)(0, 1, 2, 3, 4, 5, 6, 7),
+                        (long8)(count - 1));
+    const long8 tri_i = convert_long8(G8(int8, tri, i));
+    const long8 hit = tri_i >= 0L;  // a miss (-1) records nothing and ends its path
+    const long8 t = select((long8)(0), tri_i, hit);
+    const long8 m = convert_long8(G8(int8, tri_mat, t));
+    const long8 kind = convert_long8(G8(int8, mat_kind, m));
+    const double8 u = convert_double8(G8(float8, hit_u, i)), v = convert_double8(G8(float8, hit_v, i));
+    const double8 w0 = 1.0 - u - v;
+    const long8 c9 = 9 * t;
+    const double8 px = w0 * convert_double8(G8(float8, corners, c9)) + u * convert_double8(G8(float8, corners, c9 + 3))
+                     + v * convert_double8(G8(float8, corners, c9 + 6));
+    const double8 py = w0 * convert_double8(G8(float8, corners, c9 + 1)) + u * convert_double8(G8(float8, corners, c9 + 4))
+                     + v * convert_double8(G8(float8, corners, c9 + 7));
+    const double8 pz = w0 * convert_double8(G8(float8, corners, c9 + 2)) + u * convert_double8(G8(float8, corners, c9 + 5))
+                     + v * convert_double8(G8(float8, corners, c9 + 8));
+    const double8 nx = G8(double8, normals, 3 * t), ny = G8(double8, normals, 3 * t + 1),
+                  nz = G8(double8, normals, 3 * t + 2);
+    const double8 dx = convert_double8(G8(float8, dir_in, 3 * i)), dy = convert_double8(G8(float8, dir_in, 3 * i + 1)),
+                  dz = convert_double8(G8(float8, dir_in, 3 * i + 2));
+    const double8 fs = select((double8)(-1.0), (double8)(1.0), nx * dx + ny * dy + nz * dz < 0.0);
+    const double8 fx_ = fs * nx, fy_ = fs * ny, fz_ = fs * nz;
+    double8 bx = G8(double8, beta_in, 3 * i), by = G8(double8, beta_in, 3 * i + 1), bz = G8(double8, beta_in, 3 * i + 2);
+    const long8 ph = G8(long8, photon, i);
 
     // Record a diffuse hit: locate the element (ElementMesh.locate) and its barycentrics
-    const int is_diffuse = hit && kind == KIND_DIFFUSE;
-    const long ns = tri_n[t];
-    const double x = fmin(fmax(u, 0.0), 1.0) * (double)ns;
-    const double y = fmin(fmax(v, 0.0), 1.0) * (double)ns;
-    const long a = min(max((long)floor(x), 0L), ns - 1);
-    const long b = min(max((long)floor(y), 0L), ns - 1 - a);
-    const double ex = x - (double)a, ey = y - (double)b;
-    const int up = (ex + ey <= 1.0) || (a + b >= ns - 1);
-    const long cell = up ? a * ns - a * (a - 1) / 2 + b
-                         : ns * (ns + 1) / 2 + a * (ns - 1) - a * (a - 1) / 2 + b;
-    const double b1 = fmin(fmax(up ? ex : ex + ey - 1.0, 0.0), 1.0);
-    const double b2 = fmin(fmax(up ? ey : 1.0 - ex, 0.0), 1.0 - b1);
-    uint k = (uint)(tri_offset[t] + cell);
-    k |= (ph & 1L) ? PARITY_BIT : 0u;
-    k |= depth == 0 ? DIRECT_BIT : 0u;
-    rec_key[i] = is_diffuse ? k : 0u;
-    rec_bary[2 * i] = is_diffuse ? (ushort)rint(b1 * 65535.0) : (ushort)0;
-    rec_bary[2 * i + 1] = is_diffuse ? (ushort)rint(b2 * 65535.0) : (ushort)0;
-    rec_energy[3 * i] = is_diffuse ? (float)bx : 0.0f;
-    rec_energy[3 * i + 1] = is_diffuse ? (float)by : 0.0f;
-    rec_energy[3 * i + 2] = is_diffuse ? (float)bz : 0.0f;
-    recorded[i] = (uchar)is_diffuse;
+    const long8 is_diffuse = hit & (kind == (long8)(KIND_DIFFUSE));
+    const long8 ns = convert_long8(G8(int8, tri_n, t));
+    const double8 x = fmin(fmax(u, 0.0), 1.0) * convert_double8(ns);
+    const double8 y = fmin(fmax(v, 0.0), 1.0) * convert_double8(ns);
+    const long8 a = min(max(convert_long8(floor(x)), (long8)(0)), ns - 1);
+    const long8 b = min(max(convert_long8(floor(y)), (long8)(0)), ns - 1 - a);
+    const double8 ex = x - convert_double8(a), ey = y - convert_double8(b);
+    const long8 up = (ex + ey <= 1.0) | (a + b >= ns - 1);
+    const long8 cell = select(ns * (ns + 1) / 2 + a * (ns - 1) - a * (a - 1) / 2 + b,
+                              a * ns - a * (a - 1) / 2 + b, up);
+    const double8 b1 = fmin(fmax(select(ex + ey - 1.0, ex, up), 0.0), 1.0);
+    const double8 b2 = fmin(fmax(select(1.0 - ex, ey, up), 0.0), 1.0 - b1);
+    ulong8 k = convert_ulong8(G8(long8, tri_offset, t) + cell) & 0xFFFFFFFFUL;
+    k |= select((ulong8)(0), (ulong8)(PARITY_BIT), (ph & 1L) != 0L);
+    k |= (ulong8)(depth == 0 ? DIRECT_BIT : 0u);
+    k = select((ulong8)(0), k, is_diffuse);
+    S8(rec_key, i, convert_uint8(k));
+    const ushort8 q1 = convert_ushort8(select((double8)(0.0), rint(b1 * 65535.0), is_diffuse));
+    const ushort8 q2 = convert_ushort8(select((double8)(0.0), rint(b2 * 65535.0), is_diffuse));
+    S8(rec_bary, 2 * i, q1);
+    S8(rec_bary, 2 * i + 1, q2);
+    S8(rec_energy, 3 * i, convert_float8(select((double8)(0.0), bx, is_diffuse)));
+    S8(rec_energy, 3 * i + 1, convert_float8(select((double8)(0.0), by, is_diffuse)));
+    S8(rec_energy, 3 * i + 2, convert_float8(select((double8)(0.0), bz, is_diffuse)));
+    S8(recorded, i, convert_uchar8(-is_diffuse));
 
     // Philox words of counter (photon, depth) under key (seed, frame): roulette, two for the direction
-    uint r0 = (uint)ph, r1 = (uint)(ph >> 32), r2 = (uint)depth, r3 = 0u;
-    PHILOX4X32_10(r0, r1, r2, r3, key0, key1);
+    uint8 r0 = convert_uint8(ph & 0xFFFFFFFFL), r1 = convert_uint8(ph >> 32), r2 = (uint8)((uint)depth), r3 = (uint8)(0u);
+    uint k0 = key0, k1 = key1;
+    PHILOX8_ROUND(r0, r1, r2, r3, k0, k1); PHILOX_BUMP(k0, k1);
+    PHILOX8_ROUND(r0, r1, r2, r3, k0, k1); PHILOX_BUMP(k0, k1);
+    PHILOX8_ROUND(r0, r1, r2, r3, k0, k1); PHILOX_BUMP(k0, k1);
+    PHILOX8_ROUND(r0, r1, r2, r3, k0, k1); PHILOX_BUMP(k0, k1);
+    PHILOX8_ROUND(r0, r1, r2, r3, k0, k1); PHILOX_BUMP(k0, k1);
+    PHILOX8_ROUND(r0, r1, r2, r3, k0, k1); PHILOX_BUMP(k0, k1);
+    PHILOX8_ROUND(r0, r1, r2, r3, k0, k1); PHILOX_BUMP(k0, k1);
+    PHILOX8_ROUND(r0, r1, r2, r3, k0, k1); PHILOX_BUMP(k0, k1);
+    PHILOX8_ROUND(r0, r1, r2, r3, k0, k1); PHILOX_BUMP(k0, k1);
+    PHILOX8_ROUND(r0, r1, r2, r3, k0, k1);
 
     // Russian roulette on the albedo: survive with q = max channel, reweight by albedo / q
-    const double ax = albedo[3 * m], ay = albedo[3 * m + 1], az = albedo[3 * m + 2];
-    const double q = fmax(ax, fmax(ay, az));
-    int survive = philox_uniform(r0) < q;
-    const double qs = q > 0.0 ? q : 1.0;
+    const double8 ax = G8(double8, albedo, 3 * m), ay = G8(double8, albedo, 3 * m + 1), az = G8(double8, albedo, 3 * m + 2);
+    const double8 q = fmax(ax, fmax(ay, az));
+    long8 survive = uniform8(r0) < q;
+    const double8 qs = select((double8)(1.0), q, q > 0.0);
     bx = bx * ax / qs; by = by * ay / qs; bz = bz * az / qs;
 
     // Next direction: cosine lobe about the facing normal, mirror, or Phong lobe about the mirror
-    const double dn = dx * fx_ + dy * fy_ + dz * fz_;
-    const double mx = dx - 2.0 * dn * fx_, my = dy - 2.0 * dn * fy_, mz = dz - 2.0 * dn * fz_;
-    const double u1 = philox_uniform(r1), u2 = philox_uniform(r2);
-    const int is_glossy = kind == KIND_GLOSSY;
-    const double e = mat_exp[m];
-    const double cos_t = is_glossy ? pow(u1, 1.0 / (e + 1.0)) : sqrt(1.0 - u1);
-    // The lobe's axis: the facing normal (diffuse) or the mirror direction (glossy)
-    const double zx = is_diffuse ? fx_ : mx, zy = is_diffuse ? fy_ : my, zz = is_diffuse ? fz_ : mz;
-    double lx, ly, lz;
-    around(zx, zy, zz, cos_t, 2.0 * M_PI * u2, &lx, &ly, &lz);
-    const int is_mirror = kind == KIND_MIRROR;
-    const double ox = is_mirror ? mx : lx, oy = is_mirror ? my : ly, oz = is_mirror ? mz : lz;
-    const double cos_o = ox * fx_ + oy * fy_ + oz * fz_;
-    const double gw = is_glossy ? fmax(cos_o, 0.0) * (e + 2.0) / (e + 1.0) : 1.0;
+    const double8 dn = dx * fx_ + dy * fy_ + dz * fz_;
+    const double8 mx = dx - 2.0 * dn * fx_, my = dy - 2.0 * dn * fy_, mz = dz - 2.0 * dn * fz_;
+    const double8 u1 = uniform8(r1), u2 = uniform8(r2);
+    const long8 is_glossy = kind == (long8)(KIND_GLOSSY);
+    const double8 e = G8(double8, mat_exp, m);
+    const double8 cos_t = select(sqrt(1.0 - u1), G8(double8, glossy_cos, select((long8)(0), i, is_glossy)), is_glossy);
+    const double8 zx = select(mx, fx_, is_diffuse), zy = select(my, fy_, is_diffuse), zz = select(mz, fz_, is_diffuse);
+    // orthonormal basis about z (Duff et al., JCGT 6(1), 2017), then the direction as sampling.cl
+    const double8 sgn = select((double8)(-1.0), (double8)(1.0), zz >= 0.0);
+    const double8 ia = -1.0 / (sgn + zz);
+    const double8 ib = zx * zy * ia;
+    const double8 tx = 1.0 + sgn * zx * zx * ia, ty = sgn * ib, tz = -sgn * zx;
+    const double8 sx = ib, sy = sgn + zy * zy * ia, sz = -zy;
+    const double8 sin_t = sqrt(fmin(fmax(1.0 - cos_t * cos_t, 0.0), 1.0));
+    double8 sp, cp;
+    sincos8(2.0 * M_PI * u2, &sp, &cp);
+    const double8 lx = tx * (sin_t * cp) + sx * (sin_t * sp) + zx * cos_t;
+    const double8 ly = ty * (sin_t * cp) + sy * (sin_t * sp) + zy * cos_t;
+    const double8 lz = tz * (sin_t * cp) + sz * (sin_t * sp) + zz * cos_t;
+    const long8 is_mirror = kind == (long8)(KIND_MIRROR);
+    const double8 ox = select(lx, mx, is_mirror), oy = select(ly, my, is_mirror), oz = select(lz, mz, is_mirror);
+    const double8 cos_o = ox * fx_ + oy * fy_ + oz * fz_;
+    const double8 gw = select((double8)(1.0), fmax(cos_o, 0.0) * (e + 2.0) / (e + 1.0), is_glossy);
     bx *= gw; by *= gw; bz *= gw;
-    survive = survive && (!is_glossy || cos_o > 0.0);
-    const double side = nx * ox + ny * oy + nz * oz < 0.0 ? -epsilon : epsilon;
-    origin_out[3 * i] = (float)(px + nx * side);
-    origin_out[3 * i + 1] = (float)(py + ny * side);
-    origin_out[3 * i + 2] = (float)(pz + nz * side);
-    dir_out[3 * i] = (float)ox; dir_out[3 * i + 1] = (float)oy; dir_out[3 * i + 2] = (float)oz;
-    beta_out[3 * i] = bx; beta_out[3 * i + 1] = by; beta_out[3 * i + 2] = bz;
-    alive[i] = (uchar)(survive && hit);
+    survive = survive & (~is_glossy | (cos_o > 0.0));
+    const double8 side = select((double8)(epsilon), (double8)(-epsilon), nx * ox + ny * oy + nz * oz < 0.0);
+    S8(origin_out, 3 * i, convert_float8(px + nx * side));
+    S8(origin_out, 3 * i + 1, convert_float8(py + ny * side));
+    S8(origin_out, 3 * i + 2, convert_float8(pz + nz * side));
+    S8(dir_out, 3 * i, convert_float8(ox));
+    S8(dir_out, 3 * i + 1, convert_float8(oy));
+    S8(dir_out, 3 * i + 2, convert_float8(oz));
+    S8(beta_out, 3 * i, bx);
+    S8(beta_out, 3 * i + 1, by);
+    S8(beta_out, 3 * i + 2, bz);
+    S8(alive, i, convert_uchar8(-(survive & hit)));
 }

@@ -26,6 +26,7 @@ from .sampling import around
 
 KIND_CODE = {"diffuse": 0, "mirror": 1, "glossy": 2}
 WORK_GROUP = 64
+LANES = 8  # rays per work item of scatter8
 PARITY_BIT = np.uint32(1 << 30)
 DIRECT_BIT = np.uint32(1 << 31)
 
@@ -69,6 +70,20 @@ class Bounce:
     dirs: np.ndarray  # (m, 3) float32
     beta: np.ndarray  # (m, 3) float64
     alive: np.ndarray  # bool
+
+
+def glossy_cos(tables: SceneTables, hits: Hits, depth: int, key: tuple[int, int]) -> np.ndarray:
+    """cos of the Phong lobe's angle, u1^(1/(e+1)), for the glossy hits (0 elsewhere). Both backends
+    take it from here: pow is a libm call, which would differ between NumPy and PoCL."""
+    out = np.zeros(max(len(hits.tri), 1))
+    if not (tables.kind == 2).any():
+        return out
+    m = tables.tri_mat[np.maximum(hits.tri, 0)]
+    glossy = np.flatnonzero((hits.tri >= 0) & (tables.kind[m] == 2))
+    if len(glossy):
+        u1 = uniforms(hits.photon[glossy], depth, key)[:, 1]
+        out[glossy] = u1 ** (1.0 / (tables.exponent[m[glossy]] + 1.0))
+    return out
 
 
 def scatter_reference(tables: SceneTables, hits: Hits, depth: int, key: tuple[int, int]) -> Bounce:
@@ -118,13 +133,14 @@ def scatter_reference(tables: SceneTables, hits: Hits, depth: int, key: tuple[in
     mirror = d - 2.0 * np.einsum("ij,ij->i", d, facing)[:, None] * facing
     nd = np.empty((m_count, 3))
     diffuse = kind == 0
-    nd[diffuse] = around(facing[diffuse], np.sqrt(1.0 - w[diffuse, 1]), 2.0 * np.pi * w[diffuse, 2])
+    nd[diffuse] = around(facing[diffuse], np.sqrt(1.0 - w[diffuse, 1]), 2.0 * np.pi * w[diffuse, 2],
+                         polynomial=True)
     nd[kind == 1] = mirror[kind == 1]
     glossy = kind == 2
     if glossy.any():
         e = tables.exponent[m[glossy]]
-        cos_a = w[glossy, 1] ** (1.0 / (e + 1.0))
-        g = around(mirror[glossy], cos_a, 2.0 * np.pi * w[glossy, 2])
+        cos_a = glossy_cos(tables, hits, depth, key)[glossy]
+        g = around(mirror[glossy], cos_a, 2.0 * np.pi * w[glossy, 2], polynomial=True)
         cos_o = np.einsum("ij,ij->i", g, facing[glossy])
         beta[glossy] *= (np.maximum(cos_o, 0.0) * (e + 2.0) / (e + 1.0))[:, None]
         survive[glossy] &= cos_o > 0
@@ -144,7 +160,7 @@ class ScatterCL:
 
         self._cl = cl
         self.ctx, self.queue = device_context()
-        self.kernel = kernel("scatter", "scatter")
+        self.kernel = kernel("scatter", "scatter8")
         self.tables = tables
         flags = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
         self._tables = [cl.Buffer(self.ctx, flags, hostbuf=np.ascontiguousarray(a)) for a in (
@@ -160,11 +176,13 @@ class ScatterCL:
             return scatter_reference(self.tables, hits, depth, key)
         # A fixed work-group size: PoCL specialises (and compiles) a kernel per local size, so a
         # size chosen per launch would recompile for every new wavefront length.
-        padded = -(-m // WORK_GROUP) * WORK_GROUP
+        items = -(-m // LANES)  # eight rays a work item
+        padded = -(-items // WORK_GROUP) * WORK_GROUP
         inputs = [device_input(self.ctx, a) for a in (
             hits.tri.astype(np.int32, copy=False), hits.u.astype(np.float32, copy=False),
             hits.v.astype(np.float32, copy=False), hits.dirs.astype(np.float32, copy=False),
-            hits.beta.astype(np.float64, copy=False), hits.photon.astype(np.int64, copy=False))]
+            hits.beta.astype(np.float64, copy=False), hits.photon.astype(np.int64, copy=False),
+            glossy_cos(self.tables, hits, depth, key))]
         out = Bounce(np.empty(m, np.uint32), np.empty((m, 2), np.uint16), np.empty((m, 3), np.float32),
                      np.empty(m, np.uint8), np.empty((m, 3), np.float32), np.empty((m, 3), np.float32),
                      np.empty((m, 3), np.float64), np.empty(m, np.uint8))
