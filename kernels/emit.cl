@@ -2,8 +2,7 @@
 // direction and an RGB weight. NumPy twin and formulas: kernels/emit.py::emit_reference.
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #pragma OPENCL FP_CONTRACT OFF  // no fused multiply-add: the NumPy twin rounds every product
-#include "philox.cl"
-#include "sampling.cl"
+#include "lanes.cl"
 
 #define EMIT_POINT 0
 #define EMIT_SPOT 1
@@ -11,7 +10,10 @@
 #define EMIT_AREA 3
 #define EMISSION_STREAM 0xFFFF0000u
 
-__kernel void emit(
+// Eight photons a work item in explicit vector types, for the reasons given in lanes.cl: every
+// lane computes the four kinds of emitter and keeps its own. Lane l of work item g is photon
+// min(8 g + l, count - 1); past the end, lanes repeat the last photon and write the same values.
+__kernel void emit8(
     const long count, const uint key0, const uint key1, const int n_emitters,
     const double cx, const double cy, const double cz, const double radius, const double epsilon,
     __global const long *photon,
@@ -22,67 +24,97 @@ __kernel void emit(
     __global const float *corners, __global const double *normals,
     __global float *origin_out, __global float *dir_out, __global double *beta_out, __global int *emitter)
 {
-    const size_t i = min((long)get_global_id(0), count - 1);  // whole work-groups; see scatter.cl
-    const long ph = photon[i];
-    uint r0 = (uint)ph, r1 = (uint)(ph >> 32), r2 = EMISSION_STREAM, r3 = 0u;
-    PHILOX4X32_10(r0, r1, r2, r3, key0, key1);
-    uint s0 = (uint)ph, s1 = (uint)(ph >> 32), s2 = EMISSION_STREAM + 1u, s3 = 0u;
-    PHILOX4X32_10(s0, s1, s2, s3, key0, key1);
-    const double w0 = philox_uniform(r0), u1 = philox_uniform(r1), u2 = philox_uniform(r2);
-    const double u3 = philox_uniform(r3), u4 = philox_uniform(s0);
+    const long8 i = min((long8)(8 * (long)get_global_id(0)) + (long8)(0, 1, 2, 3, 4, 5, 6, 7),
+                        (long8)(count - 1));
+    const long8 ph = G8(long8, photon, i);
+    uint8 r0 = convert_uint8(ph & 0xFFFFFFFFL), r1 = convert_uint8(ph >> 32);
+    uint8 r2 = (uint8)(EMISSION_STREAM), r3 = (uint8)(0u);
+    PHILOX8_10(r0, r1, r2, r3, key0, key1);
+    uint8 s0 = convert_uint8(ph & 0xFFFFFFFFL), s1 = convert_uint8(ph >> 32);
+    uint8 s2 = (uint8)(EMISSION_STREAM + 1u), s3 = (uint8)(0u);
+    PHILOX8_10(s0, s1, s2, s3, key0, key1);
+    const double8 w0 = uniform8(r0), u1 = uniform8(r1), u2 = uniform8(r2), u3 = uniform8(r3), u4 = uniform8(s0);
 
     // First emitter whose CDF exceeds w0 (numpy.searchsorted side="right"), clamped to the last
-    int lo = 0, hi = n_emitters;
-    while (lo < hi) {
-        const int mid = (lo + hi) / 2;
-        if (cdf[mid] <= w0) lo = mid + 1; else hi = mid;
+    long8 lo = (long8)(0), hi = (long8)(n_emitters);
+    while (any(lo < hi)) {
+        const long8 active = lo < hi;
+        const long8 mid = (lo + hi) / 2;
+        const long8 go = active & (G8(double8, cdf, min(mid, (long8)(n_emitters - 1))) <= w0);
+        lo = select(lo, mid + 1, go);
+        hi = select(hi, mid, active & ~go);
     }
-    const int e = min(lo, n_emitters - 1);
-    const int k = kind[e];
-    const long src = index[e];
-    double ox, oy, oz, dx, dy, dz, wr, wg, wb;
-    if (k == EMIT_AREA) {
-        const double su = sqrt(u1);
-        const double b1 = su * (1.0 - u2), b2 = su * u2, b0 = 1.0 - b1 - b2;
-        const size_t c9 = 9 * (size_t)src;
-        const double nx = normals[3 * src], ny = normals[3 * src + 1], nz = normals[3 * src + 2];
-        around(nx, ny, nz, sqrt(1.0 - u3), 2.0 * M_PI * u4, &dx, &dy, &dz);
-        ox = b0 * corners[c9] + b1 * corners[c9 + 3] + b2 * corners[c9 + 6] + nx * epsilon;
-        oy = b0 * corners[c9 + 1] + b1 * corners[c9 + 4] + b2 * corners[c9 + 7] + ny * epsilon;
-        oz = b0 * corners[c9 + 2] + b1 * corners[c9 + 5] + b2 * corners[c9 + 8] + nz * epsilon;
-        wr = flux[3 * e]; wg = flux[3 * e + 1]; wb = flux[3 * e + 2];
-    } else {
-        const double ax = light_dir[3 * src], ay = light_dir[3 * src + 1], az = light_dir[3 * src + 2];
-        const double rr = light_rad[3 * src], rg = light_rad[3 * src + 1], rb = light_rad[3 * src + 2];
-        ox = light_pos[3 * src]; oy = light_pos[3 * src + 1]; oz = light_pos[3 * src + 2];
-        if (k == EMIT_POINT) {
-            around(0.0, 0.0, 1.0, 1.0 - 2.0 * u1, 2.0 * M_PI * u2, &dx, &dy, &dz);
-            const double s = 4.0 * M_PI;
-            wr = rr * s; wg = rg * s; wb = rb * s;
-        } else if (k == EMIT_SPOT) {
-            const double co = cos_outer[src], ci = cos_inner[src];
-            const double cos_t = 1.0 - u1 * (1.0 - co);
-            around(ax, ay, az, cos_t, 2.0 * M_PI * u2, &dx, &dy, &dz);
-            double f = fmin(fmax((cos_t - co) / (ci - co), 0.0), 1.0);
-            f = f * f;
-            const double s = f * (2.0 * M_PI * (1.0 - co));
-            wr = rr * s; wg = rg * s; wb = rb * s;
-        } else {  // directional: a disk of the scene's radius facing the light, upstream of the scene
-            const double r = radius * sqrt(u1), phi = 2.0 * M_PI * u2;
-            double tx, ty, tz, sx, sy, sz;
-            orthonormal_basis(ax, ay, az, &tx, &ty, &tz, &sx, &sy, &sz);
-            const double rc = r * cos(phi), rs = r * sin(phi), back = radius * 1.05;
-            ox = cx + (tx * rc + sx * rs) - ax * back;
-            oy = cy + (ty * rc + sy * rs) - ay * back;
-            oz = cz + (tz * rc + sz * rs) - az * back;
-            dx = ax; dy = ay; dz = az;
-            const double s = M_PI * radius * radius;
-            wr = rr * s; wg = rg * s; wb = rb * s;
-        }
-    }
-    const double p = prob[e];
-    origin_out[3 * i] = (float)ox; origin_out[3 * i + 1] = (float)oy; origin_out[3 * i + 2] = (float)oz;
-    dir_out[3 * i] = (float)dx; dir_out[3 * i + 1] = (float)dy; dir_out[3 * i + 2] = (float)dz;
-    beta_out[3 * i] = wr / p; beta_out[3 * i + 1] = wg / p; beta_out[3 * i + 2] = wb / p;
-    emitter[i] = e;
+    const long8 e = min(lo, (long8)(n_emitters - 1));
+    const long8 k = convert_long8(G8(int8, kind, e));
+    const long8 src = G8(long8, index, e);
+    const long8 is_area = k == (long8)(EMIT_AREA);
+    const long8 tri = select((long8)(0), src, is_area);
+    const long8 li = select(src, (long8)(0), is_area);
+
+    // Emissive triangle: uniform on it, cosine-weighted about its front normal
+    const double8 su = sqrt(u1);
+    const double8 b1 = su * (1.0 - u2), b2 = su * u2, b0 = 1.0 - b1 - b2;
+    const long8 c9 = 9 * tri;
+    const double8 nx = G8(double8, normals, 3 * tri), ny = G8(double8, normals, 3 * tri + 1),
+                  nz = G8(double8, normals, 3 * tri + 2);
+    double8 adx, ady, adz;
+    around8(nx, ny, nz, sqrt(1.0 - u3), 2.0 * M_PI * u4, &adx, &ady, &adz);
+    const double8 aox = b0 * convert_double8(G8(float8, corners, c9)) + b1 * convert_double8(G8(float8, corners, c9 + 3))
+                      + b2 * convert_double8(G8(float8, corners, c9 + 6)) + nx * epsilon;
+    const double8 aoy = b0 * convert_double8(G8(float8, corners, c9 + 1)) + b1 * convert_double8(G8(float8, corners, c9 + 4))
+                      + b2 * convert_double8(G8(float8, corners, c9 + 7)) + ny * epsilon;
+    const double8 aoz = b0 * convert_double8(G8(float8, corners, c9 + 2)) + b1 * convert_double8(G8(float8, corners, c9 + 5))
+                      + b2 * convert_double8(G8(float8, corners, c9 + 8)) + nz * epsilon;
+
+    // Punctual lights
+    const double8 ax = G8(double8, light_dir, 3 * li), ay = G8(double8, light_dir, 3 * li + 1),
+                  az = G8(double8, light_dir, 3 * li + 2);
+    const double8 rr = G8(double8, light_rad, 3 * li), rg = G8(double8, light_rad, 3 * li + 1),
+                  rb = G8(double8, light_rad, 3 * li + 2);
+    const double8 lx = G8(double8, light_pos, 3 * li), ly = G8(double8, light_pos, 3 * li + 1),
+                  lz = G8(double8, light_pos, 3 * li + 2);
+    double8 pdx, pdy, pdz;  // point: uniform on the sphere
+    around8((double8)(0.0), (double8)(0.0), (double8)(1.0), 1.0 - 2.0 * u1, 2.0 * M_PI * u2, &pdx, &pdy, &pdz);
+    const double8 co = G8(double8, cos_outer, li), ci = G8(double8, cos_inner, li);
+    const double8 cos_t = 1.0 - u1 * (1.0 - co);  // spot: uniform in the outer cone
+    double8 sdx, sdy, sdz;
+    around8(ax, ay, az, cos_t, 2.0 * M_PI * u2, &sdx, &sdy, &sdz);
+    double8 f = fmin(fmax((cos_t - co) / (ci - co), 0.0), 1.0);
+    f = f * f;
+    const double8 spot_s = f * (2.0 * M_PI * (1.0 - co));
+    // directional: a disk of the scene's radius facing the light, upstream of the scene
+    const double8 r = radius * sqrt(u1), phi = 2.0 * M_PI * u2;
+    double8 tx, ty, tz, sx, sy, sz, sp, cp;
+    basis8(ax, ay, az, &tx, &ty, &tz, &sx, &sy, &sz);
+    sincos8(phi, &sp, &cp);
+    const double8 rc = r * cp, rs = r * sp;
+    const double back = radius * 1.05;
+    const double8 dox = cx + (tx * rc + sx * rs) - ax * back;
+    const double8 doy = cy + (ty * rc + sy * rs) - ay * back;
+    const double8 doz = cz + (tz * rc + sz * rs) - az * back;
+    const double8 scale = select(select(select((double8)(M_PI * radius * radius), spot_s, k == (long8)(EMIT_SPOT)),
+                                        (double8)(4.0 * M_PI), k == (long8)(EMIT_POINT)), (double8)(0.0), is_area);
+
+    const long8 is_point = k == (long8)(EMIT_POINT), is_spot = k == (long8)(EMIT_SPOT);
+    const long8 is_dir = k == (long8)(EMIT_DIRECTIONAL);
+    const double8 ox = select(select(lx, dox, is_dir), aox, is_area);
+    const double8 oy = select(select(ly, doy, is_dir), aoy, is_area);
+    const double8 oz = select(select(lz, doz, is_dir), aoz, is_area);
+    const double8 dx = select(select(select(ax, sdx, is_spot), pdx, is_point), adx, is_area);
+    const double8 dy = select(select(select(ay, sdy, is_spot), pdy, is_point), ady, is_area);
+    const double8 dz = select(select(select(az, sdz, is_spot), pdz, is_point), adz, is_area);
+    const double8 wr = select(rr * scale, G8(double8, flux, 3 * e), is_area);
+    const double8 wg = select(rg * scale, G8(double8, flux, 3 * e + 1), is_area);
+    const double8 wb = select(rb * scale, G8(double8, flux, 3 * e + 2), is_area);
+    const double8 p = G8(double8, prob, e);
+    S8(origin_out, 3 * i, convert_float8(ox));
+    S8(origin_out, 3 * i + 1, convert_float8(oy));
+    S8(origin_out, 3 * i + 2, convert_float8(oz));
+    S8(dir_out, 3 * i, convert_float8(dx));
+    S8(dir_out, 3 * i + 1, convert_float8(dy));
+    S8(dir_out, 3 * i + 2, convert_float8(dz));
+    S8(beta_out, 3 * i, wr / p);
+    S8(beta_out, 3 * i + 1, wg / p);
+    S8(beta_out, 3 * i + 2, wb / p);
+    S8(emitter, i, convert_int8(e));
 }

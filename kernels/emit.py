@@ -22,8 +22,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .philox import EMISSION_STREAM, uniforms
-from .sampling import around, orthonormal_basis
-from .scatter import WORK_GROUP, device_input, device_output, read_back
+from .sampling import around, orthonormal_basis, sincos_poly
+from .scatter import LANES, WORK_GROUP, device_input, device_output, read_back
 
 POINT, SPOT, DIRECTIONAL, AREA = 0, 1, 2, 3
 
@@ -64,7 +64,7 @@ def emit_reference(t: EmissionTables, photon: np.ndarray, key: tuple[int, int]):
         b0 = 1.0 - b1 - b2
         c = t.corners[src[a]].astype(np.float64)
         nrm = t.normals[src[a]]
-        dirs[a] = around(nrm, np.sqrt(1.0 - u3[a]), 2.0 * np.pi * u4[a])
+        dirs[a] = around(nrm, np.sqrt(1.0 - u3[a]), 2.0 * np.pi * u4[a], polynomial=True)
         origins[a] = b0[:, None] * c[:, 0:3] + b1[:, None] * c[:, 3:6] + b2[:, None] * c[:, 6:9] + nrm * t.epsilon
         weights[a] = t.flux[e[a]]
     lights = ~a
@@ -76,12 +76,13 @@ def emit_reference(t: EmissionTables, photon: np.ndarray, key: tuple[int, int]):
     d = np.empty((len(li), 3))
     wgt = np.empty((len(li), 3))
     p = k == POINT
-    d[p] = around(np.tile([0.0, 0.0, 1.0], (p.sum(), 1)), 1.0 - 2.0 * sub_u1[p], 2.0 * np.pi * sub_u2[p])
+    d[p] = around(np.tile([0.0, 0.0, 1.0], (p.sum(), 1)), 1.0 - 2.0 * sub_u1[p], 2.0 * np.pi * sub_u2[p],
+                  polynomial=True)
     wgt[p] = rad[p] * (4.0 * np.pi)
     s = k == SPOT
     co, ci = t.cos_outer[li[s]], t.cos_inner[li[s]]
     cos_t = 1.0 - sub_u1[s] * (1.0 - co)
-    d[s] = around(axis[s], cos_t, 2.0 * np.pi * sub_u2[s])
+    d[s] = around(axis[s], cos_t, 2.0 * np.pi * sub_u2[s], polynomial=True)
     f = np.minimum(np.maximum((cos_t - co) / (ci - co), 0.0), 1.0)
     wgt[s] = rad[s] * (f * f * (2.0 * np.pi * (1.0 - co)))[:, None]
     dl = k == DIRECTIONAL
@@ -89,7 +90,8 @@ def emit_reference(t: EmissionTables, photon: np.ndarray, key: tuple[int, int]):
         r = t.radius * np.sqrt(sub_u1[dl])
         phi = 2.0 * np.pi * sub_u2[dl]
         tt, ss = orthonormal_basis(axis[dl])
-        rc, rs = r * np.cos(phi), r * np.sin(phi)
+        sp, cp = sincos_poly(phi)
+        rc, rs = r * cp, r * sp
         sub = np.flatnonzero(lights)[dl]
         origins[sub] = t.center + (tt * rc[:, None] + ss * rs[:, None]) - axis[dl] * (t.radius * 1.05)
         d[dl] = axis[dl]
@@ -101,7 +103,7 @@ def emit_reference(t: EmissionTables, photon: np.ndarray, key: tuple[int, int]):
 
 
 class EmitCL:
-    """``emit.cl`` with the emitter tables resident on the device; one instance per frame state."""
+    """``emit8`` of emit.cl with the emitter tables resident on the device; one per frame state."""
 
     def __init__(self, tables: EmissionTables):
         import pyopencl as cl
@@ -110,7 +112,7 @@ class EmitCL:
 
         self._cl = cl
         self.ctx, self.queue = device_context()
-        self.kernel = kernel("emit", "emit")
+        self.kernel = kernel("emit", "emit8")
         self.tables = tables
         ro = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
 
@@ -129,7 +131,8 @@ class EmitCL:
         n = len(photon)
         if n == 0:
             return emit_reference(self.tables, photon, key)
-        padded = -(-n // WORK_GROUP) * WORK_GROUP
+        items = -(-n // LANES)  # eight photons a work item
+        padded = -(-items // WORK_GROUP) * WORK_GROUP
         ph = device_input(self.ctx, photon.astype(np.int64, copy=False))
         outs = [np.empty((n, 3), np.float32), np.empty((n, 3), np.float32),
                 np.empty((n, 3), np.float64), np.empty(n, np.int32)]

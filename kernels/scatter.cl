@@ -6,6 +6,7 @@
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #pragma OPENCL FP_CONTRACT OFF  // no fused multiply-add: the NumPy twin rounds every product
 #include "philox.cl"
+#include "lanes.cl"
 
 #define KIND_DIFFUSE 0
 #define KIND_MIRROR 1
@@ -20,42 +21,6 @@
 // write the same values. sin/cos come from polynomials (sincos8; twin sampling.py::sincos_poly) and
 // the Phong lobe's u^(1/(e+1)) from the host (scatter.py::glossy_cos), so that no libm call can
 // differ from the NumPy twin's.
-#define PIO2_HI 1.57079632673412561417e+00
-#define PIO2_LO 6.07710050650619224932e-11
-#define TWO_OVER_PI 6.36619772367581382433e-01
-
-#define G8(T, a, ix) ((T)(a[(ix).s0], a[(ix).s1], a[(ix).s2], a[(ix).s3], \
-                          a[(ix).s4], a[(ix).s5], a[(ix).s6], a[(ix).s7]))
-#define S8(a, ix, v) do { a[(ix).s0] = (v).s0; a[(ix).s1] = (v).s1; a[(ix).s2] = (v).s2; \
-                          a[(ix).s3] = (v).s3; a[(ix).s4] = (v).s4; a[(ix).s5] = (v).s5; \
-                          a[(ix).s6] = (v).s6; a[(ix).s7] = (v).s7; } while (0)
-
-#define PHILOX8_ROUND(c0, c1, c2, c3, k0, k1) do { \
-        const ulong8 p0_ = (ulong8)((ulong)PHILOX_M0) * convert_ulong8(c0); \
-        const ulong8 p1_ = (ulong8)((ulong)PHILOX_M1) * convert_ulong8(c2); \
-        const uint8 n0_ = convert_uint8(p1_ >> 32) ^ (c1) ^ (uint8)(k0); \
-        const uint8 n2_ = convert_uint8(p0_ >> 32) ^ (c3) ^ (uint8)(k1); \
-        (c1) = convert_uint8(p1_ & 0xFFFFFFFFUL); (c3) = convert_uint8(p0_ & 0xFFFFFFFFUL); \
-        (c0) = n0_; (c2) = n2_; \
-    } while (0)
-
-inline double8 uniform8(uint8 x) { return convert_double8(x >> 8) * (1.0 / 16777216.0); }
-
-inline void sincos8(const double8 phi, double8 *s, double8 *c) {
-    const double8 q = rint(phi * TWO_OVER_PI);
-    const double8 r = (phi - q * PIO2_HI) - q * PIO2_LO;
-    const double8 z = r * r;
-    const double8 sr = r + (z * r) * (-1.66666666666666324348e-01 + z * (8.33333333332248946124e-03
-        + z * (-1.98412698298579493134e-04 + z * (2.75573137070700676789e-06
-        + z * (-2.50507602534068634195e-08 + z * 1.58969099521155010221e-10)))));
-    const double8 cr = 1.0 - (0.5 * z - z * (z * (4.16666666666666019037e-02 + z * (-1.38888888888741095749e-03
-        + z * (2.48015872894767294178e-05 + z * (-2.75573143513906633035e-07
-        + z * (2.08757232129817482790e-09 + z * -1.13596475577881948265e-11)))))));
-    const long8 quadrant = convert_long8(q) & 3L;
-    *s = select(select(select(-cr, -sr, quadrant == 2L), cr, quadrant == 1L), sr, quadrant == 0L);
-    *c = select(select(select(sr, -cr, quadrant == 2L), -sr, quadrant == 1L), cr, quadrant == 0L);
-}
-
 __kernel void scatter8(
     const long count, const int depth, const uint key0, const uint key1, const double epsilon,
     __global const int *tri, __global const float *hit_u, __global const float *hit_v,
@@ -123,17 +88,7 @@ __kernel void scatter8(
 
     // Philox words of counter (photon, depth) under key (seed, frame): roulette, two for the direction
     uint8 r0 = convert_uint8(ph & 0xFFFFFFFFL), r1 = convert_uint8(ph >> 32), r2 = (uint8)((uint)depth), r3 = (uint8)(0u);
-    uint k0 = key0, k1 = key1;
-    PHILOX8_ROUND(r0, r1, r2, r3, k0, k1); PHILOX_BUMP(k0, k1);
-    PHILOX8_ROUND(r0, r1, r2, r3, k0, k1); PHILOX_BUMP(k0, k1);
-    PHILOX8_ROUND(r0, r1, r2, r3, k0, k1); PHILOX_BUMP(k0, k1);
-    PHILOX8_ROUND(r0, r1, r2, r3, k0, k1); PHILOX_BUMP(k0, k1);
-    PHILOX8_ROUND(r0, r1, r2, r3, k0, k1); PHILOX_BUMP(k0, k1);
-    PHILOX8_ROUND(r0, r1, r2, r3, k0, k1); PHILOX_BUMP(k0, k1);
-    PHILOX8_ROUND(r0, r1, r2, r3, k0, k1); PHILOX_BUMP(k0, k1);
-    PHILOX8_ROUND(r0, r1, r2, r3, k0, k1); PHILOX_BUMP(k0, k1);
-    PHILOX8_ROUND(r0, r1, r2, r3, k0, k1); PHILOX_BUMP(k0, k1);
-    PHILOX8_ROUND(r0, r1, r2, r3, k0, k1);
+    PHILOX8_10(r0, r1, r2, r3, key0, key1);
 
     // Russian roulette on the albedo: survive with q = max channel, reweight by albedo / q
     const double8 ax = G8(double8, albedo, 3 * m), ay = G8(double8, albedo, 3 * m + 1), az = G8(double8, albedo, 3 * m + 2);
@@ -150,18 +105,8 @@ __kernel void scatter8(
     const double8 e = G8(double8, mat_exp, m);
     const double8 cos_t = select(sqrt(1.0 - u1), G8(double8, glossy_cos, select((long8)(0), i, is_glossy)), is_glossy);
     const double8 zx = select(mx, fx_, is_diffuse), zy = select(my, fy_, is_diffuse), zz = select(mz, fz_, is_diffuse);
-    // orthonormal basis about z (Duff et al., JCGT 6(1), 2017), then the direction as sampling.cl
-    const double8 sgn = select((double8)(-1.0), (double8)(1.0), zz >= 0.0);
-    const double8 ia = -1.0 / (sgn + zz);
-    const double8 ib = zx * zy * ia;
-    const double8 tx = 1.0 + sgn * zx * zx * ia, ty = sgn * ib, tz = -sgn * zx;
-    const double8 sx = ib, sy = sgn + zy * zy * ia, sz = -zy;
-    const double8 sin_t = sqrt(fmin(fmax(1.0 - cos_t * cos_t, 0.0), 1.0));
-    double8 sp, cp;
-    sincos8(2.0 * M_PI * u2, &sp, &cp);
-    const double8 lx = tx * (sin_t * cp) + sx * (sin_t * sp) + zx * cos_t;
-    const double8 ly = ty * (sin_t * cp) + sy * (sin_t * sp) + zy * cos_t;
-    const double8 lz = tz * (sin_t * cp) + sz * (sin_t * sp) + zz * cos_t;
+    double8 lx, ly, lz;
+    around8(zx, zy, zz, cos_t, 2.0 * M_PI * u2, &lx, &ly, &lz);
     const long8 is_mirror = kind == (long8)(KIND_MIRROR);
     const double8 ox = select(lx, mx, is_mirror), oy = select(ly, my, is_mirror), oz = select(lz, mz, is_mirror);
     const double8 cos_o = ox * fx_ + oy * fy_ + oz * fz_;
