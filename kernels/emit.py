@@ -134,8 +134,12 @@ class EmitCL:
         items = -(-n // LANES)  # eight photons a work item
         padded = -(-items // WORK_GROUP) * WORK_GROUP
         ph = device_input(self.ctx, photon.astype(np.int64, copy=False))
-        outs = [np.empty((n, 3), np.float32), np.empty((n, 3), np.float32),
-                np.empty((n, 3), np.float64), np.empty(n, np.int32)]
+        # Output arrays reused from call to call (no page faults of fresh memory on every call): the
+        # result is valid until the next call, and the tracer consumes it before that.
+        if getattr(self, "_pool", None) is None or len(self._pool[0]) < n:
+            self._pool = [np.empty((n, 3), np.float32), np.empty((n, 3), np.float32),
+                          np.empty((n, 3), np.float64), np.empty(n, np.int32)]
+        outs = [a[:n] for a in self._pool]
         bufs = [device_output(self.ctx, o) for o in outs]
         t = self.tables
         self.kernel.set_args(np.int64(n), np.uint32(key[0] & 0xFFFFFFFF), np.uint32(key[1] & 0xFFFFFFFF),

@@ -170,6 +170,8 @@ class ScatterCL:
             tables.kind.astype(np.int32), tables.exponent.astype(np.float64))]
 
     def __call__(self, hits: Hits, depth: int, key: tuple[int, int]) -> Bounce:
+        """One bounce on the device. The returned arrays are this instance's and are overwritten by
+        its next call."""
         cl = self._cl
         m = len(hits.tri)
         if m == 0:
@@ -183,9 +185,7 @@ class ScatterCL:
             hits.v.astype(np.float32, copy=False), hits.dirs.astype(np.float32, copy=False),
             hits.beta.astype(np.float64, copy=False), hits.photon.astype(np.int64, copy=False),
             glossy_cos(self.tables, hits, depth, key))]
-        out = Bounce(np.empty(m, np.uint32), np.empty((m, 2), np.uint16), np.empty((m, 3), np.float32),
-                     np.empty(m, np.uint8), np.empty((m, 3), np.float32), np.empty((m, 3), np.float32),
-                     np.empty((m, 3), np.float64), np.empty(m, np.uint8))
+        out = Bounce(*self._output_rows(m))
         fields = ("key", "bary", "energy", "recorded", "origins", "dirs", "beta", "alive")
         outputs = [device_output(self.ctx, getattr(out, f)) for f in fields]
         self.kernel.set_args(np.int64(m), np.int32(depth), np.uint32(key[0] & 0xFFFFFFFF),
@@ -196,6 +196,17 @@ class ScatterCL:
         out.recorded = out.recorded.view(bool)
         out.alive = out.alive.view(bool)
         return out
+
+    _OUTPUTS = ((np.uint32, ()), (np.uint16, (2,)), (np.float32, (3,)), (np.uint8, ()), (np.float32, (3,)),
+                (np.float32, (3,)), (np.float64, (3,)), (np.uint8, ()))
+
+    def _output_rows(self, m: int) -> list[np.ndarray]:
+        """The first ``m`` rows of this instance's output arrays, grown when needed. Reusing them
+        spares the kernel the page faults of fresh memory on every bounce; the result of a call is
+        therefore valid only until the next call (the tracer copies what it keeps out of it)."""
+        if getattr(self, "_pool", None) is None or len(self._pool[0]) < m:
+            self._pool = [np.empty((max(m, 1),) + shape, dtype) for dtype, shape in self._OUTPUTS]
+        return [a[:m] for a in self._pool]
 
 
 def device_input(ctx, a: np.ndarray):
