@@ -203,7 +203,7 @@ class _Hits:
         return self.origins[rows] + self.t[rows, None] * self.dirs[rows]
 
     def normal(self, rows=None) -> np.ndarray:
-        return self._normals[self.tri if rows is None else self.tri[rows]]
+        return np.take(self._normals, self.tri if rows is None else self.tri[rows], axis=0)
 
     def cos_in(self, rows=None) -> np.ndarray:
         """normal . ray direction (negative on the front face)."""
@@ -245,7 +245,7 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
             break
         hits = _Hits(sh, tri, u, v, origins, dirs, t)
         kind = sh.kind[tri]
-        rho = sh.albedo[tri]
+        rho = np.take(sh.albedo, tri, axis=0)  # np.take: rows of a table, much faster than fancy indexing
         # This depth's layers: ``out`` itself while rays and samples correspond one to one,
         # else scattered into it once
         direct_out = path is None and throughput is None
@@ -258,7 +258,7 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
         if sh.any_emissive:
             lit = np.flatnonzero(sh.emissive[tri] & (hits.cos_in() < 0))
             if len(lit):
-                acc[lit, 0] += sh.emission[tri[lit]]
+                acc[lit, 0] += np.take(sh.emission, tri[lit], axis=0)
 
         # Diffuse: direct light with shadow rays, indirect from the map; the path ends. Shaded
         # over all hits (cheaper than gathering the diffuse ones when they are most of them):
@@ -270,7 +270,7 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
             if sh.area_samples:
                 c = counter if path is None else counter[path]
                 e_direct += _area(sh, key, c, depth, hits, rays, active)
-            scale = (rho if active is None else sh.diffuse_albedo[tri]) * np.float32(1.0 / np.pi)
+            scale = (rho if active is None else np.take(sh.diffuse_albedo, tri, axis=0)) * np.float32(1.0 / np.pi)
             acc[:, 0] += scale * e_direct
             if sh.element_irradiance is not None:
                 acc[:, 1] += scale * _interpolate(sh, hits)
@@ -329,7 +329,7 @@ def _put(target: np.ndarray, idx, value, accumulate: bool = False) -> None:
 
 def _interpolate(sh: _Shading, hits: _Hits) -> np.ndarray:
     """Irradiance inside the hit element: barycentric blend of its three vertex values."""
-    c = sh.element_irradiance[hits.cell]  # (n, 3, 3): E0, E1 - E0, E2 - E0
+    c = np.take(sh.element_irradiance, hits.cell, axis=0)  # (n, 3, 3): E0, E1 - E0, E2 - E0
     b1 = hits.b1.astype(np.float32)[:, None]
     b2 = hits.b2.astype(np.float32)[:, None]
     return c[:, 0] + b1 * c[:, 1] + b2 * c[:, 2]
@@ -431,7 +431,7 @@ def _area(sh: _Shading, key, counter, depth, hits: _Hits, rays, active) -> np.nd
         pick = np.minimum(np.searchsorted(sh.area_cdf, u0, side="right"), len(sh.area_cdf) - 1)
         su = np.sqrt(u1)
         b1, b2 = (su * (1.0 - u2)).astype(np.float32), (su * u2).astype(np.float32)
-        c = sh.area_corners[pick]
+        c = np.take(sh.area_corners, pick, axis=0)
         y = c[:, 0] + b1[:, None] * (c[:, 1] - c[:, 0]) + b2[:, None] * (c[:, 2] - c[:, 0])
         lt = sh.area_tris[pick]
         delta = y - p
@@ -439,7 +439,7 @@ def _area(sh: _Shading, key, counter, depth, hits: _Hits, rays, active) -> np.nd
         dist = np.sqrt(dist2)
         to_light = delta / np.maximum(dist, 1e-30)[:, None]
         cos_s = np.einsum("ij,ij->i", facing, to_light)
-        cos_l = -np.einsum("ij,ij->i", sh.normals[lt], to_light)  # front face only
+        cos_l = -np.einsum("ij,ij->i", np.take(sh.normals, lt, axis=0), to_light)  # front face only
         ok = (cos_s > 0) & (cos_l > 0) & (lt != tri)
         sel = np.flatnonzero(ok if active is None else ok & active)
         if not len(sel):
@@ -452,7 +452,7 @@ def _area(sh: _Shading, key, counter, depth, hits: _Hits, rays, active) -> np.nd
         rays["area"] += len(sel)
         sel = sel[~blocked]
         g = cos_s[sel] * cos_l[sel] / (dist2[sel] * sh.area_pdf[pick[sel]])
-        total[sel] += g.astype(np.float32)[:, None] * sh.emission[lt[sel]]
+        total[sel] += g.astype(np.float32)[:, None] * np.take(sh.emission, lt[sel], axis=0)
     return total / np.float32(sh.area_samples)
 
 
