@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from kernels.surface import LookupCL
 from pipeline.scene import ElementMesh, FrameState
 
 from .emission import around
@@ -116,6 +117,9 @@ class _Shading:
             e = np.asarray(irradiance, np.float64)[elements.element_vertices]
             self.element_irradiance = np.stack([e[:, 0], e[:, 1] - e[:, 0], e[:, 2] - e[:, 0]],
                                                axis=1).astype(np.float32)
+        # Element and map irradiance of every hit, on PoCL (kernels/surface.cl)
+        self.lookup = (LookupCL(elements.triangle_n, elements.triangle_offset[:-1], self.element_irradiance)
+                       if elements is not None else None)
         self.area_samples = area_samples if len(state.emissive_triangles) else 0
         if self.area_samples:
             tris = state.emissive_triangles.astype(np.int64)
@@ -185,9 +189,9 @@ class _Hits:
 
     def __init__(self, sh: _Shading, tri, u, v, origins, dirs, t):
         self.tri, self.origins, self.dirs = tri, origins, dirs
-        self.cell, self.b1, self.b2 = tri, None, None  # light-culling cell of every hit
-        if sh.elements is not None:
-            self.cell, self.b1, self.b2 = sh.elements.locate(tri, u, v)
+        self.cell, self.indirect = tri, None  # light-culling cell of every hit, map irradiance there
+        if sh.lookup is not None:
+            self.cell, self.indirect = sh.lookup(tri, u, v)
         self.t = t.astype(np.float32)
         self._normals = sh.normals
         self._cache = {}
@@ -328,11 +332,9 @@ def _put(target: np.ndarray, idx, value, accumulate: bool = False) -> None:
 
 
 def _interpolate(sh: _Shading, hits: _Hits) -> np.ndarray:
-    """Irradiance inside the hit element: barycentric blend of its three vertex values."""
-    c = np.take(sh.element_irradiance, hits.cell, axis=0)  # (n, 3, 3): E0, E1 - E0, E2 - E0
-    b1 = hits.b1.astype(np.float32)[:, None]
-    b2 = hits.b2.astype(np.float32)[:, None]
-    return c[:, 0] + b1 * c[:, 1] + b2 * c[:, 2]
+    """Irradiance inside the hit element: barycentric blend of its three vertex values (computed
+    with the element lookup, kernels/surface.py)."""
+    return hits.indirect
 
 
 def _bounding_spheres(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:

@@ -1,0 +1,67 @@
+"""Hits on the element mesh: element ids and the indirect irradiance blended inside them.
+
+``lookup_reference`` (NumPy: ElementMesh.locate's arithmetic, then E0 + b1 (E1 - E0) + b2 (E2 - E0)
+in float32) and :class:`LookupCL` (``lookup8`` in surface.cl) give the same elements and the same
+irradiance; the compositor (workers/composite.py) uses them for every camera and reflection hit.
+"""
+from __future__ import annotations
+
+import numpy as np
+
+from .scatter import LANES, WORK_GROUP, device_input, device_output, read_back
+
+
+def lookup_reference(tri_n, tri_offset, element_irradiance, tri, u, v):
+    """(element (n,) int64, irradiance (n, 3) float32 or None) for hits (tri, u, v)."""
+    t = np.asarray(tri, np.int64)
+    n = tri_n[t].astype(np.int64)
+    x = np.clip(np.asarray(u, np.float64), 0.0, 1.0) * n
+    y = np.clip(np.asarray(v, np.float64), 0.0, 1.0) * n
+    a = np.clip(np.floor(x).astype(np.int64), 0, n - 1)
+    b = np.clip(np.floor(y).astype(np.int64), 0, n - 1 - a)
+    fx, fy = x - a, y - b
+    up = (fx + fy <= 1.0) | (a + b >= n - 1)
+    local = np.where(up, a * n - a * (a - 1) // 2 + b, n * (n + 1) // 2 + a * (n - 1) - a * (a - 1) // 2 + b)
+    b1 = np.clip(np.where(up, fx, fx + fy - 1.0), 0.0, 1.0)
+    b2 = np.clip(np.where(up, fy, 1.0 - fx), 0.0, 1.0 - b1)
+    element = tri_offset[t] + local
+    if element_irradiance is None:
+        return element, None
+    c = np.take(element_irradiance, element, axis=0)
+    blend = c[:, 0] + b1.astype(np.float32)[:, None] * c[:, 1] + b2.astype(np.float32)[:, None] * c[:, 2]
+    return element, blend
+
+
+class LookupCL:
+    """``lookup8`` with the element tables on the device; one per frame's illumination map."""
+
+    def __init__(self, tri_n: np.ndarray, tri_offset: np.ndarray, element_irradiance: np.ndarray | None):
+        import pyopencl as cl
+
+        from .context import device_context, kernel
+
+        self._cl = cl
+        self.ctx, self.queue = device_context()
+        self.kernel = kernel("surface", "lookup8")
+        self.blend = element_irradiance is not None
+        ro = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
+        table = (np.ascontiguousarray(element_irradiance, np.float32).reshape(-1) if self.blend
+                 else np.zeros(9, np.float32))
+        self._tables = [cl.Buffer(self.ctx, ro, hostbuf=np.ascontiguousarray(a)) for a in (
+            np.asarray(tri_n, np.int32), np.asarray(tri_offset, np.int64), table)]
+
+    def __call__(self, tri, u, v):
+        m = len(tri)
+        if m == 0:
+            return np.empty(0, np.int64), (np.empty((0, 3), np.float32) if self.blend else None)
+        items = -(-m // LANES)
+        padded = -(-items // WORK_GROUP) * WORK_GROUP
+        inputs = [device_input(self.ctx, np.asarray(a, dt)) for a, dt in
+                  ((tri, np.int32), (u, np.float32), (v, np.float32))]
+        cell = np.empty(m, np.int64)
+        blend = np.empty((m if self.blend else 1, 3), np.float32)
+        outputs = [device_output(self.ctx, cell), device_output(self.ctx, blend)]
+        self.kernel.set_args(np.int64(m), np.int32(self.blend), *inputs, *self._tables, *outputs)
+        self._cl.enqueue_nd_range_kernel(self.queue, self.kernel, (padded,), (WORK_GROUP,))
+        read_back(self.queue, [cell, blend], outputs)
+        return cell, (blend if self.blend else None)
