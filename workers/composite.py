@@ -238,7 +238,7 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
     path = None  # sample index of every live ray; None while it is 0..n-1
     throughput = None  # None while it is all ones (camera rays)
     for depth in range(max_depth + 1):
-        tri, u, v, t = sh.caster.intersect(origins, dirs)
+        tri, u, v, t = sh.caster.intersect_raw(origins, dirs)  # float32 as Embree gives them
         rays["camera" if depth == 0 else "reflection"] += len(tri)
         hit = tri >= 0
         if not hit.all():
