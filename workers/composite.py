@@ -141,11 +141,14 @@ def camera_rays(state: FrameState, width: int, height: int, px: np.ndarray, py: 
     vertical, the aspect is the image's."""
     cam = state.camera
     tan_y = np.tan(cam.definition.yfov / 2.0)
-    x = ((2.0 / width) * px - 1.0) * (tan_y * width / height)
-    y = (1.0 - (2.0 / height) * py) * tan_y
+    x = (((2.0 / width) * px - 1.0) * (tan_y * width / height)).astype(np.float32)
+    y = ((1.0 - (2.0 / height) * py) * tan_y).astype(np.float32)
     rot = cam.to_world[:3, :3]
-    rot = rot / np.linalg.norm(rot, axis=0)
-    d = np.stack([x, y, -np.ones_like(x)], axis=1).astype(np.float32) @ rot.T.astype(np.float32)
+    rot = (rot / np.linalg.norm(rot, axis=0)).astype(np.float32)
+    # d = x right + y up - forward, written out: a (n, 3) @ (3, 3) product is slow in NumPy
+    d = np.empty((len(x), 3), np.float32)
+    for k in range(3):
+        d[:, k] = x * rot[k, 0] + y * rot[k, 1] - rot[k, 2]
     d /= np.sqrt(np.einsum("ij,ij->i", d, d))[:, None]
     return cam.position, d
 
@@ -161,25 +164,25 @@ def render_frame(state: FrameState, elements: ElementMesh | None, irradiance, *,
     sh = _Shading(state, elements, irradiance, caster, area_samples)
     key = frame_key(seed, frame)
     n_pixels = width * height
-    layers = np.zeros((n_pixels, 3, 3), np.float32)  # direct, indirect, albedo
+    layers = np.zeros((3, n_pixels, 3), np.float32)  # direct, indirect, albedo: contiguous planes
     alpha = np.zeros(n_pixels, np.float32)
     rays = dict.fromkeys(RAY_KINDS, 0)
     chunk_pixels = max(1, chunk_rays // spp)
-    samples = None if spp == 1 else np.empty((chunk_pixels * spp, 3, 3), np.float32)
+    samples = None if spp == 1 else np.empty((3, chunk_pixels * spp, 3), np.float32)
     for lo in range(0, n_pixels, chunk_pixels):
         hi = min(n_pixels, lo + chunk_pixels)
         counter = np.arange(lo * spp, hi * spp, dtype=np.int64)
         if spp == 1:  # samples are pixels: trace straight into the layers
             alpha[lo:hi] = _trace_samples(state, sh, key, counter, spp, width, height, max_depth,
-                                          rays, layers[lo:hi])
+                                          rays, layers[:, lo:hi])
         else:  # mean over each pixel's samples (consecutive counters), in a fixed order
-            out = samples[:len(counter)]
+            out = samples[:, :len(counter)]
             out.fill(0)
             cover = _trace_samples(state, sh, key, counter, spp, width, height, max_depth, rays, out)
-            layers[lo:hi] = out.reshape(hi - lo, spp, 3, 3).mean(axis=1)
+            layers[:, lo:hi] = out.reshape(3, hi - lo, spp, 3).mean(axis=2)
             alpha[lo:hi] = cover.reshape(hi - lo, spp).mean(axis=1)
     shape = (height, width, 3)
-    direct, indirect, albedo = (np.ascontiguousarray(layers[:, i]).reshape(shape) for i in range(3))
+    direct, indirect, albedo = (layers[i].reshape(shape) for i in range(3))
     return FrameImage(direct + indirect, direct, indirect, albedo, alpha.reshape(shape[:2]), rays)
 
 
@@ -227,7 +230,7 @@ class _Hits:
 
 
 def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_depth, rays, out):
-    """Add direct, indirect and albedo of the camera samples ``counter`` into ``out`` (n, 3, 3),
+    """Add direct, indirect and albedo of the camera samples ``counter`` into ``out`` (3, n, 3),
     zero on entry; returns their coverage (n,)."""
     n = len(counter)
     cover = np.zeros(n, np.float32)
@@ -253,16 +256,16 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
         # This depth's layers: ``out`` itself while rays and samples correspond one to one,
         # else scattered into it once
         direct_out = path is None and throughput is None
-        acc = out if direct_out else np.zeros((len(tri), 3, 3), np.float32)
+        acc = out if direct_out else np.zeros((3, len(tri), 3), np.float32)
         if depth == 0:
-            acc[:, 2] = rho
+            acc[2] = rho
             _put(cover, path, 1.0)
 
         # Emitters seen from their front face
         if sh.any_emissive:
             lit = np.flatnonzero(sh.emissive[tri] & (hits.cos_in() < 0))
             if len(lit):
-                acc[lit, 0] += np.take(sh.emission, tri[lit], axis=0)
+                acc[0, lit] += np.take(sh.emission, tri[lit], axis=0)
 
         # Diffuse: direct light with shadow rays, indirect from the map; the path ends. Shaded
         # over all hits (cheaper than gathering the diffuse ones when they are most of them):
@@ -275,12 +278,12 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
                 c = counter if path is None else counter[path]
                 e_direct += _area(sh, key, c, depth, hits, rays, active)
             scale = (rho if active is None else np.take(sh.diffuse_albedo, tri, axis=0)) * np.float32(1.0 / np.pi)
-            acc[:, 0] += scale * e_direct
+            acc[0] += scale * e_direct
             if sh.element_irradiance is not None:
-                acc[:, 1] += scale * _interpolate(sh, hits)
+                acc[1] += scale * _interpolate(sh, hits)
             if active is None:
                 if not direct_out:
-                    _put(out, path, acc if throughput is None else acc * throughput[:, None], True)
+                    _put_layers(out, path, acc if throughput is None else acc * throughput[None])
                 break
 
         # Glossy: exact highlights of punctual lights
@@ -288,10 +291,10 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
         if len(glossy):
             mirror_g = hits.dirs[glossy] - 2.0 * hits.cos_in(glossy)[:, None] * hits.normal(glossy)
             lobe = (mirror_g, sh.exponent[tri[glossy]])
-            acc[glossy, 0] += rho[glossy] * _punctual(sh, hits, glossy, lobe, rays, None)
+            acc[0, glossy] += rho[glossy] * _punctual(sh, hits, glossy, lobe, rays, None)
 
         if not direct_out:
-            _put(out, path, acc if throughput is None else acc * throughput[:, None], True)
+            _put_layers(out, path, acc if throughput is None else acc * throughput[None])
 
         # Mirror and glossy reflection continue the path
         spec = np.flatnonzero(kind != 0)
@@ -316,6 +319,14 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
         origins = sh.caster.offset_origins(hits.points(spec), tri[spec], refl).astype(np.float32)
         dirs, path = refl, (spec if path is None else path[spec])
     return cover
+
+
+def _put_layers(target: np.ndarray, idx, value) -> None:
+    """target[:, idx] += value for layers (3, n, 3); idx None means all samples in order."""
+    if idx is None:
+        target += value
+    else:
+        target[:, idx] += value
 
 
 def _put(target: np.ndarray, idx, value, accumulate: bool = False) -> None:
