@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from kernels.camera import camera_rays_cl, mix64
 from kernels.surface import LookupCL
 from pipeline.scene import ElementMesh, FrameState
 
@@ -43,34 +44,20 @@ _FAR = 1e30  # shadow-ray length towards a directional light
 _M64 = (1 << 64) - 1
 
 
-def _mix64(x: np.ndarray) -> np.ndarray:
-    """splitmix64 finaliser on uint64 arrays (wrapping arithmetic)."""
-    x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)
-    x = (x ^ (x >> np.uint64(27))) * np.uint64(0x94D049BB133111EB)
-    return x ^ (x >> np.uint64(31))
-
-
 def frame_key(seed: int, frame: int) -> int:
     """64-bit key of (seed, frame) for :func:`uniform`."""
-    k = _mix64(np.array([(seed * 0x9E3779B97F4A7C15 + 0x632BE59BD9B4E019) & _M64], np.uint64))
-    return int(_mix64(k ^ np.uint64(frame & _M64))[0])
+    k = mix64(np.array([(seed * 0x9E3779B97F4A7C15 + 0x632BE59BD9B4E019) & _M64], np.uint64))
+    return int(mix64(k ^ np.uint64(frame & _M64))[0])
 
 
 def _hash(key: int, counter: np.ndarray, dim: int) -> np.ndarray:
-    x = _mix64(counter.astype(np.uint64) ^ np.uint64(key))
-    return _mix64(x + np.uint64((dim * 0x9E3779B97F4A7C15) & _M64))
+    x = mix64(counter.astype(np.uint64) ^ np.uint64(key))
+    return mix64(x + np.uint64((dim * 0x9E3779B97F4A7C15) & _M64))
 
 
 def uniform(key: int, counter: np.ndarray, dim: int) -> np.ndarray:
     """float64 in [0, 1) for each counter (pixel x spp + sample) and a dimension number."""
     return (_hash(key, counter, dim) >> np.uint64(11)).astype(np.float64) * (1.0 / (1 << 53))
-
-
-def uniform_pair(key: int, counter: np.ndarray, dim: int) -> tuple[np.ndarray, np.ndarray]:
-    """Two float64 in [0, 1) with 32 random bits each, from one hash (dimension ``dim``)."""
-    x = _hash(key, counter, dim)
-    scale = 1.0 / (1 << 32)
-    return (x >> np.uint64(32)).astype(np.float64) * scale, (x & np.uint64(0xFFFFFFFF)).astype(np.float64) * scale
 
 
 # --- the frame ----------------------------------------------------------------------------------
@@ -133,24 +120,6 @@ class _Shading:
             self.area_cdf[-1] = 1.0
             self.area_pdf = power / power.sum() / caster.triangle_area[self.area_tris]  # per area
             self.area_corners = state.vertices.astype(np.float32)[state.faces[self.area_tris]]
-
-
-def camera_rays(state: FrameState, width: int, height: int, px: np.ndarray, py: np.ndarray):
-    """World origin (3,) and unit float32 directions (n, 3) through image points (px, py) in
-    pixels, x right and y down from the top-left corner; the camera looks down -Z, +Y up, yfov
-    vertical, the aspect is the image's."""
-    cam = state.camera
-    tan_y = np.tan(cam.definition.yfov / 2.0)
-    x = (((2.0 / width) * px - 1.0) * (tan_y * width / height)).astype(np.float32)
-    y = ((1.0 - (2.0 / height) * py) * tan_y).astype(np.float32)
-    rot = cam.to_world[:3, :3]
-    rot = (rot / np.linalg.norm(rot, axis=0)).astype(np.float32)
-    # d = x right + y up - forward, written out: a (n, 3) @ (3, 3) product is slow in NumPy
-    d = np.empty((len(x), 3), np.float32)
-    for k in range(3):
-        d[:, k] = x * rot[k, 0] + y * rot[k, 1] - rot[k, 2]
-    d /= np.sqrt(np.einsum("ij,ij->i", d, d))[:, None]
-    return cam.position, d
 
 
 def render_frame(state: FrameState, elements: ElementMesh | None, irradiance, *, width: int,
@@ -234,10 +203,9 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
     zero on entry; returns their coverage (n,)."""
     n = len(counter)
     cover = np.zeros(n, np.float32)
-    pixel = counter // spp
-    jx, jy = uniform_pair(key, counter, 0)  # pixel jitter (dimensions 0 and 1)
-    origin, dirs = camera_rays(state, width, height, pixel % width + jx, pixel // width + jy)
-    origins = np.broadcast_to(origin.astype(np.float32), dirs.shape)
+    cam = state.camera  # jittered camera rays (random dimensions 0 and 1), kernels/camera.cl
+    dirs = camera_rays_cl(key, int(counter[0]), n, spp, width, height, cam.definition.yfov, cam.to_world[:3, :3])
+    origins = np.broadcast_to(cam.position.astype(np.float32), dirs.shape)
     path = None  # sample index of every live ray; None while it is 0..n-1
     throughput = None  # None while it is all ones (camera rays)
     for depth in range(max_depth + 1):

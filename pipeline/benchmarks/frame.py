@@ -24,13 +24,14 @@ def _raw_caster(state, width: int, height: int):
     """A function casting the frame's pixel-centre camera rays through embreex alone, once."""
     from embreex import mesh_construction, rtcore_scene
 
-    from workers.composite import camera_rays
+    from kernels.camera import camera_rays_reference
 
     scene = rtcore_scene.EmbreeScene()
     mesh_construction.TriangleMesh(scene, np.ascontiguousarray(state.vertices, np.float32),
                                    np.ascontiguousarray(state.faces, np.int32))
-    py, px = np.mgrid[0:height, 0:width]
-    origin, d = camera_rays(state, width, height, px.ravel() + 0.5, py.ravel() + 0.5)
+    cam = state.camera  # the compositor's own jittered camera rays, one a pixel
+    d = camera_rays_reference(0, 0, width * height, 1, width, height, cam.definition.yfov, cam.to_world[:3, :3])
+    origin = cam.position
     o = np.ascontiguousarray(np.broadcast_to(origin, d.shape), np.float32)
     d = np.ascontiguousarray(d, np.float32)
     scene.run(o[:1], d[:1])  # commit the BVH

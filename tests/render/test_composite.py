@@ -9,7 +9,8 @@ import numpy as np
 import pytest
 
 from pipeline.scene import ElementMesh, Scene
-from workers.composite import camera_rays, frame_key, render_frame, uniform_pair
+from kernels.camera import camera_rays_reference
+from workers.composite import frame_key, render_frame
 
 from tests.render.scenes import EYE, LAMP, area_scene, mirror_scene, plane_scene
 
@@ -27,11 +28,10 @@ def _render(path, irradiance=None, **kw):
 
 def _sample_points(state, width, height, spp, seed, frame):
     """(H, W, spp, 3) points where the compositor's camera samples meet the plane y = 0."""
-    counter = np.arange(width * height * spp, dtype=np.int64)
-    key = frame_key(seed, frame)
-    pixel = counter // spp
-    jx, jy = uniform_pair(key, counter, 0)
-    origin, d = camera_rays(state, width, height, pixel % width + jx, pixel // width + jy)
+    cam = state.camera
+    d = camera_rays_reference(frame_key(seed, frame), 0, width * height * spp, spp, width, height,
+                              cam.definition.yfov, cam.to_world[:3, :3]).astype(np.float64)
+    origin = cam.position
     t = -origin[1] / d[:, 1]
     return (origin + t[:, None] * d).reshape(height, width, spp, 3)
 

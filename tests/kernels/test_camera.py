@@ -1,0 +1,40 @@
+"""Camera rays (camera.cl) equal their NumPy twin and the compositor's own jitter and camera."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from kernels.camera import camera_rays_cl, camera_rays_reference
+
+
+def _rotation(rng):
+    q, _ = np.linalg.qr(rng.normal(size=(3, 3)))
+    return q * np.array([1.0, 1.0, np.sign(np.linalg.det(q))])
+
+
+@pytest.mark.parametrize("spp", [1, 4])
+@pytest.mark.parametrize("c0, count", [(0, 1), (5, 63), (1000, 20_000)])
+def test_camera_kernel_equals_reference(rng, spp, c0, count):
+    rot = _rotation(rng)
+    key = int(rng.integers(0, 2**63))
+    args = (key, c0, count, spp, 320, 240, 0.9, rot)
+    cl = camera_rays_cl(*args)
+    ref = camera_rays_reference(*args)
+    np.testing.assert_allclose(cl, ref, rtol=0, atol=2e-7)
+    np.testing.assert_allclose(np.linalg.norm(cl, axis=1), 1.0, atol=1e-6)
+
+
+def test_rays_follow_the_pinhole_camera():
+    """The centre sample looks down -Z; the top and bottom rows are yfov apart; jitter stays
+    inside each pixel."""
+    yfov, width, height = 0.9, 200, 100
+    rot = np.eye(3)
+    mid = (height // 2) * width + width // 2
+    d = camera_rays_reference(11, mid, 1, 1, width, height, yfov, rot)[0]
+    assert np.arccos(-d[2]) < 2 * np.tan(yfov / 2) / height * 1.5  # within about a pixel of -Z
+    top = camera_rays_reference(11, width // 2, 1, 1, width, height, yfov, rot)[0]
+    bottom = camera_rays_reference(11, (height - 1) * width + width // 2, 1, 1, width, height, yfov, rot)[0]
+    angle = np.arctan2(top[1], -top[2]) - np.arctan2(bottom[1], -bottom[2])
+    assert abs(angle - yfov) < 2 * yfov / height
+    a = camera_rays_reference(3, 0, 4, 4, width, height, yfov, rot)  # one pixel's four samples
+    assert len(np.unique(a, axis=0)) == 4 and np.all(a[:, 0] < 0) and np.all(a[:, 1] > 0)
