@@ -35,7 +35,12 @@ def _raw_caster(state, width: int, height: int):
     o = np.ascontiguousarray(np.broadcast_to(origin, d.shape), np.float32)
     d = np.ascontiguousarray(d, np.float32)
     scene.run(o[:1], d[:1])  # commit the BVH
-    return lambda: scene.run(o, d, output=1)
+    from workers.composite import CHUNK_RAYS
+
+    def cast():  # in the compositor's batch size, which Embree runs faster than one huge batch
+        for lo in range(0, len(d), CHUNK_RAYS):
+            scene.run(o[lo:lo + CHUNK_RAYS], d[lo:lo + CHUNK_RAYS], output=1)
+    return cast
 
 
 def bench_scene(path, *, width: int, height: int, spp: int, repeat: int) -> dict:
