@@ -37,8 +37,12 @@ demo: setup
 	$(LOOM) render $(DEMO)/room.glb --out $(DEMO)/room --resolution 320x240 --spp 2 --photons 40000
 	@echo "frames: $(DEMO)/room/beauty.####.exr and .png; video: $(DEMO)/room/preview.mp4"
 
+# Speed is measured here, never in tests: ratios measured in one run (see the README for figures).
 bench: setup
-	$(LOOM) bench --help
+	$(LOOM) bench photons
+	$(LOOM) bench frame
+	$(LOOM) bench temporal
+	$(LOOM) bench aqm
 
 clean:
 	rm -rf out .pytest_cache
