@@ -82,4 +82,22 @@ inline void around8(double8 zx, double8 zy, double8 zz, double8 cos_t, double8 p
     *oz = tz * (sin_t * cp) + sz * (sin_t * sp) + zz * cos_t;
 }
 
+// The element of hits at Embree barycentrics (u, v) on source triangles split ns x ns, and the
+// hit's barycentrics (b1, b2) of the element's vertices 1 and 2 (pipeline/scene/elements.py,
+// locate_in_triangles: the same arithmetic).
+inline long8 locate8(const long8 ns, const long8 offset, const double8 u, const double8 v,
+                     double8 *b1, double8 *b2) {
+    const double8 x = fmin(fmax(u, 0.0), 1.0) * convert_double8(ns);
+    const double8 y = fmin(fmax(v, 0.0), 1.0) * convert_double8(ns);
+    const long8 a = min(max(convert_long8(floor(x)), (long8)(0)), ns - 1);
+    const long8 b = min(max(convert_long8(floor(y)), (long8)(0)), ns - 1 - a);
+    const double8 ex = x - convert_double8(a), ey = y - convert_double8(b);
+    const long8 up = (ex + ey <= 1.0) | (a + b >= ns - 1);
+    const long8 within = select(ns * (ns + 1) / 2 + a * (ns - 1) - a * (a - 1) / 2 + b,
+                                a * ns - a * (a - 1) / 2 + b, up);
+    *b1 = fmin(fmax(select(ex + ey - 1.0, ex, up), 0.0), 1.0);
+    *b2 = fmin(fmax(select(1.0 - ex, ey, up), 0.0), 1.0 - *b1);
+    return offset + within;
+}
+
 #endif

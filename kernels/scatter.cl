@@ -61,18 +61,9 @@ __kernel void scatter8(
 
     // Record a diffuse hit: locate the element (ElementMesh.locate) and its barycentrics
     const long8 is_diffuse = hit & (kind == (long8)(KIND_DIFFUSE));
-    const long8 ns = convert_long8(G8(int8, tri_n, t));
-    const double8 x = fmin(fmax(u, 0.0), 1.0) * convert_double8(ns);
-    const double8 y = fmin(fmax(v, 0.0), 1.0) * convert_double8(ns);
-    const long8 a = min(max(convert_long8(floor(x)), (long8)(0)), ns - 1);
-    const long8 b = min(max(convert_long8(floor(y)), (long8)(0)), ns - 1 - a);
-    const double8 ex = x - convert_double8(a), ey = y - convert_double8(b);
-    const long8 up = (ex + ey <= 1.0) | (a + b >= ns - 1);
-    const long8 cell = select(ns * (ns + 1) / 2 + a * (ns - 1) - a * (a - 1) / 2 + b,
-                              a * ns - a * (a - 1) / 2 + b, up);
-    const double8 b1 = fmin(fmax(select(ex + ey - 1.0, ex, up), 0.0), 1.0);
-    const double8 b2 = fmin(fmax(select(1.0 - ex, ey, up), 0.0), 1.0 - b1);
-    ulong8 k = convert_ulong8(G8(long8, tri_offset, t) + cell) & 0xFFFFFFFFUL;
+    double8 b1, b2;
+    const long8 element = locate8(convert_long8(G8(int8, tri_n, t)), G8(long8, tri_offset, t), u, v, &b1, &b2);
+    ulong8 k = convert_ulong8(element) & 0xFFFFFFFFUL;
     k |= select((ulong8)(0), (ulong8)(PARITY_BIT), (ph & 1L) != 0L);
     k |= (ulong8)(depth == 0 ? DIRECT_BIT : 0u);
     k = select((ulong8)(0), k, is_diffuse);

@@ -21,6 +21,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from pipeline.scene.elements import locate_in_triangles
+
 from .philox import uniforms
 from .sampling import around
 
@@ -102,19 +104,10 @@ def scatter_reference(tables: SceneTables, hits: Hits, depth: int, key: tuple[in
     facing = np.where((np.einsum("ij,ij->i", n, d) < 0)[:, None], n, -n)
     beta = hits.beta.copy()
 
-    # Record diffuse hits (same arithmetic as ElementMesh.locate)
+    # Record diffuse hits (the element mesh's own locate)
     recorded = hit & (kind == 0)
-    ns = tables.tri_n[t].astype(np.int64)
-    x = np.clip(u, 0, 1) * ns
-    y = np.clip(v, 0, 1) * ns
-    a = np.clip(np.floor(x).astype(np.int64), 0, ns - 1)
-    b = np.clip(np.floor(y).astype(np.int64), 0, ns - 1 - a)
-    fx, fy = x - a, y - b
-    up = (fx + fy <= 1.0) | (a + b >= ns - 1)
-    local = np.where(up, a * ns - a * (a - 1) // 2 + b, ns * (ns + 1) // 2 + a * (ns - 1) - a * (a - 1) // 2 + b)
-    b1 = np.clip(np.where(up, fx, fx + fy - 1.0), 0.0, 1.0)
-    b2 = np.clip(np.where(up, fy, 1.0 - fx), 0.0, 1.0 - b1)
-    key_out = (tables.tri_offset[t] + local).astype(np.uint32)
+    element, b1, b2 = locate_in_triangles(tables.tri_n, tables.tri_offset, t, u, v)
+    key_out = element.astype(np.uint32)
     key_out |= np.where(hits.photon % 2 == 1, PARITY_BIT, np.uint32(0))
     if depth == 0:
         key_out |= DIRECT_BIT

@@ -16,18 +16,8 @@ __kernel void lookup8(const long count, const int blend,
                         (long8)(count - 1));
     const long8 t = convert_long8(G8(int8, tri, i));
     const double8 u = convert_double8(G8(float8, hit_u, i)), v = convert_double8(G8(float8, hit_v, i));
-    const long8 ns = convert_long8(G8(int8, tri_n, t));
-    const double8 x = fmin(fmax(u, 0.0), 1.0) * convert_double8(ns);
-    const double8 y = fmin(fmax(v, 0.0), 1.0) * convert_double8(ns);
-    const long8 a = min(max(convert_long8(floor(x)), (long8)(0)), ns - 1);
-    const long8 b = min(max(convert_long8(floor(y)), (long8)(0)), ns - 1 - a);
-    const double8 ex = x - convert_double8(a), ey = y - convert_double8(b);
-    const long8 up = (ex + ey <= 1.0) | (a + b >= ns - 1);
-    const long8 within = select(ns * (ns + 1) / 2 + a * (ns - 1) - a * (a - 1) / 2 + b,
-                               a * ns - a * (a - 1) / 2 + b, up);
-    const double8 b1 = fmin(fmax(select(ex + ey - 1.0, ex, up), 0.0), 1.0);
-    const double8 b2 = fmin(fmax(select(1.0 - ex, ey, up), 0.0), 1.0 - b1);
-    const long8 e = G8(long8, tri_offset, t) + within;
+    double8 b1, b2;
+    const long8 e = locate8(convert_long8(G8(int8, tri_n, t)), G8(long8, tri_offset, t), u, v, &b1, &b2);
     S8(cell_out, i, e);
     if (blend) {
         const float8 f1 = convert_float8(b1), f2 = convert_float8(b2);

@@ -8,23 +8,14 @@ from __future__ import annotations
 
 import numpy as np
 
+from pipeline.scene.elements import locate_in_triangles
+
 from .scatter import LANES, WORK_GROUP, device_input, device_output, read_back
 
 
 def lookup_reference(tri_n, tri_offset, element_irradiance, tri, u, v):
     """(element (n,) int64, irradiance (n, 3) float32 or None) for hits (tri, u, v)."""
-    t = np.asarray(tri, np.int64)
-    n = tri_n[t].astype(np.int64)
-    x = np.clip(np.asarray(u, np.float64), 0.0, 1.0) * n
-    y = np.clip(np.asarray(v, np.float64), 0.0, 1.0) * n
-    a = np.clip(np.floor(x).astype(np.int64), 0, n - 1)
-    b = np.clip(np.floor(y).astype(np.int64), 0, n - 1 - a)
-    fx, fy = x - a, y - b
-    up = (fx + fy <= 1.0) | (a + b >= n - 1)
-    local = np.where(up, a * n - a * (a - 1) // 2 + b, n * (n + 1) // 2 + a * (n - 1) - a * (a - 1) // 2 + b)
-    b1 = np.clip(np.where(up, fx, fx + fy - 1.0), 0.0, 1.0)
-    b2 = np.clip(np.where(up, fy, 1.0 - fx), 0.0, 1.0 - b1)
-    element = tri_offset[t] + local
+    element, b1, b2 = locate_in_triangles(tri_n, tri_offset, tri, u, v)
     if element_irradiance is None:
         return element, None
     c = np.take(element_irradiance, element, axis=0)

@@ -51,6 +51,26 @@ def lattice_index(a, b, n):
     return a * (n + 1) - a * (a - 1) // 2 + b
 
 
+def locate_in_triangles(triangle_n, triangle_offset, triangle, u, v):
+    """(element, b1, b2) of hits at Embree barycentrics (u, v) on source triangles split n x n
+    (module docstring): the cell containing (u n, v n), up or down, and the hit's barycentrics of
+    the cell's vertices 1 and 2, clipped to the cell. The OpenCL kernels use the same arithmetic
+    (``locate8`` in kernels/lanes.cl)."""
+    triangle = np.asarray(triangle, dtype=np.int64)
+    n = np.asarray(triangle_n)[triangle].astype(np.int64)
+    x = np.clip(np.asarray(u, np.float64), 0.0, 1.0) * n
+    y = np.clip(np.asarray(v, np.float64), 0.0, 1.0) * n
+    a = np.clip(np.floor(x).astype(np.int64), 0, n - 1)
+    b = np.clip(np.floor(y).astype(np.int64), 0, n - 1 - a)
+    fx = x - a
+    fy = y - b
+    up = (fx + fy <= 1.0) | (a + b >= n - 1)
+    local = np.where(up, up_index(a, b, n), down_index(a, b, np.maximum(n, 1)))
+    b1 = np.clip(np.where(up, fx, fx + fy - 1.0), 0.0, 1.0)
+    b2 = np.clip(np.where(up, fy, 1.0 - fx), 0.0, 1.0 - b1)
+    return (np.asarray(triangle_offset)[triangle] + local).astype(np.int64), b1, b2
+
+
 def _cells(n: int) -> tuple[np.ndarray, np.ndarray]:
     """Lattice (a, b) coordinates of every point, and the (n*n, 3) lattice indices of every cell."""
     pts = np.array([(a, b) for a in range(n + 1) for b in range(n + 1 - a)], dtype=np.int64)
@@ -159,21 +179,7 @@ class ElementMesh:
         ``b1``, ``b2`` are the barycentric weights of the element's vertices 1 and 2
         (vertex 0 gets ``1 - b1 - b2``); all three are clipped to [0, 1].
         """
-        triangle = np.asarray(triangle, dtype=np.int64)
-        n = self.triangle_n[triangle].astype(np.int64)
-        x = np.clip(np.asarray(u, np.float64), 0.0, 1.0) * n
-        y = np.clip(np.asarray(v, np.float64), 0.0, 1.0) * n
-        a = np.clip(np.floor(x).astype(np.int64), 0, n - 1)
-        b = np.clip(np.floor(y).astype(np.int64), 0, n - 1 - a)
-        fx = x - a
-        fy = y - b
-        up = (fx + fy <= 1.0) | (a + b >= n - 1)
-        local = np.where(up, up_index(a, b, n), down_index(a, b, np.maximum(n, 1)))
-        b1 = np.where(up, fx, fx + fy - 1.0)
-        b2 = np.where(up, fy, 1.0 - fx)
-        b1 = np.clip(b1, 0.0, 1.0)
-        b2 = np.clip(b2, 0.0, 1.0 - b1)
-        return (self.triangle_offset[triangle] + local).astype(np.int64), b1, b2
+        return locate_in_triangles(self.triangle_n, self.triangle_offset, triangle, u, v)
 
     def vertex_positions(self, state: FrameState) -> np.ndarray:
         """(V, 3) world positions of the shared vertices in a posed frame."""
