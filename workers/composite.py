@@ -27,10 +27,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from kernels.camera import camera_rays_cl, mix64
+from kernels.sampling import around
 from kernels.surface import LookupCL
 from pipeline.scene import ElementMesh, FrameState
 
-from .emission import around
 from .raycast import RayCaster, caster_for
 
 CHUNK_RAYS = 1 << 16  # camera samples per wavefront: large Embree batches, bounded memory
@@ -209,7 +209,7 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
     path = None  # sample index of every live ray; None while it is 0..n-1
     throughput = None  # None while it is all ones (camera rays)
     for depth in range(max_depth + 1):
-        tri, u, v, t = sh.caster.intersect_raw(origins, dirs)  # float32 as Embree gives them
+        tri, u, v, t = sh.caster.intersect(origins, dirs)  # float32 as Embree gives them
         rays["camera" if depth == 0 else "reflection"] += len(tri)
         hit = tri >= 0
         if not hit.all():

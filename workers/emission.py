@@ -11,7 +11,6 @@ from __future__ import annotations
 import numpy as np
 
 from kernels.emit import AREA, DIRECTIONAL, POINT, SPOT, EmissionTables
-from kernels.sampling import around
 from pipeline.scene import FrameState
 
 from .raycast import RayCaster
@@ -53,9 +52,3 @@ def emission_tables(state: FrameState, caster: RayCaster) -> EmissionTables:
         corners=state.vertices[state.faces].reshape(-1, 9).astype(np.float32),
         normals=caster.normals, center=caster.center.astype(np.float64), radius=float(radius),
         epsilon=float(caster.epsilon))
-
-
-def cosine_hemisphere(normals: np.ndarray, rng: np.random.Generator) -> np.ndarray:
-    """Cosine-weighted directions about unit ``normals`` (Malley's method)."""
-    u1, u2 = rng.random(len(normals)), rng.random(len(normals))
-    return around(normals, np.sqrt(1.0 - u1), 2.0 * np.pi * u2)

@@ -114,7 +114,7 @@ def _trace_wavefront(state, caster, table, emit, scatter, photon, key, max_depth
     for depth in range(max_depth):
         if not len(photon):
             return
-        tri, u, v, dist = caster.intersect_raw(origins, dirs)
+        tri, u, v, dist = caster.intersect(origins, dirs)
         if depth == 0 and any(li.definition.range is not None for li in state.lights):
             beta = beta * _range_window(state, table, emitter, dist)[:, None]
         bounce = scatter(Hits(tri, u, v, dirs, beta, photon), depth, key)  # misses end there

@@ -40,18 +40,8 @@ class RayCaster:
         self._scene.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32))
 
     def intersect(self, origins: np.ndarray, directions: np.ndarray):
-        """Closest hits: (triangle or -1, u, v, distance) for float rays (n, 3)."""
-        if len(origins) == 0:
-            e = np.empty(0)
-            return np.empty(0, np.int64), e, e, e
-        out = self._scene.run(np.ascontiguousarray(origins, np.float32),
-                              np.ascontiguousarray(directions, np.float32), output=1)
-        self.rays_cast += len(origins)
-        return (out["primID"].astype(np.int64), out["u"].astype(np.float64), out["v"].astype(np.float64),
-                out["tfar"].astype(np.float64))
-
-    def intersect_raw(self, origins: np.ndarray, directions: np.ndarray):
-        """Closest hits as embreex returns them: (int32 triangle or -1, float32 u, v, distance)."""
+        """Closest hits as embreex returns them: (int32 triangle or -1, float32 u, v, distance);
+        Embree's u, v weight the triangle's corners 1 and 2."""
         out = self._scene.run(np.ascontiguousarray(origins, np.float32),
                               np.ascontiguousarray(directions, np.float32), output=1)
         self.rays_cast += len(origins)

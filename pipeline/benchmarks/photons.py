@@ -58,7 +58,7 @@ def _worker(scene_path: str, frame: int, n_photons: int, photon_start: int) -> d
             dirs = (dirs / np.linalg.norm(dirs, axis=1, keepdims=True)).astype(np.float32)
         t0 = time.perf_counter()
         for lo_i in range(0, n_raw, 1 << 17):  # the tracer's wavefront size
-            caster.intersect_raw(origins[lo_i:lo_i + (1 << 17)], dirs[lo_i:lo_i + (1 << 17)])
+            caster.intersect(origins[lo_i:lo_i + (1 << 17)], dirs[lo_i:lo_i + (1 << 17)])
         raw_s = min(raw_s, time.perf_counter() - t0)
     return {"trace_s": trace_s, "rays": batch.rays_cast, "records": len(batch.key), "raw_s": raw_s,
             "raw_rays": n_raw}
