@@ -80,14 +80,14 @@ def bench_scene(path, *, width: int, height: int, spp: int, repeat: int) -> dict
 
 
 @click.command("frame")
-@click.argument("scenes", nargs=-1, type=click.Path(dir_okay=False))
+@click.argument("scenes", nargs=-1)
 @click.option("--resolution", default="640x480", show_default=True)
 @click.option("--spp", type=int, default=1, show_default=True)
 @click.option("--repeat", type=int, default=5, show_default=True, help="Timed renders per scene (median).")
 def bench_frame(scenes, resolution, spp, repeat):
     """Milliseconds per frame and rays/s vs raw embreex (default scenes: ROOM and ATRIUM)."""
     from pipeline.render import RenderSettings, parse_resolution
-    from pipeline.scene.builtin import write_builtin
+    from pipeline.scene.builtin import BUILTIN_SCENES, write_builtin
 
     width, height = parse_resolution(resolution)
     RenderSettings(width=width, height=height, spp=spp)  # validates spp
@@ -97,7 +97,9 @@ def bench_frame(scenes, resolution, spp, repeat):
         os.sched_setaffinity(0, {min(cores)})
     try:
         with tempfile.TemporaryDirectory() as tmp:
-            paths = list(scenes) or [write_builtin(n, Path(tmp) / f"{n}.glb") for n in ("room", "atrium")]
+            # Scene files, or names of built-in scenes (as `loom bench photons` takes them)
+            paths = [write_builtin(n, Path(tmp) / f"{n}.glb") if n in BUILTIN_SCENES else n
+                     for n in (list(scenes) or ["room", "atrium"])]
             click.echo(f"compositor at {width}x{height}, {spp} spp, one core, median of {repeat}")
             for path in paths:
                 r = bench_scene(path, width=width, height=height, spp=spp, repeat=repeat)
