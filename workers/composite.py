@@ -176,7 +176,8 @@ class _Hits:
     def points(self, rows=None) -> np.ndarray:
         if rows is None:
             return self._full("points", lambda _: self.origins + self.t[:, None] * self.dirs)
-        return self.origins[rows] + self.t[rows, None] * self.dirs[rows]
+        return (np.take(self.origins, rows, axis=0)
+                + np.take(self.t, rows)[:, None] * np.take(self.dirs, rows, axis=0))
 
     def normal(self, rows=None) -> np.ndarray:
         return np.take(self._normals, self.tri if rows is None else self.tri[rows], axis=0)
@@ -185,7 +186,7 @@ class _Hits:
         """normal . ray direction (negative on the front face)."""
         if rows is None:
             return self._full("cos_in", lambda _: np.einsum("ij,ij->i", self.normal(), self.dirs))
-        return np.einsum("ij,ij->i", self.normal(rows), self.dirs[rows])
+        return np.einsum("ij,ij->i", self.normal(rows), np.take(self.dirs, rows, axis=0))
 
     def facing(self, rows=None) -> np.ndarray:
         """Unit normals turned towards the viewer (surfaces reflect on both faces)."""
