@@ -24,9 +24,12 @@ __kernel void camera8(const long c0, const long count, const ulong key, const in
     const ulong8 h = mix64_8(mix64_8(convert_ulong8(counter) ^ key));  // dimension 0 adds nothing
     const double8 jx = convert_double8(h >> 32) * (1.0 / 4294967296.0);
     const double8 jy = convert_double8(h & 0xFFFFFFFFUL) * (1.0 / 4294967296.0);
-    const long8 pixel = counter / spp;
-    const double8 px = convert_double8(pixel % width) + jx;
-    const double8 py = convert_double8(pixel / width) + jy;
+    // Pixel row and column by exact double division (counters < 2^40, far below 2^53): 64-bit
+    // integer division has no SIMD instruction and would make the lanes scalar.
+    const double8 pixel = floor(convert_double8(counter) / (double)spp);
+    const double8 row = floor(pixel / (double)width);
+    const double8 px = (pixel - row * (double)width) + jx;
+    const double8 py = row + jy;
     const float8 x = convert_float8(((2.0 / width) * px - 1.0) * scale_x);
     const float8 y = convert_float8((1.0 - (2.0 / height) * py) * tan_y);
     float8 dx = x * r00 + y * r01 - r02;
