@@ -23,7 +23,7 @@ import numpy as np
 
 from .philox import EMISSION_STREAM, uniforms
 from .sampling import around, orthonormal_basis, sincos_poly
-from .scatter import LANES, WORK_GROUP, device_input, device_output, read_back
+from .scatter import LANES, WORK_GROUP, device_input, device_output, device_table, read_back
 
 POINT, SPOT, DIRECTIONAL, AREA = 0, 1, 2, 3
 
@@ -114,18 +114,13 @@ class EmitCL:
         self.ctx, self.queue = device_context()
         self.kernel = kernel("emit", "emit8")
         self.tables = tables
-        ro = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
-
-        def buf(a, dtype):
-            a = np.ascontiguousarray(a, dtype=dtype)
-            return cl.Buffer(self.ctx, ro, hostbuf=a if a.size else np.zeros(1, dtype))
-
-        self._tables = [buf(tables.cdf, np.float64), buf(tables.prob, np.float64), buf(tables.kind, np.int32),
-                        buf(tables.index, np.int64), buf(tables.flux, np.float64),
-                        buf(tables.light_pos, np.float64), buf(tables.light_dir, np.float64),
-                        buf(tables.light_rad, np.float64), buf(tables.cos_outer, np.float64),
-                        buf(tables.cos_inner, np.float64), buf(tables.corners, np.float32),
-                        buf(tables.normals, np.float64)]
+        self._pool = None
+        self._tables = [device_table(self.ctx, a, dt) for a, dt in (
+            (tables.cdf, np.float64), (tables.prob, np.float64), (tables.kind, np.int32),
+            (tables.index, np.int64), (tables.flux, np.float64), (tables.light_pos, np.float64),
+            (tables.light_dir, np.float64), (tables.light_rad, np.float64),
+            (tables.cos_outer, np.float64), (tables.cos_inner, np.float64),
+            (tables.corners, np.float32), (tables.normals, np.float64))]
 
     def __call__(self, photon: np.ndarray, key: tuple[int, int]):
         n = len(photon)
@@ -136,7 +131,7 @@ class EmitCL:
         ph = device_input(self.ctx, photon.astype(np.int64, copy=False))
         # Output arrays reused from call to call (no page faults of fresh memory on every call): the
         # result is valid until the next call, and the tracer consumes it before that.
-        if getattr(self, "_pool", None) is None or len(self._pool[0]) < n:
+        if self._pool is None or len(self._pool[0]) < n:
             self._pool = [np.empty((n, 3), np.float32), np.empty((n, 3), np.float32),
                           np.empty((n, 3), np.float64), np.empty(n, np.int32)]
         outs = [a[:n] for a in self._pool]

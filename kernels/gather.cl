@@ -74,6 +74,16 @@ __kernel void prefix_frames(__global double *table, const int n_elements, const 
     }
 }
 
+// Row 0 of element e's part of the element-major prefix table (E, n_frames + 1, n_parity x SLOTS)
+// for work item gid = e * n_parity + p, with p's columns: rows follow at a stride of `width`.
+inline __global double *prefix_rows(__global double *table, const long gid, const int n_frames,
+                                    const int n_parity, long *e, uint *parity, long *width) {
+    *e = gid / n_parity;
+    *parity = (uint)(gid - *e * n_parity);
+    *width = (long)n_parity * SLOTS;
+    return table + *e * (n_frames + 1) * *width + *parity * SLOTS;
+}
+
 // Sums of element e and parity p (work item e * n_parity + p) over frames 0..J-1 of the
 // records, accumulated over frames as they are made: table row j+1 = row j + sums of frame j,
 // row 0 = 0. Bitwise the same as element_sums followed by prefix_frames, without the table's
@@ -87,10 +97,9 @@ __kernel void sums_prefix(__global const uint *key, __global const ushort *b1,
 {
     const long gid = get_global_id(0);
     if (gid >= (long)n_elements * n_parity) return;
-    const long e = gid / n_parity;
-    const uint parity = (uint)(gid - e * n_parity);
-    const long width = (long)n_parity * SLOTS;
-    __global double *t = table + e * (n_frames + 1) * width + parity * SLOTS;
+    long e, width;
+    uint parity;
+    __global double *t = prefix_rows(table, gid, n_frames, n_parity, &e, &parity, &width);
     double run[SLOTS];
     for (int c = 0; c < SLOTS; ++c) {
         run[c] = 0.0;
@@ -120,10 +129,9 @@ __kernel void sums_prefix_step(__global const uint *key, __global const ushort *
 {
     const long gid = get_global_id(0);
     if (gid >= (long)n_elements * n_parity) return;
-    const long e = gid / n_parity;
-    const uint parity = (uint)(gid - e * n_parity);
-    const long width = (long)n_parity * SLOTS;
-    __global double *t = table + e * (n_frames + 1) * width + parity * SLOTS;
+    long e, width;
+    uint parity;
+    __global double *t = prefix_rows(table, gid, n_frames, n_parity, &e, &parity, &width);
     if (j == 0) {
         for (int c = 0; c < SLOTS; ++c) t[c] = 0.0;
     }

@@ -44,19 +44,7 @@ inline void sincos8(const double8 phi, double8 *s, double8 *c) {
 
 
 // Philox4x32-10 on eight counters at once (PHILOX4X32_10 of philox.cl, lane by lane).
-#define PHILOX8_10(c0, c1, c2, c3, key0, key1) do { \
-        uint k0_ = (key0), k1_ = (key1); \
-        PHILOX8_ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
-        PHILOX8_ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
-        PHILOX8_ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
-        PHILOX8_ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
-        PHILOX8_ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
-        PHILOX8_ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
-        PHILOX8_ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
-        PHILOX8_ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
-        PHILOX8_ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
-        PHILOX8_ROUND(c0, c1, c2, c3, k0_, k1_); \
-    } while (0)
+#define PHILOX8_10(c0, c1, c2, c3, key0, key1) PHILOX_10(PHILOX8_ROUND, c0, c1, c2, c3, key0, key1)
 
 // Orthonormal tangents (t, s) of unit axes z (Duff et al., JCGT 6(1), 2017), eight at a time.
 inline void basis8(double8 zx, double8 zy, double8 zz, double8 *tx, double8 *ty, double8 *tz,

@@ -20,20 +20,22 @@
 
 #define PHILOX_BUMP(k0, k1) do { (k0) += PHILOX_W0; (k1) += PHILOX_W1; } while (0)
 
-// Philox4x32-10 in place on the counter words c0..c3 with key (k0, k1) (key copied, not changed).
-#define PHILOX4X32_10(c0, c1, c2, c3, key0, key1) do { \
+// Philox4x32-10 in place on the counter words c0..c3 with key (k0, k1) (key copied, not changed):
+// ten rounds of ROUND (scalar here, eight lanes in lanes.cl) with the key bumped in between.
+#define PHILOX_10(ROUND, c0, c1, c2, c3, key0, key1) do { \
         uint k0_ = (key0), k1_ = (key1); \
-        PHILOX_ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
-        PHILOX_ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
-        PHILOX_ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
-        PHILOX_ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
-        PHILOX_ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
-        PHILOX_ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
-        PHILOX_ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
-        PHILOX_ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
-        PHILOX_ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
-        PHILOX_ROUND(c0, c1, c2, c3, k0_, k1_); \
+        ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
+        ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
+        ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
+        ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
+        ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
+        ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
+        ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
+        ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
+        ROUND(c0, c1, c2, c3, k0_, k1_); PHILOX_BUMP(k0_, k1_); \
+        ROUND(c0, c1, c2, c3, k0_, k1_); \
     } while (0)
+#define PHILOX4X32_10(c0, c1, c2, c3, key0, key1) PHILOX_10(PHILOX_ROUND, c0, c1, c2, c3, key0, key1)
 
 inline uint4 philox4x32_10(uint4 c, uint2 k) {
     uint c0 = c.x, c1 = c.y, c2 = c.z, c3 = c.w;
@@ -41,7 +43,5 @@ inline uint4 philox4x32_10(uint4 c, uint2 k) {
     return (uint4)(c0, c1, c2, c3);
 }
 
-// A uint32 to a double in [0, 1) with 24 random bits: exact in float and double alike.
-inline double philox_uniform(uint x) { return (double)(x >> 8) * (1.0 / 16777216.0); }
 
 #endif

@@ -155,12 +155,11 @@ class ScatterCL:
         self.ctx, self.queue = device_context()
         self.kernel = kernel("scatter", "scatter8")
         self.tables = tables
-        flags = cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR
-        self._tables = [cl.Buffer(self.ctx, flags, hostbuf=np.ascontiguousarray(a)) for a in (
-            tables.corners.astype(np.float32), tables.normals.astype(np.float64),
-            tables.tri_mat.astype(np.int32), tables.tri_n.astype(np.int32),
-            tables.tri_offset.astype(np.int64), tables.albedo.astype(np.float64),
-            tables.kind.astype(np.int32), tables.exponent.astype(np.float64))]
+        self._pool = None  # output arrays reused from call to call (_output_rows)
+        self._tables = [device_table(self.ctx, a, dt) for a, dt in (
+            (tables.corners, np.float32), (tables.normals, np.float64), (tables.tri_mat, np.int32),
+            (tables.tri_n, np.int32), (tables.tri_offset, np.int64), (tables.albedo, np.float64),
+            (tables.kind, np.int32), (tables.exponent, np.float64))]
 
     def __call__(self, hits: Hits, depth: int, key: tuple[int, int]) -> Bounce:
         """One bounce on the device. The returned arrays are this instance's and are overwritten by
@@ -197,9 +196,18 @@ class ScatterCL:
         """The first ``m`` rows of this instance's output arrays, grown when needed. Reusing them
         spares the kernel the page faults of fresh memory on every bounce; the result of a call is
         therefore valid only until the next call (the tracer copies what it keeps out of it)."""
-        if getattr(self, "_pool", None) is None or len(self._pool[0]) < m:
+        if self._pool is None or len(self._pool[0]) < m:
             self._pool = [np.empty((max(m, 1),) + shape, dtype) for dtype, shape in self._OUTPUTS]
         return [a[:m] for a in self._pool]
+
+
+def device_table(ctx, a: np.ndarray, dtype):
+    """A read-only device copy of a table (one element of zeros stands in for an empty one)."""
+    import pyopencl as cl
+
+    a = np.ascontiguousarray(a, dtype=dtype)
+    return cl.Buffer(ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+                     hostbuf=a if a.size else np.zeros(1, dtype))
 
 
 def device_input(ctx, a: np.ndarray):

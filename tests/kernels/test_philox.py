@@ -52,3 +52,30 @@ def test_uniforms_are_uniform_and_in_range():
     chi2 = ((hist - expected) ** 2 / expected).sum()
     assert chi2 < 45.3  # 99.9th percentile of chi-squared with 19 degrees of freedom
     assert not np.array_equal(uniforms(np.arange(10), 3, (1, 2)), uniforms(np.arange(10), 4, (1, 2)))
+
+
+def test_eight_lane_philox_equals_numpy(rng):
+    """PHILOX8_10 (lanes.cl), what the emission and bounce kernels use, lane by lane."""
+    from kernels.context import expanded_source
+
+    ctx, queue = device_context()
+    src = expanded_source("lanes") + """
+    __kernel void draw8(__global const uint *c, const uint k0, const uint k1, __global uint *out) {
+        const size_t g = get_global_id(0);
+        uint8 c0 = vload8(0, c + 32 * g), c1 = vload8(0, c + 32 * g + 8);
+        uint8 c2 = vload8(0, c + 32 * g + 16), c3 = vload8(0, c + 32 * g + 24);
+        PHILOX8_10(c0, c1, c2, c3, k0, k1);
+        vstore8(c0, 0, out + 32 * g); vstore8(c1, 0, out + 32 * g + 8);
+        vstore8(c2, 0, out + 32 * g + 16); vstore8(c3, 0, out + 32 * g + 24);
+    }"""
+    prg = cl.Program(ctx, src).build()
+    counters = rng.integers(0, 2**32, size=(512, 4), dtype=np.uint64).astype(np.uint32)
+    counters[:3] = [c for c, _, _ in KAT]
+    planar = np.ascontiguousarray(counters.reshape(64, 8, 4).transpose(0, 2, 1))  # (group, word, lane)
+    buf = cl.Buffer(ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=planar)
+    out = np.empty_like(planar)
+    out_buf = cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY, out.nbytes)
+    cl.Kernel(prg, "draw8")(queue, (64,), None, buf, np.uint32(5), np.uint32(0xFFFFFFFF), out_buf)
+    cl.enqueue_copy(queue, out, out_buf)
+    got = out.transpose(0, 2, 1).reshape(512, 4)
+    np.testing.assert_array_equal(got, philox4x32_10(counters, (5, 0xFFFFFFFF)))
