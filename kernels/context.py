@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import os
 import re
+import warnings
 from functools import lru_cache
 from pathlib import Path
 
@@ -62,7 +63,11 @@ def expanded_source(name: str, seen: frozenset[str] = frozenset()) -> str:
 def program(name: str, options: tuple[str, ...] = ()) -> cl.Program:
     """Build ``kernels/<name>.cl`` (includes inlined) once per process."""
     ctx, _ = device_context()
-    return cl.Program(ctx, expanded_source(name)).build(options=list(options))
+    with warnings.catch_warnings():
+        # PoCL's build log carries ABI notes on some CPUs (double8 arguments without AVX-512);
+        # pyopencl turns a non-empty log into a CompilerWarning although the build succeeded.
+        warnings.simplefilter("ignore", cl.CompilerWarning)
+        return cl.Program(ctx, expanded_source(name)).build(options=list(options))
 
 
 @lru_cache(maxsize=None)

@@ -90,16 +90,16 @@ def _scheduler_options(f):
 @click.option("--store", "store_url", required=True, help="Photon store: a directory or an fsspec URL.")
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--element-size", type=float, default=None, help="Element edge bound (default: the scene's).")
-@click.option("--max-depth", type=int, default=8, show_default=True, help="Maximum photon bounces.")
+@click.option("--photon-depth", type=int, default=8, show_default=True, help="Maximum photon bounces.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @_scheduler_options
-def shoot_command(scene_file, frames, photons, store_url, seed, element_size, max_depth, quiet,
+def shoot_command(scene_file, frames, photons, store_url, seed, element_size, photon_depth, quiet,
                   scheduler, workers) -> None:
     """Trace photons for every frame of SCENE_FILE into a photon store (resumable)."""
     from .config import RenderConfig
     from .shoot import shoot
 
-    config = RenderConfig(seed=seed, element_size=element_size, max_depth=max_depth)
+    config = RenderConfig(seed=seed, element_size=element_size, photon_depth=photon_depth)
     summary = shoot(scene_file, frames=frames, n_photons=photons, store_url=store_url, config=config,
                     scheduler=scheduler, workers=workers, progress=not quiet)
     click.echo(
@@ -109,46 +109,84 @@ def shoot_command(scene_file, frames, photons, store_url, seed, element_size, ma
         f"in {summary['seconds']:.1f} s -> {store_url}")
 
 
+def _photons(_ctx, _param, value):
+    if value is None or str(value).strip().lower() == "auto":
+        return None
+    try:
+        n = int(str(value).replace(",", "").replace("_", ""))
+    except ValueError:
+        raise click.BadParameter(f"expected auto or a number of photons per frame, got {value!r}") from None
+    if n <= 0:
+        raise click.BadParameter(f"must be auto or a positive number of photons per frame, got {n}")
+    return n
+
+
 @main.command("render")
 @click.argument("scene_file", type=click.Path(dir_okay=False))
 @click.option("--frames", default=None, help="Farm range: 1-100, 1-100x2, 1,5,10-20 (default: all).")
 @click.option("--out", "out_dir", required=True, type=click.Path(), help="Output directory.")
 @click.option("--resolution", default="640x480", show_default=True, help="WIDTHxHEIGHT in pixels.")
 @click.option("--spp", type=int, default=4, show_default=True, help="Jittered camera samples per pixel.")
-@click.option("--photons", type=int, default=40_000, show_default=True, help="Photons per frame (N_frame).")
+@click.option("--photons", default="auto", show_default=True, callback=_photons,
+              help="N_frame: auto (chosen per segment by the AQM, §5.2) or photons per frame for every frame.")
+@click.option("--fmax", type=int, default=None,
+              help="F_max: of the first segment with --photons auto (§5.2.1), of every frame with --photons N "
+                   "(default: fmax_initial, 15).")
+@click.option("--temporal", type=click.Choice(["adaptive", "fixed", "off"]), default="adaptive", show_default=True,
+              help="Temporal photon collection with --photons N: Condition (1) windows (§5.1), always "
+                   "+-F_max/2 (§6), or each frame's own photons.")
+@click.option("--segment", type=int, default=None,
+              help="Redo one segment (index from `loom segments OUT`) and only the frames that depend on it.")
 @click.option("--store", "store_url", default=None, help="Photon store (default: OUT/photons.zarr).")
 @click.option("--camera", default=None, help="Camera or camera-node name (default: the first camera).")
 @click.option("--seed", type=int, default=0, show_default=True)
-@click.option("--max-depth", type=int, default=4, show_default=True, help="Mirror/glossy reflections per path.")
-@click.option("--quiet", is_flag=True, help="No progress bars.")
-@click.option("--temporal", type=click.Choice(["adaptive", "fixed", "off"]), default="adaptive", show_default=True,
-              help="Temporal photon collection of the indirect maps: Condition (1) windows (§5.1), "
-                   "always +-F_max/2 (§6), or each frame's own photons.")
-@click.option("--fmax", type=int, default=None, help="F_max, frames per segment (default: fmax_initial, 15).")
-@click.option("--verbose", is_flag=True, help="Log the rays of each kind cast for every frame.")
+@click.option("--reflection-depth", type=int, default=4, show_default=True,
+              help="Mirror/glossy reflections followed per camera path.")
+@click.option("--photon-depth", type=int, default=8, show_default=True, help="Maximum photon bounces.")
+@click.option("--d-thr", type=float, default=None, help="d_thr, share of AQM pixels allowed above 1 JND (0.03).")
+@click.option("--quiet", is_flag=True, help="No progress lines.")
+@click.option("--verbose", is_flag=True, help="Log more of what the stages do.")
 @_scheduler_options
-def render_command(scene_file, frames, out_dir, resolution, spp, photons, store_url, camera, seed,
-                   max_depth, quiet, temporal, fmax, verbose, scheduler, workers) -> None:
-    """Render frames of SCENE_FILE: photons, illumination maps, EXR/PNG frames, preview.mp4."""
+def render_command(scene_file, frames, out_dir, resolution, spp, photons, fmax, temporal, segment, store_url,
+                   camera, seed, reflection_depth, photon_depth, d_thr, quiet, verbose, scheduler, workers) -> None:
+    """Render frames of SCENE_FILE: photons, segments, illumination maps, EXR/PNG frames, preview.mp4."""
     from .config import RenderConfig
     from .render import RenderSettings, parse_resolution, render
 
     if verbose:
-        logging.getLogger("pipeline.render").setLevel(logging.INFO)
-
+        logging.getLogger("pipeline").setLevel(logging.INFO)
     width, height = parse_resolution(resolution)
-    settings = RenderSettings(width=width, height=height, spp=spp, max_depth=max_depth)
+    settings = RenderSettings(width=width, height=height, spp=spp, reflection_depth=reflection_depth)
+    extra = {} if d_thr is None else {"d_thr": d_thr}
+    config = RenderConfig(seed=seed, photon_depth=photon_depth, **extra)
     report = render(scene_file, frames=frames, out_dir=out_dir, settings=settings, n_photons=photons,
-                    store_url=store_url, camera=camera, config=RenderConfig(seed=seed),
-                    scheduler=scheduler, workers=workers, progress=not quiet, temporal=temporal, fmax=fmax)
-    t, r = report["times_s"], report["rays"]
+                    store_url=store_url, camera=camera, config=config, scheduler=scheduler, workers=workers,
+                    progress=not quiet, temporal=temporal, fmax=fmax, segment=segment,
+                    echo=None if quiet else click.echo)
+    t = report["times_s"]
     click.echo(f"rendered {len(report['rendered'])} frames ({len(report['skipped'])} already done) "
-               f"at {width}x{height}, {spp} spp in {t['total_s']:.1f} s (shoot {t['shoot_s']:.1f}, "
-               f"illuminate {t['illuminate_s']:.1f}, composite {t['composite_s']:.1f}, "
-               f"video {t['video_s']:.1f})")
-    click.echo("rays: " + ", ".join(f"{k} {v:,}" for k, v in r.items()))
+               f"at {width}x{height}, {spp} spp in {t['total_s']:.1f} s (photons {t['shoot_s']:.1f}, "
+               f"AQM {t['aqm_s']:.1f}, temporal {t['temporal_s']:.1f}, composite {t['composite_s']:.1f}, "
+               f"video {t['video_s']:.1f}); {len(report['segments'])} segment(s)")
     click.echo(f"frames: {out_dir}/beauty.####.exr, .png  video: {report['video']}  "
-               f"report: {out_dir}/report.json")
+               f"report: {out_dir}/report.json  segments: loom segments {out_dir}")
+
+
+@main.command("segments")
+@click.argument("out_dir", type=click.Path(file_okay=False))
+@click.option("--json", "as_json", is_flag=True, help="The records as JSON.")
+def segments_command(out_dir: str, as_json: bool) -> None:
+    """The segments of a render: the paper's Table 1 (K_i, N_frame, F_max) with d_AQM, p_me, times."""
+    import json
+
+    from .segment_records import read_records, table
+
+    records = read_records(out_dir)
+    if as_json:
+        click.echo(json.dumps([r.to_dict() for r in records], indent=1))
+        return
+    for line in table(records):
+        click.echo(line)
 
 
 @main.group()
@@ -180,3 +218,5 @@ bench.add_command(bench_frame, "frame")
 
 from .benchmarks.temporal import bench_temporal  # noqa: E402
 bench.add_command(bench_temporal, "temporal")
+from .benchmarks.noise import bench_noise  # noqa: E402
+bench.add_command(bench_noise, "noise")

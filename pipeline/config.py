@@ -15,56 +15,89 @@ from dataclasses import dataclass, fields
 from .errors import ConfigError
 
 
+STAGES = ("photons", "collection", "filter", "segments")
+
+
+def _param(default, stage: str, symbol: str, lo=None, hi=None, *, odd: bool = False, optional: bool = False):
+    """A config field with the stage that reads it, its paper symbol and its valid range."""
+    return dataclasses.field(default=default, metadata=dict(stage=stage, symbol=symbol, lo=lo, hi=hi, odd=odd,
+                                                            optional=optional))
+
+
 @dataclass(frozen=True, kw_only=True)
 class RenderConfig:
-    """Parameters of the spatiotemporal photon processing (§5) and of the element mesh (§4)."""
+    """Parameters of the spatiotemporal photon processing (§5) and of the element mesh (§4).
 
-    # --- element mesh (§4, §5.3) -----------------------------------------------------------
-    element_size: float | None = None  # max element edge, scene units; None: the scene's own (§4, §5.3)
+    Grouped by the stage that reads them (``STAGES``); :meth:`stage_hash` digests one stage's
+    fields, so a stage's stored results are keyed by what they really depend on: changing d_thr
+    re-decides segments (pipeline/coordinator.py) but keeps the photons, while changing
+    element_size or photon_depth refuses the photon store.
+    """
 
-    # --- temporal photon processing (§5.1) -------------------------------------------------
-    k_sigma: float = 2.0  # k in Condition (1): mu - k*sigma <= x <= mu + k*sigma, §5.1
-    smoothing_frames: int = 3  # frames averaged for mu and x, §5.1
-    min_extent: int = 3  # minimal temporal extent in frames, always collected, §5.1
+    # --- photons: tracing and the element mesh they are bucketed on (§4), workers/photons.py --------
+    element_size: float | None = _param(None, "photons", "element size (§4, §5.3)", 0.0, optional=True)
+    seed: int = _param(0, "photons", "run seed: Philox key (seed, frame), counter = photon index", 0)
+    photon_depth: int = _param(8, "photons", "photon bounces before termination (§4)", 1, 1024)
 
-    # --- adaptive spatial filter (§5.2.5, Volevich et al. 2000; kernels/filter.py) ----------
-    filter_photons: float = 25.0  # n_eff below which a vertex is filtered; target r = 1/sqrt(n), §5.2.5
-    filter_rings: int = 3  # h_max: largest support, in element rings over the same surface, §5.2.5
-    filter_z: float = 2.5  # bias test: stop growing h where a ring differs by > z sigma, dept.md §1.5
-    filter_angle: float = 30.0  # degrees; neighbours' normals within this of the vertex's, dept.md §1.5
+    # --- collection: temporal windows, Condition (1) (§5.1), kernels/temporal.py ------------------
+    k_sigma: float = _param(2.0, "collection", "k in mu - k sigma <= x <= mu + k sigma, §5.1 Eq. (1)", 0.0)
+    smoothing_frames: int = _param(3, "collection", "frames averaged for mu and x, §5.1", 1, 255, odd=True)
+    min_extent: int = _param(3, "collection", "minimal temporal extent in frames, §5.1", 1, 255)
 
-    # --- segment adjustment loops (§5.2) ---------------------------------------------------
-    fmax_initial: int = 15  # initial F_max, frames in a segment, §5.2.1 and §6
-    p_thr: float = 0.40  # p_thr, share of elements whose photons stay valid, §5.2.2
-    e_max: float = 0.05  # E_max, target energy-based error after temporal pooling, §5.2.1 Eq. (2)
-    d_thr: float = 0.03  # d_thr, AQM share of pixels with visible difference, §5.2.3
-    aqm_size: int = 256  # AQM input size in pixels, §6
+    # --- filter: adaptive object-space filter (§5.2.5, Volevich et al. 2000), kernels/filter.py -----
+    spatial_filter: bool = _param(True, "filter", "Step 5 of §5.2: filter where too few photons were collected")
+    filter_photons: float = _param(25.0, "filter", "n_eff below which a vertex is filtered, r = 1/sqrt(n), §5.2.5",
+                                   0.0)
+    filter_rings: int = _param(3, "filter", "h_max, in element rings over the same surface, §5.2.5", 1, 255)
+    filter_z: float = _param(2.5, "filter", "bias test: a ring differing by > z sigma stops h, dept.md §1.5", 0.0)
+    filter_angle: float = _param(30.0, "filter", "degrees between neighbour normals, dept.md §1.5", 0.0, 180.0)
 
-    # --- photon tracing (§4) ---------------------------------------------------------------
-    seed: int = 0  # run seed; photon i of frame f draws Philox words keyed by (seed, f), counter i
-    max_depth: int = 8  # maximum photon bounces before termination
+    # --- segments: the adjustment loops of §5.2 (pipeline/segments.py, pipeline/coordinator.py) -----
+    fmax_initial: int = _param(15, "segments", "F_max of the first segment, §5.2.1 and §6", 0, 510)
+    fmax_step: int = _param(15, "segments", "F_max growth per step of §5.2.2 (15, 30, 44: the paper's values)",
+                            1, 510)
+    fmax_cap: int = _param(44, "segments", "largest F_max, §5.2.2 (44: the paper's largest, §6 Table 1)", 0, 510)
+    p_thr: float = _param(0.40, "segments", "p_thr, share of elements collecting all F_max/2 frames, §5.2.2",
+                          0.0, 1.0)
+    e_max: float = _param(0.05, "segments", "E_max, energy-based error after pooling, §5.2.1 Eq. (2)", 0.0)
+    pilot_photons: int = _param(10_000, "segments", "photons of the pilot run at K, §5.2.1 (the paper's 10,000)",
+                                100, 1 << 30)
+    n_frame_min: int = _param(1_000, "segments", "smallest N_frame the pilot may choose, §5.2.1", 1, 1 << 30)
+    n_frame_max: int = _param(640_000, "segments", "largest N_frame of the doubling loop, reported when hit, "
+                              "§5.2.3", 1, 1 << 30)
+    d_thr: float = _param(0.03, "segments", "d_thr, share of AQM pixels above 1 JND, §5.2.3", 0.0, 1.0)
+    aqm_size: int = _param(256, "segments", "AQM input size in pixels, §6", 16, 4096)
+    end_photons: float = _param(2.0, "segments", "N_frame factor for frames within F_max/2 of an animation "
+                                "end, which lack one neighbour segment, §5.2", 1.0, 64.0)
 
     def __post_init__(self) -> None:
-        checks = {
-            "element_size": self.element_size is None or self.element_size > 0,
-            "k_sigma": self.k_sigma > 0,
-            "smoothing_frames": self.smoothing_frames >= 1 and self.smoothing_frames % 2 == 1,
-            "min_extent": self.min_extent >= 1,
-            "filter_photons": self.filter_photons > 0,
-            "filter_rings": 1 <= self.filter_rings <= 255,
-            "filter_z": self.filter_z > 0,
-            "filter_angle": 0 < self.filter_angle <= 180,
-            "fmax_initial": self.fmax_initial >= 0,
-            "p_thr": 0.0 <= self.p_thr <= 1.0,
-            "e_max": self.e_max > 0,
-            "d_thr": 0.0 <= self.d_thr <= 1.0,
-            "aqm_size": self.aqm_size >= 16,
-            "seed": self.seed >= 0,
-            "max_depth": self.max_depth >= 1,
-        }
-        for name, ok in checks.items():
+        for f in fields(self):
+            value, m = getattr(self, f.name), f.metadata
+            if value is None and m["optional"]:
+                continue
+            kind = type(f.default) if f.default is not None else float
+            numeric = isinstance(value, (int, float)) and not (isinstance(value, bool) and kind is not bool)
+            ok = numeric and (kind is not int or float(value).is_integer()) and value == value
+            if ok and kind is not bool:
+                lo, hi = m["lo"], m["hi"]
+                # float lower bounds are exclusive (> 0), integer ones inclusive
+                ok = ((lo is None or (value > lo if kind is float else value >= lo))
+                      and (hi is None or value <= hi) and (not m["odd"] or int(value) % 2 == 1))
             if not ok:
-                raise ConfigError(f"invalid value {getattr(self, name)!r}", field=name)
+                raise ConfigError(f"invalid value {value!r}", field=f.name)
+        if self.fmax_initial > self.fmax_cap:
+            raise ConfigError(f"fmax_initial {self.fmax_initial} exceeds fmax_cap {self.fmax_cap}",
+                              field="fmax_initial")
+
+    @classmethod
+    def stage_fields(cls, stage: str) -> tuple[str, ...]:
+        if stage not in STAGES:
+            raise ValueError(f"unknown stage {stage!r}")
+        return tuple(f.name for f in fields(cls) if f.metadata["stage"] == stage)
+
+    def stage_hash(self, stage: str) -> str:
+        """Digest of the fields one stage reads."""
+        return stable_digest({name: getattr(self, name) for name in self.stage_fields(stage)})
 
     def to_dict(self) -> dict:
         return dataclasses.asdict(self)
@@ -89,7 +122,7 @@ class RenderConfig:
         """Digest of what the photons depend on: the resolved element size and the tracer's
         settings (the seed is stored on its own). The photon store is keyed by it, so changing
         k_sigma or d_thr reuses the photons while changing element_size refuses the store."""
-        return stable_digest({"element_size": float(element_size), "max_depth": self.max_depth})
+        return stable_digest({"element_size": float(element_size), "photon_depth": self.photon_depth})
 
 
 def stable_digest(data: dict) -> str:

@@ -98,9 +98,10 @@ def exr_metadata(path) -> dict:
         inp.close()
 
 
-def frame_is_valid(exr, png, width: int, height: int, render_hash: str) -> bool:
+def frame_is_valid(exr, png, width: int, height: int, frame_hash: str) -> bool:
     """Whether a frame is done: both files exist, decode, have the expected size and channels,
-    and the EXR was made with ``render_hash`` (the same scene, settings and photons)."""
+    and the EXR carries ``frame_hash`` (pipeline/coordinator.frame_hash: the same settings, map
+    and exposure)."""
     if not (Path(exr).is_file() and Path(png).is_file()):
         return False
     try:
@@ -113,7 +114,7 @@ def frame_is_valid(exr, png, width: int, height: int, render_hash: str) -> bool:
         return False
     first = next(iter(channels.values()), None)
     return (ok_png and set(channels) == set(EXR_CHANNELS) and first is not None
-            and first.shape == (height, width) and meta.get("render_hash") == render_hash)
+            and first.shape == (height, width) and meta.get("frame_hash") == frame_hash)
 
 
 def read_png(path) -> np.ndarray:

@@ -89,7 +89,7 @@ def tasks(p: ShootPlan, store: PhotonStore, url: str) -> list[tuple[str, dict]]:
             store_url=url, scene_path=str(p.scene.path), scene_hash=p.scene.scene_hash,
             element_size=p.elements.element_size, frame=f, frame_index=f - 1, batch=batch,
             n_photons=p.n_photons - have, photon_start=have, seed=p.config.seed,
-            max_depth=p.config.max_depth)))
+            max_depth=p.config.photon_depth)))
     return out
 
 

@@ -80,7 +80,7 @@ def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames, *, mod
 def illumination_maps(store, elements, scene, frames=None, *, mode: str = "adaptive", fmax: int | None = None,
                       config: RenderConfig = RenderConfig(), kind: str = "indirect", count_kind: str = "all",
                       split_parity: bool = False, spatial_filter: bool = False,
-                      chunk: int = 96) -> Iterator[FrameIllumination]:
+                      batches=None, chunk: int = 96) -> Iterator[FrameIllumination]:
     """Yield the illumination of every requested frame, in frame order.
 
     Parameters
@@ -96,6 +96,8 @@ def illumination_maps(store, elements, scene, frames=None, *, mode: str = "adapt
         lit objects visible with more photons than the indirect ones alone), or "indirect"/"direct".
     split_parity : also give the even/odd half-photon maps I1, I2 (§5.2.3) instead of the full map.
     spatial_filter : apply the adaptive filter of §5.2.5 with ``config.filter_*``.
+    batches : (n_frames,) leading batches in use per store frame (None: every done batch); a
+        segment uses the batches that make up its N_frame (pipeline/coordinator.py).
     """
     if mode not in MODES:
         raise LoomError(f"must be one of {', '.join(MODES)}, got {mode!r}", field="--temporal")
@@ -105,8 +107,12 @@ def illumination_maps(store, elements, scene, frames=None, *, mode: str = "adapt
         raise LoomError(f"frame indices must be in [0, {store.n_frames})")
     if store.n_elements != elements.n_elements:
         raise LoomError(f"store has {store.n_elements} elements, the element mesh {elements.n_elements}")
-    n_emitted = np.array([store.photons_emitted(f) for f in range(store.n_frames)], np.float64)
-    counts = store.counts(kind=count_kind)
+    if batches is None:
+        n_emitted = np.array([store.photons_emitted(f) for f in range(store.n_frames)], np.float64)
+    else:
+        batches = np.asarray(batches, np.int64)
+        n_emitted = np.array([store.photons_in(f, int(batches[f])) for f in range(store.n_frames)], np.float64)
+    counts = store.counts(kind=count_kind, batches=batches)
     back, fwd = collection_windows(counts, n_emitted, frames, mode=mode, fmax=fmax, config=config)
     hood = (neighbourhood(elements.element_vertices, elements.vertex_local, elements.vertex_instance,
                           max_rings=config.filter_rings, max_angle=config.filter_angle)
@@ -119,7 +125,8 @@ def illumination_maps(store, elements, scene, frames=None, *, mode: str = "adapt
         hi = int((f[:, None] + fwd[part]).max()) + 1
         for g in [g for g in records if g < lo]:
             del records[g]
-        records.update({g: store.read_frame(g) for g in range(lo, hi) if g not in records})
+        records.update({g: store.read_frame(g, batches=None if batches is None else range(int(batches[g])))
+                        for g in range(lo, hi) if g not in records})
         flux = gather_flux_cl([records[g] for g in range(lo, hi)], n_emitted[lo:hi], back[part], fwd[part],
                               f - lo, elements.element_vertices, elements.n_vertices, kind=kind,
                               split_parity=split_parity)

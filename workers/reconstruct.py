@@ -126,3 +126,74 @@ def illuminate_task(*, store_url: str, scene_path: str, scene_hash: str, camera:
     IlluminationMaps.open(store_url, mode="r+").write_frame(frame - 1, adaptation=adaptation, **maps)
     return {"frame": frame, "adaptation": adaptation, "records": len(records),
             "photons": records.photons_emitted, "seconds": time.perf_counter() - t0}
+
+
+def vertex_moments(element, b1, b2, energy, element_vertices, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
+    """(V,) luminance flux S_v = sum_j b_k(j) Y_j and its squared-weight sum Q_v = sum_j b_k(j)^2 Y_j^2
+    (dept.md §1.3): the moments the pilot's energy-based error reads (pipeline/segments.energy_error)."""
+    from pipeline.tonemap import luminance
+
+    ev = np.asarray(element_vertices)
+    w1, w2 = _bary(b1), _bary(b2)
+    w = np.concatenate([1.0 - w1 - w2, w1, w2])
+    y = np.tile(luminance(np.asarray(energy, np.float64).reshape(-1, 3)), 3)
+    idx = ev[np.asarray(element, np.int64)].astype(np.int64).T.ravel()
+    return (np.bincount(idx, weights=w * y, minlength=n_vertices),
+            np.bincount(idx, weights=(w * y) ** 2, minlength=n_vertices))
+
+
+def frame_direct(store, frame_index: int, n_batches: int, elements, areas) -> np.ndarray:
+    """(V, 3) mesh-based direct estimate of a frame from its own direct photons (§4; eye adaptation)."""
+    records = store.read_frame(frame_index, batches=range(n_batches))
+    sel = records.direct
+    return vertex_irradiance(records.element[sel], records.b1[sel], records.b2[sel], records.energy[sel],
+                             elements, areas, records.photons_emitted)
+
+
+def map_digest(*maps: np.ndarray) -> str:
+    """16 hex digits of SHA-256 over the float32 bytes of maps: what a frame's pixels read of them."""
+    import hashlib
+
+    h = hashlib.sha256()
+    for m in maps:
+        h.update(np.ascontiguousarray(m, dtype=np.float32).tobytes())
+    return h.hexdigest()[:16]
+
+
+def reconstruct_task(*, store_url: str, scene_path: str, scene_hash: str, camera: str | None,
+                     element_size: float, frames: list[int], fmax: int, mode: str, batches: list[int],
+                     config: dict, aspect: float) -> dict:
+    """Dask task, Steps 4-5 of §5.2 for consecutive frames of one segment: the temporal gather of the
+    indirect maps (Condition (1) windows up to F_max/2, pipeline/temporal.py), the adaptive spatial
+    filter where too few photons were collected, each frame's direct estimate from its own photons
+    and its adaptation luminance from the map it shows. Writes the maps; returns per frame the
+    adaptation, a digest of the maps, the vertices filtered and the mean window length."""
+    import time
+
+    from pipeline.config import RenderConfig
+    from pipeline.store import PhotonStore
+    from pipeline.store.illumination import IlluminationMaps
+    from pipeline.temporal import illumination_maps
+
+    from .scene_cache import load_elements, load_scene
+
+    t0 = time.perf_counter()
+    cfg = RenderConfig.from_dict(config)
+    scene = load_scene(scene_path, scene_hash, camera)
+    elements = load_elements(scene_path, scene_hash, element_size)
+    store = PhotonStore.open(store_url)
+    maps = IlluminationMaps.open(store_url, mode="r+")
+    use = np.asarray(batches, np.int64)
+    out = {}
+    for lit in illumination_maps(store, elements, scene, [f - 1 for f in frames], mode=mode, fmax=fmax, config=cfg,
+                                 spatial_filter=cfg.spatial_filter, batches=use, chunk=len(frames)):
+        f = lit.frame_index + 1
+        state = scene.pose_frame(f)
+        direct = frame_direct(store, lit.frame_index, int(use[lit.frame_index]), elements, elements.vertex_areas(state))
+        indirect = lit.irradiance
+        adaptation = mesh_adaptation(state, elements, indirect + direct, aspect)
+        maps.write_frame(lit.frame_index, indirect=indirect, direct=direct, adaptation=adaptation)
+        out[str(f)] = {"adaptation": adaptation, "digest": map_digest(indirect),
+                       "filtered": 0 if lit.rings is None else int(np.count_nonzero(lit.rings)),
+                       "window": float(np.mean(lit.back.astype(np.int64) + lit.fwd + 1))}
+    return {"frames": out, "seconds": time.perf_counter() - t0}

@@ -251,6 +251,23 @@ class PhotonStore:
         f = self.source_frame(frame_index)
         return int(self._meta(f, self.done_batches(f))[:, 2].sum())
 
+    def photons_in(self, frame_index: int, n_batches: int) -> int:
+        """Photons emitted by a frame's first ``n_batches`` done batches (a prefix in use)."""
+        f = self.source_frame(frame_index)
+        done = self.done_batches(f)
+        if not 0 <= n_batches <= len(done):
+            raise LoomError(f"frame {f}: {n_batches} batches asked, {len(done)} done", path=self.url)
+        return int(self._meta(f, done[:n_batches])[:, 2].sum())
+
+    def prefix_for(self, frame_index: int, n_photons: int) -> int | None:
+        """The fewest leading done batches of a frame holding at least ``n_photons`` photons, or
+        None when all of them hold fewer (a batch must be shot first)."""
+        f = self.source_frame(frame_index)
+        done = self.done_batches(f)
+        running = np.cumsum(self._meta(f, done)[:, 2].astype(np.int64))
+        reach = np.flatnonzero(running >= n_photons)
+        return int(reach[0]) + 1 if len(reach) else (0 if n_photons <= 0 else None)
+
     def batch_info(self, frame_index: int, batch: int) -> dict | None:
         """The done marker of a batch as a dict of BATCH_FIELDS, or None if not done."""
         f = self.source_frame(frame_index)
@@ -408,12 +425,13 @@ class PhotonStore:
                             path=self.url)
         return arrays
 
-    def counts(self, kind: str = "all", frames=None, parity: int | None = None) -> np.ndarray:
+    def counts(self, kind: str = "all", frames=None, parity: int | None = None, batches=None) -> np.ndarray:
         """u32 (len(frames), n_elements) hit counts over done batches, without reading records.
 
         ``kind`` is "direct", "indirect" or "all"; ``parity`` 0/1 keeps even/odd photons only.
-        ``frames`` (default all) may repeat or be shared frames. One chunk read per frame: the
-        running counts at its last done batch.
+        ``frames`` (default all) may repeat or be shared frames. ``batches`` (one per frame, or
+        None: all done) is the number of leading batches in use. One chunk read per frame: the
+        running counts at its last batch in use.
         """
         if kind not in ("direct", "indirect", "all") or parity not in (None, 0, 1):
             raise LoomError(f"counts(kind={kind!r}, parity={parity!r}): kind must be direct, "
@@ -426,6 +444,16 @@ class PhotonStore:
         sources = self._sources()[chosen]
         unique, inverse = np.unique(sources, return_inverse=True)
         last = self._done_table()[unique].sum(axis=1) - 1  # done batches are a prefix
+        if batches is not None:
+            use = np.asarray(batches, np.int64).reshape(-1)
+            if use.shape != chosen.shape:
+                raise LoomError(f"counts: {use.shape[0]} batch counts for {chosen.shape[0]} frames", path=self.url)
+            first = np.zeros(unique.shape[0], np.int64)
+            first[inverse.reshape(-1)[::-1]] = np.arange(chosen.shape[0])[::-1]
+            want = use[first] - 1
+            if (want > last).any():
+                raise LoomError("counts: more batches asked than done", path=self.url)
+            last = want
         table = np.zeros((unique.shape[0], self.n_elements), dtype=np.uint32)
         block = max(1, (64 << 20) // (4 * len(CATEGORIES) * self.n_elements))
         for b in np.unique(last[last >= 0]):

@@ -1,0 +1,481 @@
+"""The segment coordinator: the five steps of §5.2 for one animation segment, as a Dask task.
+
+``coordinate`` (in the client) runs one :func:`segment_task` per segment, in segment order as the
+paper does: segment i+1 starts after segment i's end with its F_max. Each segment task fans out
+its own photon batches, reconstruction and frame tasks from inside the task through distributed's
+``worker_client`` (which secedes from the worker's thread pool, so even one one-thread worker
+cannot deadlock); with ``--scheduler synchronous`` the same code runs them in-process. Task i:
+
+1. Steps 1-3 for segment i if no task decided it yet (i = 0, or a stale record), then for segment
+   i + 1, whose photons segment i's windows reach (§5.2: "Steps 1-3 are performed not only for the
+   current segment but for the subsequent segment as well"); the previous segment's photons are
+   in the store already.
+   - Step 1 (§5.2.1): a pilot of ``pilot_photons`` at K gives the energy-based error E of its
+     indirect map; N_frame from Eq. (2) for E ~ E_max sqrt(F_max + 1); every frame gets N_frame.
+   - Step 2 (§5.2.2): p_me both ways at K; F_max grows while p_me >= p_thr, K moving with it.
+   - Step 3 (§5.2.3): I1(K), I2(K) from the even and odd photons with adaptive collection,
+     composited with the same camera samples and direct light, tone mapped as the final frame
+     (pipeline/perceived.py); N_frame doubles (one batch more a frame) while d_AQM > d_thr.
+   - Frames within F_max/2 of an animation end get ``end_photons`` x N_frame (§5.2).
+2. Steps 4-5 (§5.2.4-5) for the frames of segment i: reconstruction tasks of ``CHUNK_FRAMES``
+   frames each (workers/reconstruct.reconstruct_task), then one composite task a frame.
+
+The decisions are pure functions in pipeline/segments.py. Records (pipeline/segment_records.py)
+are written when a segment is decided and when it is done; a rerun skips done segments whose
+frames are valid and reuses every stored photon batch. Which photons a frame uses is fixed by the
+records (the fewest leading batches holding its target), never by what else the store holds, so
+results do not depend on the order work happened in, on the worker count or on a resume.
+"""
+from __future__ import annotations
+
+import time
+from contextlib import contextmanager
+from dataclasses import asdict, dataclass
+from typing import Callable, Iterator
+
+import numpy as np
+
+from .cluster import run_tasks
+from .config import RenderConfig, stable_digest
+from .segment_records import SegmentRecord, read_record, write_record
+from .segments import (Placement, clamp_n_frame, energy_error, grow_fmax, next_n_frame, p_me,
+                       photon_targets, pilot_n_frame, place_segment)
+
+CHUNK_FRAMES = 16  # frames per reconstruction task: fixed, so the gather's bits never depend on workers
+
+
+@dataclass(frozen=True)
+class Job:
+    """Everything a segment task needs, as plain values (it travels to workers)."""
+
+    scene_path: str
+    scene_hash: str
+    camera: str | None
+    element_size: float
+    store_url: str
+    out_dir: str
+    first: int  # first and last frame of the animation the segments cover
+    last: int
+    selection: tuple  # frames to render (fixed settings may skip frames; guided: first..last)
+    width: int
+    height: int
+    spp: int
+    reflection_depth: int
+    area_samples: int
+    tonemap: dict
+    config: dict
+    render_hash: str  # what a frame's pixels depend on besides its maps and adaptation
+    decision_hash: str  # what the segment decisions depend on
+    fmax: int  # F_max of the first segment (--fmax or fmax_initial), or of every frame when fixed
+    n_photons: int | None  # None: guided (--photons auto); else fixed N_frame
+    temporal: str  # adaptive | fixed | off
+    single_state: bool  # camera-only motion: every frame shares one photon set
+
+    def to_dict(self) -> dict:
+        return asdict(self)
+
+
+@contextmanager
+def fanout() -> Iterator[object | None]:
+    """A client for tasks submitted from inside a task (worker_client, which secedes), or None
+    when not on a Dask worker (synchronous scheduler): run_tasks then runs them in-process."""
+    try:
+        from distributed import get_worker, worker_client
+
+        get_worker()
+    except (ImportError, ValueError):
+        yield None
+        return
+    with worker_client() as client:
+        yield client
+
+
+class _Segments:
+    """One segment task's view of the run: scene, element mesh, store, config, records."""
+
+    def __init__(self, job: Job, client):
+        from workers.scene_cache import load_elements, load_scene
+
+        from .store import PhotonStore
+
+        self.job, self.client = job, client
+        self.config = RenderConfig.from_dict(job.config)
+        self.scene = load_scene(job.scene_path, job.scene_hash, job.camera)
+        self.elements = load_elements(job.scene_path, job.scene_hash, job.element_size)
+        self.store = PhotonStore.open(job.store_url, mode="r+")
+        self.times = {"shoot_s": 0.0, "aqm_s": 0.0, "temporal_s": 0.0}
+
+    # --- photons ---------------------------------------------------------------------------
+    def shoot(self, targets: dict[int, int]) -> None:
+        """Trace one batch more for every frame whose stored batches hold fewer than its target."""
+        from workers.photons import shoot_task
+
+        t0 = time.perf_counter()
+        want: dict[int, int] = {}
+        for f, n in targets.items():
+            src = self.store.source_frame(f - 1) + 1
+            want[src] = max(want.get(src, 0), int(n))
+        cfg8 = self.config.photon_hash(self.job.element_size)[:8]
+        calls = []
+        for f, n in sorted(want.items()):
+            if self.store.prefix_for(f - 1, n) is not None:
+                continue
+            have, batch = self.store.photons_emitted(f - 1), len(self.store.done_batches(f - 1))
+            calls.append((f"shoot-{cfg8}-s{self.config.seed}-f{f:05d}-b{batch:02d}", dict(
+                store_url=self.job.store_url, scene_path=self.job.scene_path, scene_hash=self.job.scene_hash,
+                element_size=self.job.element_size, frame=f, frame_index=f - 1, batch=batch,
+                n_photons=n - have, photon_start=have, seed=self.config.seed,
+                max_depth=self.config.photon_depth)))
+        run_tasks(self.client, shoot_task, calls, desc="shoot", progress=False)
+        self.times["shoot_s"] += time.perf_counter() - t0
+
+    def batches(self, targets: dict[int, int]) -> np.ndarray:
+        """(n_frames,) leading batches in use per store frame for these targets (0 elsewhere)."""
+        use = np.zeros(self.store.n_frames, np.int64)
+        for f, n in targets.items():
+            nb = self.store.prefix_for(f - 1, n)
+            if nb is None:
+                raise RuntimeError(f"frame {f} holds fewer than its {n} photons")
+            use[f - 1] = nb
+        return use
+
+    def known_targets(self, index: int) -> dict[int, int]:
+        """Targets of every decided segment before ``index`` (their photons are in the store)."""
+        out: dict[int, int] = {}
+        for i in range(index):
+            rec = read_record(self.job.out_dir, i)
+            if rec is not None:
+                out.update(rec.targets())
+        return out
+
+    # --- Step 1 ------------------------------------------------------------------------------
+    def pilot(self, place: Placement) -> dict:
+        from workers.reconstruct import vertex_moments
+
+        n_probe = self.config.pilot_photons
+        self.shoot({place.k: n_probe})
+        records = self.store.read_frame(place.k - 1, batches=range(self.store.prefix_for(place.k - 1, n_probe)))
+        sel = ~records.direct
+        s, q = vertex_moments(records.element[sel], records.b1[sel], records.b2[sel], records.energy[sel],
+                              self.elements.element_vertices, self.elements.n_vertices)
+        e0 = energy_error(s, q)
+        n_pilot = pilot_n_frame(records.photons_emitted, e0, self.config.e_max, place.fmax)
+        return {"frame": place.k, "n_probe": int(records.photons_emitted), "e_probe": e0,
+                "e_target": self.config.e_max * float(np.sqrt(place.fmax + 1)),
+                "n_pilot": n_pilot if np.isfinite(n_pilot) else None}
+
+    # --- Step 2 ------------------------------------------------------------------------------
+    def p_me(self, place: Placement, targets: dict[int, int]) -> tuple[float, float]:
+        from .temporal import collection_windows
+
+        use = self.batches(targets)
+        counts = self.store.counts(kind="all", batches=use)
+        emitted = np.array([self.store.photons_in(f, int(use[f])) for f in range(self.store.n_frames)], np.float64)
+        back, fwd = collection_windows(counts, emitted, [place.k - 1], mode="adaptive", fmax=place.fmax,
+                                       config=self.config)
+        hit = counts[place.start - 1:place.end].sum(axis=0) > 0
+        return p_me(back[0], fwd[0], place.fmax, hit)
+
+    # --- Step 3 ------------------------------------------------------------------------------
+    def d_aqm(self, place: Placement, targets: dict[int, int], index: int) -> float:
+        """d_AQM (percent) of I1(K) against I2(K) as the viewer sees them; the M_AQM picture is
+        written beside the segment record."""
+        from workers.composite import render_frame
+        from workers.reconstruct import frame_direct, mesh_adaptation
+
+        from .aqm.visualize import difference_picture
+        from .images import write_png
+        from .perceived import displayed_difference
+        from .segment_records import record_path
+        from .temporal import illumination_maps
+        from .tonemap import ToneMapping
+
+        t0 = time.perf_counter()
+        use = self.batches(targets)
+        k = place.k
+        (lit,) = illumination_maps(self.store, self.elements, self.scene, [k - 1], mode=self.job.temporal,
+                                   fmax=place.fmax, config=self.config, split_parity=True, batches=use)
+        state = self.scene.pose_frame(k)
+        direct = frame_direct(self.store, k - 1, int(use[k - 1]), self.elements, self.elements.vertex_areas(state))
+        job = self.job
+        images = [render_frame(state, self.elements, half, width=job.width, height=job.height, spp=job.spp,
+                               seed=self.config.seed, frame=k, max_depth=job.reflection_depth,
+                               area_samples=job.area_samples).beauty for half in lit.irradiance]
+        adaptation = mesh_adaptation(state, self.elements, direct + 0.5 * (lit.irradiance[0] + lit.irradiance[1]),
+                                     job.width / job.height)
+        result = displayed_difference(images[0], images[1], adaptation, params=ToneMapping(**job.tonemap),
+                                      aqm_size=self.config.aqm_size)
+        picture = record_path(job.out_dir, index).with_suffix(".aqm.png")
+        picture.parent.mkdir(parents=True, exist_ok=True)
+        write_png(picture, difference_picture(images[0], result.visible))
+        self.times["aqm_s"] += time.perf_counter() - t0
+        return float(result.d_aqm)
+
+    # --- Steps 1-3 for one segment -----------------------------------------------------------
+    def decide(self, index: int, start: int, fmax: int) -> SegmentRecord:
+        job, cfg = self.job, self.config
+        t_start = time.perf_counter()
+        prior = self.known_targets(index)
+        if job.n_photons is not None:  # fixed settings: nothing to decide
+            return self._fixed_record(index)
+        if job.single_state:  # camera-only motion: one photon set, nothing to collect in time
+            place = Placement(job.first, (job.first + job.last) // 2, job.last, 0)
+        else:
+            place = place_segment(start, fmax, job.last)
+
+        # Step 1: pilot at K, N_frame from Eq. (2)
+        pilot = self.pilot(place)
+        n = clamp_n_frame(pilot["n_pilot"] if pilot["n_pilot"] is not None else float("inf"),
+                          cfg.n_frame_min, cfg.n_frame_max)
+        self.shoot({f: n for f in place.frames})
+        t_init = time.perf_counter()
+
+        # Step 2: F_max while p_me >= p_thr (never for camera-only motion: all frames share photons)
+        fmax_steps = []
+        while True:
+            pb, pf = self.p_me(place, {**prior, **{f: n for f in place.frames}})
+            fmax_steps.append({"fmax": place.fmax, "k": place.k, "p_me_back": pb, "p_me_fwd": pf})
+            grown = None if job.single_state or place.end >= job.last else grow_fmax(
+                place.fmax, pb, pf, p_thr=cfg.p_thr, step=cfg.fmax_step, cap=cfg.fmax_cap)
+            if grown is None:
+                break
+            place = place_segment(start, grown, job.last)
+            self.shoot({f: n for f in place.frames})
+        t_fmax = time.perf_counter()
+
+        # Step 3: N_frame doubled while d_AQM > d_thr
+        n_steps, capped = [], False
+        while True:
+            d = self.d_aqm(place, {**prior, **{f: n for f in place.frames}}, index)
+            n_steps.append({"n_frame": n, "d_aqm": d})
+            doubled = next_n_frame(n, d / 100.0, cfg.d_thr, cfg.n_frame_max)
+            if doubled is None:
+                capped = d / 100.0 > cfg.d_thr
+                break
+            n = doubled
+            self.shoot({f: n for f in place.frames})
+        t_n = time.perf_counter()
+
+        # Frames next to an animation end: more photons for their missing neighbours (§5.2)
+        final = photon_targets(place, n, first=job.first, last=job.last, end_factor=cfg.end_photons)
+        self.shoot(final)
+        ends = sorted(f for f, v in final.items() if v != n)
+        rec = SegmentRecord(
+            index=index, start=place.start, end=place.end, k=place.k, fmax=place.fmax, n_frame=n,
+            temporal=job.temporal, guided=True, decision_hash=job.decision_hash, end_frames=ends,
+            end_factor=cfg.end_photons, pilot=pilot, fmax_steps=fmax_steps, n_frame_steps=n_steps, capped=capped,
+            times_s={"init_s": t_init - t_start, "fmax_s": t_fmax - t_init, "n_frame_s": t_n - t_fmax,
+                     "decide_s": time.perf_counter() - t_start})
+        write_record(job.out_dir, rec)
+        return rec
+
+    def _fixed_record(self, index: int) -> SegmentRecord:
+        """--photons N --fmax F: one record over the render's frames, shot at N."""
+        job = self.job
+        t0 = time.perf_counter()
+        self.shoot({f: job.n_photons for f in job.selection})
+        rec = SegmentRecord(index=index, start=job.first, end=job.last, k=(job.first + job.last) // 2,
+                            fmax=job.fmax, n_frame=job.n_photons, temporal=job.temporal, guided=False,
+                            decision_hash=job.decision_hash, times_s={"init_s": time.perf_counter() - t0})
+        write_record(job.out_dir, rec)
+        return rec
+
+    def record(self, index: int, start: int, fmax: int) -> SegmentRecord:
+        """Segment ``index`` decided for this run: its record if current, else decided now."""
+        rec = read_record(self.job.out_dir, index)
+        if rec is not None and rec.decision_hash == self.job.decision_hash and rec.start == start:
+            return rec
+        return self.decide(index, start, fmax)
+
+    # --- Steps 4-5 and the frames --------------------------------------------------------------
+    def frames_of(self, rec: SegmentRecord) -> list[int]:
+        sel = set(self.job.selection)
+        return [f for f in range(rec.start, rec.end + 1) if f in sel]
+
+    def reconstruct(self, rec: SegmentRecord, targets: dict[int, int]) -> dict:
+        from workers.reconstruct import reconstruct_task
+
+        t0 = time.perf_counter()
+        job = self.job
+        use = self.batches(targets).tolist()
+        frames = self.frames_of(rec)
+        calls = [(f"reconstruct-{job.decision_hash[:8]}-f{frames[i]:05d}", dict(
+            store_url=job.store_url, scene_path=job.scene_path, scene_hash=job.scene_hash, camera=job.camera,
+            element_size=job.element_size, frames=frames[i:i + CHUNK_FRAMES], fmax=rec.fmax, mode=rec.temporal,
+            batches=use, config=job.config, aspect=job.width / job.height))
+            for i in range(0, len(frames), CHUNK_FRAMES)]
+        out = {}
+        for r in run_tasks(self.client, reconstruct_task, calls, desc="reconstruct", progress=False).values():
+            out.update(r["frames"])
+        self.times["temporal_s"] += time.perf_counter() - t0
+        return out
+
+
+def frame_hash(render_hash: str, info: dict, adaptation: float) -> str:
+    """What a frame's files depend on: the render's settings, its indirect map and its exposure."""
+    return stable_digest({"render": render_hash, "map": info["digest"], "adaptation": float(adaptation)})
+
+
+def smoothed_adaptation(job: Job, frames_info: dict[int, dict], upto: int) -> dict[int, float]:
+    """The exponential filter of pipeline/tonemap.py over the rendered frames up to ``upto``: it is
+    causal, so a segment's frames need only the adaptation of the frames before them."""
+    from workers.scene_cache import load_scene
+
+    from .tonemap import smooth_adaptation
+
+    scene = load_scene(job.scene_path, job.scene_hash, job.camera)
+    frames = [f for f in job.selection if f <= upto]
+    values = smooth_adaptation([frames_info[f]["adaptation"] for f in frames],
+                               [scene.timeline.time(f) for f in frames], job.tonemap["tau"])
+    return dict(zip(frames, values.tolist()))
+
+
+def composite_frames(job: Job, client, frames: list[int], frames_info: dict[int, dict], *,
+                     force: frozenset = frozenset()) -> list[int]:
+    """Composite every frame of ``frames`` whose files do not carry its current frame hash (and
+    those in ``force``); returns the frames written."""
+    from workers.composite import composite_task
+
+    from .images import frame_is_valid, frame_paths
+
+    smoothed = smoothed_adaptation(job, frames_info, max(frames))
+    calls = []
+    for f in frames:
+        info = frames_info[f]
+        fh = frame_hash(job.render_hash, info, smoothed[f])
+        exr, png = frame_paths(job.out_dir, f)
+        if f not in force and frame_is_valid(exr, png, job.width, job.height, fh):
+            continue
+        calls.append((f"composite-{fh[:8]}-f{f:05d}", dict(
+            store_url=job.store_url, scene_path=job.scene_path, scene_hash=job.scene_hash, camera=job.camera,
+            element_size=job.element_size, frame=f, width=job.width, height=job.height, spp=job.spp,
+            seed=job.config["seed"], max_depth=job.reflection_depth, area_samples=job.area_samples,
+            adaptation=smoothed[f], tonemap=job.tonemap, out_dir=job.out_dir,
+            metadata=dict(scene=job.scene_path.rsplit("/", 1)[-1], scene_hash=job.scene_hash,
+                          camera=job.camera or "", render_hash=job.render_hash, frame_hash=fh,
+                          seed=job.config["seed"], spp=job.spp, resolution=f"{job.width}x{job.height}",
+                          adaptation=smoothed[f], frame_adaptation=info["adaptation"]))))
+    run_tasks(client, composite_task, calls, desc="composite", progress=False)
+    return [int(kw["frame"]) for _, kw in calls]
+
+
+def _frames_info(job: Job, upto_index: int) -> dict[int, dict]:
+    info: dict[int, dict] = {}
+    for i in range(upto_index + 1):
+        rec = read_record(job.out_dir, i)
+        info.update({int(f): v for f, v in rec.frames.items()})
+    return info
+
+
+def segment_task(job: dict, index: int, force: bool = False) -> dict:
+    """Dask task for segment ``index``: decide it (if no earlier task did) and the next one, then
+    reconstruct and composite its frames. Returns its record as a dict. ``force`` redoes the
+    segment's decisions, maps and frames (``loom render --segment``)."""
+    job = Job(**job)
+    with fanout() as client:
+        run = _Segments(job, client)
+        prev = read_record(job.out_dir, index - 1) if index else None
+        start = job.first if prev is None else prev.end + 1
+        fmax = job.fmax if prev is None else prev.fmax
+        if force:
+            old = read_record(job.out_dir, index)
+            rec = run.decide(index, start, old.fmax if old is not None else fmax) if job.n_photons is None \
+                else run._fixed_record(index)
+        else:
+            rec = run.record(index, start, fmax)
+        nxt = run.record(index + 1, rec.end + 1, rec.fmax) if rec.end < job.last and rec.guided else None
+        targets = {**run.known_targets(index), **rec.targets(), **(nxt.targets() if nxt else {})}
+        if not rec.guided:
+            targets = {f: job.n_photons for f in job.selection}
+        t0 = time.perf_counter()
+        rec.frames = run.reconstruct(rec, targets)
+        t1 = time.perf_counter()
+        info = {**_frames_info(job, index - 1), **{int(f): v for f, v in rec.frames.items()}}
+        frames = run.frames_of(rec)
+        written = composite_frames(job, client, frames, info, force=frozenset(frames) if force else frozenset())
+        rec.status = "done"
+        rec.times_s.update({"frames_s": time.perf_counter() - t0, "reconstruct_s": t1 - t0,
+                            "composite_s": time.perf_counter() - t1, **{k: round(v, 4) for k, v in run.times.items()}})
+        write_record(job.out_dir, rec)
+        return {"record": rec.to_dict(), "written": written}
+
+
+def segment_done(job: Job, index: int) -> SegmentRecord | None:
+    """The record of a segment a rerun may skip: done, current and with every frame valid."""
+    from .images import frame_is_valid, frame_paths
+
+    rec = read_record(job.out_dir, index)
+    if rec is None or rec.status != "done" or rec.decision_hash != job.decision_hash:
+        return None
+    info = _frames_info(job, index)
+    frames = [f for f in range(rec.start, rec.end + 1) if f in set(job.selection)]
+    if any(f not in info for f in frames):
+        return None
+    smoothed = smoothed_adaptation(job, info, rec.end)
+    for f in frames:
+        exr, png = frame_paths(job.out_dir, f)
+        if not frame_is_valid(exr, png, job.width, job.height, frame_hash(job.render_hash, info[f], smoothed[f])):
+            return None
+    return rec
+
+
+def coordinate(job: Job, client, *, on_segment: Callable[[SegmentRecord, list[int]], None] | None = None) -> list:
+    """Run the segments in order (client side). Returns their records."""
+    records, index, start = [], 0, job.first
+    while start <= job.last:
+        rec = segment_done(job, index)
+        written: list[int] = []
+        if rec is None or (records and rec.start != start):
+            if client is None:
+                result = segment_task(job.to_dict(), index)
+            else:
+                result = client.submit(segment_task, job.to_dict(), index, key=f"segment-{job.decision_hash[:8]}-"
+                                       f"{index:03d}-{time.time_ns()}", pure=False).result()
+            rec, written = SegmentRecord.from_dict(result["record"]), result["written"]
+        records.append(rec)
+        if on_segment:
+            on_segment(rec, written)
+        index, start = index + 1, rec.end + 1
+    return records
+
+
+def reprocess(job: Job, client, index: int) -> tuple[SegmentRecord, list[int]]:
+    """Redo segment ``index`` (its frame range kept) and exactly the frames that depend on it: its
+    own, the neighbours' whose windows reach into it, and any later frame whose smoothed exposure
+    changed; every other frame's files stay untouched."""
+    from .errors import LoomError
+
+    old = read_record(job.out_dir, index)
+    if old is None:
+        raise LoomError(f"segment {index} has no record yet; render first", field="--segment")
+    if client is None:
+        result = segment_task(job.to_dict(), index, True)
+    else:
+        result = client.submit(segment_task, job.to_dict(), index, True, pure=False,
+                               key=f"segment-{job.decision_hash[:8]}-{index:03d}-redo-{time.time_ns()}").result()
+    rec = SegmentRecord.from_dict(result["record"])
+    written = list(result["written"])
+    # Neighbours: their windows reach into this segment; recompute their maps, redo changed frames
+    with _Neighbours(job, client) as run:
+        for i in (index - 1, index + 1):
+            nb = read_record(job.out_dir, i)
+            if nb is None or nb.status != "done":
+                continue
+            targets = {**run.known_targets(i), **nb.targets()}
+            after = read_record(job.out_dir, i + 1)
+            if after is not None:
+                targets.update(after.targets())
+            nb.frames = run.reconstruct(nb, targets)
+            write_record(job.out_dir, nb)
+        last_index = index
+        while read_record(job.out_dir, last_index + 1) is not None:
+            last_index += 1
+        info = _frames_info(job, last_index)
+        later = [f for f in job.selection if f in info]
+        written += composite_frames(job, client, later, info)
+    return rec, sorted(set(written))
+
+
+@contextmanager
+def _Neighbours(job: Job, client):
+    yield _Segments(job, client)

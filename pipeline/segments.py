@@ -1,0 +1,152 @@
+"""The pure decisions of the segment coordinator (§5.2): arrays and numbers in, decisions out.
+
+Nothing here touches Dask, zarr or files, so every rule is tested on synthetic inputs with known
+answers (tests/coordinator/test_segments.py); pipeline/coordinator.py only runs them.
+
+* :func:`energy_error`, :func:`pilot_n_frame` — Step 1 (§5.2.1, Eq. 2);
+* :func:`p_me`, :func:`grow_fmax` — Step 2 (§5.2.2);
+* :func:`next_n_frame` — Step 3 (§5.2.3);
+* :func:`place_segment`, :func:`photon_targets` — where segments lie and how many photons each
+  frame gets (the first and last segments compensate their missing neighbour, §5.2).
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+
+# --- Step 1: initialization (§5.2.1) -----------------------------------------------------------
+def energy_error(s_y: np.ndarray, q_y: np.ndarray) -> float:
+    """The energy-based error E of an indirect illumination map (dept.md §1.4), as a fraction.
+
+    E = sum_v A_v sigma_v / sum_v A_v E_v, the flux-weighted mean relative standard error of the
+    vertex values, with E_v = S_v / A_v and sigma_v = sqrt(Q_v) / A_v (dept.md §1.3: the variance
+    of a sum of i.i.d. photon weights is estimated by the sum of their squares). The areas cancel:
+    E = sum sqrt(Q_v) / sum S_v. ``s_y`` (V,) luminance flux per vertex, ``q_y`` (V,) its sum of
+    squared weights. Why this estimate: it is scale-free, dominated by the bright regions a
+    viewer adapts to, ignores unlit vertices and falls exactly as 1/sqrt(N) (Eq. 2's premise);
+    it is measured on the unfiltered vertex values, the map Condition (1) pools in time, so the
+    target E_max sqrt(F_max + 1) speaks of the photons before any spatial filter (Step 5 repairs
+    only what the AQM still sees). Returns inf when the map holds no light.
+    """
+    total = float(np.sum(s_y, dtype=np.float64))
+    if not total > 0:
+        return math.inf
+    return float(np.sum(np.sqrt(np.maximum(q_y, 0.0)), dtype=np.float64)) / total
+
+
+def pilot_n_frame(n_probe: int, e_probe: float, e_max: float, fmax: int) -> float:
+    """N_frame from a pilot run of ``n_probe`` photons with error ``e_probe`` (§5.2.1, Eq. 2).
+
+    The pilot runs "until E ~ E_max sqrt(F_max + 1)"; since E is proportional to 1/sqrt(N)
+    (Eq. 2, [15]), the photons that reach that error follow from one probe without running on:
+    N_frame = n_probe (e_probe / (E_max sqrt(F_max + 1)))^2. Pooling F_max + 1 frames of N_frame
+    photons then gives E ~ E_max.
+    """
+    if not (n_probe > 0 and e_max > 0 and fmax >= 0):
+        raise ValueError(f"pilot_n_frame({n_probe}, {e_probe}, {e_max}, {fmax})")
+    target = e_max * math.sqrt(fmax + 1)
+    return n_probe * (e_probe / target) ** 2
+
+
+def clamp_n_frame(n: float, n_min: int, n_max: int) -> int:
+    """The pilot's N_frame as a whole number of photons inside [n_min, n_max] (inf -> n_max)."""
+    if not math.isfinite(n):
+        return int(n_max)
+    return int(min(max(math.ceil(n), n_min), n_max))
+
+
+# --- Step 2: segment length (§5.2.2) -----------------------------------------------------------
+def p_me(back: np.ndarray, fwd: np.ndarray, fmax: int, considered: np.ndarray | None = None) -> tuple[float, float]:
+    """Shares of elements whose photons are collected over all F_max/2 frames before and after K.
+
+    ``back``/``fwd`` (E,) window extents at K (kernels/temporal.py); ``considered`` (E,) bool, the
+    elements that count (default all; the coordinator takes those hit by any photon in the
+    segment, since an element no photon reaches keeps a full window by Condition (1)'s sigma = 1
+    and would pass without telling anything about the lighting).
+    """
+    half = fmax // 2
+    back, fwd = np.asarray(back), np.asarray(fwd)
+    mask = np.ones(back.shape, bool) if considered is None else np.asarray(considered, bool)
+    n = int(mask.sum())
+    if n == 0 or half == 0:
+        return 0.0, 0.0
+    return float(np.count_nonzero((back >= half) & mask)) / n, float(np.count_nonzero((fwd >= half) & mask)) / n
+
+
+def grow_fmax(fmax: int, p_back: float, p_fwd: float, *, p_thr: float, step: int, cap: int) -> int | None:
+    """The next F_max to try, or None to keep ``fmax`` (§5.2.2).
+
+    F_max grows while p_me >= p_thr in either direction: the paper stops "until p_me < p_thr",
+    and its final K_2 (F_max = 30) has p_me below p_thr both ways (36 % and 30 %, §6). Growth is
+    by ``step`` frames up to ``cap`` (15 -> 30 -> 44 with the defaults, the paper's F_max values).
+    """
+    if max(p_back, p_fwd) < p_thr or fmax >= cap:
+        return None
+    return min(fmax + step, cap)
+
+
+# --- Step 3: number of photons (§5.2.3) --------------------------------------------------------
+def next_n_frame(n_frame: int, d_aqm: float, d_thr: float, n_max: int) -> int | None:
+    """N_frame doubled while d_AQM (a fraction of pixels) exceeds d_thr, or None to stop: at the
+    first N_frame with d_AQM <= d_thr, or when doubling would pass ``n_max`` (the cap, reported)."""
+    if d_aqm <= d_thr or 2 * n_frame > n_max:
+        return None
+    return 2 * n_frame
+
+
+# --- where segments lie (§5.2, Fig. 2) ---------------------------------------------------------
+@dataclass(frozen=True)
+class Placement:
+    """Frames [start, end] of a segment, its central frame K and its F_max."""
+
+    start: int
+    k: int
+    end: int
+    fmax: int
+
+    @property
+    def frames(self) -> list[int]:
+        return list(range(self.start, self.end + 1))
+
+
+def place_segment(start: int, fmax: int, last: int) -> Placement:
+    """The segment that begins at ``start`` (the frame after the previous segment's end, §5.2.2):
+    K = start + F_max/2, end = start + F_max, F_max + 1 frames.
+
+    Near the end of the animation: a segment that would pass ``last`` ends there with K in the
+    middle of what is left, and a segment that would leave fewer than F_max/2 + 1 frames after it
+    takes them in (a stub shorter than half a window would get its own pilot and AQM for a few
+    frames; the longer segment's windows stay bounded by F_max/2 all the same).
+    """
+    if fmax < 0 or start > last:
+        raise ValueError(f"place_segment({start}, {fmax}, {last})")
+    half = fmax // 2
+    end = start + fmax
+    if end >= last or last - end < half + 1:
+        end = last
+    k = min(start + half, (start + end) // 2) if end == last else start + half
+    return Placement(start, k, end, fmax)
+
+
+def end_frames(first: int, last: int, fmax: int) -> set[int]:
+    """Frames within F_max/2 of an end of the animation: their windows lack one side."""
+    half = fmax // 2
+    return {f for f in range(first, last + 1) if f - first < half or last - f < half}
+
+
+def photon_targets(placement: Placement, n_frame: int, *, first: int, last: int, end_factor: float,
+                   frames=None) -> dict[int, int]:
+    """Photons each frame of a segment traces: N_frame, and ``end_factor`` x N_frame for frames
+    within F_max/2 of the animation's first or last frame (§5.2: "for the very first and last
+    animation segments the lack of those extra frames is compensated by tracing more photons").
+
+    Why 2x by default: the end frame itself collects F_max/2 + 1 frames instead of F_max + 1,
+    about half the photons, so doubling the frames it can reach restores its pooled count; the
+    frames further in miss less and are over-served a little.
+    """
+    frames = placement.frames if frames is None else list(frames)
+    ends = end_frames(first, last, placement.fmax)
+    return {f: int(math.ceil(n_frame * end_factor)) if f in ends else int(n_frame) for f in frames}
