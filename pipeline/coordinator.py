@@ -50,7 +50,8 @@ class Job:
 
     scene_path: str
     scene_hash: str
-    camera: str | None
+    camera: str | None  # the --camera option (None: the scene's first camera)
+    camera_name: str  # the camera node rendered from
     element_size: float
     store_url: str
     out_dir: str
@@ -104,6 +105,7 @@ class _Segments:
         self.elements = load_elements(job.scene_path, job.scene_hash, job.element_size)
         self.store = PhotonStore.open(job.store_url, mode="r+")
         self.times = {"shoot_s": 0.0, "aqm_s": 0.0, "temporal_s": 0.0}
+        self.batches_traced = 0
 
     # --- photons ---------------------------------------------------------------------------
     def shoot(self, targets: dict[int, int]) -> None:
@@ -127,6 +129,7 @@ class _Segments:
                 n_photons=n - have, photon_start=have, seed=self.config.seed,
                 max_depth=self.config.photon_depth)))
         run_tasks(self.client, shoot_task, calls, desc="shoot", progress=False)
+        self.batches_traced += len(calls)
         self.times["shoot_s"] += time.perf_counter() - t0
 
     def batches(self, targets: dict[int, int]) -> np.ndarray:
@@ -331,9 +334,9 @@ def smoothed_adaptation(job: Job, frames_info: dict[int, dict], upto: int) -> di
 
 
 def composite_frames(job: Job, client, frames: list[int], frames_info: dict[int, dict], *,
-                     force: frozenset = frozenset()) -> list[int]:
+                     force: frozenset = frozenset()) -> dict[int, dict]:
     """Composite every frame of ``frames`` whose files do not carry its current frame hash (and
-    those in ``force``); returns the frames written."""
+    those in ``force``); returns the rays cast per kind of every frame written."""
     from workers.composite import composite_task
 
     from .images import frame_is_valid, frame_paths
@@ -352,11 +355,12 @@ def composite_frames(job: Job, client, frames: list[int], frames_info: dict[int,
             seed=job.config["seed"], max_depth=job.reflection_depth, area_samples=job.area_samples,
             adaptation=smoothed[f], tonemap=job.tonemap, out_dir=job.out_dir,
             metadata=dict(scene=job.scene_path.rsplit("/", 1)[-1], scene_hash=job.scene_hash,
-                          camera=job.camera or "", render_hash=job.render_hash, frame_hash=fh,
+                          camera=job.camera_name, render_hash=job.render_hash, frame_hash=fh,
+                          config_hash=RenderConfig.from_dict(job.config).hash, photons=info["photons"],
                           seed=job.config["seed"], spp=job.spp, resolution=f"{job.width}x{job.height}",
                           adaptation=smoothed[f], frame_adaptation=info["adaptation"]))))
-    run_tasks(client, composite_task, calls, desc="composite", progress=False)
-    return [int(kw["frame"]) for _, kw in calls]
+    done = run_tasks(client, composite_task, calls, desc="composite", progress=False)
+    return {int(r["frame"]): r["rays"] for r in done.values()}
 
 
 def _frames_info(job: Job, upto_index: int) -> dict[int, dict]:
@@ -397,7 +401,8 @@ def segment_task(job: dict, index: int, force: bool = False) -> dict:
         rec.times_s.update({"frames_s": time.perf_counter() - t0, "reconstruct_s": t1 - t0,
                             "composite_s": time.perf_counter() - t1, **{k: round(v, 4) for k, v in run.times.items()}})
         write_record(job.out_dir, rec)
-        return {"record": rec.to_dict(), "written": written}
+        return {"record": rec.to_dict(), "rays": {str(f): r for f, r in written.items()},
+                "batches": run.batches_traced}
 
 
 def segment_done(job: Job, index: int) -> SegmentRecord | None:
@@ -419,27 +424,29 @@ def segment_done(job: Job, index: int) -> SegmentRecord | None:
     return rec
 
 
-def coordinate(job: Job, client, *, on_segment: Callable[[SegmentRecord, list[int]], None] | None = None) -> list:
-    """Run the segments in order (client side). Returns their records."""
+def coordinate(job: Job, client, *, on_segment: Callable[[SegmentRecord, dict], None] | None = None) -> list:
+    """Run the segments in order (client side); ``on_segment(record, result)`` after each, with
+    the segment task's result (frames written with their rays, batches traced; empty when the
+    segment was done already). Returns the records."""
     records, index, start = [], 0, job.first
     while start <= job.last:
         rec = segment_done(job, index)
-        written: list[int] = []
+        result = {"rays": {}, "batches": 0}
         if rec is None or (records and rec.start != start):
             if client is None:
                 result = segment_task(job.to_dict(), index)
             else:
                 result = client.submit(segment_task, job.to_dict(), index, key=f"segment-{job.decision_hash[:8]}-"
                                        f"{index:03d}-{time.time_ns()}", pure=False).result()
-            rec, written = SegmentRecord.from_dict(result["record"]), result["written"]
+            rec = SegmentRecord.from_dict(result["record"])
         records.append(rec)
         if on_segment:
-            on_segment(rec, written)
+            on_segment(rec, result)
         index, start = index + 1, rec.end + 1
     return records
 
 
-def reprocess(job: Job, client, index: int) -> tuple[SegmentRecord, list[int]]:
+def reprocess(job: Job, client, index: int) -> tuple[SegmentRecord, dict]:
     """Redo segment ``index`` (its frame range kept) and exactly the frames that depend on it: its
     own, the neighbours' whose windows reach into it, and any later frame whose smoothed exposure
     changed; every other frame's files stay untouched."""
@@ -454,7 +461,7 @@ def reprocess(job: Job, client, index: int) -> tuple[SegmentRecord, list[int]]:
         result = client.submit(segment_task, job.to_dict(), index, True, pure=False,
                                key=f"segment-{job.decision_hash[:8]}-{index:03d}-redo-{time.time_ns()}").result()
     rec = SegmentRecord.from_dict(result["record"])
-    written = list(result["written"])
+    rays = {int(f): r for f, r in result["rays"].items()}
     # Neighbours: their windows reach into this segment; recompute their maps, redo changed frames
     with _Neighbours(job, client) as run:
         for i in (index - 1, index + 1):
@@ -472,8 +479,8 @@ def reprocess(job: Job, client, index: int) -> tuple[SegmentRecord, list[int]]:
             last_index += 1
         info = _frames_info(job, last_index)
         later = [f for f in job.selection if f in info]
-        written += composite_frames(job, client, later, info)
-    return rec, sorted(set(written))
+        rays.update(composite_frames(job, client, later, info))
+    return rec, {"rays": {str(f): r for f, r in sorted(rays.items())}, "batches": result["batches"]}
 
 
 @contextmanager

@@ -33,6 +33,7 @@ from .tonemap import ToneMapping
 
 log = logging.getLogger(__name__)
 MAX_SIDE = 16384
+RAY_KINDS = ("camera", "shadow", "area", "reflection")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -136,7 +137,7 @@ def render(scene_path, *, frames: str | None, out_dir, settings: RenderSettings 
     if not guided:  # fixed settings read no segment parameter
         decision.pop("segments")
     single_state = len(set(p.sources[f] for f in p.frames)) == 1 and guided
-    job = Job(scene_path=str(scene.path), scene_hash=scene.scene_hash, camera=camera,
+    job = Job(scene_path=str(scene.path), scene_hash=scene.scene_hash, camera=camera, camera_name=cam_name,
               element_size=p.elements.element_size, store_url=store_url, out_dir=str(out),
               first=p.frames[0], last=p.frames[-1], selection=tuple(p.frames), width=settings.width,
               height=settings.height, spp=settings.spp, reflection_depth=settings.reflection_depth,
@@ -145,26 +146,27 @@ def render(scene_path, *, frames: str | None, out_dir, settings: RenderSettings 
               temporal=temporal, single_state=single_state)
     del store
 
-    def report_segment(rec, written):
+    rays: dict[int, dict] = {}
+    batches = 0
+
+    def report_segment(rec, result):
+        nonlocal batches
+        rays.update({int(f): r for f, r in result["rays"].items()})
+        batches += result["batches"]
         if echo is None:
             return
         d = f", d_AQM {rec.d_aqm:.2f} %" if rec.d_aqm is not None else ""
         cap = " (n_frame_max reached)" if rec.capped else ""
         echo(f"segment {rec.index}: frames {rec.start}-{rec.end}, K {rec.k}, F_max {rec.fmax}, "
-             f"N_frame {rec.n_frame:,}{d}{cap}; {len(written)} frames written")
+             f"N_frame {rec.n_frame:,}{d}{cap}; {len(result['rays'])} frames written")
 
-    written: list[int] = []
     with connect(scheduler, workers) as client:
         if segment is not None:
-            rec, written = reprocess(job, client, segment)
-            report_segment(rec, written)
+            report_segment(*reprocess(job, client, segment))
             from .segment_records import read_records
             records = read_records(out)
         else:
-            def on_segment(rec, w):
-                written.extend(w)
-                report_segment(rec, w)
-            records = coordinate(job, client, on_segment=on_segment)
+            records = coordinate(job, client, on_segment=report_segment)
 
     # Video and report
     t0 = time.perf_counter()
@@ -176,13 +178,15 @@ def render(scene_path, *, frames: str | None, out_dir, settings: RenderSettings 
     times.update(video_s=round(video_s, 3), total_s=round(time.perf_counter() - t_start, 3))
     report = {
         "scene": str(scene.path), "camera": cam_name, "frames": p.frames,
-        "rendered": sorted(written), "skipped": sorted(set(p.frames) - set(written)),
+        "rendered": sorted(rays), "skipped": sorted(set(p.frames) - set(rays)),
         "resolution": [settings.width, settings.height], "spp": settings.spp,
         "photons": "auto" if guided else n_photons,
         "segments": [{"index": r.index, "frames": [r.start, r.end], "k": r.k, "fmax": r.fmax,
                       "n_frame": r.n_frame, "d_aqm": r.d_aqm, "capped": r.capped} for r in records],
         "store": store_url, "video": str(video), "render_hash": render_hash,
-        "times_s": times,
+        "photon_batches_traced": batches, "times_s": times,
+        "rays": {k: sum(r[k] for r in rays.values()) for k in RAY_KINDS},
+        "rays_per_frame": {str(f): rays[f] for f in sorted(rays)},
     }
     tmp = out / f".report.json.{os.getpid()}.partial"
     tmp.write_text(json.dumps(report, indent=1))

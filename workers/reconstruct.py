@@ -194,6 +194,7 @@ def reconstruct_task(*, store_url: str, scene_path: str, scene_hash: str, camera
         adaptation = mesh_adaptation(state, elements, indirect + direct, aspect)
         maps.write_frame(lit.frame_index, indirect=indirect, direct=direct, adaptation=adaptation)
         out[str(f)] = {"adaptation": adaptation, "digest": map_digest(indirect),
+                       "photons": store.photons_in(lit.frame_index, int(use[lit.frame_index])),
                        "filtered": 0 if lit.rings is None else int(np.count_nonzero(lit.rings)),
                        "window": float(np.mean(lit.back.astype(np.int64) + lit.fwd + 1))}
     return {"frames": out, "seconds": time.perf_counter() - t0}
