@@ -144,11 +144,14 @@ def _photons(_ctx, _param, value):
               help="Mirror/glossy reflections followed per camera path.")
 @click.option("--photon-depth", type=int, default=8, show_default=True, help="Maximum photon bounces.")
 @click.option("--d-thr", type=float, default=None, help="d_thr, share of AQM pixels allowed above 1 JND (0.03).")
+@click.option("--config", "config_file", type=click.Path(dir_okay=False), default=None,
+              help="JSON object of RenderConfig fields (pipeline/config.py); the options above override it.")
 @click.option("--quiet", is_flag=True, help="No progress lines.")
 @click.option("--verbose", is_flag=True, help="Log more of what the stages do.")
 @_scheduler_options
 def render_command(scene_file, frames, out_dir, resolution, spp, photons, fmax, temporal, segment, store_url,
-                   camera, seed, reflection_depth, photon_depth, d_thr, quiet, verbose, scheduler, workers) -> None:
+                   camera, seed, reflection_depth, photon_depth, d_thr, config_file, quiet, verbose, scheduler,
+                   workers) -> None:
     """Render frames of SCENE_FILE: photons, segments, illumination maps, EXR/PNG frames, preview.mp4."""
     from .config import RenderConfig
     from .render import RenderSettings, parse_resolution, render
@@ -157,8 +160,11 @@ def render_command(scene_file, frames, out_dir, resolution, spp, photons, fmax, 
         logging.getLogger("pipeline").setLevel(logging.INFO)
     width, height = parse_resolution(resolution)
     settings = RenderSettings(width=width, height=height, spp=spp, reflection_depth=reflection_depth)
-    extra = {} if d_thr is None else {"d_thr": d_thr}
-    config = RenderConfig(seed=seed, photon_depth=photon_depth, **extra)
+    from .config import load_config
+
+    fields = load_config(config_file) if config_file else {}
+    fields.update(seed=seed, photon_depth=photon_depth, **({} if d_thr is None else {"d_thr": d_thr}))
+    config = RenderConfig.from_dict(fields)
     report = render(scene_file, frames=frames, out_dir=out_dir, settings=settings, n_photons=photons,
                     store_url=store_url, camera=camera, config=config, scheduler=scheduler, workers=workers,
                     progress=not quiet, temporal=temporal, fmax=fmax, segment=segment,

@@ -129,3 +129,22 @@ def stable_digest(data: dict) -> str:
     """16 hex digits of SHA-256 over sorted JSON: the same settings give the same digest anywhere."""
     blob = json.dumps(data, sort_keys=True).encode()
     return hashlib.sha256(blob).hexdigest()[:16]
+
+
+def load_config(path) -> dict:
+    """The RenderConfig fields of a JSON file (an object); one-line errors name the file."""
+    import math
+
+    try:
+        data = json.loads(open(path, encoding="utf-8").read(), parse_constant=lambda c: math.nan)
+    except OSError as err:
+        raise ConfigError(f"cannot read: {err.strerror}", field=str(path)) from None
+    except ValueError as err:
+        raise ConfigError(f"not JSON: {err}", field=str(path)) from None
+    if not isinstance(data, dict):
+        raise ConfigError("must be a JSON object of RenderConfig fields", field=str(path))
+    try:
+        RenderConfig.from_dict(data)
+    except ConfigError as err:
+        raise ConfigError(err.reason, field=f"{path}: {err.field}") from None
+    return data

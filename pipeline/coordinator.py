@@ -38,7 +38,7 @@ import numpy as np
 from .cluster import run_tasks
 from .config import RenderConfig, stable_digest
 from .segment_records import SegmentRecord, read_record, write_record
-from .segments import (Placement, clamp_n_frame, energy_error, grow_fmax, next_n_frame, p_me,
+from .segments import (Placement, clamp_n_frame, doubling_loop, energy_error, fmax_loop, p_me,
                        photon_targets, pilot_n_frame, place_segment)
 
 CHUNK_FRAMES = 16  # frames per reconstruction task: fixed, so the gather's bits never depend on workers
@@ -180,7 +180,7 @@ class _Segments:
         return p_me(back[0], fwd[0], place.fmax, hit)
 
     # --- Step 3 ------------------------------------------------------------------------------
-    def d_aqm(self, place: Placement, targets: dict[int, int], index: int) -> float:
+    def d_aqm(self, place: Placement, targets: dict[int, int], index: int, temporal: str) -> float:
         """d_AQM (percent) of I1(K) against I2(K) as the viewer sees them; the M_AQM picture is
         written beside the segment record."""
         from workers.composite import render_frame
@@ -196,7 +196,7 @@ class _Segments:
         t0 = time.perf_counter()
         use = self.batches(targets)
         k = place.k
-        (lit,) = illumination_maps(self.store, self.elements, self.scene, [k - 1], mode=self.job.temporal,
+        (lit,) = illumination_maps(self.store, self.elements, self.scene, [k - 1], mode=temporal,
                                    fmax=place.fmax, config=self.config, split_parity=True, batches=use)
         state = self.scene.pose_frame(k)
         direct = frame_direct(self.store, k - 1, int(use[k - 1]), self.elements, self.elements.vertex_areas(state))
@@ -230,33 +230,27 @@ class _Segments:
         pilot = self.pilot(place)
         n = clamp_n_frame(pilot["n_pilot"] if pilot["n_pilot"] is not None else float("inf"),
                           cfg.n_frame_min, cfg.n_frame_max)
-        self.shoot({f: n for f in place.frames})
         t_init = time.perf_counter()
 
         # Step 2: F_max while p_me >= p_thr (never for camera-only motion: all frames share photons)
-        fmax_steps = []
-        while True:
-            pb, pf = self.p_me(place, {**prior, **{f: n for f in place.frames}})
-            fmax_steps.append({"fmax": place.fmax, "k": place.k, "p_me_back": pb, "p_me_fwd": pf})
-            grown = None if job.single_state or place.end >= job.last else grow_fmax(
-                place.fmax, pb, pf, p_thr=cfg.p_thr, step=cfg.fmax_step, cap=cfg.fmax_cap)
-            if grown is None:
-                break
-            place = place_segment(start, grown, job.last)
-            self.shoot({f: n for f in place.frames})
+        def p_me_of(at: Placement) -> tuple[float, float]:
+            self.shoot({f: n for f in at.frames})
+            return self.p_me(at, {**prior, **{f: n for f in at.frames}})
+
+        temporal = "off" if job.single_state else job.temporal
+        if job.single_state:
+            fmax_steps = []
+        else:
+            place, fmax_steps = fmax_loop(place.start, place.fmax, job.last, p_me_of, p_thr=cfg.p_thr,
+                                          step=cfg.fmax_step, cap=cfg.fmax_cap)
         t_fmax = time.perf_counter()
 
         # Step 3: N_frame doubled while d_AQM > d_thr
-        n_steps, capped = [], False
-        while True:
-            d = self.d_aqm(place, {**prior, **{f: n for f in place.frames}}, index)
-            n_steps.append({"n_frame": n, "d_aqm": d})
-            doubled = next_n_frame(n, d / 100.0, cfg.d_thr, cfg.n_frame_max)
-            if doubled is None:
-                capped = d / 100.0 > cfg.d_thr
-                break
-            n = doubled
-            self.shoot({f: n for f in place.frames})
+        def d_aqm_of(n_frame: int) -> float:
+            self.shoot({f: n_frame for f in place.frames})
+            return self.d_aqm(place, {**prior, **{f: n_frame for f in place.frames}}, index, temporal)
+
+        n, n_steps, capped = doubling_loop(n, d_aqm_of, d_thr=cfg.d_thr, n_max=cfg.n_frame_max)
         t_n = time.perf_counter()
 
         # Frames next to an animation end: more photons for their missing neighbours (§5.2)
@@ -265,7 +259,7 @@ class _Segments:
         ends = sorted(f for f, v in final.items() if v != n)
         rec = SegmentRecord(
             index=index, start=place.start, end=place.end, k=place.k, fmax=place.fmax, n_frame=n,
-            temporal=job.temporal, guided=True, decision_hash=job.decision_hash, end_frames=ends,
+            temporal=temporal, guided=True, decision_hash=job.decision_hash, end_frames=ends,
             end_factor=cfg.end_photons, pilot=pilot, fmax_steps=fmax_steps, n_frame_steps=n_steps, capped=capped,
             times_s={"init_s": t_init - t_start, "fmax_s": t_fmax - t_init, "n_frame_s": t_n - t_fmax,
                      "decide_s": time.perf_counter() - t_start})

@@ -97,6 +97,36 @@ def next_n_frame(n_frame: int, d_aqm: float, d_thr: float, n_max: int) -> int | 
     return 2 * n_frame
 
 
+def doubling_loop(n_frame: int, measure, *, d_thr: float, n_max: int) -> tuple[int, list[dict], bool]:
+    """Step 3's loop: ``measure(n)`` gives d_AQM (percent) at N_frame = n (the caller traces what
+    n needs); N_frame doubles until d_AQM <= d_thr (a fraction) or the cap. Returns the final
+    N_frame, the steps [{n_frame, d_aqm}] and whether the cap stopped it above d_thr."""
+    steps = []
+    while True:
+        d = float(measure(n_frame))
+        steps.append({"n_frame": int(n_frame), "d_aqm": d})
+        doubled = next_n_frame(n_frame, d / 100.0, d_thr, n_max)
+        if doubled is None:
+            return int(n_frame), steps, d / 100.0 > d_thr
+        n_frame = doubled
+
+
+def fmax_loop(start: int, fmax: int, last: int, measure, *, p_thr: float, step: int, cap: int,
+              grow: bool = True) -> tuple[Placement, list[dict]]:
+    """Step 2's loop: ``measure(placement)`` gives (p_me back, p_me fwd) at its K (the caller
+    traces the placement's frames); F_max grows by :func:`grow_fmax` until it stops, the cap, or
+    the segment reaches the animation's end. Returns the placement and the steps."""
+    place = place_segment(start, fmax, last)
+    steps = []
+    while True:
+        pb, pf = measure(place)
+        steps.append({"fmax": place.fmax, "k": place.k, "p_me_back": float(pb), "p_me_fwd": float(pf)})
+        grown = grow_fmax(place.fmax, pb, pf, p_thr=p_thr, step=step, cap=cap) if grow and place.end < last else None
+        if grown is None:
+            return place, steps
+        place = place_segment(start, grown, last)
+
+
 # --- where segments lie (§5.2, Fig. 2) ---------------------------------------------------------
 @dataclass(frozen=True)
 class Placement:

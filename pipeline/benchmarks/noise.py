@@ -74,6 +74,7 @@ def run(photons=(10_000, 20_000, 40_000, 80_000), *, fmax: int = 30, width: int 
         echo=click.echo) -> dict:
     from pipeline.aqm import aqm
     from pipeline.config import RenderConfig
+    from pipeline.errors import LoomError
     from pipeline.perceived import displayed_difference
     from pipeline.scene import ElementMesh, Scene
     from pipeline.scene.builtin import write_builtin
@@ -123,6 +124,9 @@ def run(photons=(10_000, 20_000, 40_000, 80_000), *, fmax: int = 30, width: int 
             shoot(str(path), frames=f"{K - half}-{K + half}", n_photons=int(n), store_url=url, config=config,
                   scheduler=scheduler, workers=workers, progress=False)
             pstore = PhotonStore.open(url)
+            if pstore.photons_emitted(index) != n:
+                raise LoomError(f"holds {pstore.photons_emitted(index):,} photons for frame {K}, more than "
+                                f"N_frame = {n:,}; use a new --store or larger --photons", path=url, field="--store")
             rec = pstore.read_frame(index)
             d = rec.direct
             direct = vertex_irradiance(rec.element[d], rec.b1[d], rec.b2[d], rec.energy[d], mesh, areas,
@@ -177,8 +181,9 @@ def run(photons=(10_000, 20_000, 40_000, 80_000), *, fmax: int = 30, width: int 
             need = n_max * (rows[-1]["sigma_v"] / amp) ** 2
             echo(f"AQM sensitivity on this frame (displayed): per-vertex multiplicative noise of {100 * amp:.2f} % "
                  f"rms in each image gives d_AQM = {thr:g} %; a uniform +10 % step of the whole frame gives "
-                 f"{step:.1f} %. sigma_v at {n_max:,} is {100 * rows[-1]['sigma_v']:.1f} %: about "
-                 f"{need:,.0f} photons per frame would reach the threshold without filtering (sigma_v ~ N^-1/2).")
+                 f"{step:.1f} %. sigma_v at {n_max:,} is {100 * rows[-1]['sigma_v']:.1f} %: at least "
+                 f"{need:,.0f} photons per frame to reach it unfiltered (sigma_v ~ N^-1/2; it falls slower "
+                 f"where windows shrink).")
         return result
     finally:
         if tmp is not None:

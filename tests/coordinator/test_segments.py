@@ -1,0 +1,173 @@
+"""The coordinator's pure decisions (pipeline/segments.py) on synthetic inputs with known answers:
+Eq. (2), p_me with a lighting step at a known frame, the doubling loop, segment placement and the
+photons of the frames next to an animation end."""
+from __future__ import annotations
+
+import math
+
+import numpy as np
+import pytest
+
+from pipeline.config import RenderConfig
+from pipeline.segments import (clamp_n_frame, doubling_loop, end_frames, energy_error, fmax_loop, grow_fmax,
+                               next_n_frame, p_me, photon_targets, pilot_n_frame, place_segment)
+from pipeline.temporal import collection_windows
+
+
+# --- Step 1: Eq. (2) --------------------------------------------------------------------------
+def _moments(rng, p, n, weight=1.0):
+    """Vertex moments of n photons landing on vertices with probabilities p (Poisson counts)."""
+    hits = rng.poisson(n * p)
+    return weight * hits, weight ** 2 * hits
+
+
+def test_energy_error_falls_as_one_over_sqrt_n_and_the_pilot_finds_the_analytic_n(rng):
+    # A static scene: vertex v receives a photon with probability p_v. With equal weights
+    # E(N) = sum sqrt(N p_v) / sum N p_v = c / sqrt(N), c = sum sqrt(p) / sum p, so the N_frame for
+    # which pooling F_max + 1 frames reaches E_max is (c / (E_max sqrt(F_max + 1)))^2.
+    p = rng.gamma(2.0, 1.0, 1000)  # >= 13 hits a vertex on average: sqrt's Jensen bias stays ~1 %
+    p /= p.sum() * 1.5  # a third of the photons escape or hit nothing
+    c = np.sqrt(p).sum() / p.sum()
+    e_max, fmax = 0.05, 30
+    analytic = (c / (e_max * math.sqrt(fmax + 1))) ** 2
+    for n_probe in (20_000, 80_000):
+        e = energy_error(*_moments(rng, p, n_probe, weight=3.7))
+        assert e == pytest.approx(c / math.sqrt(n_probe), rel=0.05)
+        assert pilot_n_frame(n_probe, e, e_max, fmax) == pytest.approx(analytic, rel=0.20)
+    # The photon weight cancels (E is scale-free) and no light means no estimate
+    s, q = _moments(rng, p, 20_000)
+    assert energy_error(s * 1e-30, q * 1e-60) == pytest.approx(energy_error(s, q), rel=1e-9)
+    assert energy_error(np.zeros(5), np.zeros(5)) == math.inf
+    assert clamp_n_frame(math.inf, 1000, 640_000) == 640_000 and clamp_n_frame(12.2, 1000, 9000) == 1000
+
+
+def test_pilot_on_a_real_static_scene_follows_eq2(tmp_path):
+    # The STATIC built-in traced for real: E at N and at 4N differ by 2 (E ~ 1/sqrt(N)), so the
+    # pilot's N_frame from either probe agrees within 20 %.
+    from pipeline.scene import ElementMesh, Scene
+    from pipeline.scene.builtin import write_builtin
+    from workers.photons import trace_batch
+    from workers.reconstruct import vertex_moments
+
+    scene = Scene.load(write_builtin("static", tmp_path / "static.glb"))
+    elements = ElementMesh.build(scene)
+    state = scene.pose_frame(1)
+    errors = {}
+    for n in (20_000, 80_000):
+        b = trace_batch(state, elements, n_photons=n, photon_start=0, seed=5, frame=1, max_depth=8)
+        from pipeline.store import DIRECT_BIT, ELEMENT_MASK
+        indirect = (b.key & np.uint32(DIRECT_BIT)) == 0
+        s, q = vertex_moments((b.key[indirect] & np.uint32(ELEMENT_MASK)).astype(np.int64), b.bary[indirect, 0],
+                              b.bary[indirect, 1], b.energy[indirect], elements.element_vertices, elements.n_vertices)
+        errors[n] = energy_error(s, q)
+    assert errors[20_000] / errors[80_000] == pytest.approx(2.0, rel=0.10)
+    n_a, n_b = (pilot_n_frame(n, e, 0.05, 15) for n, e in errors.items())
+    assert n_a == pytest.approx(n_b, rel=0.20)
+
+
+# --- Step 2: p_me ---------------------------------------------------------------------------------
+def test_p_me_sees_a_lighting_step_at_a_known_frame(rng):
+    # 41 frames, K = frame index 20, F_max = 20. Every element keeps its mean except half of them,
+    # whose lighting doubles 5 frames after K (20 sigma at mu = 400): their forward windows break
+    # there. Everything else keeps full windows but for Condition (1)'s false alarms (k = 2 over 10
+    # frames: a few percent), the same both ways, so p_me forward is half of p_me backward.
+    frames, elements, k = 41, 2000, 20
+    mu = np.full(elements, 400.0)
+    counts = rng.poisson(np.broadcast_to(mu, (frames, elements))).astype(np.uint32)
+    step = np.arange(elements) < elements // 2
+    counts[k + 5:, step] *= 2
+    cfg = RenderConfig()
+    back, fwd = collection_windows(counts, np.full(frames, 40_000.0), [k], mode="adaptive", fmax=20, config=cfg)
+    pb, pf = p_me(back[0], fwd[0], 20)
+    assert pb > 0.9 and pf == pytest.approx(0.5 * pb, abs=0.03)
+    assert np.all(fwd[0, step] <= 5)
+    # Only the elements that count: the static half alone keeps (nearly) all its windows
+    assert p_me(back[0], fwd[0], 20, considered=~step)[1] == pytest.approx(pb, abs=0.03)
+    # A longer segment reaches the step backwards too when K moves past it
+    assert grow_fmax(20, pb, pf, p_thr=0.4, step=15, cap=44) == 35
+    assert grow_fmax(20, 0.39, 0.2, p_thr=0.4, step=15, cap=44) is None
+    assert grow_fmax(44, 0.9, 0.9, p_thr=0.4, step=15, cap=44) is None
+    assert grow_fmax(30, 0.9, 0.9, p_thr=0.4, step=15, cap=44) == 44
+
+
+def test_fmax_loop_grows_until_p_me_falls_below_p_thr():
+    # p_me falls with F_max as the windows reach a change: 0.9 at 15, 0.5 at 30, 0.3 at 45 -> 44.
+    seen = []
+
+    def measure(place):
+        seen.append(place)
+        return {15: (0.9, 0.8), 30: (0.5, 0.35), 44: (0.3, 0.2)}[place.fmax]
+
+    place, steps = fmax_loop(1, 15, 300, measure, p_thr=0.4, step=15, cap=44)
+    assert [s["fmax"] for s in steps] == [15, 30, 44] and place.fmax == 44
+    assert [p.k for p in seen] == [8, 16, 23]  # K moves F_max/2 from the previous segment's end
+    place, steps = fmax_loop(1, 15, 300, lambda p: (0.39, 0.1), p_thr=0.4, step=15, cap=44)
+    assert place.fmax == 15 and len(steps) == 1
+    # A segment that already reaches the animation's end does not grow
+    place, steps = fmax_loop(280, 15, 300, lambda p: (1.0, 1.0), p_thr=0.4, step=15, cap=44)
+    assert len(steps) == 1 and place.end == 300
+
+
+# --- Step 3: the doubling loop ----------------------------------------------------------------
+def test_doubling_loop_stops_at_the_first_n_frame_below_d_thr():
+    # d_AQM (percent) halves with every doubling: 12 % at 10,000 -> 3 % at 40,000 (<= d_thr = 3 %)
+    measured = []
+
+    def measure(n):
+        measured.append(n)
+        return 12.0 * 10_000 / n
+
+    n, steps, capped = doubling_loop(10_000, measure, d_thr=0.03, n_max=640_000)
+    assert n == 40_000 and measured == [10_000, 20_000, 40_000] and not capped
+    assert [s["d_aqm"] for s in steps] == [12.0, 6.0, 3.0]
+    n, steps, capped = doubling_loop(10_000, measure, d_thr=0.03, n_max=25_000)
+    assert n == 20_000 and capped  # the cap stops it above d_thr: reported
+    assert next_n_frame(10_000, 0.02, 0.03, 640_000) is None
+    assert next_n_frame(10_000, 0.04, 0.03, 640_000) == 20_000
+
+
+# --- placement and end frames -------------------------------------------------------------------
+def test_segments_tile_the_animation_and_the_last_takes_in_a_stub():
+    placed, start = [], 1
+    while start <= 135:
+        p = place_segment(start, 30, 135)
+        placed.append((p.start, p.k, p.end))
+        start = p.end + 1
+    assert placed == [(1, 16, 31), (32, 47, 62), (63, 78, 93), (94, 109, 135)]  # 124-135 is a stub: merged
+    p = place_segment(120, 30, 135)  # past the end: clipped, K in the middle of what is left
+    assert (p.start, p.k, p.end) == (120, 127, 135)
+    assert place_segment(1, 0, 10).frames == [1]
+
+
+def test_frames_next_to_an_animation_end_get_more_photons():
+    assert end_frames(1, 100, 10) == {1, 2, 3, 4, 5, 96, 97, 98, 99, 100}
+    first = place_segment(1, 10, 100)
+    targets = photon_targets(first, 40_000, first=1, last=100, end_factor=2.0)
+    assert [targets[f] for f in first.frames] == [80_000] * 5 + [40_000] * 6
+    middle = place_segment(40, 10, 100)
+    assert set(photon_targets(middle, 40_000, first=1, last=100, end_factor=2.0).values()) == {40_000}
+
+
+# --- the config: every field read by one stage --------------------------------------------------
+def test_stage_hashes_cover_only_their_stage():
+    base = RenderConfig()
+    changed = {"d_thr": 0.05, "p_thr": 0.5, "k_sigma": 3.0, "filter_photons": 9.0, "photon_depth": 3}
+    for name, value in changed.items():
+        other = base.replace(**{name: value})
+        stage = next(f.metadata["stage"] for f in __import__("dataclasses").fields(RenderConfig) if f.name == name)
+        for s in ("photons", "collection", "filter", "segments"):
+            assert (other.stage_hash(s) != base.stage_hash(s)) == (s == stage), (name, s)
+    assert base.replace(d_thr=0.05).photon_hash(0.4) == base.photon_hash(0.4)
+    assert base.replace(photon_depth=3).photon_hash(0.4) != base.photon_hash(0.4)
+
+
+def test_every_config_field_is_read_outside_config():
+    import dataclasses
+    import pathlib
+    import re
+
+    root = pathlib.Path(__file__).resolve().parents[2]
+    text = "\n".join(p.read_text() for d in ("pipeline", "workers", "kernels") for p in (root / d).rglob("*.py")
+                     if p.name != "config.py")
+    for f in dataclasses.fields(RenderConfig):
+        assert re.search(rf"\.{f.name}\b", text), f"RenderConfig.{f.name} is read by nothing"
