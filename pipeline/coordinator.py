@@ -107,6 +107,12 @@ class _Segments:
         self.times = {"shoot_s": 0.0, "aqm_s": 0.0, "temporal_s": 0.0}
         self.batches_traced = 0
 
+    def add_times(self, result: dict, keys) -> None:
+        """Sum a task's own timings (seconds of work, whichever worker did it) into this segment's."""
+        for k in keys:
+            if k in result:
+                self.times[f"task_{k}"] = self.times.get(f"task_{k}", 0.0) + float(result[k])
+
     # --- photons ---------------------------------------------------------------------------
     def shoot(self, targets: dict[int, int]) -> None:
         """Trace one batch more for every frame whose stored batches hold fewer than its target."""
@@ -128,7 +134,8 @@ class _Segments:
                 element_size=self.job.element_size, frame=f, frame_index=f - 1, batch=batch,
                 n_photons=n - have, photon_start=have, seed=self.config.seed,
                 max_depth=self.config.photon_depth)))
-        run_tasks(self.client, shoot_task, calls, desc="shoot", progress=False)
+        for r in run_tasks(self.client, shoot_task, calls, desc="shoot", progress=False).values():
+            self.add_times(r, ("pose_s", "trace_s", "write_s"))
         self.batches_traced += len(calls)
         self.times["shoot_s"] += time.perf_counter() - t0
 
@@ -304,6 +311,7 @@ class _Segments:
         out = {}
         for r in run_tasks(self.client, reconstruct_task, calls, desc="reconstruct", progress=False).values():
             out.update(r["frames"])
+            self.add_times(r.get("times", {}), r.get("times", {}).keys())
         self.times["temporal_s"] += time.perf_counter() - t0
         return out
 
@@ -330,7 +338,8 @@ def smoothed_adaptation(job: Job, frames_info: dict[int, dict], upto: int) -> di
 def composite_frames(job: Job, client, frames: list[int], frames_info: dict[int, dict], *,
                      force: frozenset = frozenset()) -> dict[int, dict]:
     """Composite every frame of ``frames`` whose files do not carry its current frame hash (and
-    those in ``force``); returns the rays cast per kind of every frame written."""
+    those in ``force``); returns the composite task's result (rays per kind, timings) of every frame
+    written."""
     from workers.composite import composite_task
 
     from .images import frame_is_valid, frame_paths
@@ -354,7 +363,7 @@ def composite_frames(job: Job, client, frames: list[int], frames_info: dict[int,
                           seed=job.config["seed"], spp=job.spp, resolution=f"{job.width}x{job.height}",
                           adaptation=smoothed[f], frame_adaptation=info["adaptation"]))))
     done = run_tasks(client, composite_task, calls, desc="composite", progress=False)
-    return {int(r["frame"]): r["rays"] for r in done.values()}
+    return {int(r["frame"]): r for r in done.values()}
 
 
 def _frames_info(job: Job, upto_index: int) -> dict[int, dict]:
@@ -391,11 +400,14 @@ def segment_task(job: dict, index: int, force: bool = False) -> dict:
         info = {**_frames_info(job, index - 1), **{int(f): v for f, v in rec.frames.items()}}
         frames = run.frames_of(rec)
         written = composite_frames(job, client, frames, info, force=frozenset(frames) if force else frozenset())
+        for r in written.values():
+            run.add_times({f"composite_{k}": v for k, v in r.items() if k.endswith("_s")},
+                          ("composite_load_s", "composite_render_s", "composite_write_s"))
         rec.status = "done"
         rec.times_s.update({"frames_s": time.perf_counter() - t0, "reconstruct_s": t1 - t0,
                             "composite_s": time.perf_counter() - t1, **{k: round(v, 4) for k, v in run.times.items()}})
         write_record(job.out_dir, rec)
-        return {"record": rec.to_dict(), "rays": {str(f): r for f, r in written.items()},
+        return {"record": rec.to_dict(), "rays": {str(f): r["rays"] for f, r in written.items()},
                 "batches": run.batches_traced}
 
 
@@ -473,7 +485,7 @@ def reprocess(job: Job, client, index: int) -> tuple[SegmentRecord, dict]:
             last_index += 1
         info = _frames_info(job, last_index)
         later = [f for f in job.selection if f in info]
-        rays.update(composite_frames(job, client, later, info))
+        rays.update({f: r["rays"] for f, r in composite_frames(job, client, later, info).items()})
     return rec, {"rays": {str(f): r for f, r in sorted(rays.items())}, "batches": result["batches"]}
 
 
