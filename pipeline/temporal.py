@@ -45,6 +45,7 @@ class FrameIllumination:
     back: np.ndarray  # (E,) uint8: element e collected frames [f - back, f + fwd]
     fwd: np.ndarray  # (E,) uint8
     rings: np.ndarray | None  # (P, V) uint8 filter support taken (0: unfiltered), None: no filter
+    direct: np.ndarray | None = None  # (V, 3) float64 the frame's own direct estimate (with_direct)
 
 
 def _runs(has_photons: np.ndarray) -> list[tuple[int, int]]:
@@ -80,7 +81,8 @@ def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames, *, mod
 def illumination_maps(store, elements, scene, frames=None, *, mode: str = "adaptive", fmax: int | None = None,
                       config: RenderConfig = RenderConfig(), kind: str = "indirect", count_kind: str = "all",
                       split_parity: bool = False, spatial_filter: bool = False,
-                      batches=None, chunk: int = 96) -> Iterator[FrameIllumination]:
+                      batches=None, chunk: int = 96, with_direct: bool = False,
+                      times: dict | None = None) -> Iterator[FrameIllumination]:
     """Yield the illumination of every requested frame, in frame order.
 
     Parameters
@@ -98,7 +100,12 @@ def illumination_maps(store, elements, scene, frames=None, *, mode: str = "adapt
     spatial_filter : apply the adaptive filter of §5.2.5 with ``config.filter_*``.
     batches : (n_frames,) leading batches in use per store frame (None: every done batch); a
         segment uses the batches that make up its N_frame (pipeline/coordinator.py).
+    with_direct : also give each frame's mesh-based direct estimate from its own direct photons
+        (workers/reconstruct.vertex_irradiance, §4), from the records the gather holds already.
+    times : if given, seconds spent are added to its keys ``read_s`` (records), ``windows_s``,
+        ``sums_s`` (gather), ``filter_s`` (filter and irradiance) and ``direct_s``.
     """
+    clock = _Clock(times)
     if mode not in MODES:
         raise LoomError(f"must be one of {', '.join(MODES)}, got {mode!r}", field="--temporal")
     fmax = config.fmax_initial if fmax is None else int(fmax)
@@ -114,9 +121,8 @@ def illumination_maps(store, elements, scene, frames=None, *, mode: str = "adapt
         n_emitted = np.array([store.photons_in(f, int(batches[f])) for f in range(store.n_frames)], np.float64)
     counts = store.counts(kind=count_kind, batches=batches)
     back, fwd = collection_windows(counts, n_emitted, frames, mode=mode, fmax=fmax, config=config)
-    hood = (neighbourhood(elements.element_vertices, elements.vertex_local, elements.vertex_instance,
-                          max_rings=config.filter_rings, max_angle=config.filter_angle)
-            if spatial_filter else None)
+    hood = _neighbourhood(elements, config.filter_rings, config.filter_angle) if spatial_filter else None
+    clock.lap("windows_s")
     records: dict[int, object] = {}  # FrameRecords per frame index, kept across chunks
     for start in range(0, len(frames), chunk):
         part = np.arange(start, min(start + chunk, len(frames)))
@@ -125,21 +131,72 @@ def illumination_maps(store, elements, scene, frames=None, *, mode: str = "adapt
         hi = int((f[:, None] + fwd[part]).max()) + 1
         for g in [g for g in records if g < lo]:
             del records[g]
+        clock.lap(None)
         records.update({g: store.read_frame(g, batches=None if batches is None else range(int(batches[g])))
                         for g in range(lo, hi) if g not in records})
+        clock.lap("read_s")
         flux = gather_flux_cl([records[g] for g in range(lo, hi)], n_emitted[lo:hi], back[part], fwd[part],
                               f - lo, elements.element_vertices, elements.n_vertices, kind=kind,
                               split_parity=split_parity)
         areas = np.stack([elements.vertex_areas(scene.pose_frame(store.frame_numbers[g])) for g in f.tolist()])
+        clock.lap("sums_s")
+        own = [_direct(records[g], elements, a) if with_direct else None for g, a in zip(f.tolist(), areas)]
+        clock.lap("direct_s")
         rings = None
         if hood is not None:  # every map of the chunk in one launch
             irr, rings = adaptive_filter_cl(flux, np.broadcast_to(areas[:, None, :], flux.shape[:-1]), hood,
                                             photons=config.filter_photons, z=config.filter_z)
         else:
             irr = irradiance(flux, areas[:, None, :])
+        clock.lap("filter_s")
         for i, (frame_index, j) in enumerate(zip(f.tolist(), part.tolist())):
             yield FrameIllumination(frame_index, irr[i] if split_parity else irr[i, 0], back[j], fwd[j],
-                                    None if rings is None else rings[i])
+                                    None if rings is None else rings[i], own[i])
+
+
+_hoods: dict[int, tuple] = {}  # id(element mesh) -> (weak reference to it, {(rings, angle): rings})
+
+
+def _neighbourhood(elements, rings: int, angle: float):
+    """The filter's vertex rings of an element mesh, computed once per mesh and process (a
+    reconstruction task of 16 frames spent a quarter of its time on them)."""
+    import weakref
+
+    entry = _hoods.get(id(elements))
+    if entry is None or entry[0]() is not elements:
+        entry = (weakref.ref(elements, lambda _, k=id(elements): _hoods.pop(k, None)), {})
+        _hoods[id(elements)] = entry
+    key = (int(rings), float(angle))
+    if key not in entry[1]:
+        entry[1][key] = neighbourhood(elements.element_vertices, elements.vertex_local, elements.vertex_instance,
+                                      max_rings=rings, max_angle=angle)
+    return entry[1][key]
+
+
+class _Clock:
+    """Adds the seconds since the last lap to ``times[key]`` (nothing when ``times`` is None)."""
+
+    def __init__(self, times: dict | None):
+        import time
+
+        self.times, self.now = times, time.perf_counter
+        self.last = self.now()
+
+    def lap(self, key: str | None) -> None:
+        if self.times is None:
+            return
+        t = self.now()
+        if key is not None:
+            self.times[key] = self.times.get(key, 0.0) + t - self.last
+        self.last = t
+
+
+def _direct(records, elements, areas) -> np.ndarray:
+    from workers.reconstruct import vertex_irradiance
+
+    sel = records.direct
+    return vertex_irradiance(records.element[sel], records.b1[sel], records.b2[sel], records.energy[sel],
+                             elements, areas, records.photons_emitted)
 
 
 def write_temporal_maps(store_url: str, scene, elements, frames, *, mode: str, fmax: int | None,

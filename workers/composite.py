@@ -460,7 +460,7 @@ def composite_task(*, scene_path: str, scene_hash: str, camera: str | None, elem
     scene = load_scene(scene_path, scene_hash, camera)
     elements = load_elements(scene_path, scene_hash, element_size)
     state = scene.pose_frame(frame)
-    irradiance = IlluminationMaps.open(store_url).read(frame - 1, "indirect")
+    irradiance = IlluminationMaps.open_shared(store_url).read(frame - 1, "indirect")
     t1 = time.perf_counter()
     img = render_frame(state, elements, irradiance, width=width, height=height, spp=spp, seed=seed,
                        frame=frame, max_depth=max_depth, area_samples=area_samples)

@@ -153,7 +153,7 @@ def shoot_task(*, store_url: str, scene_path: str, scene_hash: str, element_size
 
     from .scene_cache import load_elements, load_scene
 
-    store = PhotonStore.open(store_url, mode="r+")
+    store = PhotonStore.open_shared(store_url, mode="r+")
     if store.is_done(frame_index, batch):
         return {"frame": frame, "batch": batch, "skipped": True}
     t0 = time.perf_counter()

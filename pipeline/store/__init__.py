@@ -9,10 +9,12 @@ Record (dept.md §1.1), exactly ``RECORD_BYTES`` = 20 bytes uncompressed, stored
     bary    2 x u16 4 B  b1, b2 fixed point /65535 (b0 = 1 - b1 - b2)
     energy  3 x f32 12 B RGB energy (throughput x per-photon power, scaled by the tracer)
 
-On disk (blosc zstd-3 + byte shuffle) a random 1,000,000-record batch on 45,000 elements takes
-13.3 bytes a record (key 0.2, bary 4.0, energy 9.1), plus 0.15 for its offsets and counts.
+On disk the records of a batch are one (5, n) u32 array, rows key, b1 | b2 << 16 and the bits
+of energy R, G, B (struct-of-arrays in one chunk), blosc lz4 + byte shuffle: a ROOM frame at
+40,000 photons takes about 14 bytes a record (zstd-3 took 12 but cost 4x the time to write and
+5x to read; every batch is read by about three reconstruction tasks).
 
-On disk (``F`` frames, ``B`` = max_batches, ``E`` elements)::
+On disk (``F`` frames, ``B`` = max_batches, ``E`` elements), format version 2::
 
     run.zarr/
       zarr.json          group; attributes: format, format_version, scene_hash, config_hash, seed,
@@ -23,22 +25,25 @@ On disk (``F`` frames, ``B`` = max_batches, ``E`` elements)::
                          per category indirect-even, indirect-odd, direct-even, direct-odd
       source/            (F,) i32, one chunk, -1 or the frame whose photons frame f reuses
       frames/<f>/        group per frame, made by the coordinator
-        <b>/             made by the writer of (f, b) and by nobody else
-          key (n,) u32   bary (n, 2) u16   energy (n, 3) f32   records sorted by element
-          offsets (E+1,) i64   records of element e are [offsets[e], offsets[e+1])
+        <b>              (5, n) u32 array, chunk (5, 2^20), made by the writer of (f, b) and by
+                         nobody else; records sorted by element (an element's records are
+                         contiguous: the reader recovers the offsets from the keys)
 
 Why this layout. Record counts per batch are unknown until traced and vary 2x per doubling
-(§5.2.3), so each batch gets its own exactly-sized arrays, created by its writer under
-``frames/<f>/<b>/``: in zarr v3 that writes only metadata inside the batch's own prefix
-(parents exist), so no shared metadata and no resize. A preallocated (frame, capacity) layout
+(§5.2.3), so each batch gets its own exactly-sized array, created by its writer at
+``frames/<f>/<b>``: in zarr v3 that writes only metadata inside the batch's own prefix
+(parents exist), so no shared metadata and no resize. One array a batch, its metadata and
+chunks written as whole objects by the store itself (``_Raw``), costs two file writes where
+four zarr arrays cost about 50 ms of zarr calls. A preallocated (frame, capacity) layout
 would need a capacity guess and coordinator resizes. The small fixed-size tables (batch, counts,
 source) are made by the coordinator in :meth:`PhotonStore.create`; a chunk of them belongs to
 exactly one (frame, batch), so concurrent writers never share a chunk (zarr 3 has no locks).
 Counts are running sums so the frames x elements table is one chunk read per frame (300 x 45,000
 in well under a second) rather than one per batch.
 
-Atomicity and idempotence. LocalStore writes every chunk as temp file + rename, so a chunk is
-whole or absent. A writer writes records, offsets and counts first and the ``batch`` chunk last;
+Atomicity and idempotence. LocalStore writes every chunk as temp file + rename, and so does the
+store's own writer of the record arrays, so a chunk is whole or absent. A writer writes records
+and counts first and the ``batch`` chunk last;
 that chunk is the done marker, so a killed writer leaves a batch that is not done, which a rerun
 rewrites. Records are sorted into a total order (element, key, b1, b2, energy bits), so the
 bytes do not depend on input order, and a rerun writes identical bytes over identical chunks
@@ -49,6 +54,11 @@ changes once written. ``file://`` URLs map to LocalStore for these guarantees (f
 filesystem neither renames atomically nor makes parent directories); other fsspec URLs rely on
 the object store writing each object whole. A killed writer may leave ``*.partial`` temp files,
 which zarr never reads.
+
+Caches. A store instance reads each done marker once (it never changes). On a LocalStore it also
+reuses the done table (one directory listing) and the sources while the ``batch/`` directory
+and the ``source`` chunk are unchanged (stat), so the hundreds of small queries of a
+reconstruction task cost microseconds, and a batch another process finishes is still seen.
 
 Modules: ``records`` (the record, validation, total order; pure NumPy), ``photon_store`` (zarr).
 """

@@ -22,9 +22,10 @@ import zarr
 import zarr.errors
 
 from ..errors import LoomError
-from .photon_store import records_codec, make_store
+from .photon_store import _file_stamp, local_path, make_store, records_codec
 
 GROUP = "illumination"
+_SHARED: dict = {}  # (path, mode) -> (metadata stamps, IlluminationMaps): IlluminationMaps.open_shared
 MAPS = ("indirect", "direct")
 
 
@@ -65,6 +66,25 @@ class IlluminationMaps:
         if GROUP not in root:
             raise LoomError("the photon store has no illumination maps yet", path=where)
         return cls(root[GROUP], where)
+
+    @classmethod
+    def open_shared(cls, url, mode: str = "r") -> IlluminationMaps:
+        """:meth:`open`, reusing this process's instance while the arrays' metadata files are
+        the same (LocalStore only; :meth:`create` with other shapes writes new ones)."""
+        path = local_path(url)
+        if path is None:
+            return cls.open(url, mode)
+        stamp = tuple(_file_stamp(path / GROUP / name / "zarr.json") for name in (*MAPS, "adaptation"))
+        key = (str(path), mode)
+        found = _SHARED.get(key)
+        if found is not None and None not in stamp and found[0] == stamp:
+            return found[1]
+        maps = cls.open(url, mode)
+        if None not in stamp:
+            _SHARED[key] = (stamp, maps)
+            while len(_SHARED) > 8:
+                _SHARED.pop(next(iter(_SHARED)))
+        return maps
 
     def write_frame(self, frame_index: int, *, indirect: np.ndarray, direct: np.ndarray,
                     adaptation: float) -> None:

@@ -63,14 +63,28 @@ class FrameRecords:
     @classmethod
     def merge(cls, frame_index: int, source_frame: int, batches, parts, n_elements: int,
               photons_emitted: int) -> FrameRecords:
-        """Merge element-sorted batches ``parts`` [(key, bary, energy, offsets)] in batch order."""
-        key = np.concatenate([p[0] for p in parts] or [np.zeros(0, np.uint32)])
-        bary = np.concatenate([p[1] for p in parts] or [np.zeros((0, 2), np.uint16)])
-        energy = np.concatenate([p[2] for p in parts] or [np.zeros((0, 3), np.float32)])
-        offsets = sum((p[3] for p in parts), np.zeros(n_elements + 1, np.int64))
-        order = np.argsort(key & np.uint32(ELEMENT_MASK), kind="stable")  # keeps batch order
-        key, bary, energy = key[order], bary[order], energy[order]
-        return cls(frame_index, source_frame, tuple(batches), key, key & np.uint32(ELEMENT_MASK),
+        """Merge element-sorted batches ``parts`` [(key, bary, energy, offsets)] in batch order:
+        element-major, and within an element batch 0's records first (what a stable sort by
+        element of the concatenation gives, computed from the offsets in O(n))."""
+        parts = list(parts)
+        offsets = sum((np.asarray(p[3], np.int64) for p in parts), np.zeros(n_elements + 1, np.int64))
+        if len(parts) == 1:
+            key, bary, energy = (np.ascontiguousarray(a) for a in parts[0][:3])
+        else:
+            n = int(offsets[-1])
+            key = np.empty(n, np.uint32)
+            bary = np.empty((n, 2), np.uint16)
+            energy = np.empty((n, 3), np.float32)
+            before = np.zeros(n_elements, np.int64)  # records of earlier batches per element
+            for k, b, e, o in parts:
+                o = np.asarray(o, np.int64)
+                count = np.diff(o)
+                shift = offsets[:-1] + before - o[:-1]  # destination - source index, per element
+                dest = np.arange(o[-1], dtype=np.int64) + np.repeat(shift, count)
+                key[dest], bary[dest], energy[dest] = k, b, e
+                before += count
+        element = key & np.uint32(ELEMENT_MASK)
+        return cls(frame_index, source_frame, tuple(batches), key, element,
                    (key & DIRECT_BIT) != 0, ((key & PARITY_BIT) != 0).astype(np.uint8),
                    bary[:, 0].copy(), bary[:, 1].copy(), energy, offsets, photons_emitted)
 
@@ -87,6 +101,34 @@ class SortedBatch:
 
     def digest(self, *extra: int) -> int:
         return records_digest(self.key, self.bary, self.energy, *extra)
+
+    def packed(self) -> np.ndarray:
+        """u32 (5, n): the on-disk rows (:func:`pack_records`)."""
+        return pack_records(self.key, self.bary, self.energy)
+
+
+def pack_records(key: np.ndarray, bary: np.ndarray, energy: np.ndarray) -> np.ndarray:
+    """u32 (5, n) rows key, b1 | b2 << 16, and the bits of energy R, G, B: the record fields as
+    one struct-of-arrays block (pipeline.store, FORMAT_VERSION 2)."""
+    n = key.shape[0]
+    out = np.empty((5, n), np.uint32)
+    out[0] = key
+    out[1] = bary[:, 0]
+    out[1] |= bary[:, 1].astype(np.uint32) << np.uint32(16)
+    out[2:5] = np.ascontiguousarray(energy, np.float32).view(np.uint32).T
+    return out
+
+
+def unpack_records(rows: np.ndarray, n_elements: int):
+    """(key, bary, energy, offsets) of a (5, n) block written by :func:`pack_records`."""
+    key = np.ascontiguousarray(rows[0])
+    bary = np.empty((rows.shape[1], 2), np.uint16)
+    bary[:, 0] = rows[1] & np.uint32(0xFFFF)
+    bary[:, 1] = rows[1] >> np.uint32(16)
+    energy = np.ascontiguousarray(rows[2:5].T).view(np.float32)
+    offsets = np.zeros(n_elements + 1, np.int64)
+    np.cumsum(np.bincount(key & np.uint32(ELEMENT_MASK), minlength=n_elements), out=offsets[1:])
+    return key, bary, energy, offsets
 
 
 def as_int(value, name: str, where: str, lo: int, hi: int | None = None) -> int:
@@ -122,8 +164,10 @@ def sort_records(key: np.ndarray, bary: np.ndarray, energy: np.ndarray) -> np.nd
     element = (key & ELEMENT_MASK).astype(np.uint64)
     primary = ((element << np.uint64(2) | (key >> np.uint32(30)).astype(np.uint64)) << np.uint64(32)
                | bary[:, 0].astype(np.uint64) << np.uint64(16) | bary[:, 1].astype(np.uint64))
-    order = np.argsort(primary, kind="stable")
-    ranked = primary[order]
+    # Any correct sort gives the same permutation when the primary keys are distinct, so the
+    # faster unstable one is used; ties are broken by the energy bits (equal records: any order)
+    order = np.argsort(primary)
+    ranked = np.take(primary, order)
     if ranked.size > 1 and (ranked[1:] == ranked[:-1]).any():  # ties: break by energy bits
         bits = energy.view(np.uint32)
         order = np.lexsort((bits[:, 2], bits[:, 1], bits[:, 0], primary))
@@ -145,9 +189,10 @@ def prepare_records(key, bary, energy, n_elements: int, where: str) -> SortedBat
 
     # Sort into the total order, then count per element and category
     order = sort_records(key, bary, energy)
-    key, bary, energy, element = key[order], bary[order], energy[order], element[order]
+    key, bary, energy = np.take(key, order), np.take(bary, order, axis=0), np.take(energy, order, axis=0)
     category = (key >> np.uint32(30)).astype(np.int64)
-    counts = np.bincount(category * n_elements + element, minlength=len(CATEGORIES) * n_elements)
+    counts = np.bincount(category * n_elements + (key & np.uint32(ELEMENT_MASK)),
+                         minlength=len(CATEGORIES) * n_elements)
     counts = counts.reshape(len(CATEGORIES), n_elements).astype(np.uint64)
     offsets = np.zeros(n_elements + 1, dtype=np.int64)
     np.cumsum(counts.sum(axis=0), out=offsets[1:])

@@ -49,7 +49,7 @@ def test01_record_is_20_bytes_and_described(store):
     assert RECORD_BYTES == 20
     attrs = dict(zarr.open_group(store.url, mode="r").attrs)
     assert attrs["record_layout"]["record_bytes"] == 20
-    assert attrs["format_version"] == 1 and attrs["frame_numbers"] == [101, 102, 103, 104]
+    assert attrs["format_version"] == 2 and attrs["frame_numbers"] == [101, 102, 103, 104]
     assert {k: attrs[k] for k in IDENTITY} == IDENTITY
 
 
@@ -131,7 +131,7 @@ def test07_crash_before_done_marker(tmp_path):
                                                      "energy": second["energy"],
                                                      "photons_emitted": 1000,
                                                      "photon_start": 1000}))
-    assert (tmp_path / "crashed/frames/3/1/key/c/0").exists()
+    assert (tmp_path / "crashed/frames/3/1/c/0/0").exists()
     assert not crashed.is_done(3, 1) and crashed.done_batches(3) == [0]
     assert len(crashed.read_frame(3)) == 2000 and crashed.photons_emitted(3) == 1000
     np.testing.assert_array_equal(crashed.counts(frames=[3])[0],
@@ -153,7 +153,7 @@ def test08_urls(tmp_path, scheme):
     assert reopened.done_batches(1) == [0, 1] and len(reopened.read_frame(1)) == 1000
     check_consistent(reopened.read_frame(1), N_ELEMENTS)
     if scheme != "memory":
-        assert (tmp_path / "u.zarr/frames/1/1/key/zarr.json").exists()
+        assert (tmp_path / "u.zarr/frames/1/1/zarr.json").exists()
 
 
 @pytest.mark.parametrize("attr, value", [("scene_hash", "scene-other"), ("config_hash", "cfg-9"),
@@ -238,7 +238,7 @@ def test14_bad_input(store, tmp_path, args, message):
     with pytest.raises(LoomError, match=message) as err:
         store.write_batch(**args)
     assert "\n" not in str(err.value) and str(err.value).startswith(store.url)
-    assert not list((tmp_path / "run.zarr/frames").rglob("key"))
+    assert not list((tmp_path / "run.zarr/frames").rglob("c"))  # no record chunk written
     assert store.done_batches(0) == []
 
 
@@ -356,8 +356,8 @@ def test21_pack_key_bits():
 def test22_verify_batch_detects_changed_records(store):
     write_frame(store.url, 1, [2000], N_ELEMENTS)
     assert store.verify_batch(1, 0) and not store.verify_batch(1, 1)
-    energy = zarr.open_array(store.url, path="frames/1/0/energy", mode="r+")
-    energy[0, 0] = energy[0, 0] + 1
+    rows = zarr.open_array(store.url, path="frames/1/0", mode="r+")  # key, bary, energy R, G, B
+    rows[2, 0] = rows[2, 0] + 1
     assert not store.verify_batch(1, 0)
 
 
@@ -366,3 +366,47 @@ def test23_pickles_by_url(store):
     clone = pickle.loads(pickle.dumps(store))
     assert clone.url == store.url and clone.mode == "r+" and clone.done_batches(0) == [0]
     assert "frames=4" in repr(clone)
+
+
+def test24_batch_array_is_plain_zarr(store):
+    """The record array the store writes itself is an ordinary zarr array of the packed rows."""
+    from pipeline.store.records import pack_records, unpack_records
+
+    batch = make_batch(2, 0, 3000, N_ELEMENTS)
+    store.write_batch(2, 0, **batch)
+    rows = zarr.open_array(store.url, path="frames/2/0", mode="r")[...]
+    key, bary, energy = expected_sorted(batch)
+    np.testing.assert_array_equal(rows, pack_records(key, bary, energy))
+    k, b, e, offsets = unpack_records(rows, N_ELEMENTS)
+    np.testing.assert_array_equal(k, key)
+    np.testing.assert_array_equal(b, bary)
+    np.testing.assert_array_equal(e.view(np.uint32), energy.view(np.uint32))
+    np.testing.assert_array_equal(np.diff(offsets), np.bincount(key & ELEMENT_MASK, minlength=N_ELEMENTS))
+
+
+def test25_merge_is_a_stable_sort_by_element():
+    parts = []
+    for b, n in enumerate([500, 0, 1200, 7]):
+        batch = make_batch(0, b, n, N_ELEMENTS)
+        key, bary, energy = expected_sorted(batch)
+        offsets = np.concatenate([[0], np.cumsum(np.bincount(key & ELEMENT_MASK, minlength=N_ELEMENTS))])
+        parts.append((key, bary, energy, offsets))
+    got = FrameRecords.merge(0, 0, range(4), parts, N_ELEMENTS, 99)
+    key = np.concatenate([p[0] for p in parts])
+    order = np.argsort(key & ELEMENT_MASK, kind="stable")
+    np.testing.assert_array_equal(got.key, key[order])
+    np.testing.assert_array_equal(got.b1, np.concatenate([p[1] for p in parts])[order, 0])
+    np.testing.assert_array_equal(got.energy, np.concatenate([p[2] for p in parts])[order])
+    check_consistent(got, N_ELEMENTS)
+
+
+def test26_an_open_store_sees_batches_written_by_others(store):
+    """Cached done tables and markers never hide a batch another writer finished meanwhile."""
+    reader = PhotonStore.open(store.url, **IDENTITY)
+    assert reader.done_batches(0) == [] and reader.prefix_for(0, 10) is None
+    write_frame(store.url, 0, [300, 300], N_ELEMENTS)
+    assert reader.done_batches(0) == [0, 1] and reader.prefix_for(0, 300) == 2
+    time.sleep(0.15)  # old enough for the listing to be reused ...
+    assert reader.done_batches(0) == [0, 1]
+    write_frame(store.url, 1, [300], N_ELEMENTS)  # ... until the directory changes
+    assert reader.done_batches(1) == [0] and reader.photons_in(1, 1) == 150
