@@ -43,6 +43,7 @@ bench: setup
 	$(LOOM) bench frame
 	$(LOOM) bench temporal
 	$(LOOM) bench aqm
+	$(LOOM) bench render
 
 clean:
 	rm -rf out .pytest_cache

@@ -226,3 +226,5 @@ from .benchmarks.temporal import bench_temporal  # noqa: E402
 bench.add_command(bench_temporal, "temporal")
 from .benchmarks.noise import bench_noise  # noqa: E402
 bench.add_command(bench_noise, "noise")
+from .benchmarks.render import bench_render  # noqa: E402
+bench.add_command(bench_render, "render")

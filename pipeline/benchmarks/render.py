@@ -1,0 +1,132 @@
+"""``loom bench render``: the paper's Table 2 (§6) per frame, and the scaling of a whole render.
+
+Three renders of the scene (default the built-in ROOM, all its frames, 320x240, 2 spp), each into
+a fresh output directory on a LocalCluster:
+
+* (a) guided: ``--photons auto`` (``render(..., n_photons=None)``), ``--workers`` workers;
+* (b) fixed N_frame = 40,000, F_max = 30, adaptive collection, on 1 worker and on ``--workers``.
+
+Table 2 rows, from the segment records (pipeline/segment_records.py, ``times_s``) of one run:
+wall-clock stage times ``shoot_s``, ``aqm_s``, ``temporal_s`` (the reconstruction tasks),
+``composite_s``, and the decisions' remainder (``decide_s`` less its shooting and AQM: pilot
+error and p_me windows, counted as temporal processing). The tasks' own timings (summed over
+workers: ``task_*``) split a stage's wall time in proportion: photon tracing = shoot x
+(pose + trace) / (pose + trace + store write); I/O = the store write's part of the shoot and the
+record reads and map writes' part of the reconstruction. Total indirect = tracing + AQM +
+temporal + I/O; ray tracing is the compositing stage (rendering, tone mapping, EXR and PNG).
+Per frame = divided by the frames rendered; shares are of indirect + ray tracing. "core s" is
+the tasks' summed time per frame (what one core would spend).
+
+Scaling: the wall time of the whole fixed render (``render()``, cluster start-up included) on 1
+worker against ``--workers``, and the same without the cluster start-up and video (the
+segments' wall time).
+"""
+from __future__ import annotations
+
+import json
+import tempfile
+import time
+from pathlib import Path
+
+import click
+
+ROWS = ("photon tracing", "AQM", "temporal processing", "I/O", "total indirect", "ray tracing")
+IO_KEYS = ("task_reconstruct_read_s", "task_reconstruct_map_write_s")
+
+
+def stage_table(records) -> dict:
+    """Table 2 in seconds (wall) and core-seconds from a run's segment records."""
+    t: dict[str, float] = {}
+    for r in records:
+        for k, v in r.times_s.items():
+            t[k] = t.get(k, 0.0) + float(v)
+    g = t.get
+    shoot, aqm, temporal, composite = g("shoot_s", 0.0), g("aqm_s", 0.0), g("temporal_s", 0.0), g("composite_s", 0.0)
+    decide_rest = max(0.0, g("decide_s", 0.0) - shoot - aqm)
+    trace_core = g("task_pose_s", 0.0) + g("task_trace_s", 0.0)
+    write_core = g("task_write_s", 0.0)
+    rec_core = sum(v for k, v in t.items() if k.startswith("task_reconstruct_"))
+    rec_io_core = sum(g(k, 0.0) for k in IO_KEYS)
+    shoot_io = shoot * write_core / (trace_core + write_core) if trace_core + write_core > 0 else 0.0
+    rec_io = temporal * rec_io_core / rec_core if rec_core > 0 else 0.0
+    wall = {"photon tracing": shoot - shoot_io, "AQM": aqm, "temporal processing": temporal - rec_io + decide_rest,
+            "I/O": shoot_io + rec_io, "ray tracing": composite}
+    core = {"photon tracing": trace_core, "AQM": aqm, "temporal processing": rec_core - rec_io_core + decide_rest,
+            "I/O": write_core + rec_io_core,
+            "ray tracing": sum(g(f"task_composite_{k}_s", 0.0) for k in ("load", "render", "write"))}
+    for d in (wall, core):
+        d["total indirect"] = sum(d[k] for k in ("photon tracing", "AQM", "temporal processing", "I/O"))
+    return {"wall": wall, "core": core, "times": t}
+
+
+def run_render(scene: Path, out: Path, *, frames, width, height, spp, workers, n_photons, fmax) -> dict:
+    from pipeline.render import RenderSettings, render
+    from pipeline.segment_records import read_records
+
+    t0 = time.perf_counter()
+    report = render(scene, frames=frames, out_dir=out, settings=RenderSettings(width=width, height=height, spp=spp),
+                    n_photons=n_photons, fmax=fmax, temporal="adaptive", scheduler="local", workers=workers,
+                    progress=False)
+    wall = time.perf_counter() - t0
+    records = read_records(out)
+    table = stage_table(records)
+    segments_wall = sum(r.times_s.get("decide_s", r.times_s.get("init_s", 0.0)) + r.times_s.get("frames_s", 0.0)
+                        for r in records)
+    return {"wall_s": wall, "segments_wall_s": segments_wall, "frames": len(report["rendered"]),
+            "segments": report["segments"], "table": table, "report_times": report["times_s"]}
+
+
+def _print_table(echo, title: str, run: dict) -> None:
+    n = max(run["frames"], 1)
+    wall, core = run["table"]["wall"], run["table"]["core"]
+    total = wall["total indirect"] + wall["ray tracing"]
+    n_frame = ", ".join(f"{s['n_frame']:,}" for s in run["segments"])
+    fmax = ", ".join(str(s["fmax"]) for s in run["segments"])
+    echo(f"\n{title}: {run['frames']} frames, {run['wall_s']:.1f} s wall, {len(run['segments'])} segment(s) "
+         f"(N_frame {n_frame}; F_max {fmax})")
+    echo(f"  {'stage':<22}{'s/frame':>10}{'share':>9}{'core s/frame':>14}")
+    for row in ROWS:
+        echo(f"  {row:<22}{wall[row] / n:>10.4f}{100 * wall[row] / total if total else 0:>8.1f}%{core[row] / n:>14.4f}")
+
+
+@click.command("render")
+@click.argument("scene", default="room")
+@click.option("--frames", default=None, help="Frame range (default: all of the scene's frames).")
+@click.option("--resolution", default="320x240", show_default=True)
+@click.option("--spp", type=int, default=2, show_default=True)
+@click.option("--workers", type=int, default=2, show_default=True, help="Workers of the guided and the scaled run.")
+@click.option("--photons", "n_photons", type=int, default=40_000, show_default=True, help="Fixed N_frame.")
+@click.option("--fmax", type=int, default=30, show_default=True, help="Fixed F_max.")
+@click.option("--skip-guided", is_flag=True, help="Only the fixed runs (Table 2 b and scaling).")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None, help="Also write the figures here.")
+def bench_render(scene, frames, resolution, spp, workers, n_photons, fmax, skip_guided, json_path):
+    """Table 2 per frame (guided and fixed N_frame/F_max) and 1 vs N worker scaling (default: ROOM)."""
+    from pipeline.render import parse_resolution
+    from pipeline.scene.builtin import BUILTIN_SCENES, write_builtin
+
+    width, height = parse_resolution(resolution)
+    echo = click.echo
+    results: dict = {}
+    with tempfile.TemporaryDirectory(prefix="loom-bench-render-") as tmp:
+        tmp = Path(tmp)
+        path = write_builtin(scene, tmp / f"{scene}.glb") if scene in BUILTIN_SCENES else Path(scene)
+        common = dict(frames=frames, width=width, height=height, spp=spp)
+        echo(f"loom bench render: {Path(path).stem}, {width}x{height}, {spp} spp, LocalCluster")
+        if not skip_guided:
+            results["guided"] = run_render(path, tmp / "guided", workers=workers, n_photons=None, fmax=None, **common)
+            _print_table(echo, f"(a) guided (--photons auto), {workers} workers", results["guided"])
+        results["fixed_1"] = run_render(path, tmp / "fixed1", workers=1, n_photons=n_photons, fmax=fmax, **common)
+        results[f"fixed_{workers}"] = run_render(path, tmp / f"fixed{workers}", workers=workers,
+                                                 n_photons=n_photons, fmax=fmax, **common)
+    fixed = results[f"fixed_{workers}"]
+    _print_table(echo, f"(b) fixed N_frame {n_photons:,}, F_max {fmax}, {workers} workers", fixed)
+    _print_table(echo, f"    fixed N_frame {n_photons:,}, F_max {fmax}, 1 worker", results["fixed_1"])
+    one = results["fixed_1"]
+    ratio = one["wall_s"] / fixed["wall_s"]
+    ratio_segments = one["segments_wall_s"] / fixed["segments_wall_s"]
+    echo(f"\nscaling, whole render (fixed): 1 worker {one['wall_s']:.1f} s, {workers} workers {fixed['wall_s']:.1f} s: "
+         f"{ratio:.2f}x (segments only: {one['segments_wall_s']:.1f} s vs {fixed['segments_wall_s']:.1f} s, "
+         f"{ratio_segments:.2f}x)")
+    results["scaling"] = {"workers": workers, "ratio": ratio, "ratio_segments": ratio_segments}
+    if json_path:
+        Path(json_path).write_text(json.dumps(results, indent=1, default=str))
