@@ -91,6 +91,22 @@ def fanout() -> Iterator[object | None]:
         yield client
 
 
+PROGRESS_TOPIC = "loom-progress"
+_local_progress: list = []  # callbacks of a client running segment tasks in-process (synchronous)
+
+
+def progress(message: str) -> None:
+    """A progress line from a segment task: a worker event the client subscribed to, or the local
+    callback when the task runs in the client's process."""
+    try:
+        from distributed import get_worker
+
+        get_worker().log_event(PROGRESS_TOPIC, message)
+    except (ImportError, ValueError):
+        for callback in _local_progress:
+            callback(message)
+
+
 class _Segments:
     """One segment task's view of the run: scene, element mesh, store, config, records."""
 
@@ -106,6 +122,7 @@ class _Segments:
         self.store = PhotonStore.open(job.store_url, mode="r+")
         self.times = {"shoot_s": 0.0, "aqm_s": 0.0, "temporal_s": 0.0}
         self.batches_traced = 0
+        self._index = None  # the segment being decided, for progress lines
 
     def add_times(self, result: dict, keys) -> None:
         """Sum a task's own timings (seconds of work, whichever worker did it) into this segment's."""
@@ -170,6 +187,8 @@ class _Segments:
                               self.elements.element_vertices, self.elements.n_vertices)
         e0 = energy_error(s, q)
         n_pilot = pilot_n_frame(records.photons_emitted, e0, self.config.e_max, place.fmax)
+        progress(f"segment {self._index}: pilot at K {place.k}: E {e0:.3f} with {records.photons_emitted:,} "
+                 f"photons -> N_frame {n_pilot:,.0f} (Eq. 2, F_max {place.fmax})")
         return {"frame": place.k, "n_probe": int(records.photons_emitted), "e_probe": e0,
                 "e_target": self.config.e_max * float(np.sqrt(place.fmax + 1)),
                 "n_pilot": n_pilot if np.isfinite(n_pilot) else None}
@@ -184,7 +203,9 @@ class _Segments:
         back, fwd = collection_windows(counts, emitted, [place.k - 1], mode="adaptive", fmax=place.fmax,
                                        config=self.config)
         hit = counts[place.start - 1:place.end].sum(axis=0) > 0
-        return p_me(back[0], fwd[0], place.fmax, hit)
+        pb, pf = p_me(back[0], fwd[0], place.fmax, hit)
+        progress(f"segment {self._index}: F_max {place.fmax}, K {place.k}: p_me {pb:.2f} back, {pf:.2f} forward")
+        return pb, pf
 
     # --- Step 3 ------------------------------------------------------------------------------
     def d_aqm(self, place: Placement, targets: dict[int, int], index: int, temporal: str) -> float:
@@ -219,11 +240,13 @@ class _Segments:
         picture.parent.mkdir(parents=True, exist_ok=True)
         write_png(picture, difference_picture(images[0], result.visible))
         self.times["aqm_s"] += time.perf_counter() - t0
+        progress(f"segment {index}: N_frame {targets[k]:,} at K {k}: d_AQM {result.d_aqm:.2f} %")
         return float(result.d_aqm)
 
     # --- Steps 1-3 for one segment -----------------------------------------------------------
     def decide(self, index: int, start: int, fmax: int) -> SegmentRecord:
         job, cfg = self.job, self.config
+        self._index = index
         t_start = time.perf_counter()
         prior = self.known_targets(index)
         if job.n_photons is not None:  # fixed settings: nothing to decide
@@ -395,6 +418,7 @@ def segment_task(job: dict, index: int, force: bool = False) -> dict:
         if not rec.guided:
             targets = {f: job.n_photons for f in job.selection}
         t0 = time.perf_counter()
+        progress(f"segment {index}: frames {rec.start}-{rec.end}: reconstructing (Steps 4-5) and compositing")
         rec.frames = run.reconstruct(rec, targets)
         t1 = time.perf_counter()
         info = {**_frames_info(job, index - 1), **{int(f): v for f, v in rec.frames.items()}}
@@ -430,11 +454,36 @@ def segment_done(job: Job, index: int) -> SegmentRecord | None:
     return rec
 
 
-def coordinate(job: Job, client, *, on_segment: Callable[[SegmentRecord, dict], None] | None = None) -> list:
+def coordinate(job: Job, client, *, on_segment: Callable[[SegmentRecord, dict], None] | None = None,
+               on_progress: Callable[[str], None] | None = None) -> list:
     """Run the segments in order (client side); ``on_segment(record, result)`` after each, with
     the segment task's result (frames written with their rays, batches traced; empty when the
-    segment was done already). Returns the records."""
+    segment was done already), and ``on_progress(line)`` for the steps inside a segment task.
+    Returns the records."""
     records, index, start = [], 0, job.first
+    with _progress_to(client, on_progress):
+        return _coordinate(job, client, on_segment, records, index, start)
+
+
+@contextmanager
+def _progress_to(client, on_progress):
+    if on_progress is None:
+        yield
+    elif client is None:
+        _local_progress.append(on_progress)
+        try:
+            yield
+        finally:
+            _local_progress.remove(on_progress)
+    else:
+        client.subscribe_topic(PROGRESS_TOPIC, lambda event: on_progress(event[1]))
+        try:
+            yield
+        finally:
+            client.unsubscribe_topic(PROGRESS_TOPIC)
+
+
+def _coordinate(job, client, on_segment, records, index, start) -> list:
     while start <= job.last:
         rec = segment_done(job, index)
         result = {"rays": {}, "batches": 0}

@@ -166,7 +166,8 @@ def render(scene_path, *, frames: str | None, out_dir, settings: RenderSettings 
             from .segment_records import read_records
             records = read_records(out)
         else:
-            records = coordinate(job, client, on_segment=report_segment)
+            records = coordinate(job, client, on_segment=report_segment,
+                                 on_progress=None if echo is None else (lambda line: echo(f"  {line}")))
 
     # Video and report
     t0 = time.perf_counter()

@@ -91,10 +91,12 @@ def grow_fmax(fmax: int, p_back: float, p_fwd: float, *, p_thr: float, step: int
 # --- Step 3: number of photons (§5.2.3) --------------------------------------------------------
 def next_n_frame(n_frame: int, d_aqm: float, d_thr: float, n_max: int) -> int | None:
     """N_frame doubled while d_AQM (a fraction of pixels) exceeds d_thr, or None to stop: at the
-    first N_frame with d_AQM <= d_thr, or when doubling would pass ``n_max`` (the cap, reported)."""
-    if d_aqm <= d_thr or 2 * n_frame > n_max:
+    first N_frame with d_AQM <= d_thr, or at the cap ``n_max`` (reported by the caller). The last
+    step goes to the cap itself when doubling would pass it, so the configured maximum is reached
+    whatever N_frame the pilot started from."""
+    if d_aqm <= d_thr or n_frame >= n_max:
         return None
-    return 2 * n_frame
+    return min(2 * n_frame, n_max)
 
 
 def doubling_loop(n_frame: int, measure, *, d_thr: float, n_max: int) -> tuple[int, list[dict], bool]:

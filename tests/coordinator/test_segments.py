@@ -121,9 +121,11 @@ def test_doubling_loop_stops_at_the_first_n_frame_below_d_thr():
     assert n == 40_000 and measured == [10_000, 20_000, 40_000] and not capped
     assert [s["d_aqm"] for s in steps] == [12.0, 6.0, 3.0]
     n, steps, capped = doubling_loop(10_000, measure, d_thr=0.03, n_max=25_000)
-    assert n == 20_000 and capped  # the cap stops it above d_thr: reported
+    assert n == 25_000 and capped and measured[-1] == 25_000  # the cap is reached, then reported
     assert next_n_frame(10_000, 0.02, 0.03, 640_000) is None
     assert next_n_frame(10_000, 0.04, 0.03, 640_000) == 20_000
+    assert next_n_frame(600_000, 0.04, 0.03, 640_000) == 640_000
+    assert next_n_frame(640_000, 0.04, 0.03, 640_000) is None
 
 
 # --- placement and end frames -------------------------------------------------------------------
