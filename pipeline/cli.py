@@ -181,13 +181,19 @@ def render_command(scene_file, frames, out_dir, resolution, spp, photons, fmax, 
 @main.command("segments")
 @click.argument("out_dir", type=click.Path(file_okay=False))
 @click.option("--json", "as_json", is_flag=True, help="The records as JSON.")
-def segments_command(out_dir: str, as_json: bool) -> None:
+@click.option("--plot", "plot_file", type=click.Path(dir_okay=False), default=None,
+              help="Also draw d_AQM against N_frame (Fig. 6) and p_me against F_max into this PNG.")
+def segments_command(out_dir: str, as_json: bool, plot_file: str | None) -> None:
     """The segments of a render: the paper's Table 1 (K_i, N_frame, F_max) with d_AQM, p_me, times."""
     import json
 
     from .segment_records import read_records, table
 
     records = read_records(out_dir)
+    if plot_file:
+        from .segment_plot import plot_segments
+
+        click.echo(f"wrote {plot_segments(records, plot_file)}", err=as_json)
     if as_json:
         click.echo(json.dumps([r.to_dict() for r in records], indent=1))
         return

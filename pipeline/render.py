@@ -169,8 +169,11 @@ def render(scene_path, *, frames: str | None, out_dir, settings: RenderSettings 
             records = coordinate(job, client, on_segment=report_segment,
                                  on_progress=None if echo is None else (lambda line: echo(f"  {line}")))
 
-    # Video and report
+    # Video, the segment figure and the report
     t0 = time.perf_counter()
+    if guided:
+        from .segment_plot import plot_segments
+        plot_segments(records, out / "segments" / "segments.png", d_thr=config.d_thr, p_thr=config.p_thr)
     video = out / "preview.mp4"
     write_video([frame_paths(out, f)[1] for f in p.frames], video, scene.timeline.fps)
     video_s = time.perf_counter() - t0

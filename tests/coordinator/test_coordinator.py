@@ -82,6 +82,8 @@ def test_every_step_runs_and_is_recorded(reference):
     table = _loom("segments", reference).stdout
     assert "N_frame" in table and "F_max" in table and f"{recs[0].k:>4}" in table
     assert len(json.loads(_loom("segments", reference, "--json").stdout)) == len(recs)
+    assert (reference / "segments" / "segments.png").stat().st_size > 0  # Fig. 6 and the F_max steps
+    assert (reference / "segments" / "segment-000.aqm.png").stat().st_size > 0  # M_AQM at K
 
 
 def test_cluster_gives_the_same_records_and_frames(room, reference):
