@@ -1,0 +1,106 @@
+"""The guided default (``--photons auto``) on ROOM and ATRIUM against converged per-frame references
+(slow: ``make test-all``).
+
+References are one frame's own photons, no temporal collection, ``REFERENCE_PHOTONS`` of them;
+their noise floor is stated by comparing their even and odd halves with the same AQM. Frames are
+compared as the viewer sees them (pipeline/perceived.py) with the same camera samples and direct
+light, so every difference is in the indirect light.
+"""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.config import RenderConfig
+from pipeline.perceived import displayed_difference
+from pipeline.render import RenderSettings, render
+from pipeline.scene import ElementMesh, Scene
+from pipeline.scene.builtin import write_builtin
+from pipeline.shoot import shoot
+from pipeline.store import PhotonStore
+from pipeline.store.illumination import IlluminationMaps
+from pipeline.temporal import illumination_maps
+from workers.composite import render_frame
+
+pytestmark = pytest.mark.slow
+SETTINGS = RenderSettings(width=320, height=240, spp=2)
+REFERENCE_PHOTONS = 16_000_000  # 8x the paper's 2,000,000: that one's own noise is visible to our AQM
+
+
+class Frames:
+    """Composites of one frame of a scene under different indirect maps, same samples and direct light."""
+
+    def __init__(self, scene_path, tmp):
+        self.path, self.tmp = scene_path, tmp
+        self.scene = Scene.load(scene_path)
+        self.elements = ElementMesh.build(self.scene)
+
+    def beauty(self, frame: int, irradiance) -> np.ndarray:
+        return render_frame(self.scene.pose_frame(frame), self.elements, irradiance, width=SETTINGS.width,
+                            height=SETTINGS.height, spp=SETTINGS.spp, seed=0, frame=frame).beauty
+
+    def reference(self, frame: int) -> tuple[np.ndarray, np.ndarray]:
+        """(full, (even, odd)) indirect maps of ``REFERENCE_PHOTONS`` of the frame's own photons."""
+        url = str(self.tmp / f"ref-{frame}.zarr")
+        shoot(str(self.path), frames=str(frame), n_photons=REFERENCE_PHOTONS, store_url=url,
+              config=RenderConfig(seed=977), scheduler="local", progress=False)
+        (lit,) = illumination_maps(PhotonStore.open(url), self.elements, self.scene, [frame - 1], mode="off",
+                                   split_parity=True)
+        return lit.irradiance.mean(axis=0), lit.irradiance
+
+    def compare(self, frame: int, irradiance, adaptation: float) -> dict:
+        full, halves = self.reference(frame)
+        ref = self.beauty(frame, full)
+        floor = displayed_difference(self.beauty(frame, halves[0]), self.beauty(frame, halves[1]), adaptation).d_aqm
+        test = self.beauty(frame, irradiance)
+        d = displayed_difference(test, ref, adaptation).d_aqm
+        y = lambda img: img @ np.array([0.2126, 0.7152, 0.0722])  # noqa: E731
+        rel = float(np.sqrt(np.mean((y(test) - y(ref)) ** 2)) / np.mean(y(ref)))
+        return {"d_aqm": d, "floor_halves": floor, "rel_rms": rel}
+
+
+def _check_records(records, config: RenderConfig):
+    for r in records:
+        print(f"segment {r.index}: frames {r.start}-{r.end} K {r.k} F_max {r.fmax} N_frame {r.n_frame:,} "
+              f"d_AQM {r.d_aqm:.2f} % {'(cap)' if r.capped else ''} steps {r.n_frame_steps}")
+        assert r.d_aqm <= 100 * config.d_thr or (r.capped and r.n_frame == config.n_frame_max)
+
+
+def test_room_guided_frames_match_the_converged_reference(tmp_path):
+    path = write_builtin("room", tmp_path / "room.glb")
+    report = render(path, frames=None, out_dir=tmp_path / "out", settings=SETTINGS, progress=False)
+    from pipeline.segment_records import read_records
+
+    records = read_records(tmp_path / "out")
+    _check_records(records, RenderConfig())
+    assert records[0].start == 1 and records[-1].end == 135 and len(report["rendered"]) == 135
+    frames = Frames(path, tmp_path)
+    maps = IlluminationMaps.open(str(tmp_path / "out" / "photons.zarr"))
+    for r in records:
+        got = frames.compare(r.k, maps.read(r.k - 1), r.frames[str(r.k)]["adaptation"])
+        print(f"K {r.k}: guided vs reference d_AQM {got['d_aqm']:.2f} % (reference halves "
+              f"{got['floor_halves']:.2f} %), relative rms {got['rel_rms']:.4f}")
+        assert got["d_aqm"] <= 1.0  # the paper's claim for d_thr = 3 % (§6)
+
+
+def test_atrium_guided_frames_lose_the_mottling(tmp_path):
+    path = write_builtin("atrium", tmp_path / "atrium.glb")
+    frames_spec, k_probe = "136-166", 151
+    guided = render(path, frames=frames_spec, out_dir=tmp_path / "guided", settings=SETTINGS, progress=False)
+    old = render(path, frames=frames_spec, out_dir=tmp_path / "old", settings=SETTINGS, n_photons=40_000,
+                 fmax=15, temporal="adaptive", config=RenderConfig(spatial_filter=False), progress=False)
+    from pipeline.segment_records import read_records
+
+    records = read_records(tmp_path / "guided")
+    _check_records(records, RenderConfig())
+    assert sum(v["filtered"] for r in records for v in r.frames.values()) > 0  # Step 5 where windows stay short
+    frames = Frames(path, tmp_path)
+    rec = next(r for r in records if r.start <= k_probe <= r.end)
+    adaptation = rec.frames[str(k_probe)]["adaptation"]
+    got = {name: frames.compare(k_probe, IlluminationMaps.open(str(tmp_path / name / "photons.zarr")).read(k_probe - 1),
+                                adaptation) for name in ("guided", "old")}
+    print({name: {k: round(v, 4) for k, v in g.items()} for name, g in got.items()}, guided["segments"],
+          old["segments"])
+    # Today's defaults show mottled indirect light at a glance; the guided frames do not
+    assert got["old"]["d_aqm"] > 10.0
+    assert got["guided"]["d_aqm"] <= 3.0 and got["guided"]["rel_rms"] < 0.5 * got["old"]["rel_rms"]
