@@ -30,6 +30,7 @@ from __future__ import annotations
 
 import time
 from contextlib import contextmanager
+from pathlib import Path
 from dataclasses import asdict, dataclass
 from typing import Callable, Iterator
 
@@ -498,7 +499,22 @@ def _coordinate(job, client, on_segment, records, index, start) -> list:
         if on_segment:
             on_segment(rec, result)
         index, start = index + 1, rec.end + 1
+    _drop_records_after(job, index - 1)
     return records
+
+
+def _drop_records_after(job: Job, last_index: int) -> None:
+    """Remove records (and their pictures) a previous run left beyond this run's last segment."""
+    from .segment_records import DIRECTORY
+
+    folder = Path(job.out_dir) / DIRECTORY
+    for path in folder.glob("segment-*"):
+        try:
+            index = int(path.name.split("-")[1].split(".")[0])
+        except ValueError:
+            continue
+        if index > last_index:
+            path.unlink(missing_ok=True)
 
 
 def reprocess(job: Job, client, index: int) -> tuple[SegmentRecord, dict]:

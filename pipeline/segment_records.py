@@ -46,8 +46,10 @@ class SegmentRecord:
 
     def targets(self) -> dict[int, int]:
         """Photons each frame of the segment traces (pipeline/segments.photon_targets)."""
+        from .segments import frame_photons
+
         ends = set(self.end_frames)
-        return {f: (int(-(-self.n_frame * self.end_factor // 1)) if f in ends else self.n_frame)
+        return {f: frame_photons(self.n_frame, self.end_factor if f in ends else 1.0)
                 for f in range(self.start, self.end + 1)}
 
     @property

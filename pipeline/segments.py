@@ -181,4 +181,9 @@ def photon_targets(placement: Placement, n_frame: int, *, first: int, last: int,
     """
     frames = placement.frames if frames is None else list(frames)
     ends = end_frames(first, last, placement.fmax)
-    return {f: int(math.ceil(n_frame * end_factor)) if f in ends else int(n_frame) for f in frames}
+    return {f: frame_photons(n_frame, end_factor if f in ends else 1.0) for f in frames}
+
+
+def frame_photons(n_frame: int, factor: float) -> int:
+    """Photons a frame traces: N_frame times its factor (1, or ``end_photons`` next to an end)."""
+    return int(math.ceil(n_frame * factor))

@@ -148,3 +148,19 @@ def test_camera_only_motion_traces_one_photon_set(tmp_path):
     # every batch traced belongs to the one photon set, which holds just what the loop asked for
     assert report["photon_batches_traced"] == len(store.done_batches(0))
     assert store.photons_emitted(0) == max(rec.n_frame, 4000)
+
+
+def test_changing_d_thr_re_decides_without_tracing_again(room, reference):
+    tmp, scene, config = room
+    out = tmp / "redecide"
+    shutil.copytree(reference, out)
+    lenient = tmp / "lenient.json"
+    lenient.write_text(json.dumps({**CHEAP, "d_thr": 0.95}))  # the first N_frame passes everywhere
+    _loom(*_render_args(scene, out, lenient, "--scheduler", "synchronous"))
+    old, new = read_records(reference), read_records(out)
+    assert all(r.decision_hash != old[0].decision_hash for r in new)
+    assert all(len(r.n_frame_steps) == 1 for r in new)
+    report = json.loads((out / "report.json").read_text())
+    assert report["photon_batches_traced"] == 0  # the pilot's N_frame is a prefix of what is stored
+    assert sorted(p.name for p in (out / "segments").glob("segment-*.json")) == [
+        f"segment-{r.index:03d}.json" for r in new]
