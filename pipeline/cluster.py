@@ -46,8 +46,10 @@ def connect(scheduler: str = "local", workers: int | None = None) -> Iterator[ob
         n = workers or os.cpu_count() or 1
         with dask.config.set({"distributed.nanny.pre-spawn-environ": WORKER_ENV,
                               "distributed.worker.daemon": False}):
+            # The scheduler serves HTTP (metrics) even without a dashboard, on 8787 unless told
+            # otherwise, and warns when another cluster holds it: any free port instead.
             cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                   dashboard_address=None, silence_logs=logging.WARNING)
+                                   dashboard_address=":0", silence_logs=logging.WARNING)
             client = Client(cluster)
         try:
             yield client
