@@ -538,26 +538,22 @@ def reprocess(job: Job, client, index: int) -> tuple[SegmentRecord, dict]:
     rec = SegmentRecord.from_dict(result["record"])
     rays = {int(f): r for f, r in result["rays"].items()}
     # Neighbours: their windows reach into this segment; recompute their maps, redo changed frames
-    with _Neighbours(job, client) as run:
-        for i in (index - 1, index + 1):
-            nb = read_record(job.out_dir, i)
-            if nb is None or nb.status != "done":
-                continue
-            targets = {**run.known_targets(i), **nb.targets()}
-            after = read_record(job.out_dir, i + 1)
-            if after is not None:
-                targets.update(after.targets())
-            nb.frames = run.reconstruct(nb, targets)
-            write_record(job.out_dir, nb)
-        last_index = index
-        while read_record(job.out_dir, last_index + 1) is not None:
-            last_index += 1
-        info = _frames_info(job, last_index)
-        later = [f for f in job.selection if f in info]
-        rays.update({f: r["rays"] for f, r in composite_frames(job, client, later, info).items()})
+    run = _Segments(job, client)
+    for i in (index - 1, index + 1):
+        nb = read_record(job.out_dir, i)
+        if nb is None or nb.status != "done":
+            continue
+        targets = {**run.known_targets(i), **nb.targets()}
+        after = read_record(job.out_dir, i + 1)
+        if after is not None:
+            targets.update(after.targets())
+        nb.frames = run.reconstruct(nb, targets)
+        write_record(job.out_dir, nb)
+    last_index = index
+    while read_record(job.out_dir, last_index + 1) is not None:
+        last_index += 1
+    info = _frames_info(job, last_index)
+    later = [f for f in job.selection if f in info]
+    rays.update({f: r["rays"] for f, r in composite_frames(job, client, later, info).items()})
     return rec, {"rays": {str(f): r for f, r in sorted(rays.items())}, "batches": result["batches"]}
 
-
-@contextmanager
-def _Neighbours(job: Job, client):
-    yield _Segments(job, client)
