@@ -162,13 +162,30 @@ def as_array(value, name: str, shape_tail: tuple, dtype, where: str) -> np.ndarr
 def sort_records(key: np.ndarray, bary: np.ndarray, energy: np.ndarray) -> np.ndarray:
     """Permutation into the total order (element, key, b1, b2, energy bits): input-order free."""
     element = (key & ELEMENT_MASK).astype(np.uint64)
-    primary = ((element << np.uint64(2) | (key >> np.uint32(30)).astype(np.uint64)) << np.uint64(32)
-               | bary[:, 0].astype(np.uint64) << np.uint64(16) | bary[:, 1].astype(np.uint64))
-    # Any correct sort gives the same permutation when the primary keys are distinct, so the
-    # faster unstable one is used; ties are broken by the energy bits (equal records: any order)
-    order = np.argsort(primary)
-    ranked = np.take(primary, order)
+    n = key.shape[0]
+    top = int(element.max()).bit_length() if n else 0
+    low = max(1, (n - 1).bit_length())  # bits of a record index
+    if top + 34 + low <= 64:
+        # (element, category, b1, b2) with the record index below it in one u64: sorting values
+        # is 3x faster than argsort and gives the stable order
+        packed = ((element << np.uint64(2) | (key >> np.uint32(30)).astype(np.uint64)) << np.uint64(32 + low)
+                  | (bary[:, 0].astype(np.uint64) << np.uint64(16 + low))
+                  | (bary[:, 1].astype(np.uint64) << np.uint64(low)) | np.arange(n, dtype=np.uint64))
+        packed.sort()
+        order = (packed & np.uint64((1 << low) - 1)).astype(np.int64)
+        ranked = packed >> np.uint64(low)
+        primary = None
+    else:
+        primary = ((element << np.uint64(2) | (key >> np.uint32(30)).astype(np.uint64)) << np.uint64(32)
+                   | bary[:, 0].astype(np.uint64) << np.uint64(16) | bary[:, 1].astype(np.uint64))
+        # Any correct sort gives the same permutation when the primary keys are distinct, so the
+        # faster unstable one is used; ties are broken by the energy bits (equal records: any order)
+        order = np.argsort(primary)
+        ranked = np.take(primary, order)
     if ranked.size > 1 and (ranked[1:] == ranked[:-1]).any():  # ties: break by energy bits
+        if primary is None:
+            primary = ((element << np.uint64(2) | (key >> np.uint32(30)).astype(np.uint64)) << np.uint64(32)
+                       | bary[:, 0].astype(np.uint64) << np.uint64(16) | bary[:, 1].astype(np.uint64))
         bits = energy.view(np.uint32)
         order = np.lexsort((bits[:, 2], bits[:, 1], bits[:, 0], primary))
     return order

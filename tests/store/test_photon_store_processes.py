@@ -22,7 +22,7 @@ HELPERS = str(Path(__file__).parent)
 
 def create(path: Path, n_frames: int) -> str:
     PhotonStore.create(path, n_frames=n_frames, n_elements=N_ELEMENTS,
-                       frame_numbers=list(range(n_frames)), max_batches=8, **IDENTITY)
+                       frame_numbers=list(range(n_frames)), max_batches=9, **IDENTITY)
     return str(path)
 
 
@@ -79,7 +79,8 @@ WRITER = textwrap.dedent("""
 @pytest.mark.parametrize("delay", [0.0, 0.05, 0.2])
 def test02_writer_killed_mid_write(tmp_path, delay):
     """SIGKILL a writer: done batches are intact, the rest not done, and a rerun ends identical."""
-    sizes = [20_000, 20_000, 40_000, 80_000, 160_000, 320_000]
+    # Doubling batches up to 2.56 M records: several seconds of writing, so the kill lands mid-run
+    sizes = [20_000, 20_000, 40_000, 80_000, 160_000, 320_000, 640_000, 1_280_000, 2_560_000]
     url = create(tmp_path / "killed.zarr", 1)
     code = WRITER.format(helpers=HELPERS, url=url, sizes=sizes, n_elements=N_ELEMENTS)
     proc = subprocess.Popen([sys.executable, "-c", code], stdout=subprocess.PIPE, text=True)
