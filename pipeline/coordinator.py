@@ -217,7 +217,7 @@ class _Segments:
 
         from .aqm.visualize import difference_picture
         from .images import write_png
-        from .perceived import displayed_difference
+        from .perceived import camera_flow, displayed_difference
         from .segment_records import record_path
         from .temporal import illumination_maps
         from .tonemap import ToneMapping
@@ -239,8 +239,10 @@ class _Segments:
                                area_samples=job.area_samples).beauty for half in lit.irradiance]
         adaptation = mesh_adaptation(state, self.elements, direct + 0.5 * (lit.irradiance[0] + lit.irradiance[1]),
                                      job.width / job.height)
-        result = displayed_difference(images[0], images[1], adaptation, params=ToneMapping(**job.tonemap),
-                                      aqm_size=self.config.aqm_size)
+        params = ToneMapping(**job.tonemap)
+        flow = camera_flow(self.scene, k, job.width, job.height, params)
+        result = displayed_difference(images[0], images[1], adaptation, params=params,
+                                      aqm_size=self.config.aqm_size, flow=flow)
         picture = record_path(job.out_dir, index).with_suffix(".aqm.png")
         picture.parent.mkdir(parents=True, exist_ok=True)
         write_png(picture, difference_picture(images[0], result.visible))

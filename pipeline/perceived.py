@@ -27,8 +27,43 @@ def viewing_for(params: ToneMapping) -> ViewingConditions:
 
 
 def displayed_difference(rgb_a: np.ndarray, rgb_b: np.ndarray, adaptation: float, *,
-                         params: ToneMapping = ToneMapping(), aqm_size: int = 256) -> AQMResult:
-    """d_AQM and M_AQM of two linear renderings of one frame as the viewer sees them."""
+                         params: ToneMapping = ToneMapping(), aqm_size: int = 256, flow=None) -> AQMResult:
+    """d_AQM and M_AQM of two linear renderings of one frame as the viewer sees them; ``flow`` the
+    image velocity of camera motion in deg/s (:func:`camera_flow`), None for a still camera."""
     view = viewing_for(params)
     return aqm(display_values(rgb_a, adaptation, params), display_values(rgb_b, adaptation, params),
-               viewing=view, aqm_size=aqm_size, names=("I1", "I2"))
+               viewing=view, aqm_size=aqm_size, names=("I1", "I2"), flow=flow)
+
+
+def camera_flow(scene, frame: int, width: int, height: int, params: ToneMapping = ToneMapping()) -> np.ndarray | None:
+    """Image velocity (H, W, 2) in deg/s that the camera's own motion gives frame ``frame`` (§6: pixel
+    flow by 3-D warping of the neighbouring frames' cameras; moving objects are assumed tracked by
+    the eye), from a depth image of pixel-centre rays cast with Embree. None when the camera does
+    not move around this frame (the AQM then takes the eye as still)."""
+    from workers.raycast import caster_for
+
+    from .aqm import image_velocity
+
+    state = scene.pose_frame(frame)
+    cam = state.camera
+    neighbours = {}
+    for name, g in (("previous", frame - 1), ("following", frame + 1)):
+        if 1 <= g <= scene.timeline.frames:
+            neighbours[name] = scene.pose_frame(g).camera.world_to_camera
+    here = cam.world_to_camera
+    if not neighbours or all(np.allclose(m, here, rtol=0, atol=1e-9) for m in neighbours.values()):
+        return None
+    yfov = cam.definition.yfov
+    f = 0.5 * height / np.tan(0.5 * yfov)
+    x = (np.arange(width) + 0.5 - 0.5 * width) / f
+    y = -(np.arange(height) + 0.5 - 0.5 * height) / f
+    local = np.stack(np.broadcast_arrays(x[None, :], y[:, None], -np.ones((height, width))), axis=-1).reshape(-1, 3)
+    rot = cam.to_world[:3, :3] / np.linalg.norm(cam.to_world[:3, :3], axis=0)
+    dirs = local @ rot.T
+    lengths = np.linalg.norm(dirs, axis=1, keepdims=True)
+    origins = np.broadcast_to(cam.position, dirs.shape)
+    tri, _, _, t = caster_for(state).intersect(np.ascontiguousarray(origins, np.float32),
+                                                np.ascontiguousarray(dirs / lengths, np.float32))
+    depth = np.where(tri >= 0, t.astype(np.float64) / lengths[:, 0], np.inf).reshape(height, width)
+    return image_velocity(np.maximum(depth, 1e-6), here, yfov=yfov, fps=scene.timeline.fps,
+                          ppd=viewing_for(params).ppd, **neighbours)

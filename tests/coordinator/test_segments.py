@@ -173,3 +173,15 @@ def test_every_config_field_is_read_outside_config():
                      if p.name != "config.py")
     for f in dataclasses.fields(RenderConfig):
         assert re.search(rf"\.{f.name}\b", text), f"RenderConfig.{f.name} is read by nothing"
+
+
+def test_camera_flow_is_the_cameras_own_motion(tmp_path):
+    # The AQM of Step 3 gets the pixel flow of camera motion (§6); a still camera gets none.
+    from pipeline.perceived import camera_flow
+    from pipeline.scene import Scene
+    from pipeline.scene.builtin import write_builtin
+
+    orbit = Scene.load(write_builtin("static", tmp_path / "static.glb"))  # the camera orbits the room
+    flow = camera_flow(orbit, 10, 64, 48)
+    assert flow.shape == (48, 64, 2) and np.isfinite(flow).all() and np.abs(flow).mean() > 0.1
+    assert camera_flow(Scene.load(write_builtin("room", tmp_path / "room.glb")), 10, 64, 48) is None
