@@ -326,24 +326,78 @@ class _Segments:
         sel = set(self.job.selection)
         return [f for f in range(rec.start, rec.end + 1) if f in sel]
 
-    def reconstruct(self, rec: SegmentRecord, targets: dict[int, int]) -> dict:
-        from workers.reconstruct import reconstruct_task
-
-        t0 = time.perf_counter()
+    def _reconstruct_calls(self, rec: SegmentRecord, targets: dict[int, int]) -> list[tuple[str, dict]]:
         job = self.job
         use = self.batches(targets).tolist()
         frames = self.frames_of(rec)
-        calls = [(f"reconstruct-{job.decision_hash[:8]}-f{frames[i]:05d}", dict(
+        return [(f"reconstruct-{job.decision_hash[:8]}-f{frames[i]:05d}", dict(
             store_url=job.store_url, scene_path=job.scene_path, scene_hash=job.scene_hash, camera=job.camera,
             element_size=job.element_size, frames=frames[i:i + CHUNK_FRAMES], fmax=rec.fmax, mode=rec.temporal,
             batches=use, config=job.config, aspect=job.width / job.height))
             for i in range(0, len(frames), CHUNK_FRAMES)]
+
+    def _took(self, result: dict) -> None:
+        self.add_times(result.get("times", {}), result.get("times", {}).keys())
+
+    def reconstruct(self, rec: SegmentRecord, targets: dict[int, int]) -> dict:
+        """Steps 4-5 for the frames of ``rec`` (maps written); their frame infos."""
+        from workers.reconstruct import reconstruct_task
+
+        t0 = time.perf_counter()
         out = {}
-        for r in run_tasks(self.client, reconstruct_task, calls, desc="reconstruct", progress=False).values():
+        for r in run_tasks(self.client, reconstruct_task, self._reconstruct_calls(rec, targets), desc="reconstruct",
+                           progress=False).values():
             out.update(r["frames"])
-            self.add_times(r.get("times", {}), r.get("times", {}).keys())
+            self._took(r)
         self.times["temporal_s"] += time.perf_counter() - t0
         return out
+
+    def frames(self, rec: SegmentRecord, targets: dict[int, int], before: dict[int, dict],
+               force: bool) -> tuple[dict, dict]:
+        """Steps 4-5 and the composites of a segment's frames, pipelined: a chunk's frames are
+        composited as soon as it and every chunk before it are reconstructed (the smoothed
+        adaptation looks only backwards), so ray tracing overlaps the temporal stage. Returns the
+        frame infos and the composite results of the frames written. ``before``: infos of the
+        frames of earlier segments; ``force``: write every frame of the segment."""
+        from workers.composite import composite_task
+        from workers.reconstruct import reconstruct_task
+
+        from .cluster import TASK_RETRIES
+
+        t0 = time.perf_counter()
+        calls = self._reconstruct_calls(rec, targets)
+        forced = frozenset(self.frames_of(rec)) if force else frozenset()
+        info, out, written = dict(before), {}, {}
+
+        def take(result: dict, chunk_frames: list[int]) -> list[tuple[str, dict]]:
+            self._took(result)
+            out.update(result["frames"])
+            info.update({int(f): v for f, v in result["frames"].items()})
+            return composite_calls(self.job, chunk_frames, info, force=forced)
+
+        if self.client is None:
+            for _, kw in calls:
+                for _, ckw in take(reconstruct_task(**kw), kw["frames"]):
+                    r = composite_task(**ckw)
+                    written[int(r["frame"])] = r
+            self.times["temporal_s"] += time.perf_counter() - t0
+            return out, written
+        from distributed import as_completed
+
+        submit = self.client.submit
+        chunk_of = {submit(reconstruct_task, key=key, retries=TASK_RETRIES, pure=False, **kw): i
+                    for i, (key, kw) in enumerate(calls)}
+        ready, following, composites = {}, 0, []
+        for future, result in as_completed(list(chunk_of), with_results=True):
+            ready[chunk_of[future]] = result
+            while following in ready:
+                for key, ckw in take(ready.pop(following), calls[following][1]["frames"]):
+                    composites.append(submit(composite_task, key=key, retries=TASK_RETRIES, pure=False, **ckw))
+                following += 1
+        self.times["temporal_s"] += time.perf_counter() - t0
+        for _, r in as_completed(composites, with_results=True):
+            written[int(r["frame"])] = r
+        return out, written
 
 
 def frame_hash(render_hash: str, info: dict, adaptation: float) -> str:
@@ -372,6 +426,15 @@ def composite_frames(job: Job, client, frames: list[int], frames_info: dict[int,
     written."""
     from workers.composite import composite_task
 
+    done = run_tasks(client, composite_task, composite_calls(job, frames, frames_info, force=force),
+                     desc="composite", progress=False)
+    return {int(r["frame"]): r for r in done.values()}
+
+
+def composite_calls(job: Job, frames: list[int], frames_info: dict[int, dict], *,
+                    force: frozenset = frozenset()) -> list[tuple[str, dict]]:
+    """(key, kwargs) of the composite tasks of the frames in ``frames`` that need one (see
+    :func:`composite_frames`); ``frames_info`` holds every rendered frame up to the last of them."""
     from .images import frame_is_valid, frame_paths
 
     smoothed = smoothed_adaptation(job, frames_info, max(frames))
@@ -392,8 +455,7 @@ def composite_frames(job: Job, client, frames: list[int], frames_info: dict[int,
                           config_hash=RenderConfig.from_dict(job.config).hash, photons=info["photons"],
                           seed=job.config["seed"], spp=job.spp, resolution=f"{job.width}x{job.height}",
                           adaptation=smoothed[f], frame_adaptation=info["adaptation"]))))
-    done = run_tasks(client, composite_task, calls, desc="composite", progress=False)
-    return {int(r["frame"]): r for r in done.values()}
+    return calls
 
 
 def _frames_info(job: Job, upto_index: int) -> dict[int, dict]:
@@ -426,11 +488,8 @@ def segment_task(job: dict, index: int, force: bool = False) -> dict:
             targets = {f: job.n_photons for f in job.selection}
         t0 = time.perf_counter()
         progress(f"segment {index}: frames {rec.start}-{rec.end}: reconstructing (Steps 4-5) and compositing")
-        rec.frames = run.reconstruct(rec, targets)
-        t1 = time.perf_counter()
-        info = {**_frames_info(job, index - 1), **{int(f): v for f, v in rec.frames.items()}}
-        frames = run.frames_of(rec)
-        written = composite_frames(job, client, frames, info, force=frozenset(frames) if force else frozenset())
+        rec.frames, written = run.frames(rec, targets, _frames_info(job, index - 1), force)
+        t1 = t0 + run.times["temporal_s"]
         for r in written.values():
             run.add_times({f"composite_{k}": v for k, v in r.items() if k.endswith("_s")},
                           ("composite_load_s", "composite_render_s", "composite_write_s"))
