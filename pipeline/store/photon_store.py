@@ -24,7 +24,8 @@ from .records import (BARY_SCALE, CATEGORIES, ELEMENT_MASK, FIELDS, RECORD_BYTES
                       SortedBatch, as_int, prepare_records, records_digest, unpack_records)
 
 FORMAT = "photonloom.photons"
-FORMAT_VERSION = 2  # 2: one (5, n) u32 array per batch, lz4; 1: key/bary/energy/offsets arrays
+FORMAT_VERSION = 3  # 3: SHA-256 digest, raw done markers, lz4 counts; 2: BLAKE2b, zstd tables;
+# 1: key/bary/energy/offsets arrays
 BATCH_FIELDS = ("done_magic", "photon_start", "photons_emitted", "n_records", "digest")
 DONE_MAGIC = 0x4C4F4F4D  # "LOOM": the batch chunk is written last, so its presence means done
 RECORD_CHUNK = 1 << 20  # records per chunk of the per-batch arrays (20 MiB raw)
@@ -56,9 +57,17 @@ def _batch_metadata(n: int, rows: int) -> bytes:
         indent=2).encode()
 
 
+def table_codec() -> BloscCodec:
+    """The codec of the count table and the illumination maps, whose chunks the store encodes
+    itself (:func:`_encode_rows`): BATCH_CODEC's lz4 + byte shuffle on 4-byte values."""
+    return BloscCodec(**BATCH_CODEC)
+
+
 def _encode_rows(block: np.ndarray) -> bytes:
-    return numcodecs.blosc.compress(np.ascontiguousarray(block, "<u4"), BATCH_CODEC["cname"].encode(),
-                                    BATCH_CODEC["clevel"], numcodecs.blosc.SHUFFLE, 0, 4)
+    """A chunk of 4-byte values (u32 or f32) as zarr's BloscCodec(**BATCH_CODEC) encodes it."""
+    block = np.ascontiguousarray(block, block.dtype.newbyteorder("<"))
+    return numcodecs.blosc.compress(block, BATCH_CODEC["cname"].encode(), BATCH_CODEC["clevel"],
+                                    numcodecs.blosc.SHUFFLE, 0, 4)
 
 
 def _decode(data: bytes, dtype, count: int) -> np.ndarray:
@@ -99,16 +108,24 @@ class _Raw:
     def set_many(self, items: list[tuple[str, bytes]]) -> None:
         if self.root is not None:
             for key, data in items:
-                path = self.root / key
-                path.parent.mkdir(parents=True, exist_ok=True)
-                tmp = path.with_name(f".{path.name}.{os.getpid()}.{id(data):x}.partial")
+                path = os.path.join(self.root, key)
+                head, name = os.path.split(path)
+                tmp = os.path.join(head, f".{name}.{os.getpid()}.{id(data):x}.partial")
                 try:
-                    with open(tmp, "wb") as fh:
+                    fh = open(tmp, "wb")
+                except FileNotFoundError:  # first object under this prefix
+                    os.makedirs(head, exist_ok=True)
+                    fh = open(tmp, "wb")
+                try:
+                    with fh:
                         fh.write(data)
                     os.replace(tmp, path)
-                finally:
-                    if tmp.exists():
-                        tmp.unlink()
+                except BaseException:
+                    try:
+                        os.unlink(tmp)
+                    except FileNotFoundError:
+                        pass
+                    raise
             return
 
         async def put():
@@ -297,15 +314,17 @@ class PhotonStore:
 
     @staticmethod
     def _make_arrays(root: zarr.Group, n_frames: int, n_elements: int, max_batches: int) -> None:
-        common = dict(overwrite=True, compressors=records_codec())
+        # batch and counts chunks are written (and read) by the store itself: the done marker
+        # uncompressed (40 bytes), the running counts with the record arrays' lz4
         root.create_array("batch", shape=(n_frames, max_batches, len(BATCH_FIELDS)),
                           chunks=(1, 1, len(BATCH_FIELDS)), dtype="uint64", fill_value=0,
-                          chunk_key_encoding={"name": "default", "separator": "."}, **common)
+                          chunk_key_encoding={"name": "default", "separator": "."},
+                          overwrite=True, compressors=None)
         root.create_array("counts", shape=(n_frames, max_batches, len(CATEGORIES), n_elements),
                           chunks=(1, 1, len(CATEGORIES), n_elements), dtype="uint32",
-                          fill_value=0, **common)
+                          fill_value=0, overwrite=True, compressors=table_codec())
         root.create_array("source", shape=(n_frames,), chunks=(n_frames,), dtype="int32",
-                          fill_value=-1, **common)
+                          fill_value=-1, overwrite=True, compressors=records_codec())
         frames = root.require_group("frames")
         for f in range(n_frames):
             frames.require_group(str(f))
@@ -406,10 +425,9 @@ class PhotonStore:
             for b, data in zip(missing, self._raw.get_many([f"batch/c.{frame}.{b}.0" for b in missing])):
                 if data is None:
                     continue
-                try:
-                    row = _decode(data, "<u8", len(BATCH_FIELDS)).astype(np.uint64)
-                except (ValueError, RuntimeError):
-                    raise LoomError(f"frame {frame} batch {b}: unreadable done marker", path=self.url) from None
+                if len(data) != 8 * len(BATCH_FIELDS):
+                    raise LoomError(f"frame {frame} batch {b}: unreadable done marker", path=self.url)
+                row = np.frombuffer(data, "<u8").astype(np.uint64)
                 if row[0] == DONE_MAGIC:
                     self._rows[(frame, b)] = row
         return [self._rows.get((frame, b)) for b in batches]
@@ -514,7 +532,7 @@ class PhotonStore:
         if start != expected_start:
             raise LoomError(f"photon_start {start} is not contiguous: the previous batch ends at "
                             f"{expected_start}", path=where)
-        row = np.array([DONE_MAGIC, start, emitted, records.key.shape[0],
+        row = np.array([DONE_MAGIC, start, emitted, len(records),
                         records.digest(start, emitted)], dtype=np.uint64)
         return _Prepared(f, b, records, row)
 
@@ -527,18 +545,38 @@ class PhotonStore:
         batch with missing chunks. zarr reads the array as any other.
         """
         base, rec = f"frames/{p.frame}/{p.batch}", p.records
-        n = rec.key.shape[0]
+        n = len(rec)
         rows = max(1, min(n, RECORD_CHUNK))
         block = rec.packed()
-        items = [(f"{base}/c/0/{i}", _encode_rows(self._chunk(block, i * rows, rows)))
-                 for i in range(max(1, -(-n // rows)))]
-        self._raw.set_many(items + [(f"{base}/zarr.json", _batch_metadata(n, rows))])
-        running = rec.counts.copy()
+        running = rec.counts
         if p.batch > 0:
-            running += self._counts[p.frame, p.batch - 1].astype(np.uint64)
+            running = running + self._count_chunks([(p.frame, p.batch - 1)])[0]
         if running.size and running.max() > np.iinfo(np.uint32).max:
             raise LoomError("per-element hit count overflows u32", path=self.url)
-        self._counts[p.frame, p.batch] = running.astype(np.uint32)
+        items = [(f"{base}/c/0/{i}", _encode_rows(self._chunk(block, i * rows, rows)))
+                 for i in range(max(1, -(-n // rows)))]
+        items.append((f"{base}/zarr.json", _batch_metadata(n, rows)))
+        items.append((self._count_key(p.frame, p.batch), _encode_rows(running.astype(np.uint32))))
+        self._raw.set_many(items)
+
+    @staticmethod
+    def _count_key(frame: int, batch: int) -> str:
+        return f"counts/c/{frame}/{batch}/0/0"
+
+    def _count_chunks(self, pairs) -> list[np.ndarray]:
+        """u32 (4, n_elements) running counts of (frame, batch) pairs, zeros where absent (the
+        fill value), decoded straight from their chunks."""
+        shape = (len(CATEGORIES), self.n_elements)
+        out = []
+        for (f, b), data in zip(pairs, self._raw.get_many([self._count_key(f, b) for f, b in pairs])):
+            if data is None:
+                out.append(np.zeros(shape, np.uint32))
+                continue
+            try:
+                out.append(_decode(data, "<u4", shape[0] * shape[1]).reshape(shape))
+            except (ValueError, RuntimeError):
+                raise LoomError(f"frame {f} batch {b}: unreadable count chunk", path=self.url) from None
+        return out
 
     @staticmethod
     def _chunk(block: np.ndarray, lo: int, rows: int) -> np.ndarray:
@@ -550,7 +588,8 @@ class PhotonStore:
 
     def _mark_done(self, p: _Prepared) -> None:
         """Write the batch's row of the batch table: its own chunk, so it lands whole."""
-        self._batch[p.frame, p.batch] = p.row  # one chunk, one atomic write: the batch is done
+        # one uncompressed chunk, one atomic write: the batch is done
+        self._raw.set_many([(f"batch/c.{p.frame}.{p.batch}.0", p.row.astype("<u8").tobytes())])
         self._rows[(p.frame, p.batch)] = p.row.astype(np.uint64)
 
     def share_frame(self, frame_index: int, source_frame_index: int) -> None:
@@ -595,12 +634,15 @@ class PhotonStore:
         if info is None:
             return False
         f = self.source_frame(frame_index)
-        key, bary, energy, _ = self._read_batch(f, int(batch), info["n_records"])
-        return records_digest(key, bary, energy, info["photon_start"],
-                              info["photons_emitted"]) == info["digest"]
+        rows = self._read_rows(f, int(batch), info["n_records"])
+        return records_digest(rows, info["photon_start"], info["photons_emitted"]) == info["digest"]
 
     def _read_batch(self, f: int, b: int, n: int):
         """(key, bary, energy, offsets) of a done batch of ``n`` records, straight from its chunks."""
+        return unpack_records(self._read_rows(f, b, n), self.n_elements)
+
+    def _read_rows(self, f: int, b: int, n: int) -> np.ndarray:
+        """u32 (5, n): the packed rows of a done batch of ``n`` records."""
         rows = max(1, min(n, RECORD_CHUNK))
         keys = [f"frames/{f}/{b}/c/0/{i}" for i in range(max(1, -(-n // rows)))]
         try:
@@ -612,7 +654,7 @@ class PhotonStore:
             raise LoomError(f"frame {f} batch {b}: records do not match its done marker ({n})",
                             path=self.url) from None
         block = parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)
-        return unpack_records(block[:, :n], self.n_elements)
+        return block[:, :n]
 
     def counts(self, kind: str = "all", frames=None, parity: int | None = None, batches=None) -> np.ndarray:
         """u32 (len(frames), n_elements) hit counts over done batches, without reading records.
@@ -644,16 +686,12 @@ class PhotonStore:
                 raise LoomError("counts: more batches asked than done", path=self.url)
             last = want
         table = np.zeros((unique.shape[0], self.n_elements), dtype=np.uint32)
-        block = max(1, (64 << 20) // (4 * len(CATEGORIES) * self.n_elements))
-        for b in np.unique(last[last >= 0]):
-            rows = np.flatnonzero(last == b)
-            # Basic slices over runs of consecutive frames: 4x faster than integer indexing
-            runs = np.split(rows, np.flatnonzero(np.diff(unique[rows]) != 1) + 1)
-            for run in runs:
-                for i in range(0, run.shape[0], block):  # bounded memory: ~64 MiB per read
-                    part = run[i:i + block]
-                    data = self._counts[int(unique[part[0]]):int(unique[part[-1]]) + 1, int(b)]
-                    table[part] = data[:, cats].sum(axis=1, dtype=np.uint32)
+        rows = np.flatnonzero(last >= 0)
+        for i in range(0, rows.shape[0], 64):  # bounded memory: 64 chunks per read
+            part = rows[i:i + 64]
+            pairs = [(int(unique[j]), int(last[j])) for j in part]
+            for j, data in zip(part, self._count_chunks(pairs)):
+                table[j] = data[cats[0]] if len(cats) == 1 else data[cats].sum(axis=0, dtype=np.uint32)
         return table[inverse.reshape(-1)]
 
 

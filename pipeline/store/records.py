@@ -32,12 +32,14 @@ def pack_key(element, photon_index, direct) -> np.ndarray:
             | np.asarray(direct, dtype=bool).astype(np.uint32) << np.uint32(31))
 
 
-def records_digest(key: np.ndarray, bary: np.ndarray, energy: np.ndarray, *extra: int) -> int:
-    """64-bit BLAKE2b of sorted records (and ``extra`` integers): a batch's fingerprint."""
-    h = hashlib.blake2b(digest_size=8)
-    for part in (key, bary, energy, np.array(extra, np.int64)):
-        h.update(np.ascontiguousarray(part).tobytes())
-    return int.from_bytes(h.digest(), "little")
+def records_digest(rows: np.ndarray, *extra: int) -> int:
+    """64-bit fingerprint of a batch: the first 8 bytes (little-endian) of SHA-256 over its packed
+    on-disk rows (:func:`pack_records`, u32 little-endian, row-major) and the ``extra`` integers
+    (int64). SHA-256 runs in hardware on current x86 (SHA-NI) and ARM cores: 2x faster than the
+    BLAKE2b of format 1-2, and the packed rows are hashed in place, not copied field by field."""
+    h = hashlib.sha256(np.ascontiguousarray(rows, "<u4"))
+    h.update(np.array(extra, "<i8").tobytes())
+    return int.from_bytes(h.digest()[:8], "little")
 
 
 @dataclass(frozen=True)
@@ -91,20 +93,26 @@ class FrameRecords:
 
 @dataclass(frozen=True)
 class SortedBatch:
-    """A validated batch in the store's total order, with its per-element tables."""
+    """A validated batch in the store's total order: its packed on-disk rows (:func:`pack_records`)
+    and per-element tables."""
 
-    key: np.ndarray
-    bary: np.ndarray
-    energy: np.ndarray
+    rows: np.ndarray  # u32 (5, n)
     offsets: np.ndarray  # i64 (n_elements + 1,)
     counts: np.ndarray  # u64 (4, n_elements), this batch only, rows in CATEGORIES order
 
+    def __len__(self) -> int:
+        return int(self.rows.shape[1])
+
+    @property
+    def key(self) -> np.ndarray:
+        return self.rows[0]
+
     def digest(self, *extra: int) -> int:
-        return records_digest(self.key, self.bary, self.energy, *extra)
+        return records_digest(self.rows, *extra)
 
     def packed(self) -> np.ndarray:
         """u32 (5, n): the on-disk rows (:func:`pack_records`)."""
-        return pack_records(self.key, self.bary, self.energy)
+        return self.rows
 
 
 def pack_records(key: np.ndarray, bary: np.ndarray, energy: np.ndarray) -> np.ndarray:
@@ -122,9 +130,8 @@ def pack_records(key: np.ndarray, bary: np.ndarray, energy: np.ndarray) -> np.nd
 def unpack_records(rows: np.ndarray, n_elements: int):
     """(key, bary, energy, offsets) of a (5, n) block written by :func:`pack_records`."""
     key = np.ascontiguousarray(rows[0])
-    bary = np.empty((rows.shape[1], 2), np.uint16)
-    bary[:, 0] = rows[1] & np.uint32(0xFFFF)
-    bary[:, 1] = rows[1] >> np.uint32(16)
+    # Row 1 is b1 | b2 << 16 in little-endian u32: as u16 pairs it is (b1, b2) already
+    bary = np.ascontiguousarray(rows[1]).astype("<u4", copy=False).view("<u2").reshape(-1, 2)
     energy = np.ascontiguousarray(rows[2:5].T).view(np.float32)
     offsets = np.zeros(n_elements + 1, np.int64)
     np.cumsum(np.bincount(key & np.uint32(ELEMENT_MASK), minlength=n_elements), out=offsets[1:])
@@ -204,13 +211,18 @@ def prepare_records(key, bary, energy, n_elements: int, where: str) -> SortedBat
     if n and int(element.max()) >= n_elements:
         raise LoomError(f"element id {int(element.max())} >= n_elements {n_elements}", path=where)
 
-    # Sort into the total order, then count per element and category
+    # Sort into the total order, straight into the packed rows, then count per element and category
     order = sort_records(key, bary, energy)
-    key, bary, energy = np.take(key, order), np.take(bary, order, axis=0), np.take(energy, order, axis=0)
-    category = (key >> np.uint32(30)).astype(np.int64)
-    counts = np.bincount(category * n_elements + (key & np.uint32(ELEMENT_MASK)),
-                         minlength=len(CATEGORIES) * n_elements)
+    rows = np.empty((5, n), np.uint32)
+    np.take(key, order, out=rows[0])
+    # little-endian u16 pairs (b1, b2) read as a little-endian u32 are b1 | b2 << 16
+    np.take(np.ascontiguousarray(bary, "<u2").view("<u4").reshape(n), order, out=rows[1])
+    rows[2:5] = np.take(energy.view(np.uint32), order, axis=0).T
+    key = rows[0]
+    element = key & np.uint32(ELEMENT_MASK)
+    category = (key >> np.uint32(30)).astype(np.intp)
+    counts = np.bincount(category * n_elements + element, minlength=len(CATEGORIES) * n_elements)
     counts = counts.reshape(len(CATEGORIES), n_elements).astype(np.uint64)
     offsets = np.zeros(n_elements + 1, dtype=np.int64)
     np.cumsum(counts.sum(axis=0), out=offsets[1:])
-    return SortedBatch(key, bary, energy, offsets, counts)
+    return SortedBatch(rows, offsets, counts)

@@ -49,7 +49,7 @@ def test01_record_is_20_bytes_and_described(store):
     assert RECORD_BYTES == 20
     attrs = dict(zarr.open_group(store.url, mode="r").attrs)
     assert attrs["record_layout"]["record_bytes"] == 20
-    assert attrs["format_version"] == 2 and attrs["frame_numbers"] == [101, 102, 103, 104]
+    assert attrs["format_version"] == 3 and attrs["frame_numbers"] == [101, 102, 103, 104]
     assert {k: attrs[k] for k in IDENTITY} == IDENTITY
 
 
