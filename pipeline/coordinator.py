@@ -28,6 +28,7 @@ results do not depend on the order work happened in, on the worker count or on a
 """
 from __future__ import annotations
 
+import math
 import time
 from contextlib import contextmanager
 from pathlib import Path
@@ -39,7 +40,7 @@ import numpy as np
 from .cluster import run_tasks
 from .config import RenderConfig, stable_digest
 from .segment_records import SegmentRecord, read_record, write_record
-from .segments import (Placement, clamp_n_frame, doubling_loop, energy_error, fmax_loop, p_me,
+from .segments import (Placement, calibrated_start, clamp_n_frame, doubling_loop, energy_error, fmax_loop, p_me,
                        photon_targets, pilot_n_frame, place_segment)
 
 CHUNK_FRAMES = 16  # frames per reconstruction task: fixed, so the gather's bits never depend on workers
@@ -265,8 +266,12 @@ class _Segments:
 
         # Step 1: pilot at K, N_frame from Eq. (2)
         pilot = self.pilot(place)
-        n = clamp_n_frame(pilot["n_pilot"] if pilot["n_pilot"] is not None else float("inf"),
-                          cfg.n_frame_min, cfg.n_frame_max)
+        before = read_record(job.out_dir, index - 1) if index else None
+        carried = ((before.pilot.get("n_pilot"), before.n_frame) if before is not None and before.guided
+                   and before.pilot.get("n_pilot") else None)
+        start_n = calibrated_start(pilot["n_pilot"] if pilot["n_pilot"] is not None else float("inf"), carried)
+        pilot["n_start"] = start_n if math.isfinite(start_n) else None
+        n = clamp_n_frame(start_n, cfg.n_frame_min, cfg.n_frame_max)
         t_init = time.perf_counter()
 
         # Step 2: F_max while p_me >= p_thr (never for camera-only motion: all frames share photons)

@@ -51,6 +51,22 @@ def pilot_n_frame(n_probe: int, e_probe: float, e_max: float, fmax: int) -> floa
     return n_probe * (e_probe / target) ** 2
 
 
+def calibrated_start(n_pilot: float, previous: tuple[float, float] | None) -> float:
+    """Where Step 3 starts for a segment: the pilot's N_frame (Eq. 2) times what the previous
+    segment's doubling loop found the energy criterion to under-ask, halved.
+
+    ``previous`` is (its pilot's N_frame, its final N_frame). The paper starts every segment at its
+    pilot's guess; when our AQM asks 2^k times more (on ROOM, 25-100x), every segment would double
+    k times again, each step an AQM evaluation and a pass over the segment's photons. The pilot
+    still measures this segment's E, so a segment lit differently moves with it; starting one
+    doubling below the carried-over ratio lets a segment that needs less stop lower than its
+    predecessor did. Without a previous segment, or a ratio under 2, it is the paper's rule.
+    """
+    if previous is None or not (previous[0] and previous[0] > 0 and math.isfinite(n_pilot)):
+        return n_pilot
+    return n_pilot * max(1.0, previous[1] / previous[0] / 2.0)
+
+
 def clamp_n_frame(n: float, n_min: int, n_max: int) -> int:
     """The pilot's N_frame as a whole number of photons inside [n_min, n_max] (inf -> n_max)."""
     if not math.isfinite(n):

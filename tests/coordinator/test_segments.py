@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from pipeline.config import RenderConfig
-from pipeline.segments import (clamp_n_frame, doubling_loop, end_frames, energy_error, fmax_loop, grow_fmax,
+from pipeline.segments import (calibrated_start, clamp_n_frame, doubling_loop, end_frames, energy_error, fmax_loop, grow_fmax,
                                next_n_frame, p_me, photon_targets, pilot_n_frame, place_segment)
 from pipeline.temporal import collection_windows
 
@@ -185,3 +185,22 @@ def test_camera_flow_is_the_cameras_own_motion(tmp_path):
     flow = camera_flow(orbit, 10, 64, 48)
     assert flow.shape == (48, 64, 2) and np.isfinite(flow).all() and np.abs(flow).mean() > 0.1
     assert camera_flow(Scene.load(write_builtin("room", tmp_path / "room.glb")), 10, 64, 48) is None
+
+
+def test_the_next_segment_starts_where_the_last_ones_aqm_put_the_pilot():
+    # Segment 0: the pilot said 10,000, the AQM loop ended at 320,000 (32x). Segment 1's pilot says
+    # 12,000; the loop starts one doubling below the carried ratio, at 12,000 x 16 = 192,000, and a
+    # segment whose AQM is content at 192,000 stops there instead of 5 doublings later.
+    start = calibrated_start(12_000, (10_000, 320_000))
+    assert start == 192_000
+    need = 150_000  # this segment's d_AQM <= d_thr from here on
+
+    def measure(n):
+        return 2.0 if n >= need else 5.0
+
+    n, steps, _ = doubling_loop(clamp_n_frame(start, 1000, 640_000), measure, d_thr=0.03, n_max=640_000)
+    assert n == 192_000 and len(steps) == 1
+    n_paper, steps_paper, _ = doubling_loop(12_000, measure, d_thr=0.03, n_max=640_000)
+    assert n_paper == 192_000 and len(steps_paper) == 5  # the paper's start: the same N_frame, 5 AQMs
+    assert calibrated_start(12_000, None) == 12_000  # the first segment: Eq. 2 alone
+    assert calibrated_start(12_000, (10_000, 15_000)) == 12_000  # a ratio under 2 changes nothing
