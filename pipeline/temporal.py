@@ -54,10 +54,21 @@ def _runs(has_photons: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
 
 
+def window_reach(fmax: int, mode: str, config: RenderConfig) -> int:
+    """Frames of the count table either side of an output frame that its window can depend on:
+    F_max/2 frames of walk plus the smoothing half-width of Condition (1)'s rates."""
+    return (0 if mode == "off" else int(fmax) // 2) + int(config.smoothing_frames) // 2
+
+
 def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames, *, mode: str, fmax: int,
-                       config: RenderConfig) -> tuple[np.ndarray, np.ndarray]:
+                       config: RenderConfig, counts_from: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """(len(frames), E) back and fwd windows of the requested frame indices, per run of frames
-    with photons (a requested frame without photons is an error)."""
+    with photons (a requested frame without photons is an error).
+
+    ``counts`` holds the count-table rows ``counts_from ..`` (default the whole table); only the
+    rows within :func:`window_reach` of the requested frames are read, and the windows are the
+    same bits as from the whole table: every rate and walk inside the reach sees the same rows
+    and the same run ends (``n_emitted`` is of every frame)."""
     frames = np.asarray(frames, np.int64)
     n_emitted = np.asarray(n_emitted, np.float64)
     back = np.zeros((len(frames), counts.shape[1]), np.uint8)
@@ -65,14 +76,19 @@ def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames, *, mod
     missing = frames[n_emitted[frames] <= 0] if len(frames) else frames
     if len(missing):
         raise LoomError(f"frame index(es) {missing[:5].tolist()} have no photons; shoot them first")
+    reach = window_reach(fmax, mode, config)
     for start, stop in _runs(n_emitted > 0):
         inside = np.flatnonzero((frames >= start) & (frames < stop))
         if not len(inside):
             continue
         lo, hi = int(frames[inside].min()), int(frames[inside].max()) + 1
-        b, w = windows_cl(counts[start:stop], n_emitted[start:stop], fmax=fmax, mode=mode,
+        a, z = max(start, lo - reach), min(stop, hi + reach)
+        if a < counts_from or z > counts_from + counts.shape[0]:
+            raise LoomError(f"count rows [{a}, {z}) needed, [{counts_from}, "
+                            f"{counts_from + counts.shape[0]}) given")
+        b, w = windows_cl(counts[a - counts_from:z - counts_from], n_emitted[a:z], fmax=fmax, mode=mode,
                           k_sigma=config.k_sigma, smoothing_frames=config.smoothing_frames,
-                          min_extent=config.min_extent, frames=(lo - start, hi - start))
+                          min_extent=config.min_extent, frames=(lo - a, hi - a))
         back[inside] = b[frames[inside] - lo]
         fwd[inside] = w[frames[inside] - lo]
     return back, fwd
@@ -105,6 +121,8 @@ def illumination_maps(store, elements, scene, frames=None, *, mode: str = "adapt
     times : if given, seconds spent are added to its keys ``read_s`` (records), ``windows_s``,
         ``sums_s`` (gather), ``filter_s`` (filter and irradiance) and ``direct_s``.
     """
+    from workers.reconstruct import frame_geometry
+
     clock = _Clock(times)
     if mode not in MODES:
         raise LoomError(f"must be one of {', '.join(MODES)}, got {mode!r}", field="--temporal")
@@ -114,13 +132,20 @@ def illumination_maps(store, elements, scene, frames=None, *, mode: str = "adapt
         raise LoomError(f"frame indices must be in [0, {store.n_frames})")
     if store.n_elements != elements.n_elements:
         raise LoomError(f"store has {store.n_elements} elements, the element mesh {elements.n_elements}")
-    if batches is None:
-        n_emitted = np.array([store.photons_emitted(f) for f in range(store.n_frames)], np.float64)
-    else:
+    if batches is not None:
         batches = np.asarray(batches, np.int64)
-        n_emitted = np.array([store.photons_in(f, int(batches[f])) for f in range(store.n_frames)], np.float64)
-    counts = store.counts(kind=count_kind, batches=batches)
-    back, fwd = collection_windows(counts, n_emitted, frames, mode=mode, fmax=fmax, config=config)
+    n_emitted = store.emitted(batches).astype(np.float64)
+    # Only the count-table rows the windows can reach (a chunk of 16 frames reads 48 of ROOM's 135)
+    reach = window_reach(fmax, mode, config)
+    first = max(0, int(frames.min()) - reach) if len(frames) else 0
+    last = min(store.n_frames, int(frames.max()) + 1 + reach) if len(frames) else 0
+    if mode == "adaptive":
+        use = None if batches is None else store.shared_batches(batches)[first:last]
+        counts = store.counts(kind=count_kind, frames=range(first, last), batches=use)
+    else:  # the table's values are not read
+        counts = np.zeros((last - first, store.n_elements), np.uint32)
+    back, fwd = collection_windows(counts, n_emitted, frames, mode=mode, fmax=fmax, config=config,
+                                   counts_from=first)
     hood = _neighbourhood(elements, config.filter_rings, config.filter_angle) if spatial_filter else None
     clock.lap("windows_s")
     records: dict[int, object] = {}  # FrameRecords per frame index, kept across chunks
@@ -138,7 +163,7 @@ def illumination_maps(store, elements, scene, frames=None, *, mode: str = "adapt
         flux = gather_flux_cl([records[g] for g in range(lo, hi)], n_emitted[lo:hi], back[part], fwd[part],
                               f - lo, elements.element_vertices, elements.n_vertices, kind=kind,
                               split_parity=split_parity)
-        areas = np.stack([elements.vertex_areas(scene.pose_frame(store.frame_numbers[g])) for g in f.tolist()])
+        areas = np.stack([frame_geometry(scene, elements, store.frame_numbers[g]).vertex_areas for g in f.tolist()])
         clock.lap("sums_s")
         own = [_direct(records[g], elements, a) if with_direct else None for g, a in zip(f.tolist(), areas)]
         clock.lap("direct_s")

@@ -14,6 +14,8 @@ one-frame window: keep its signature and arithmetic (float64, np.bincount) as th
 """
 from __future__ import annotations
 
+from collections import OrderedDict
+
 import numpy as np
 
 from pipeline.store import BARY_SCALE
@@ -58,7 +60,70 @@ def _bary(b) -> np.ndarray:
     return b.astype(np.float64)
 
 
-def mesh_adaptation(state, elements, irradiance: np.ndarray, aspect: float) -> float:
+class FrameGeometry:
+    """A posed frame's state and what its reconstruction reads of the element mesh: element areas
+    (E,), vertex hat areas (V,) and element centres (E, 3), each computed once however many steps
+    use them (the gather's irradiance, the direct estimate, the adaptation luminance)."""
+
+    def __init__(self, scene, elements, frame: int):
+        self.scene, self.elements, self.frame = scene, elements, int(frame)
+        self.state = scene.pose_frame(self.frame)
+        self.areas = elements.areas(self.state)
+        # what ElementMesh.vertex_areas computes, from the areas above
+        self.vertex_areas = np.bincount(elements.element_vertices.ravel(), weights=np.repeat(self.areas / 3.0, 3),
+                                        minlength=elements.n_vertices)
+        self._centres = None
+
+    @property
+    def centres(self) -> np.ndarray:
+        if self._centres is None:
+            self._centres = self.elements.element_positions(self.state).mean(axis=1)
+        return self._centres
+
+
+_GEOMETRY: OrderedDict = OrderedDict()  # (id(scene), id(elements), frame) -> FrameGeometry
+GEOMETRY_FRAMES = 48  # a reconstruction chunk's frames and then some
+
+
+def frame_geometry(scene, elements, frame: int) -> FrameGeometry:
+    """:class:`FrameGeometry` of a frame number, kept per process for the last GEOMETRY_FRAMES
+    frames (an entry holds its scene and mesh, so their ids cannot be reused while it lives)."""
+    key = (id(scene), id(elements), int(frame))
+    found = _GEOMETRY.get(key)
+    if found is not None and found.scene is scene and found.elements is elements:
+        _GEOMETRY.move_to_end(key)
+        return found
+    found = _GEOMETRY[key] = FrameGeometry(scene, elements, frame)
+    while len(_GEOMETRY) > GEOMETRY_FRAMES:
+        _GEOMETRY.popitem(last=False)
+    return found
+
+
+_MATERIALS: dict = {}  # id(elements) -> (elements, materials, triangle_material, tables)
+
+
+def _material_tables(state, elements):
+    """Per-vertex albedo / pi and emission (V, 3) and the source triangle count, once per element
+    mesh and material assignment (they do not move with the animation)."""
+    entry = _MATERIALS.get(id(elements))
+    if (entry is not None and entry[0] is elements and entry[1] is state.materials
+            and np.array_equal(entry[2], state.triangle_material)
+            and np.array_equal(entry[3], state.triangle_instance)):
+        return entry[4]
+    inst_mat = np.zeros(len(state.instance_matrices), np.int64)
+    inst_mat[state.triangle_instance] = state.triangle_material
+    mat = inst_mat[elements.vertex_instance]
+    albedo = np.array([m.albedo for m in state.materials])[mat]
+    emission = np.array([m.emission for m in state.materials])[mat]
+    tables = (albedo / np.pi, emission, len(state.faces))
+    _MATERIALS.clear()
+    _MATERIALS[id(elements)] = (elements, state.materials, state.triangle_material.copy(),
+                                state.triangle_instance.copy(), tables)
+    return tables
+
+
+def mesh_adaptation(state, elements, irradiance: np.ndarray, aspect: float,
+                    geometry: FrameGeometry | None = None) -> float:
     """Adaptation luminance of a frame from its mesh-based lighting (§4), in radiance units.
 
     Radiance rho/pi x E (+ emission) is averaged over each source triangle (area-weighted over its
@@ -69,24 +134,19 @@ def mesh_adaptation(state, elements, irradiance: np.ndarray, aspect: float) -> f
     """
     from pipeline.tonemap import log_average, luminance
 
-    inst_mat = np.zeros(len(state.instance_matrices), np.int64)
-    inst_mat[state.triangle_instance] = state.triangle_material
-    mat = inst_mat[elements.vertex_instance]
-    albedo = np.array([m.albedo for m in state.materials])[mat]
-    emission = np.array([m.emission for m in state.materials])[mat]
-    vertex_radiance = luminance(albedo / np.pi * irradiance + emission)
+    albedo_pi, emission, n_tri = _material_tables(state, elements)
+    vertex_radiance = luminance(albedo_pi * irradiance + emission)
 
     # Per source triangle: area-weighted mean of its elements' radiance
-    area = elements.areas(state)
+    area = elements.areas(state) if geometry is None else geometry.areas
     tri = elements.element_triangle
-    n_tri = len(state.faces)
     element_radiance = vertex_radiance[elements.element_vertices].mean(axis=1)
     tri_area = np.bincount(tri, weights=area, minlength=n_tri)
     tri_sum = np.bincount(tri, weights=area * element_radiance, minlength=n_tri)
     tri_radiance = np.divide(tri_sum, tri_area, out=np.zeros(n_tri), where=tri_area > 0)
 
     # Elements in the view frustum, weighted by the solid angle they subtend
-    centre = elements.element_positions(state).mean(axis=1)
+    centre = elements.element_positions(state).mean(axis=1) if geometry is None else geometry.centres
     cam = state.camera
     local = (centre - cam.position) @ (cam.to_world[:3, :3] / np.linalg.norm(cam.to_world[:3, :3], axis=0))
     depth = -local[:, 2]
@@ -192,9 +252,9 @@ def reconstruct_task(*, store_url: str, scene_path: str, scene_hash: str, camera
                                  with_direct=True, times=times):
         f = lit.frame_index + 1
         t1 = time.perf_counter()
-        state = scene.pose_frame(f)
+        geometry = frame_geometry(scene, elements, f)  # posed once, by the gather
         indirect, direct = lit.irradiance, lit.direct
-        adaptation = mesh_adaptation(state, elements, indirect + direct, aspect)
+        adaptation = mesh_adaptation(geometry.state, elements, indirect + direct, aspect, geometry)
         t2 = time.perf_counter()
         maps.write_frame(lit.frame_index, indirect=indirect, direct=direct, adaptation=adaptation)
         times["adapt_s"] += t2 - t1

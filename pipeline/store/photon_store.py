@@ -3,6 +3,7 @@ from __future__ import annotations
 
 import json
 import os
+from collections import OrderedDict
 import re
 import time
 import urllib.parse
@@ -29,6 +30,7 @@ FORMAT_VERSION = 3  # 3: SHA-256 digest, raw done markers, lz4 counts; 2: BLAKE2
 BATCH_FIELDS = ("done_magic", "photon_start", "photons_emitted", "n_records", "digest")
 DONE_MAGIC = 0x4C4F4F4D  # "LOOM": the batch chunk is written last, so its presence means done
 RECORD_CHUNK = 1 << 20  # records per chunk of the per-batch arrays (20 MiB raw)
+RECORD_CACHE_BYTES = 192 << 20  # decoded frames an open_shared instance keeps (LRU, read-only)
 LISTING_MARGIN_NS = 100_000_000  # a done-table listing is reused once the directory is 0.1 s old
 _BATCH_CHUNK = re.compile(r"c\.(\d+)\.(\d+)\.0")  # chunk keys of batch/ ("." separator)
 
@@ -252,6 +254,11 @@ class PhotonStore:
         self._rows: dict[tuple[int, int], np.ndarray] = {}
         self._done_cache = None
         self._source_cache = None
+        # Decoded frames (FrameRecords of done batches never change): only open_shared instances
+        # keep them, up to record_cache_bytes, least recently used out first
+        self.record_cache_bytes = 0
+        self._records: OrderedDict = OrderedDict()
+        self._records_bytes = 0
 
     def __repr__(self) -> str:
         return (f"PhotonStore({self.url!r}, mode={self.mode!r}, frames={self.n_frames}, "
@@ -363,6 +370,7 @@ class PhotonStore:
             return found[1]
         store = cls.open(url, mode=mode)
         if stamp is not None:
+            store.record_cache_bytes = RECORD_CACHE_BYTES
             _SHARED[(str(path), mode)] = (stamp, store)
             while len(_SHARED) > 8:
                 _SHARED.pop(next(iter(_SHARED)))
@@ -467,6 +475,38 @@ class PhotonStore:
         if not 0 <= n_batches <= len(done):
             raise LoomError(f"frame {f}: {n_batches} batches asked, {len(done)} done", path=self.url)
         return int(self._meta(f, done[:n_batches])[:, 2].sum())
+
+    def emitted(self, batches=None) -> np.ndarray:
+        """int64 (n_frames,): photons emitted per frame by its first ``batches[f]`` done batches
+        (of its source frame, if shared), or by all its done batches (None): one
+        :meth:`photons_in` per frame, vectorised."""
+        sources, done = self._sources(), self._done_table()
+        n_done = done.sum(axis=1)
+        use = n_done[sources] if batches is None else np.asarray(batches, np.int64).reshape(-1)
+        if use.shape != (self.n_frames,):
+            raise LoomError(f"emitted: {use.shape[0]} batch counts for {self.n_frames} frames", path=self.url)
+        out = np.zeros(self.n_frames, np.int64)
+        for g in np.unique(sources):
+            mine = np.flatnonzero(sources == g)
+            if (use[mine] < 0).any() or (use[mine] > n_done[g]).any():
+                bad = int(mine[(use[mine] < 0) | (use[mine] > n_done[g])][0])
+                raise LoomError(f"frame {g}: {int(use[bad])} batches asked, {int(n_done[g])} done",
+                                path=self.url)
+            running = np.concatenate([[0], np.cumsum(self._meta(int(g), range(int(use[mine].max())))[:, 2]
+                                                     .astype(np.int64))])
+            out[mine] = running[use[mine]]
+        return out
+
+    def shared_batches(self, batches) -> np.ndarray:
+        """int64 (n_frames,): ``batches`` with each frame given the count of the first frame using
+        the same source frame, which is what :meth:`counts` uses for all of them; so a subset of
+        frames gets the counts it would get within the whole table."""
+        use = np.asarray(batches, np.int64).reshape(-1)
+        sources = self._sources()
+        order = np.arange(self.n_frames)[::-1]
+        first = np.empty(self.n_frames, np.int64)
+        first[sources[order]] = order  # the last write of a source, its first frame, wins
+        return use[first[sources]]
 
     def prefix_for(self, frame_index: int, n_photons: int) -> int | None:
         """The fewest leading done batches of a frame holding at least ``n_photons`` photons, or
@@ -624,9 +664,30 @@ class PhotonStore:
             missing = [b for b in chosen if b not in done]
             if missing:
                 raise LoomError(f"frame {f}: batch(es) {missing} not done", path=self.url)
+        key = (f, g, tuple(chosen))
+        found = self._records.get(key)
+        if found is not None:
+            self._records.move_to_end(key)
+            return found
         meta = self._meta(g, chosen)
         parts = [self._read_batch(g, b, int(row[3])) for b, row in zip(chosen, meta)]
-        return FrameRecords.merge(f, g, chosen, parts, self.n_elements, int(meta[:, 2].sum()))
+        records = FrameRecords.merge(f, g, chosen, parts, self.n_elements, int(meta[:, 2].sum()))
+        if self.record_cache_bytes > 0:
+            self._keep(key, records)
+        return records
+
+    def _keep(self, key, records: FrameRecords) -> None:
+        arrays = [v for v in vars(records).values() if isinstance(v, np.ndarray)]
+        size = sum(a.nbytes for a in arrays)
+        if size > self.record_cache_bytes:
+            return
+        for a in arrays:
+            a.flags.writeable = False  # shared by every later reader of the frame
+        self._records[key] = records
+        self._records_bytes += size
+        while self._records_bytes > self.record_cache_bytes:
+            _, old = self._records.popitem(last=False)
+            self._records_bytes -= sum(v.nbytes for v in vars(old).values() if isinstance(v, np.ndarray))
 
     def verify_batch(self, frame_index: int, batch: int) -> bool:
         """Re-read a done batch and check its records against the digest in its done marker."""
