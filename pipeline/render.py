@@ -78,21 +78,14 @@ def check_out_dir(out: Path) -> None:
         raise LoomError(f"is not writable ({parent} does not allow writing)", path=str(out), field="--out")
 
 
-def render(scene_path, *, frames: str | None, out_dir, settings: RenderSettings = RenderSettings(),
-           n_photons: int | None = None, store_url: str | None = None, camera: str | None = None,
-           config: RenderConfig = RenderConfig(), scheduler: str = "local", workers: int | None = None,
-           progress: bool = True, temporal: str = "adaptive", fmax: int | None = None,
-           segment: int | None = None, echo=None) -> dict:
-    """Render ``frames`` of a scene into ``out_dir``; returns the report (also ``report.json``).
+def prepare_job(scene_path, *, frames: str | None, out_dir, settings: RenderSettings = RenderSettings(),
+                n_photons: int | None = None, store_url: str | None = None, camera: str | None = None,
+                config: RenderConfig = RenderConfig(), temporal: str = "adaptive", fmax: int | None = None):
+    """Check every input (one-line LoomErrors, before anything is written), then create the output
+    folder, the photon store and its illumination arrays (only the client creates arrays: zarr 3
+    has no locks) and return the coordinator's Job (pipeline/coordinator.py)."""
+    from .coordinator import Job
 
-    ``n_photons`` None (``--photons auto``): the segment coordinator chooses N_frame and F_max per
-    segment (pipeline/coordinator.py, §5.2), ``fmax`` is the first segment's F_max. An integer
-    keeps them fixed for every frame (``--photons N --fmax F``), with ``temporal`` adaptive, fixed
-    or off. ``segment`` redoes one segment and the frames that depend on it.
-    """
-    from .coordinator import Job, coordinate, reprocess
-
-    # Check every input before anything is written
     out = Path(out_dir)
     check_out_dir(out)
     scene = Scene.load(scene_path, camera=camera)
@@ -117,12 +110,9 @@ def render(scene_path, *, frames: str | None, out_dir, settings: RenderSettings 
         if temporal != "adaptive":
             raise LoomError("--photons auto collects photons adaptively (§5.2); use --photons N for "
                             f"--temporal {temporal}", field="--temporal")
-    if segment is not None and segment < 0:
-        raise LoomError(f"must be a segment index >= 0, got {segment}", field="--segment")
-    t_start = time.perf_counter()
 
     out.mkdir(parents=True, exist_ok=True)
-    store = open_store(p, store_url)
+    open_store(p, store_url)
     from .store.illumination import IlluminationMaps
     IlluminationMaps.create(store_url, n_frames=scene.timeline.frames, n_vertices=p.elements.n_vertices)
     photon_hash = config.photon_hash(p.elements.element_size)
@@ -130,22 +120,40 @@ def render(scene_path, *, frames: str | None, out_dir, settings: RenderSettings 
                 width=settings.width, height=settings.height, spp=settings.spp,
                 reflection_depth=settings.reflection_depth, area_samples=settings.area_samples,
                 tonemap=settings.tonemap.to_dict())
-    render_hash = stable_digest(look)
     decision = dict(look, first=p.frames[0], last=p.frames[-1], fmax=fmax, n_photons=n_photons,
                     temporal=temporal, selection=p.frames, **{s: config.stage_hash(s) for s in
                                                                ("collection", "filter", "segments")})
     if not guided:  # fixed settings read no segment parameter
         decision.pop("segments")
-    single_state = len(set(p.sources[f] for f in p.frames)) == 1 and guided
-    job = Job(scene_path=str(scene.path), scene_hash=scene.scene_hash, camera=camera, camera_name=cam_name,
-              element_size=p.elements.element_size, store_url=store_url, out_dir=str(out),
-              first=p.frames[0], last=p.frames[-1], selection=tuple(p.frames), width=settings.width,
-              height=settings.height, spp=settings.spp, reflection_depth=settings.reflection_depth,
-              area_samples=settings.area_samples, tonemap=settings.tonemap.to_dict(), config=config.to_dict(),
-              render_hash=render_hash, decision_hash=stable_digest(decision), fmax=fmax, n_photons=n_photons,
-              temporal=temporal, single_state=single_state)
-    del store
+    return Job(scene_path=str(scene.path), scene_hash=scene.scene_hash, camera=camera, camera_name=cam_name,
+               element_size=p.elements.element_size, store_url=store_url, out_dir=str(out),
+               first=p.frames[0], last=p.frames[-1], selection=tuple(p.frames), width=settings.width,
+               height=settings.height, spp=settings.spp, reflection_depth=settings.reflection_depth,
+               area_samples=settings.area_samples, tonemap=settings.tonemap.to_dict(), config=config.to_dict(),
+               render_hash=stable_digest(look), decision_hash=stable_digest(decision), fmax=fmax,
+               n_photons=n_photons, temporal=temporal,
+               single_state=len(set(p.sources[f] for f in p.frames)) == 1 and guided)
 
+
+def render(scene_path, *, frames: str | None, out_dir, settings: RenderSettings = RenderSettings(),
+           n_photons: int | None = None, store_url: str | None = None, camera: str | None = None,
+           config: RenderConfig = RenderConfig(), scheduler: str = "local", workers: int | None = None,
+           progress: bool = True, temporal: str = "adaptive", fmax: int | None = None,
+           segment: int | None = None, echo=None) -> dict:
+    """Render ``frames`` of a scene into ``out_dir``; returns the report (also ``report.json``).
+
+    ``n_photons`` None (``--photons auto``): the segment coordinator chooses N_frame and F_max per
+    segment (pipeline/coordinator.py, §5.2), ``fmax`` is the first segment's F_max. An integer
+    keeps them fixed for every frame (``--photons N --fmax F``), with ``temporal`` adaptive, fixed
+    or off. ``segment`` redoes one segment and the frames that depend on it.
+    """
+    from .coordinator import coordinate, reprocess
+
+    if segment is not None and segment < 0:
+        raise LoomError(f"must be a segment index >= 0, got {segment}", field="--segment")
+    t_start = time.perf_counter()
+    job = prepare_job(scene_path, frames=frames, out_dir=out_dir, settings=settings, n_photons=n_photons,
+                      store_url=store_url, camera=camera, config=config, temporal=temporal, fmax=fmax)
     rays: dict[int, dict] = {}
     batches = 0
 
@@ -164,30 +172,37 @@ def render(scene_path, *, frames: str | None, out_dir, settings: RenderSettings 
         if segment is not None:
             report_segment(*reprocess(job, client, segment))
             from .segment_records import read_records
-            records = read_records(out)
+            records = read_records(job.out_dir)
         else:
             records = coordinate(job, client, on_segment=report_segment,
                                  on_progress=None if echo is None else (lambda line: echo(f"  {line}")))
+    return finish(job, records, rays=rays, batches=batches, t_start=t_start)
 
-    # Video, the segment figure and the report
+
+def finish(job, records, *, rays: dict, batches: int, t_start: float) -> dict:
+    """The segment figure, ``preview.mp4`` and ``report.json`` of a rendered job."""
+    out = Path(job.out_dir)
+    config = RenderConfig.from_dict(job.config)
     t0 = time.perf_counter()
-    if guided:
+    if job.n_photons is None:
         from .segment_plot import plot_segments
         plot_segments(records, out / "segments" / "segments.png", d_thr=config.d_thr, p_thr=config.p_thr)
     video = out / "preview.mp4"
-    write_video([frame_paths(out, f)[1] for f in p.frames], video, scene.timeline.fps)
+    from workers.scene_cache import load_scene
+    fps = load_scene(job.scene_path, job.scene_hash, job.camera).timeline.fps
+    write_video([frame_paths(out, f)[1] for f in job.selection], video, fps)
     video_s = time.perf_counter() - t0
     times = {k: round(sum(r.times_s.get(k, 0.0) for r in records), 3)
              for k in ("shoot_s", "aqm_s", "temporal_s", "reconstruct_s", "composite_s", "decide_s")}
     times.update(video_s=round(video_s, 3), total_s=round(time.perf_counter() - t_start, 3))
     report = {
-        "scene": str(scene.path), "camera": cam_name, "frames": p.frames,
-        "rendered": sorted(rays), "skipped": sorted(set(p.frames) - set(rays)),
-        "resolution": [settings.width, settings.height], "spp": settings.spp,
-        "photons": "auto" if guided else n_photons,
+        "scene": job.scene_path, "camera": job.camera_name, "frames": list(job.selection),
+        "rendered": sorted(rays), "skipped": sorted(set(job.selection) - set(rays)),
+        "resolution": [job.width, job.height], "spp": job.spp,
+        "photons": "auto" if job.n_photons is None else job.n_photons,
         "segments": [{"index": r.index, "frames": [r.start, r.end], "k": r.k, "fmax": r.fmax,
                       "n_frame": r.n_frame, "d_aqm": r.d_aqm, "capped": r.capped} for r in records],
-        "store": store_url, "video": str(video), "render_hash": render_hash,
+        "store": job.store_url, "video": str(video), "render_hash": job.render_hash,
         "photon_batches_traced": batches, "times_s": times,
         "rays": {k: sum(r[k] for r in rays.values()) for k in RAY_KINDS},
         "rays_per_frame": {str(f): rays[f] for f in sorted(rays)},
