@@ -8,7 +8,7 @@ LOOM   := $(VENV)/bin/loom
 STAMP  := $(VENV)/.installed
 DEMO   := out/demo
 
-.PHONY: setup opencl test test-all demo bench clean
+.PHONY: setup opencl test test-all demo render bench clean
 
 setup: opencl $(STAMP)
 
@@ -37,6 +37,14 @@ demo: setup
 	$(LOOM) render $(DEMO)/room.glb --out $(DEMO)/room --resolution 320x240 --spp 2
 	$(LOOM) segments $(DEMO)/room
 	@echo "frames: $(DEMO)/room/beauty.####.exr and .png; video: $(DEMO)/room/preview.mp4"
+
+# A make-driven farm render: make render SCENE=room.glb FRAMES=1-135 OUT=out/room [JOBS=2] [OPTS="--spp 4"]
+# (`loom plan` writes OUT/Makefile, whose targets make then runs; a rerun does only what is missing).
+JOBS ?= $(shell nproc)
+render: setup
+	@test -n "$(SCENE)" -a -n "$(OUT)" || { echo "usage: make render SCENE=scene.glb OUT=dir [FRAMES=1-100] [JOBS=N] [OPTS=...]"; exit 2; }
+	$(LOOM) plan $(SCENE) --out $(OUT) $(if $(FRAMES),--frames $(FRAMES)) $(OPTS)
+	$(MAKE) -C $(OUT) -j$(JOBS)
 
 # Speed is measured here, never in tests: ratios measured in one run (see the README for figures).
 bench: setup

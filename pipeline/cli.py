@@ -121,61 +121,108 @@ def _photons(_ctx, _param, value):
     return n
 
 
+def _job_options(f):
+    """The options that say what a render makes (shared by ``loom render`` and ``loom plan``)."""
+    options = [
+        click.argument("scene_file", type=click.Path(dir_okay=False)),
+        click.option("--frames", default=None, help="Farm range: 1-100, 1-100x2, 1,5,10-20 (default: all)."),
+        click.option("--out", "out_dir", required=True, type=click.Path(), help="Output directory."),
+        click.option("--resolution", default="640x480", show_default=True, help="WIDTHxHEIGHT in pixels."),
+        click.option("--spp", type=int, default=4, show_default=True, help="Jittered camera samples per pixel."),
+        click.option("--photons", default="auto", show_default=True, callback=_photons,
+                     help="N_frame: auto (chosen per segment by the AQM, §5.2) or photons per frame for every "
+                          "frame."),
+        click.option("--fmax", type=int, default=None,
+                     help="F_max: of the first segment with --photons auto (§5.2.1), of every frame with "
+                          "--photons N (default: fmax_initial, 15)."),
+        click.option("--temporal", type=click.Choice(["adaptive", "fixed", "off"]), default="adaptive",
+                     show_default=True, help="Temporal photon collection with --photons N: Condition (1) windows "
+                     "(§5.1), always +-F_max/2 (§6), or each frame's own photons."),
+        click.option("--store", "store_url", default=None, help="Photon store (default: OUT/photons.zarr)."),
+        click.option("--camera", default=None, help="Camera or camera-node name (default: the first camera)."),
+        click.option("--seed", type=int, default=0, show_default=True),
+        click.option("--reflection-depth", type=int, default=4, show_default=True,
+                     help="Mirror/glossy reflections followed per camera path."),
+        click.option("--photon-depth", type=int, default=8, show_default=True, help="Maximum photon bounces."),
+        click.option("--d-thr", type=float, default=None,
+                     help="d_thr, share of AQM pixels allowed above 1 JND (0.03)."),
+        click.option("--config", "config_file", type=click.Path(dir_okay=False), default=None,
+                     help="JSON object of RenderConfig fields (pipeline/config.py); the options above override it."),
+    ]
+    for option in reversed(options):
+        f = option(f)
+    return f
+
+
+def _job_arguments(scene_file, frames, out_dir, resolution, spp, photons, fmax, temporal, store_url, camera, seed,
+                   reflection_depth, photon_depth, d_thr, config_file) -> dict:
+    """The keyword arguments of pipeline.render.prepare_job / render from the job options."""
+    from .config import RenderConfig, load_config
+    from .render import RenderSettings, parse_resolution
+
+    width, height = parse_resolution(resolution)
+    fields = load_config(config_file) if config_file else {}
+    fields.update(seed=seed, photon_depth=photon_depth, **({} if d_thr is None else {"d_thr": d_thr}))
+    return dict(scene_path=scene_file, frames=frames, out_dir=out_dir, n_photons=photons, fmax=fmax,
+                temporal=temporal, store_url=store_url, camera=camera, config=RenderConfig.from_dict(fields),
+                settings=RenderSettings(width=width, height=height, spp=spp, reflection_depth=reflection_depth))
+
+
 @main.command("render")
-@click.argument("scene_file", type=click.Path(dir_okay=False))
-@click.option("--frames", default=None, help="Farm range: 1-100, 1-100x2, 1,5,10-20 (default: all).")
-@click.option("--out", "out_dir", required=True, type=click.Path(), help="Output directory.")
-@click.option("--resolution", default="640x480", show_default=True, help="WIDTHxHEIGHT in pixels.")
-@click.option("--spp", type=int, default=4, show_default=True, help="Jittered camera samples per pixel.")
-@click.option("--photons", default="auto", show_default=True, callback=_photons,
-              help="N_frame: auto (chosen per segment by the AQM, §5.2) or photons per frame for every frame.")
-@click.option("--fmax", type=int, default=None,
-              help="F_max: of the first segment with --photons auto (§5.2.1), of every frame with --photons N "
-                   "(default: fmax_initial, 15).")
-@click.option("--temporal", type=click.Choice(["adaptive", "fixed", "off"]), default="adaptive", show_default=True,
-              help="Temporal photon collection with --photons N: Condition (1) windows (§5.1), always "
-                   "+-F_max/2 (§6), or each frame's own photons.")
+@_job_options
 @click.option("--segment", type=int, default=None,
               help="Redo one segment (index from `loom segments OUT`) and only the frames that depend on it.")
-@click.option("--store", "store_url", default=None, help="Photon store (default: OUT/photons.zarr).")
-@click.option("--camera", default=None, help="Camera or camera-node name (default: the first camera).")
-@click.option("--seed", type=int, default=0, show_default=True)
-@click.option("--reflection-depth", type=int, default=4, show_default=True,
-              help="Mirror/glossy reflections followed per camera path.")
-@click.option("--photon-depth", type=int, default=8, show_default=True, help="Maximum photon bounces.")
-@click.option("--d-thr", type=float, default=None, help="d_thr, share of AQM pixels allowed above 1 JND (0.03).")
-@click.option("--config", "config_file", type=click.Path(dir_okay=False), default=None,
-              help="JSON object of RenderConfig fields (pipeline/config.py); the options above override it.")
 @click.option("--quiet", is_flag=True, help="No progress lines.")
 @click.option("--verbose", is_flag=True, help="Log more of what the stages do.")
 @_scheduler_options
-def render_command(scene_file, frames, out_dir, resolution, spp, photons, fmax, temporal, segment, store_url,
-                   camera, seed, reflection_depth, photon_depth, d_thr, config_file, quiet, verbose, scheduler,
-                   workers) -> None:
+def render_command(segment, quiet, verbose, scheduler, workers, **job) -> None:
     """Render frames of SCENE_FILE: photons, segments, illumination maps, EXR/PNG frames, preview.mp4."""
-    from .config import RenderConfig
-    from .render import RenderSettings, parse_resolution, render
+    from .render import render
 
     if verbose:
         logging.getLogger("pipeline").setLevel(logging.INFO)
-    width, height = parse_resolution(resolution)
-    settings = RenderSettings(width=width, height=height, spp=spp, reflection_depth=reflection_depth)
-    from .config import load_config
-
-    fields = load_config(config_file) if config_file else {}
-    fields.update(seed=seed, photon_depth=photon_depth, **({} if d_thr is None else {"d_thr": d_thr}))
-    config = RenderConfig.from_dict(fields)
-    report = render(scene_file, frames=frames, out_dir=out_dir, settings=settings, n_photons=photons,
-                    store_url=store_url, camera=camera, config=config, scheduler=scheduler, workers=workers,
-                    progress=not quiet, temporal=temporal, fmax=fmax, segment=segment,
-                    echo=None if quiet else click.echo)
-    t = report["times_s"]
+    args = _job_arguments(**job)
+    report = render(args.pop("scene_path"), **args, scheduler=scheduler, workers=workers, progress=not quiet,
+                    segment=segment, echo=None if quiet else click.echo)
+    t, out_dir = report["times_s"], job["out_dir"]
     click.echo(f"rendered {len(report['rendered'])} frames ({len(report['skipped'])} already done) "
-               f"at {width}x{height}, {spp} spp in {t['total_s']:.1f} s (photons {t['shoot_s']:.1f}, "
-               f"AQM {t['aqm_s']:.1f}, temporal {t['temporal_s']:.1f}, composite {t['composite_s']:.1f}, "
-               f"video {t['video_s']:.1f}); {len(report['segments'])} segment(s)")
+               f"at {report['resolution'][0]}x{report['resolution'][1]}, {report['spp']} spp in "
+               f"{t['total_s']:.1f} s (photons {t['shoot_s']:.1f}, AQM {t['aqm_s']:.1f}, temporal "
+               f"{t['temporal_s']:.1f}, composite {t['composite_s']:.1f}, video {t['video_s']:.1f}); "
+               f"{len(report['segments'])} segment(s)")
     click.echo(f"frames: {out_dir}/beauty.####.exr, .png  video: {report['video']}  "
                f"report: {out_dir}/report.json  segments: loom segments {out_dir}")
+
+
+@main.command("plan")
+@_job_options
+@click.option("--loom", "loom_command", default=None,
+              help="The loom command the recipes run (default: this one; a farm may wrap it, e.g. 'srun loom').")
+def plan_command(loom_command, **job) -> None:
+    """Write OUT/Makefile: a make-driven farm render (make -C OUT -j N) of what `loom render` would make."""
+    from .farm import bounds, write_plan
+    from .render import prepare_job
+
+    args = _job_arguments(**job)
+    made = prepare_job(args.pop("scene_path"), **args)
+    path = write_plan(made, loom_command)
+    segments, chunks = bounds(made)
+    click.echo(f"wrote {path}: up to {segments} segment(s) x {chunks} chunk(s) of frames; "
+               f"run: make -C {job['out_dir']} -j N")
+
+
+@main.command("farm", hidden=True)
+@click.argument("step", type=click.Choice(["decide", "reconstruct", "frames", "done", "finish"]))
+@click.argument("out_dir", type=click.Path(file_okay=False))
+@click.argument("numbers", type=int, nargs=-1)
+def farm_command(step: str, out_dir: str, numbers: tuple[int, ...]) -> None:
+    """One target of a `loom plan` Makefile (pipeline/farm.py)."""
+    from .farm import step as run_step
+
+    want = {"decide": 1, "reconstruct": 2, "frames": 2, "done": 1, "finish": 0}[step]
+    if len(numbers) != want or any(n < 0 for n in numbers):
+        raise LoomError(f"{step} takes {want} index(es) >= 0, got {list(numbers)}", field="farm")
+    click.echo(run_step(step, out_dir, *numbers))
 
 
 @main.command("segments")

@@ -210,4 +210,12 @@ def finish(job, records, *, rays: dict, batches: int, t_start: float) -> dict:
     tmp = out / f".report.json.{os.getpid()}.partial"
     tmp.write_text(json.dumps(report, indent=1))
     os.replace(tmp, out / "report.json")
+    _remove_leftovers(out)
     return report
+
+
+def _remove_leftovers(out: Path) -> None:
+    """Temporary files a killed writer left (``.NAME.PID.partial``): with every frame done, no
+    writer is alive that could still rename one into place."""
+    for tmp in [*out.glob(".*.partial*"), *out.glob("segments/.*.partial*"), *out.glob(".farm/.*.partial*")]:
+        tmp.unlink(missing_ok=True)

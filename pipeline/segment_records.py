@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import json
 import os
+import re
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
@@ -100,6 +101,8 @@ def read_records(out_dir) -> list[SegmentRecord]:
         raise LoomError("has no segment records (render it with loom render first)", path=str(out_dir))
     out = []
     for path in sorted(folder.glob("segment-*.json")):
+        if not re.fullmatch(r"segment-\d+\.json", path.name):
+            continue  # a farm's chunk files (pipeline/farm.py) sit beside the records
         rec = read_record(out_dir, int(path.stem.split("-")[1]))
         if rec is not None:
             out.append(rec)

@@ -1,0 +1,94 @@
+"""`loom plan` + make: a make-driven farm render gives the frames `loom render` gives, resumes after
+a kill anywhere in `make -j2`, answers `make -q`, and its recipes exit at once when done."""
+from __future__ import annotations
+
+import json
+import os
+import signal
+import subprocess
+import sys
+import time
+
+import pytest
+
+from pipeline.images import frame_paths
+from pipeline.segment_records import read_records
+
+CHEAP = {"pilot_photons": 2000, "n_frame_min": 1000, "n_frame_max": 16000, "d_thr": 0.45,
+         "fmax_initial": 6, "fmax_step": 4, "fmax_cap": 10}
+FIRST, LAST = 60, 80
+LOOM = [sys.executable, "-m", "pipeline"]
+
+
+def _run(*args, check=True, **kw):
+    result = subprocess.run([*map(str, args)], capture_output=True, text=True, **kw)
+    if check:
+        assert result.returncode == 0, result.stdout + result.stderr
+    return result
+
+
+def _options(out, config):
+    return ["--frames", f"{FIRST}-{LAST}", "--out", out, "--resolution", "48x36", "--spp", "1", "--config", config]
+
+
+def _frames(out):
+    return {f: tuple(p.read_bytes() for p in frame_paths(out, f)) for f in range(FIRST, LAST + 1)}
+
+
+def _make(out, *args, **kw):
+    return _run("make", "-s", "-C", out, f"LOOM={sys.executable} -m pipeline", *args, **kw)
+
+
+@pytest.fixture(scope="module")
+def room(tmp_path_factory):
+    tmp = tmp_path_factory.mktemp("farm")
+    scene = tmp / "room.glb"
+    _run(*LOOM, "scene", "room", "-o", scene)
+    config = tmp / "cheap.json"
+    config.write_text(json.dumps(CHEAP))
+    ref = tmp / "ref"
+    _run(*LOOM, "render", scene, *_options(ref, config), "--scheduler", "synchronous", "--quiet")
+    return tmp, scene, config, ref
+
+
+def test_plan_and_make_give_the_frames_of_loom_render(room):
+    tmp, scene, config, ref = room
+    out = tmp / "farm"
+    said = _run(*LOOM, "plan", scene, *_options(out, config)).stdout
+    assert "Makefile" in said and (out / "Makefile").is_file()
+    assert _make(out, "-q", check=False).returncode != 0  # not done yet
+    _make(out, "-j2")
+    assert _make(out, "-q", check=False).returncode == 0
+    assert _frames(out) == _frames(ref)
+    assert [r.without_times() for r in read_records(out)] == [r.without_times() for r in read_records(ref)]
+    assert (out / "preview.mp4").is_file() and len(read_records(out)) >= 2
+    # A recipe whose outputs are there and valid exits at once, saying so
+    again = _run(*LOOM, "farm", "reconstruct", out, "0", "0").stdout
+    assert "already reconstructed" in again
+
+
+def test_a_killed_make_resumes_to_the_same_frames(room):
+    tmp, scene, config, ref = room
+    out = tmp / "killed"
+    _run(*LOOM, "plan", scene, *_options(out, config))
+    proc = subprocess.Popen(["make", "-s", "-C", str(out), "-j2", f"LOOM={sys.executable} -m pipeline"],
+                            stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+    deadline = time.monotonic() + 300
+    while time.monotonic() < deadline and proc.poll() is None:
+        if (out / ".farm" / "decide-001.ok").exists():  # killed while frames are being made
+            os.killpg(proc.pid, signal.SIGKILL)
+            break
+        time.sleep(0.02)
+    proc.wait()
+    assert proc.returncode == -signal.SIGKILL, "make finished before it could be killed"
+    _make(out, "-j2")
+    assert _frames(out) == _frames(ref)
+    assert not list(out.rglob("*.partial*"))
+
+
+def test_bad_plan_input_is_one_line(room, tmp_path):
+    tmp, scene, config, _ = room
+    result = _run(*LOOM, "farm", "decide", tmp_path / "nothing", "0", check=False)
+    assert result.returncode == 2 and result.stderr.strip().count("\n") == 0 and "loom plan" in result.stderr
+    result = _run(*LOOM, "plan", tmp_path / "missing.glb", "--out", tmp_path / "o", check=False)
+    assert result.returncode == 2 and not (tmp_path / "o").exists()
