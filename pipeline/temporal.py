@@ -217,11 +217,9 @@ class _Clock:
 
 
 def _direct(records, elements, areas) -> np.ndarray:
-    from workers.reconstruct import vertex_irradiance
+    from workers.reconstruct import records_irradiance
 
-    sel = records.direct
-    return vertex_irradiance(records.element[sel], records.b1[sel], records.b2[sel], records.energy[sel],
-                             elements, areas, records.photons_emitted)
+    return records_irradiance(records, records.direct, elements, areas)
 
 
 def write_temporal_maps(store_url: str, scene, elements, frames, *, mode: str, fmax: int | None,

@@ -44,3 +44,26 @@ def test_uniform_photons_give_constant_irradiance(rng):
     energy = np.full((n, 3), flux)  # weight = flux x N / N
     e = vertex_irradiance(np.where(lower, 0, 1), b1, b2, energy, ELEMS, _vertex_areas(), n)
     np.testing.assert_allclose(e, flux, rtol=0.02)
+
+
+def test_records_irradiance_is_vertex_irradiance_bit_for_bit(rng):
+    """The direct estimate's fast path (integer picks, one product) gives vertex_irradiance's bits."""
+    from types import SimpleNamespace
+
+    from workers.reconstruct import records_irradiance
+
+    n_elements, n_vertices = 40, 30
+    elems = rng.integers(0, n_vertices, (n_elements, 3))
+    areas = rng.random(n_vertices)
+    areas[3] = 0.0
+    n = 5000
+    b1 = rng.integers(0, 30000, n).astype(np.uint16)
+    records = SimpleNamespace(element=rng.integers(0, n_elements, n).astype(np.uint32), b1=b1,
+                              b2=(rng.integers(0, 30000, n)).astype(np.uint16),
+                              energy=rng.random((n, 3)).astype(np.float32), photons_emitted=1234)
+    select = rng.random(n) < 0.4
+    for sel in (select, ~select, np.zeros(n, bool)):
+        got = records_irradiance(records, sel, elems, areas)
+        want = vertex_irradiance(records.element[sel], records.b1[sel], records.b2[sel], records.energy[sel],
+                                 elems, areas, records.photons_emitted)
+        assert got.dtype == want.dtype and np.array_equal(got, want)

@@ -152,3 +152,53 @@ def test_spatial_filter_repairs_only_where_temporal_collection_falls_short(room)
 def test_b_against_the_papers_2M_photon_reference(tmp_path):
     room = Room(tmp_path, 2_000_000)
     check_highlight_and_torus(room)
+
+
+def test_windows_from_the_reached_count_rows_are_the_whole_tables(room):
+    """A chunk's windows from only the count rows within F_max/2 + smoothing of its frames are the
+    windows computed from the whole table, bit for bit; so are the maps the task writes from them."""
+    from pipeline.temporal import collection_windows, window_reach
+
+    cfg = RenderConfig()
+    store = room.store
+    counts = store.counts()
+    emitted = store.emitted().astype(np.float64)
+    assert np.array_equal(emitted, [store.photons_emitted(f) for f in range(store.n_frames)])
+    reach = window_reach(FMAX, "adaptive", cfg)
+    for frames in ([room.index], list(range(K2 - 16, K2 + 4)), [K2 + 10, K2 + 14]):
+        whole = collection_windows(counts, emitted, frames, mode="adaptive", fmax=FMAX, config=cfg)
+        lo, hi = max(0, min(frames) - reach), min(store.n_frames, max(frames) + 1 + reach)
+        part = collection_windows(counts[lo:hi], emitted, frames, mode="adaptive", fmax=FMAX, config=cfg,
+                                  counts_from=lo)
+        assert all(np.array_equal(a, b) for a, b in zip(whole, part))
+    with pytest.raises(Exception, match="count rows"):
+        collection_windows(counts[K2:], emitted, [K2], mode="adaptive", fmax=FMAX, config=cfg, counts_from=K2)
+
+
+def test_shared_store_caches_decoded_frames_read_only(room):
+    """open_shared keeps decoded frames (bounded, read-only); a plain open keeps none."""
+    shared = PhotonStore.open_shared(room.store.url)
+    a, b = shared.read_frame(room.index), shared.read_frame(room.index)
+    assert a is b and not a.energy.flags.writeable
+    plain = room.store.read_frame(room.index)
+    assert np.array_equal(plain.key, a.key) and np.array_equal(plain.energy, a.energy)
+    assert room.store.record_cache_bytes == 0 and not room.store._records
+    from pipeline.store.photon_store import RECORD_CACHE_BYTES
+
+    shared.record_cache_bytes = 1  # smaller than a frame: nothing kept
+    shared._records.clear()
+    try:
+        assert shared.read_frame(room.index) is not shared.read_frame(room.index)
+    finally:
+        shared.record_cache_bytes = RECORD_CACHE_BYTES
+
+
+def test_mesh_adaptation_with_the_frames_geometry_is_the_same(room):
+    from workers.reconstruct import frame_geometry, mesh_adaptation
+
+    irr = next(illumination_maps(room.store, room.mesh, room.scene, [room.index])).irradiance
+    geometry = frame_geometry(room.scene, room.mesh, K2)
+    assert np.array_equal(geometry.vertex_areas, room.mesh.vertex_areas(room.state))
+    assert frame_geometry(room.scene, room.mesh, K2) is geometry
+    assert mesh_adaptation(room.state, room.mesh, irr, 4 / 3) == mesh_adaptation(
+        geometry.state, room.mesh, irr, 4 / 3, geometry)
