@@ -174,8 +174,10 @@ def _job_arguments(scene_file, frames, out_dir, resolution, spp, photons, fmax, 
               help="Redo one segment (index from `loom segments OUT`) and only the frames that depend on it.")
 @click.option("--quiet", is_flag=True, help="No progress lines.")
 @click.option("--verbose", is_flag=True, help="Log more of what the stages do.")
+@click.option("--performance-report", type=click.Path(dir_okay=False), default=None,
+              help="Write Dask's performance report of the run to this HTML file.")
 @_scheduler_options
-def render_command(segment, quiet, verbose, scheduler, workers, **job) -> None:
+def render_command(segment, quiet, verbose, performance_report, scheduler, workers, **job) -> None:
     """Render frames of SCENE_FILE: photons, segments, illumination maps, EXR/PNG frames, preview.mp4."""
     from .render import render
 
@@ -183,7 +185,7 @@ def render_command(segment, quiet, verbose, scheduler, workers, **job) -> None:
         logging.getLogger("pipeline").setLevel(logging.INFO)
     args = _job_arguments(**job)
     report = render(args.pop("scene_path"), **args, scheduler=scheduler, workers=workers, progress=not quiet,
-                    segment=segment, echo=None if quiet else click.echo)
+                    segment=segment, echo=None if quiet else click.echo, performance_report=performance_report)
     t, out_dir = report["times_s"], job["out_dir"]
     click.echo(f"rendered {len(report['rendered'])} frames ({len(report['skipped'])} already done) "
                f"at {report['resolution'][0]}x{report['resolution'][1]}, {report['spp']} spp in "

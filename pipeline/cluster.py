@@ -26,13 +26,18 @@ TASK_RETRIES = 3
 
 
 @contextmanager
-def connect(scheduler: str = "local", workers: int | None = None) -> Iterator[object | None]:
+def connect(scheduler: str = "local", workers: int | None = None, *, performance_report: str | None = None,
+            echo=None) -> Iterator[object | None]:
     """Yield a ``distributed.Client`` (or None for ``synchronous``) for the duration of a run.
 
     ``local`` starts a LocalCluster of worker processes sized to the machine (``workers`` or one
     per core); ``synchronous`` runs tasks in this process; anything else is a scheduler address.
+    ``echo`` gets the dashboard link; ``performance_report`` is an HTML file for Dask's own report
+    of the run (distributed.performance_report).
     """
     if scheduler == "synchronous":
+        if performance_report:
+            raise LoomError("needs a Dask cluster (--scheduler local or an address)", field="--performance-report")
         yield None
         return
     import logging
@@ -52,7 +57,8 @@ def connect(scheduler: str = "local", workers: int | None = None) -> Iterator[ob
                                    dashboard_address=":0", silence_logs=logging.WARNING)
             client = Client(cluster)
         try:
-            yield client
+            with _reporting(client, performance_report, echo):
+                yield client
         finally:
             client.close()
             cluster.close()
@@ -63,11 +69,26 @@ def connect(scheduler: str = "local", workers: int | None = None) -> Iterator[ob
     try:
         client = Client(scheduler, timeout="20s")
     except OSError as err:
-        raise LoomError(f"cannot reach the scheduler: {err}", field="--scheduler") from None
+        reason = " ".join(str(err).split())
+        raise LoomError(f"cannot reach the scheduler {scheduler} within 20 s ({reason})", field="--scheduler") from None
     try:
-        yield client
+        with _reporting(client, performance_report, echo):
+            yield client
     finally:
         client.close()
+
+
+@contextmanager
+def _reporting(client, performance_report: str | None, echo):
+    if echo is not None and getattr(client, "dashboard_link", None):
+        echo(f"dask dashboard: {client.dashboard_link}")
+    if not performance_report:
+        yield
+        return
+    from distributed import performance_report as report
+
+    with report(filename=performance_report):
+        yield
 
 
 def run_tasks(client, func: Callable, calls: Iterable[tuple[str, dict]], *, desc: str,

@@ -139,21 +139,20 @@ def render(scene_path, *, frames: str | None, out_dir, settings: RenderSettings 
            n_photons: int | None = None, store_url: str | None = None, camera: str | None = None,
            config: RenderConfig = RenderConfig(), scheduler: str = "local", workers: int | None = None,
            progress: bool = True, temporal: str = "adaptive", fmax: int | None = None,
-           segment: int | None = None, echo=None) -> dict:
+           segment: int | None = None, echo=None, performance_report: str | None = None) -> dict:
     """Render ``frames`` of a scene into ``out_dir``; returns the report (also ``report.json``).
 
     ``n_photons`` None (``--photons auto``): the segment coordinator chooses N_frame and F_max per
     segment (pipeline/coordinator.py, §5.2), ``fmax`` is the first segment's F_max. An integer
     keeps them fixed for every frame (``--photons N --fmax F``), with ``temporal`` adaptive, fixed
-    or off. ``segment`` redoes one segment and the frames that depend on it.
+    or off. ``segment`` redoes one segment and the frames that depend on it. ``echo`` gets progress
+    lines (and the Dask dashboard link); ``performance_report`` an HTML file for Dask's report.
     """
     from .coordinator import coordinate, reprocess
 
     if segment is not None and segment < 0:
         raise LoomError(f"must be a segment index >= 0, got {segment}", field="--segment")
     t_start = time.perf_counter()
-    job = prepare_job(scene_path, frames=frames, out_dir=out_dir, settings=settings, n_photons=n_photons,
-                      store_url=store_url, camera=camera, config=config, temporal=temporal, fmax=fmax)
     rays: dict[int, dict] = {}
     batches = 0
 
@@ -168,7 +167,11 @@ def render(scene_path, *, frames: str | None, out_dir, settings: RenderSettings 
         echo(f"segment {rec.index}: frames {rec.start}-{rec.end}, K {rec.k}, F_max {rec.fmax}, "
              f"N_frame {rec.n_frame:,}{d}{cap}; {len(result['rays'])} frames written")
 
-    with connect(scheduler, workers) as client:
+    # The scheduler is reached before anything is written: an address with nothing listening
+    # leaves no output folder behind
+    with connect(scheduler, workers, performance_report=performance_report, echo=echo) as client:
+        job = prepare_job(scene_path, frames=frames, out_dir=out_dir, settings=settings, n_photons=n_photons,
+                          store_url=store_url, camera=camera, config=config, temporal=temporal, fmax=fmax)
         if segment is not None:
             report_segment(*reprocess(job, client, segment))
             from .segment_records import read_records
