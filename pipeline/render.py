@@ -213,12 +213,16 @@ def finish(job, records, *, rays: dict, batches: int, t_start: float) -> dict:
     tmp = out / f".report.json.{os.getpid()}.partial"
     tmp.write_text(json.dumps(report, indent=1))
     os.replace(tmp, out / "report.json")
-    _remove_leftovers(out)
+    _remove_leftovers(out, job.store_url)
     return report
 
 
-def _remove_leftovers(out: Path) -> None:
-    """Temporary files a killed writer left (``.NAME.PID.partial``): with every frame done, no
-    writer is alive that could still rename one into place."""
-    for tmp in [*out.glob(".*.partial*"), *out.glob("segments/.*.partial*"), *out.glob(".farm/.*.partial*")]:
+def _remove_leftovers(out: Path, store_url: str) -> None:
+    """Temporary files killed writers left (``.NAME.PID[.ID].partial``) in the output folder and a
+    local photon store: with every frame done, no writer of this run is alive that could still
+    rename one into place (zarr never reads them either way)."""
+    leftovers = [*out.glob(".*.partial*"), *out.glob("segments/.*.partial*"), *out.glob(".farm/.*.partial*")]
+    if "://" not in store_url or store_url.startswith("file://"):
+        leftovers += Path(store_url.removeprefix("file://")).rglob(".*.partial*")
+    for tmp in leftovers:
         tmp.unlink(missing_ok=True)
