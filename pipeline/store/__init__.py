@@ -23,29 +23,31 @@ version is refused with a one-line error: version 2 had BLAKE2b digests and zstd
       batch/             (F, B, 5) u64, chunk (1, 1, 5) uncompressed (40 bytes), keys "c.f.b.0":
                          [DONE_MAGIC, photon_start, photons_emitted, n_records, digest]; a chunk
                          exists <=> the batch is done
-      counts/            (F, B, 4, E) u32, chunk (1, 1, 4, E), lz4 + shuffle: hits of batches 0..b
-                         (running sum) per category indirect-even, indirect-odd, direct-even,
-                         direct-odd
+      counts/            (F, B, 4, E) u32, chunk (1, 1, 4, E), lz4 + shuffle, keys "c.f.b.0.0":
+                         hits of batches 0..b (running sum) per category indirect-even,
+                         indirect-odd, direct-even, direct-odd
       source/            (F,) i32, one chunk, -1 or the frame whose photons frame f reuses
       frames/<f>/        group per frame, made by the coordinator
-        <b>              (5, n) u32 array, chunk (5, 2^20), made by the writer of (f, b) and by
-                         nobody else; records sorted by element (an element's records are
-                         contiguous: the reader recovers the offsets from the keys)
+        <b>              (5, n) u32 array, chunk (5, 2^20), keys "c.0.i", made by the writer of
+                         (f, b) and by nobody else; records sorted by element (an element's
+                         records are contiguous: the reader recovers the offsets from the keys)
 
 Why this layout. Record counts per batch are unknown until traced and vary 2x per doubling
 (§5.2.3), so each batch gets its own exactly-sized array, created by its writer at
-``frames/<f>/<b>``: in zarr v3 that writes only metadata inside the batch's own prefix
-(parents exist), so no shared metadata and no resize. One array a batch, its metadata and
-chunks written as whole objects by the store itself (``_Raw``), costs two file writes where
-four zarr arrays cost about 50 ms of zarr calls. The store also encodes and writes the batch's
-``counts`` chunk and its done marker itself, and reads both (and the count table) straight from
-their chunks: zarr's array calls cost about 3 ms a batch there. Every chunk stays one zarr reads. A preallocated (frame, capacity) layout
-would need a capacity guess and coordinator resizes. The small fixed-size tables (batch, counts,
-source) are made by the coordinator in :meth:`PhotonStore.create`; a chunk of them belongs to
-exactly one (frame, batch), so concurrent writers never share a chunk (zarr 3 has no locks).
-Counts are running sums so the frames x elements table is one chunk read per frame (300 x 45,000
-in well under a second) rather than one per batch; a reconstruction chunk reads only the rows its
-windows can reach (pipeline/temporal.py).
+``frames/<f>/<b>``: in zarr v3 that writes only metadata inside the batch's own prefix (parents
+exist), so no shared metadata and no resize. One array a batch, its metadata and chunks written as
+whole objects by the store itself (``_Raw``), costs two file writes where four zarr arrays cost
+about 50 ms of zarr calls. The store also encodes and writes the batch's ``counts`` chunk and its
+done marker itself, and reads both (and the count table) straight from their chunks: zarr's array
+calls cost about 3 ms a batch there. zarr reads every chunk as its own. A preallocated (frame,
+capacity) layout would need a capacity guess and coordinator resizes. The small fixed-size tables
+(batch, counts, source) are made by the coordinator in :meth:`PhotonStore.create`; a chunk of them
+belongs to exactly one (frame, batch), so concurrent writers never share a chunk (zarr 3 has no
+locks). Every chunk key uses "." (``c.f.b.0``): an array's chunks are files of its one directory. A
+new directory costs about 1 ms on ext4 against 0.1 ms for a new file, and "/" keys made five new
+directories per batch and four per frame of maps. Counts are running sums so the frames x elements
+table is one chunk read per frame (300 x 45,000 in well under a second) rather than one per batch;
+a reconstruction chunk reads only the rows its windows can reach (pipeline/temporal.py).
 
 Digest. The done marker's digest is the first 64 bits of SHA-256 over the batch's packed rows (as
 on disk, uncompressed) and (photon_start, photons_emitted): what :meth:`PhotonStore.verify_batch`
@@ -53,18 +55,18 @@ checks the records against and what a rewrite of a done batch is compared by. SH
 hardware on current x86 and ARM cores (1.5 ms for a ROOM batch of 125,000 records).
 
 Atomicity and idempotence. LocalStore writes every chunk as temp file + rename, and so does the
-store's own writer (record arrays, counts, done markers, illumination maps), so a chunk is whole
-or absent. A writer writes records and counts first and the ``batch`` chunk last, in a second
-write: that chunk is the done marker, so a killed writer leaves a batch that is not done, which a rerun
-rewrites. Records are sorted into a total order (element, key, b1, b2, energy bits), so the
-bytes do not depend on input order, and a rerun writes identical bytes over identical chunks
-(existing arrays are reused, never deleted, so a duplicate task cannot expose a done batch with
-missing chunks). Writing a batch that is already done only compares digests. Batch b needs batch
-b-1 done and starts at its photon end, so done batches are a prefix 0..k-1 and batch b never
-changes once written. ``file://`` URLs map to LocalStore for these guarantees (fsspec's local
-filesystem neither renames atomically nor makes parent directories); other fsspec URLs rely on
-the object store writing each object whole. A killed writer may leave ``*.partial`` temp files,
-which zarr never reads.
+store's own writer (record arrays, counts, done markers, illumination maps), so a chunk is whole or
+absent. A writer writes records and counts first and the ``batch`` chunk last, in a second write:
+that chunk is the done marker, so a killed writer leaves a batch that is not done, which a rerun
+rewrites. Records are sorted into a total order (element, key, b1, b2, energy bits), so the bytes
+do not depend on input order, and a rerun writes identical bytes over identical chunks (existing
+arrays are reused, never deleted, so a duplicate task cannot expose a done batch with missing
+chunks). Writing a batch that is already done only compares digests. Batch b needs batch b-1 done
+and starts at its photon end, so done batches are a prefix 0..k-1 and batch b never changes once
+written. ``file://`` URLs map to LocalStore for these guarantees (fsspec's local filesystem neither
+renames atomically nor makes parent directories); other fsspec URLs rely on the object store
+writing each object whole. A killed writer may leave ``*.partial`` temp files, which zarr never
+reads.
 
 Caches. A store instance reads each done marker once (it never changes). On a LocalStore it also
 reuses the done table (one directory listing) and the sources while the ``batch/`` directory

@@ -26,7 +26,7 @@ import zarr
 import zarr.errors
 
 from ..errors import LoomError
-from .photon_store import _file_stamp, _Raw, _encode_rows, local_path, make_store, table_codec
+from .photon_store import FLAT_KEYS, _file_stamp, _Raw, _encode_rows, local_path, make_store, table_codec
 
 GROUP = "illumination"
 _SHARED: dict = {}  # (path, mode) -> (metadata stamps, IlluminationMaps): IlluminationMaps.open_shared
@@ -48,8 +48,7 @@ class IlluminationMaps:
         self._raw = _Raw(group.store)
         self._prefix = f"{group.path}/" if group.path else ""
         # Chunks are encoded here only for arrays with the codecs create() gives (else zarr writes)
-        self._own = (all(self._maps[n].compressors == (table_codec(),) for n in MAPS)
-                     and self._adaptation.compressors == () and self._adaptation.dtype == np.float64)
+        self._own = all(_as_created(self._group, name) for name in (*MAPS, "adaptation"))
 
     @classmethod
     def create(cls, url, *, n_frames: int, n_vertices: int) -> IlluminationMaps:
@@ -58,16 +57,17 @@ class IlluminationMaps:
         root = _root(where, "r+")
         group = root.require_group(GROUP)
         shape = (n_frames, n_vertices, 3)
-        fits = all(name in group and group[name].shape == shape
-                   and group[name].compressors == (table_codec(),) for name in MAPS) \
+        fits = all(name in group and group[name].shape == shape for name in MAPS) \
             and "adaptation" in group and group["adaptation"].shape == (n_frames,) \
-            and group["adaptation"].compressors == ()
+            and all(_as_created(group, name) for name in (*MAPS, "adaptation"))
         if not fits:
             for name in MAPS:
                 group.create_array(name, shape=shape, chunks=(1, n_vertices, 3), dtype="float32",
-                                   fill_value=0.0, compressors=table_codec(), overwrite=True)
+                                   fill_value=0.0, compressors=table_codec(), overwrite=True,
+                                   chunk_key_encoding=FLAT_KEYS)
             group.create_array("adaptation", shape=(n_frames,), chunks=(1,), dtype="float64",
-                               fill_value=np.nan, compressors=None, overwrite=True)
+                               fill_value=np.nan, compressors=None, overwrite=True,
+                               chunk_key_encoding=FLAT_KEYS)
         return cls(group, where)
 
     @classmethod
@@ -116,9 +116,9 @@ class IlluminationMaps:
             self._adaptation[f] = float(adaptation)
             return
         # The maps' chunks, then the adaptation chunk (the done marker) in a second write
-        self._raw.set_many([(f"{self._prefix}{name}/c/{f}/0/0", _encode_rows(data))
+        self._raw.set_many([(f"{self._prefix}{name}/c.{f}.0.0", _encode_rows(data))
                             for name, data in maps.items()])
-        self._raw.set_many([(f"{self._prefix}adaptation/c/{f}", np.array([adaptation], "<f8").tobytes())])
+        self._raw.set_many([(f"{self._prefix}adaptation/c.{f}", np.array([adaptation], "<f8").tobytes())])
 
     def read(self, frame_index: int, name: str = "indirect") -> np.ndarray:
         """(V, 3) float32 map of a done frame."""
@@ -139,6 +139,15 @@ class IlluminationMaps:
         if not 0 <= f < self.n_frames:
             raise LoomError(f"frame index {f} out of range [0, {self.n_frames})", path=self.url)
         return f
+
+
+def _as_created(group: zarr.Group, name: str) -> bool:
+    """Whether an array has the dtype, codecs and chunk keys :meth:`IlluminationMaps.create` gives
+    it, which the store's own chunk writer assumes."""
+    arr = group[name]
+    want = ("float64", ()) if name == "adaptation" else ("float32", (table_codec(),))
+    return (str(arr.dtype), arr.compressors) == want \
+        and getattr(arr.metadata.chunk_key_encoding, "separator", None) == "."
 
 
 def _root(where: str, mode: str) -> zarr.Group:

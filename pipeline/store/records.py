@@ -168,21 +168,25 @@ def as_array(value, name: str, shape_tail: tuple, dtype, where: str) -> np.ndarr
 
 def sort_records(key: np.ndarray, bary: np.ndarray, energy: np.ndarray) -> np.ndarray:
     """Permutation into the total order (element, key, b1, b2, energy bits): input-order free."""
-    element = (key & ELEMENT_MASK).astype(np.uint64)
+    key = np.asarray(key, np.uint32)
     n = key.shape[0]
-    top = int(element.max()).bit_length() if n else 0
+    top = int((key & np.uint32(ELEMENT_MASK)).max()).bit_length() if n else 0
     low = max(1, (n - 1).bit_length())  # bits of a record index
     if top + 34 + low <= 64:
         # (element, category, b1, b2) with the record index below it in one u64: sorting values
-        # is 3x faster than argsort and gives the stable order
-        packed = ((element << np.uint64(2) | (key >> np.uint32(30)).astype(np.uint64)) << np.uint64(32 + low)
-                  | (bary[:, 0].astype(np.uint64) << np.uint64(16 + low))
-                  | (bary[:, 1].astype(np.uint64) << np.uint64(low)) | np.arange(n, dtype=np.uint64))
+        # is 3x faster than argsort and gives the stable order. element << 2 | category is key
+        # rotated left by 2 and b1 << 16 | b2 the little-endian pair rotated by 16 (u32 work)
+        pair = np.ascontiguousarray(bary, "<u2").view("<u4").reshape(n)  # b1 | b2 << 16
+        packed = ((key << np.uint32(2)) | (key >> np.uint32(30))).astype(np.uint64)
+        packed <<= np.uint64(32 + low)
+        packed |= ((pair << np.uint32(16)) | (pair >> np.uint32(16))).astype(np.uint64) << np.uint64(low)
+        packed |= np.arange(n, dtype=np.uint64)
         packed.sort()
         order = (packed & np.uint64((1 << low) - 1)).astype(np.int64)
         ranked = packed >> np.uint64(low)
         primary = None
     else:
+        element = (key & ELEMENT_MASK).astype(np.uint64)
         primary = ((element << np.uint64(2) | (key >> np.uint32(30)).astype(np.uint64)) << np.uint64(32)
                    | bary[:, 0].astype(np.uint64) << np.uint64(16) | bary[:, 1].astype(np.uint64))
         # Any correct sort gives the same permutation when the primary keys are distinct, so the
@@ -191,6 +195,7 @@ def sort_records(key: np.ndarray, bary: np.ndarray, energy: np.ndarray) -> np.nd
         ranked = np.take(primary, order)
     if ranked.size > 1 and (ranked[1:] == ranked[:-1]).any():  # ties: break by energy bits
         if primary is None:
+            element = (key & ELEMENT_MASK).astype(np.uint64)
             primary = ((element << np.uint64(2) | (key >> np.uint32(30)).astype(np.uint64)) << np.uint64(32)
                        | bary[:, 0].astype(np.uint64) << np.uint64(16) | bary[:, 1].astype(np.uint64))
         bits = energy.view(np.uint32)
