@@ -125,8 +125,12 @@ def prepare_job(scene_path, *, frames: str | None, out_dir, settings: RenderSett
                                                                ("collection", "filter", "segments")})
     if not guided:  # fixed settings read no segment parameter
         decision.pop("segments")
-    return Job(scene_path=str(scene.path), scene_hash=scene.scene_hash, camera=camera, camera_name=cam_name,
-               element_size=p.elements.element_size, store_url=store_url, out_dir=str(out),
+    # Absolute paths: tasks and farm recipes run elsewhere, and in other working directories
+    if "://" not in store_url:
+        store_url = str(Path(store_url).resolve())
+    return Job(scene_path=str(scene.path.resolve()), scene_hash=scene.scene_hash, camera=camera,
+               camera_name=cam_name, element_size=p.elements.element_size, store_url=store_url,
+               out_dir=str(out.resolve()),
                first=p.frames[0], last=p.frames[-1], selection=tuple(p.frames), width=settings.width,
                height=settings.height, spp=settings.spp, reflection_depth=settings.reflection_depth,
                area_samples=settings.area_samples, tonemap=settings.tonemap.to_dict(), config=config.to_dict(),

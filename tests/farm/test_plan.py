@@ -92,3 +92,19 @@ def test_bad_plan_input_is_one_line(room, tmp_path):
     assert result.returncode == 2 and result.stderr.strip().count("\n") == 0 and "loom plan" in result.stderr
     result = _run(*LOOM, "plan", tmp_path / "missing.glb", "--out", tmp_path / "o", check=False)
     assert result.returncode == 2 and not (tmp_path / "o").exists()
+
+
+def test_a_recipe_with_a_changed_or_missing_scene_is_one_line(room, tmp_path):
+    tmp, scene, config, _ = room
+    mine = tmp_path / "scene.glb"
+    mine.write_bytes(scene.read_bytes())
+    out = tmp_path / "plan"
+    _run(*LOOM, "plan", mine, *_options(out, config))
+    _run(*LOOM, "scene", "cornell", "-o", mine)  # another scene at the same path
+    changed = _run(*LOOM, "farm", "decide", out, "0", check=False)
+    mine.unlink()
+    missing = _run(*LOOM, "farm", "decide", out, "0", check=False)
+    for result, reason in ((changed, "changed"), (missing, "no such file")):
+        assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1
+        assert str(mine) in result.stderr and reason in result.stderr
+    assert not (out / "segments").exists()  # nothing half-written
