@@ -179,7 +179,8 @@ def test_readme_paragraph_matches_compose():
     text = (ROOT / "README.md").read_text()
     if "**Containers.**" not in text:
         pytest.skip("README has no **Containers.** paragraph yet")
-    para = text[text.index("**Containers.**"):].split("\n\n")[0]
+    start = text.index("**Containers.**")
+    para = text[start:text.index("**Not tested here:**", start)]  # the paragraph and its command block
     assert "docker/Dockerfile" in para and "docker/compose.yaml" in para and "--scale worker=" in para
     compose = yaml.safe_load((DOCKER / "compose.yaml").read_text())
     commands = [" ".join(s["command"]) for s in compose["services"].values()]
