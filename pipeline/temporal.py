@@ -221,24 +221,3 @@ def _direct(records, elements, areas) -> np.ndarray:
 
     return records_irradiance(records, records.direct, elements, areas)
 
-
-def write_temporal_maps(store_url: str, scene, elements, frames, *, mode: str, fmax: int | None,
-                        config: RenderConfig = RenderConfig(), spatial_filter: bool = False) -> dict:
-    """Replace the indirect maps of ``frames`` (frame numbers) in the run's illumination maps
-    (pipeline/store/illumination.py) by their spatiotemporal reconstruction; the direct maps and
-    adaptation luminances written by the per-frame illuminate tasks are kept. Returns a summary."""
-    from .store import PhotonStore
-    from .store.illumination import IlluminationMaps
-
-    store = PhotonStore.open(store_url)
-    maps = IlluminationMaps.open(store_url, mode="r+")
-    numbers = list(store.frame_numbers)
-    indices = [numbers.index(f) for f in frames]
-    lengths = []
-    for lit in illumination_maps(store, elements, scene, indices, mode=mode, fmax=fmax, config=config,
-                                 spatial_filter=spatial_filter):
-        adaptation = float(maps.adaptation()[lit.frame_index])
-        maps.write_frame(lit.frame_index, indirect=lit.irradiance, direct=maps.read(lit.frame_index, "direct"),
-                         adaptation=adaptation)
-        lengths.append(float(np.mean(lit.back.astype(np.int64) + lit.fwd + 1)))
-    return {"frames": len(lengths), "mean_window": float(np.mean(lengths)) if lengths else 0.0}

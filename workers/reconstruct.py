@@ -10,7 +10,7 @@ hits give a mesh-based direct estimate used only for eye adaptation (§4).
 :func:`vertex_irradiance` is the NumPy reference of the temporal gather (kernels/, issue 5) for a
 one-frame window: keep its signature and arithmetic (float64, np.bincount) as they are.
 :func:`mesh_adaptation` turns a frame's maps into its adaptation luminance (pipeline/tonemap.py);
-:func:`illuminate_task` is the Dask task that writes both maps and that value for one frame.
+:func:`reconstruct_task` is the Dask task of Steps 4-5 for a chunk of a segment's frames.
 """
 from __future__ import annotations
 
@@ -187,35 +187,6 @@ def mesh_adaptation(state, elements, irradiance: np.ndarray, aspect: float,
         seen[:] = True  # nothing in view: adapt to the whole scene
     weight = area[seen] / np.maximum((local[seen] ** 2).sum(axis=1), 1e-12)
     return log_average(tri_radiance[tri[seen]], weight)
-
-
-def illuminate_task(*, store_url: str, scene_path: str, scene_hash: str, camera: str | None,
-                    element_size: float, frame: int, aspect: float) -> dict:
-    """Dask task: a frame's indirect and direct maps into the store, and its adaptation luminance.
-
-    Plain arguments in, a small dict out; recomputable, so a rerun overwrites the same chunks.
-    """
-    import time
-
-    from pipeline.store import PhotonStore
-    from pipeline.store.illumination import IlluminationMaps
-
-    from .scene_cache import load_elements, load_scene
-
-    t0 = time.perf_counter()
-    scene = load_scene(scene_path, scene_hash, camera)
-    elements = load_elements(scene_path, scene_hash, element_size)
-    state = scene.pose_frame(frame)
-    records = PhotonStore.open(store_url).read_frame(frame - 1)
-    areas = elements.vertex_areas(state)
-    maps = {}
-    for name, sel in (("indirect", ~records.direct), ("direct", records.direct)):
-        maps[name] = vertex_irradiance(records.element[sel], records.b1[sel], records.b2[sel],
-                                       records.energy[sel], elements, areas, records.photons_emitted)
-    adaptation = mesh_adaptation(state, elements, maps["indirect"] + maps["direct"], aspect)
-    IlluminationMaps.open(store_url, mode="r+").write_frame(frame - 1, adaptation=adaptation, **maps)
-    return {"frame": frame, "adaptation": adaptation, "records": len(records),
-            "photons": records.photons_emitted, "seconds": time.perf_counter() - t0}
 
 
 def vertex_moments(element, b1, b2, energy, element_vertices, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
