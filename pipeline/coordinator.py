@@ -390,7 +390,13 @@ class _Segments:
         from distributed import as_completed
 
         submit = self.client.submit
-        chunk_of = {submit(reconstruct_task, key=key, retries=TASK_RETRIES, pure=False, **kw): i
+        # Consecutive chunks share the frames their windows reach: contiguous runs of chunks go to
+        # one worker each (a hint, so the frame cache of workers/reconstruct.py hits; Dask may still
+        # move a chunk, and placement never changes a bit of the result)
+        workers = sorted(self.client.scheduler_info().get("workers", {}))
+        chunk_of = {submit(reconstruct_task, key=key, retries=TASK_RETRIES, pure=False,
+                           workers=[workers[i * len(workers) // len(calls)]] if workers else None,
+                           allow_other_workers=True, **kw): i
                     for i, (key, kw) in enumerate(calls)}
         ready, following, composites = {}, 0, []
         for future, result in as_completed(list(chunk_of), with_results=True):
