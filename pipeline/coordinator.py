@@ -93,6 +93,18 @@ def fanout() -> Iterator[object | None]:
         yield client
 
 
+@contextmanager
+def _writing(where: str):
+    """A task's failure to write (permissions, a full or read-only disk, a path that is a file) is
+    the user's to fix: one line naming the file, instead of a worker's traceback."""
+    from .errors import LoomError
+
+    try:
+        yield
+    except OSError as err:
+        raise LoomError(f"cannot write: {err.strerror or err}", path=err.filename or where, field="store") from None
+
+
 PROGRESS_TOPIC = "loom-progress"
 _local_progress: list = []  # callbacks of a client running segment tasks in-process (synchronous)
 
@@ -121,7 +133,9 @@ class _Segments:
         self.config = RenderConfig.from_dict(job.config)
         self.scene = load_scene(job.scene_path, job.scene_hash, job.camera)
         self.elements = load_elements(job.scene_path, job.scene_hash, job.element_size)
-        self.store = PhotonStore.open(job.store_url, mode="r+")
+        # A store swapped for another run's (another scene, photon settings or seed) is refused here
+        self.store = PhotonStore.open(job.store_url, mode="r+", scene_hash=job.scene_hash,
+                                      config_hash=self.config.photon_hash(job.element_size), seed=self.config.seed)
         self.times = {"shoot_s": 0.0, "aqm_s": 0.0, "temporal_s": 0.0}
         self.batches_traced = 0
         self._index = None  # the segment being decided, for progress lines
@@ -153,7 +167,9 @@ class _Segments:
                 element_size=self.job.element_size, frame=f, frame_index=f - 1, batch=batch,
                 n_photons=n - have, photon_start=have, seed=self.config.seed,
                 max_depth=self.config.photon_depth)))
-        for r in run_tasks(self.client, shoot_task, calls, desc="shoot", progress=False).values():
+        with _writing(self.job.store_url):
+            results = run_tasks(self.client, shoot_task, calls, desc="shoot", progress=False)
+        for r in results.values():
             self.add_times(r, ("pose_s", "trace_s", "write_s"))
         self.batches_traced += len(calls)
         self.times["shoot_s"] += time.perf_counter() - t0
@@ -499,7 +515,8 @@ def segment_task(job: dict, index: int, force: bool = False) -> dict:
             targets = {f: job.n_photons for f in job.selection}
         t0 = time.perf_counter()
         progress(f"segment {index}: frames {rec.start}-{rec.end}: reconstructing (Steps 4-5) and compositing")
-        rec.frames, written = run.frames(rec, targets, _frames_info(job, index - 1), force)
+        with _writing(job.out_dir):
+            rec.frames, written = run.frames(rec, targets, _frames_info(job, index - 1), force)
         t1 = t0 + run.times["temporal_s"]
         for r in written.values():
             run.add_times({f"composite_{k}": v for k, v in r.items() if k.endswith("_s")},

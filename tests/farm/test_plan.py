@@ -108,3 +108,27 @@ def test_a_recipe_with_a_changed_or_missing_scene_is_one_line(room, tmp_path):
         assert result.returncode == 2 and len(result.stderr.strip().splitlines()) == 1
         assert str(mine) in result.stderr and reason in result.stderr
     assert not (out / "segments").exists()  # nothing half-written
+
+
+def test_a_recipe_with_another_runs_store_or_an_unwritable_one_is_one_line(room, tmp_path):
+    import shutil
+
+    tmp, scene, config, _ = room
+    out, other = tmp_path / "plan", tmp_path / "other"
+    _run(*LOOM, "plan", scene, *_options(out, config))
+    cornell = tmp_path / "cornell.glb"
+    _run(*LOOM, "scene", "cornell", "-o", cornell)
+    _run(*LOOM, "plan", cornell, "--frames", "1-4", "--out", other, "--config", config)
+    shutil.rmtree(out / "photons.zarr")
+    shutil.copytree(other / "photons.zarr", out / "photons.zarr")  # another run's store
+    swapped = _run(*LOOM, "farm", "decide", out, "0", check=False)
+    assert swapped.returncode == 2 and len(swapped.stderr.strip().splitlines()) == 1
+    assert "photons.zarr" in swapped.stderr and "scene" in swapped.stderr
+    # A store a worker cannot write into: its frames folder is a file
+    _run(*LOOM, "plan", scene, *_options(tmp_path / "third", config))
+    frames = tmp_path / "third" / "photons.zarr" / "frames"
+    shutil.rmtree(frames)
+    frames.write_text("not a folder")
+    broken = _run(*LOOM, "farm", "decide", tmp_path / "third", "0", check=False)
+    assert broken.returncode == 2 and len(broken.stderr.strip().splitlines()) == 1, broken.stderr
+    assert "photons.zarr" in broken.stderr and "cannot write" in broken.stderr
