@@ -222,11 +222,11 @@ def finish(job, records, *, rays: dict, batches: int, t_start: float) -> dict:
 
 
 def _remove_leftovers(out: Path, store_url: str) -> None:
-    """Temporary files killed writers left (``.NAME.PID[.ID].partial``) in the output folder and a
-    local photon store: with every frame done, no writer of this run is alive that could still
+    """Temporary files killed writers left (``.NAME.PID[.ID].partial``, zarr's ``zarr.UUID.partial``)
+    in the output folder and a local photon store: with every frame done, no writer of this run is alive that could still
     rename one into place (zarr never reads them either way)."""
     leftovers = [*out.glob(".*.partial*"), *out.glob("segments/.*.partial*"), *out.glob(".farm/.*.partial*")]
     if "://" not in store_url or store_url.startswith("file://"):
-        leftovers += Path(store_url.removeprefix("file://")).rglob(".*.partial*")
+        leftovers += Path(store_url.removeprefix("file://")).rglob("*.partial")  # ours and zarr's LocalStore's
     for tmp in leftovers:
         tmp.unlink(missing_ok=True)
