@@ -22,7 +22,7 @@ from pipeline.store.illumination import IlluminationMaps
 from pipeline.temporal import illumination_maps
 from workers.composite import render_frame
 
-pytestmark = pytest.mark.slow
+pytestmark = [pytest.mark.slow, pytest.mark.timeout(3600)]  # minutes of rendering, not a hang
 SETTINGS = RenderSettings(width=320, height=240, spp=2)
 # 32x the paper's 2,000,000, whose own noise our AQM sees on ROOM; shot in batches of 8,000,000
 # (a worker holds one batch's records while it sorts them: about 2 GB)
