@@ -68,16 +68,18 @@ def test_rerun_skips_done_batches(scenes, reference):
     assert summary["tasks"] == 0
 
 
-def test_resume_after_kill_matches_uninterrupted_run(scenes, reference, tmp_path):
-    url = str(tmp_path / "killed.zarr")
-    cmd = [sys.executable, "-m", "pipeline", "shoot", scenes["cornell"], "--frames", "1-12",
-           "--photons", "6000", "--store", url, "--scheduler", "synchronous", "--quiet"]
+def test_resume_after_kill_matches_uninterrupted_run(scenes, tmp_path):
+    # 30 frames of 40,000 photons: long enough that the writer is still mid-run when killed
+    url, reference = str(tmp_path / "killed.zarr"), str(tmp_path / "whole.zarr")
+    cmd = [sys.executable, "-m", "pipeline", "shoot", scenes["cornell"], "--frames", "1-30",
+           "--photons", "40000", "--store", url, "--scheduler", "synchronous", "--quiet"]
+    subprocess.run(cmd[:-5] + ["--store", reference] + cmd[-3:], check=True, capture_output=True)
     proc = subprocess.Popen(cmd, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
     deadline = time.monotonic() + 120
     done = 0
     while time.monotonic() < deadline and proc.poll() is None:
         try:
-            done = sum(len(PhotonStore.open(url).done_batches(f)) for f in range(12))
+            done = sum(len(PhotonStore.open(url).done_batches(f)) for f in range(30))
         except LoomError:
             done = 0
         if done >= 3:
@@ -86,7 +88,7 @@ def test_resume_after_kill_matches_uninterrupted_run(scenes, reference, tmp_path
         time.sleep(0.05)
     proc.wait()
     assert proc.returncode == -signal.SIGKILL, "the shoot finished before it could be killed"
-    assert 3 <= done < 12
+    assert 3 <= done < 30
     result = subprocess.run(cmd, capture_output=True, text=True)
     assert result.returncode == 0, result.stderr
     assert "already done" in result.stdout
