@@ -200,14 +200,16 @@ def render_command(segment, quiet, verbose, performance_report, scheduler, worke
 @_job_options
 @click.option("--loom", "loom_command", default=None,
               help="The loom command the recipes run (default: this one; a farm may wrap it, e.g. 'srun loom').")
-def plan_command(loom_command, **job) -> None:
+@click.option("--decide-workers", type=int, default=1, show_default=True,
+              help="Worker processes a decide recipe traces its photons on (1: in its own process).")
+def plan_command(loom_command, decide_workers, **job) -> None:
     """Write OUT/Makefile: a make-driven farm render (make -C OUT -j N) of what `loom render` would make."""
     from .farm import bounds, write_plan
     from .render import prepare_job
 
     args = _job_arguments(**job)
     made = prepare_job(args.pop("scene_path"), **args)
-    path = write_plan(made, loom_command)
+    path = write_plan(made, loom_command, decide_workers)
     segments, chunks = bounds(made)
     click.echo(f"wrote {path}: up to {segments} segment(s) x {chunks} chunk(s) of frames; "
                f"run: make -C {job['out_dir']} -j N")

@@ -49,11 +49,17 @@ def bounds(job: Job) -> tuple[int, int]:
     return max(1, math.ceil(n / (job.fmax + 1))), max(1, math.ceil(longest / CHUNK_FRAMES))
 
 
-def write_plan(job: Job, loom: str | None = None) -> Path:
-    """``OUT/plan.json`` and ``OUT/Makefile`` for ``job``; returns the Makefile's path."""
+def write_plan(job: Job, loom: str | None = None, decide_workers: int = 1) -> Path:
+    """``OUT/plan.json`` and ``OUT/Makefile`` for ``job``; returns the Makefile's path.
+    ``decide_workers`` > 1: the decide recipes trace their photons on a LocalCluster of that many
+    workers (decisions are sequential, nothing else of a segment can run before them, so a farm may
+    give a decide target a whole machine); 1: in the recipe's own process."""
     out = Path(job.out_dir)
     loom = loom or str(Path(sys.executable).with_name("loom"))
-    _atomic(out / PLAN, json.dumps({"job": job.to_dict()}, indent=1, sort_keys=True))
+    if not 1 <= decide_workers <= 1024:
+        raise LoomError(f"must be in [1, 1024], got {decide_workers}", field="--decide-workers")
+    _atomic(out / PLAN, json.dumps({"job": job.to_dict(), "decide_workers": decide_workers}, indent=1,
+                                   sort_keys=True))
     segments, chunks = bounds(job)
     d = shlex.quote(str(out.resolve()))
     ok = lambda name: f"{STAMPS}/{name}.ok"  # noqa: E731
@@ -90,6 +96,16 @@ def write_plan(job: Job, loom: str | None = None) -> Path:
     path = out / "Makefile"
     _atomic(path, "\n".join(lines))
     return path
+
+
+def _plan(out_dir) -> dict:
+    path = Path(out_dir) / PLAN
+    try:
+        return json.loads(path.read_text())
+    except FileNotFoundError:
+        raise LoomError("has no plan (run `loom plan` first)", path=str(out_dir)) from None
+    except ValueError as err:
+        raise LoomError(f"not a photonloom plan ({err})", path=str(path)) from None
 
 
 def load_job(out_dir) -> Job:
@@ -143,9 +159,12 @@ def _decide(job: Job, i: int) -> str:
     prev = _current(job, i - 1) if i else None
     if prev is not None and prev.end >= job.last:
         return f"segment {i}: none (the animation ends in segment {i - 1})"
-    run = _Segments(job, None)
+    from .cluster import connect
+
+    workers = int(_plan(job.out_dir).get("decide_workers", 1))
     start, fmax = (job.first, job.fmax) if prev is None else (prev.end + 1, prev.fmax)
-    rec = run.record(i, start, fmax)
+    with connect("synchronous" if workers == 1 else "local", workers) as client:
+        rec = _Segments(job, client).record(i, start, fmax)
     return f"segment {i}: frames {rec.start}-{rec.end}, K {rec.k}, F_max {rec.fmax}, N_frame {rec.n_frame:,}"
 
 
