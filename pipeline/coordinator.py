@@ -31,8 +31,8 @@ from __future__ import annotations
 import math
 import time
 from contextlib import contextmanager
-from pathlib import Path
 from dataclasses import asdict, dataclass
+from pathlib import Path
 from typing import Callable, Iterator
 
 import numpy as np
@@ -121,7 +121,7 @@ def progress(message: str) -> None:
             callback(message)
 
 
-class _Segments:
+class SegmentRun:
     """One segment task's view of the run: scene, element mesh, store, config, records."""
 
     def __init__(self, job: Job, client):
@@ -184,6 +184,17 @@ class _Segments:
             use[f - 1] = nb
         return use
 
+    def reach_targets(self, rec: SegmentRecord) -> dict[int, int]:
+        """Photon targets of every frame segment ``rec``'s windows may reach: the earlier segments',
+        its own and the next one's (§5.2: a segment's photons are collected by its neighbours)."""
+        if not rec.guided:
+            return {f: self.job.n_photons for f in self.job.selection}
+        out = {**self.known_targets(rec.index), **rec.targets()}
+        after = read_record(self.job.out_dir, rec.index + 1)
+        if after is not None and after.decision_hash == self.job.decision_hash:
+            out.update(after.targets())
+        return out
+
     def known_targets(self, index: int) -> dict[int, int]:
         """Targets of every decided segment before ``index`` (their photons are in the store)."""
         out: dict[int, int] = {}
@@ -230,7 +241,7 @@ class _Segments:
         """d_AQM (percent) of I1(K) against I2(K) as the viewer sees them; the M_AQM picture is
         written beside the segment record."""
         from workers.composite import render_frame
-        from workers.reconstruct import frame_direct, mesh_adaptation
+        from workers.reconstruct import mesh_adaptation
 
         from .aqm.visualize import difference_picture
         from .images import write_png
@@ -247,9 +258,8 @@ class _Segments:
         # unfiltered halves differ by; judged unfiltered, the loop would trace for noise no frame shows.
         (lit,) = illumination_maps(self.store, self.elements, self.scene, [k - 1], mode=temporal,
                                    fmax=place.fmax, config=self.config, split_parity=True, batches=use,
-                                   spatial_filter=self.config.spatial_filter)
-        state = self.scene.pose_frame(k)
-        direct = frame_direct(self.store, k - 1, int(use[k - 1]), self.elements, self.elements.vertex_areas(state))
+                                   spatial_filter=self.config.spatial_filter, with_direct=True)
+        state, direct = self.scene.pose_frame(k), lit.direct
         job = self.job
         images = [render_frame(state, self.elements, half, width=job.width, height=job.height, spp=job.spp,
                                seed=self.config.seed, frame=k, max_depth=job.reflection_depth,
@@ -272,9 +282,9 @@ class _Segments:
         job, cfg = self.job, self.config
         self._index = index
         t_start = time.perf_counter()
-        prior = self.known_targets(index)
         if job.n_photons is not None:  # fixed settings: nothing to decide
             return self._fixed_record(index)
+        prior = self.known_targets(index)
         if job.single_state:  # camera-only motion: one photon set, nothing to collect in time
             place = Placement(job.first, (job.first + job.last) // 2, job.last, 0)
         else:
@@ -347,7 +357,7 @@ class _Segments:
         sel = set(self.job.selection)
         return [f for f in range(rec.start, rec.end + 1) if f in sel]
 
-    def _reconstruct_calls(self, rec: SegmentRecord, targets: dict[int, int]) -> list[tuple[str, dict]]:
+    def reconstruct_calls(self, rec: SegmentRecord, targets: dict[int, int]) -> list[tuple[str, dict]]:
         job = self.job
         use = self.batches(targets).tolist()
         frames = self.frames_of(rec)
@@ -366,7 +376,7 @@ class _Segments:
 
         t0 = time.perf_counter()
         out = {}
-        for r in run_tasks(self.client, reconstruct_task, self._reconstruct_calls(rec, targets), desc="reconstruct",
+        for r in run_tasks(self.client, reconstruct_task, self.reconstruct_calls(rec, targets), desc="reconstruct",
                            progress=False).values():
             out.update(r["frames"])
             self._took(r)
@@ -386,7 +396,7 @@ class _Segments:
         from .cluster import TASK_RETRIES
 
         t0 = time.perf_counter()
-        calls = self._reconstruct_calls(rec, targets)
+        calls = self.reconstruct_calls(rec, targets)
         forced = frozenset(self.frames_of(rec)) if force else frozenset()
         info, out, written = dict(before), {}, {}
 
@@ -499,7 +509,7 @@ def segment_task(job: dict, index: int, force: bool = False) -> dict:
     segment's decisions, maps and frames (``loom render --segment``)."""
     job = Job(**job)
     with fanout() as client:
-        run = _Segments(job, client)
+        run = SegmentRun(job, client)
         prev = read_record(job.out_dir, index - 1) if index else None
         start = job.first if prev is None else prev.end + 1
         fmax = job.fmax if prev is None else prev.fmax
@@ -509,10 +519,9 @@ def segment_task(job: dict, index: int, force: bool = False) -> dict:
                 else run._fixed_record(index)
         else:
             rec = run.record(index, start, fmax)
-        nxt = run.record(index + 1, rec.end + 1, rec.fmax) if rec.end < job.last and rec.guided else None
-        targets = {**run.known_targets(index), **rec.targets(), **(nxt.targets() if nxt else {})}
-        if not rec.guided:
-            targets = {f: job.n_photons for f in job.selection}
+        if rec.end < job.last and rec.guided:
+            run.record(index + 1, rec.end + 1, rec.fmax)  # Steps 1-3 of the next segment (§5.2)
+        targets = run.reach_targets(rec)
         t0 = time.perf_counter()
         progress(f"segment {index}: frames {rec.start}-{rec.end}: reconstructing (Steps 4-5) and compositing")
         with _writing(job.out_dir):
@@ -598,15 +607,11 @@ def _coordinate(job, client, on_segment, records, index, start) -> list:
 
 def _drop_records_after(job: Job, last_index: int) -> None:
     """Remove records (and their pictures) a previous run left beyond this run's last segment."""
-    from .segment_records import DIRECTORY
+    from .segment_records import DIRECTORY, record_index
 
-    folder = Path(job.out_dir) / DIRECTORY
-    for path in folder.glob("segment-*"):
-        try:
-            index = int(path.name.split("-")[1].split(".")[0])
-        except ValueError:
-            continue
-        if index > last_index:
+    for path in (Path(job.out_dir) / DIRECTORY).glob("segment-*"):
+        index = record_index(path)
+        if index is not None and index > last_index:
             path.unlink(missing_ok=True)
 
 
@@ -627,16 +632,12 @@ def reprocess(job: Job, client, index: int) -> tuple[SegmentRecord, dict]:
     rec = SegmentRecord.from_dict(result["record"])
     rays = {int(f): r for f, r in result["rays"].items()}
     # Neighbours: their windows reach into this segment; recompute their maps, redo changed frames
-    run = _Segments(job, client)
+    run = SegmentRun(job, client)
     for i in (index - 1, index + 1):
         nb = read_record(job.out_dir, i)
         if nb is None or nb.status != "done":
             continue
-        targets = {**run.known_targets(i), **nb.targets()}
-        after = read_record(job.out_dir, i + 1)
-        if after is not None:
-            targets.update(after.targets())
-        nb.frames = run.reconstruct(nb, targets)
+        nb.frames = run.reconstruct(nb, run.reach_targets(nb))
         write_record(job.out_dir, nb)
     last_index = index
     while read_record(job.out_dir, last_index + 1) is not None:

@@ -28,7 +28,7 @@ import shlex
 import sys
 from pathlib import Path
 
-from .coordinator import CHUNK_FRAMES, Job, _Segments, composite_calls
+from .coordinator import CHUNK_FRAMES, Job, SegmentRun, composite_calls
 from .errors import LoomError
 from .segment_records import read_record, read_records, record_path, write_record
 
@@ -164,7 +164,7 @@ def _decide(job: Job, i: int) -> str:
     workers = int(_plan(job.out_dir).get("decide_workers", 1))
     start, fmax = (job.first, job.fmax) if prev is None else (prev.end + 1, prev.fmax)
     with connect("synchronous" if workers == 1 else "local", workers) as client:
-        rec = _Segments(job, client).record(i, start, fmax)
+        rec = SegmentRun(job, client).record(i, start, fmax)
     return f"segment {i}: frames {rec.start}-{rec.end}, K {rec.k}, F_max {rec.fmax}, N_frame {rec.n_frame:,}"
 
 
@@ -176,13 +176,10 @@ def _calls(job: Job, i: int):
     rec, _ = _segment(job, i)
     if rec is None:
         return None, None, []
-    run = _Segments(job, None)
-    targets = {**run.known_targets(i), **rec.targets()}
     if rec.end < job.last and rec.guided:
-        targets.update(_current(job, i + 1).targets())
-    if not rec.guided:
-        targets = {f: job.n_photons for f in job.selection}
-    return rec, run, run._reconstruct_calls(rec, targets)
+        _current(job, i + 1)  # its decide target must have run: the windows reach its photons
+    run = SegmentRun(job, None)
+    return rec, run, run.reconstruct_calls(rec, run.reach_targets(rec))
 
 
 def _reconstruct(job: Job, i: int, c: int) -> str:

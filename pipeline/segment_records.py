@@ -75,6 +75,12 @@ def record_path(out_dir, index: int) -> Path:
     return Path(out_dir) / DIRECTORY / f"segment-{index:03d}.json"
 
 
+def record_index(path) -> int | None:
+    """The segment index of a file of the records folder (record, picture, farm chunk), or None."""
+    m = re.match(r"segment-(\d+)[.]", Path(path).name)
+    return int(m[1]) if m else None
+
+
 def write_record(out_dir, record: SegmentRecord) -> None:
     path = record_path(out_dir, record.index)
     path.parent.mkdir(parents=True, exist_ok=True)
@@ -103,7 +109,7 @@ def read_records(out_dir) -> list[SegmentRecord]:
     for path in sorted(folder.glob("segment-*.json")):
         if not re.fullmatch(r"segment-\d+\.json", path.name):
             continue  # a farm's chunk files (pipeline/farm.py) sit beside the records
-        rec = read_record(out_dir, int(path.stem.split("-")[1]))
+        rec = read_record(out_dir, record_index(path))
         if rec is not None:
             out.append(rec)
     return out

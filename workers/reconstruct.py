@@ -203,14 +203,6 @@ def vertex_moments(element, b1, b2, energy, element_vertices, n_vertices: int) -
             np.bincount(idx, weights=(w * y) ** 2, minlength=n_vertices))
 
 
-def frame_direct(store, frame_index: int, n_batches: int, elements, areas) -> np.ndarray:
-    """(V, 3) mesh-based direct estimate of a frame from its own direct photons (§4; eye adaptation)."""
-    records = store.read_frame(frame_index, batches=range(n_batches))
-    sel = records.direct
-    return vertex_irradiance(records.element[sel], records.b1[sel], records.b2[sel], records.energy[sel],
-                             elements, areas, records.photons_emitted)
-
-
 def map_digest(*maps: np.ndarray) -> str:
     """16 hex digits of SHA-256 over the float32 bytes of maps: what a frame's pixels read of them."""
     import hashlib
