@@ -143,6 +143,27 @@ __kernel void sums_prefix_step(__global const uint *key, __global const ushort *
     for (int c = 0; c < SLOTS; ++c) o[c] = prev[c] + acc[c];
 }
 
+// The same table from per-frame element sums already made (element_sums of frame j, laid out
+// (E, n_parity, 12)), one launch a frame: row j + 1 = row j + sums, row 0 zeroed with frame 0.
+// Bitwise equal to sums_prefix and sums_prefix_step: element_sums adds a frame's records into
+// zeros in the same order as they do, and the rows add those sums in the same order.
+__kernel void frame_sums_prefix_step(__global const double *sums, const int j, const int n_frames,
+                                     const int n_elements, const int n_parity, __global double *table)
+{
+    const long gid = get_global_id(0);
+    if (gid >= (long)n_elements * n_parity) return;
+    long e, width;
+    uint parity;
+    __global double *t = prefix_rows(table, gid, n_frames, n_parity, &e, &parity, &width);
+    if (j == 0) {
+        for (int c = 0; c < SLOTS; ++c) t[c] = 0.0;
+    }
+    __global const double *acc = sums + gid * SLOTS;
+    __global const double *prev = t + (long)j * width;
+    __global double *o = t + (long)(j + 1) * width;
+    for (int c = 0; c < SLOTS; ++c) o[c] = prev[c] + acc[c];
+}
+
 // Vertex flux of every output frame i (work item v; frames in order, so an element's rows are
 // read while in cache): vertex v adds, over the element corners in slots[voffsets[v] ..
 // voffsets[v+1]) (element * 3 + corner, ascending), the corner's window sum over its element's

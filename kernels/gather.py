@@ -283,6 +283,38 @@ def gather_flux_cl(frames, n_emitted, back, fwd, rows, element_vertices, n_verti
                  n_parity)
 
 
+def frame_sums_flux_cl(frame_sums, n_emitted, back, fwd, rows, element_vertices, n_vertices: int) -> np.ndarray:
+    """Steps 2-3 on PoCL from per-frame element sums made earlier (``frame_sums``: J arrays
+    (E, P, 3, 4), each :func:`element_sums_cl` of one frame): the prefix table is filled one
+    launch a frame from the arrays where they lie (no host stacking or transposition), then
+    windows and vertices as :func:`window_flux_cl`. Bitwise equal to :func:`gather_flux_cl` on
+    those frames' records (tested): what lets pipeline/temporal.py sum a frame's records once per
+    worker, however many chunks' windows reach it. NumPy twin: :func:`window_flux_reference` of
+    the stacked sums."""
+    frame_sums = [np.ascontiguousarray(a, np.float64) for a in frame_sums]
+    n_rows = len(frame_sums)
+    if not n_rows:
+        raise LoomError("no frames of sums to gather")
+    n_elements, n_parity = frame_sums[0].shape[:2]
+    if any(a.shape != (n_elements, n_parity, 3, 4) for a in frame_sums):
+        raise LoomError(f"frame sums must all be (elements, parity, 3, 4), got {frame_sums[0].shape} and others")
+    n_emitted, back, fwd, rows = _check_window_args(n_rows, n_elements, n_emitted, back, fwd, rows)
+    width = n_elements * n_parity * SLOTS
+    if width == 0:
+        return np.zeros((len(rows), n_parity, n_vertices, 4))
+    ctx, queue = device_context()
+    d_table = scratch("gather.table", 8 * (n_rows + 1) * width)
+    step = kernel("gather", "frame_sums_prefix_step")
+    held = []  # read in place: keep the buffers until the kernels have finished
+    for j, a in enumerate(frame_sums):
+        held.append(_in_place(ctx, a))
+        step(queue, (n_elements * n_parity,), None, held[-1], np.int32(j), np.int32(n_rows),
+             np.int32(n_elements), np.int32(n_parity), d_table)
+    queue.finish()
+    del held
+    return _flux(d_table, True, n_emitted, back, fwd, rows, element_vertices, n_vertices, n_elements, n_parity)
+
+
 def window_flux_reference(sums, n_emitted, back, fwd, rows, element_vertices, n_vertices: int) -> np.ndarray:
     """NumPy twin of :func:`window_flux_cl`: window rows added directly, corners scattered
     with ``np.bincount``."""

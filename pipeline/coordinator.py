@@ -420,7 +420,10 @@ class SegmentRun:
         # one worker each (a hint, so the frame cache of workers/reconstruct.py hits; Dask may still
         # move a chunk, and placement never changes a bit of the result)
         workers = sorted(self.client.scheduler_info().get("workers", {}))
-        chunk_of = {submit(reconstruct_task, key=key, retries=TASK_RETRIES, pure=False,
+        # Priorities: a worker takes its chunks in frame order (so composites can follow chunk by
+        # chunk and its frame cache sees the frames of the chunk before) and any reconstruction
+        # before any composite (the temporal stage is not slowed by the ray tracing it feeds).
+        chunk_of = {submit(reconstruct_task, key=key, retries=TASK_RETRIES, pure=False, priority=len(calls) - i,
                            workers=[workers[i * len(workers) // len(calls)]] if workers else None,
                            allow_other_workers=True, **kw): i
                     for i, (key, kw) in enumerate(calls)}
@@ -429,7 +432,7 @@ class SegmentRun:
             ready[chunk_of[future]] = result
             while following in ready:
                 for key, ckw in take(ready.pop(following), calls[following][1]["frames"]):
-                    composites.append(submit(composite_task, key=key, retries=TASK_RETRIES, pure=False, **ckw))
+                    composites.append(submit(composite_task, key=key, retries=TASK_RETRIES, pure=False, priority=0, **ckw))
                 following += 1
         self.times["temporal_s"] += time.perf_counter() - t0
         for _, r in as_completed(composites, with_results=True):

@@ -5,9 +5,10 @@ What the render pipeline calls to turn stored photons into per-frame vertex irra
 1. windows   from the store's frames x elements count table (never the records), per frame and
              element, Condition (1) (kernels/temporal.py), ``mode`` adaptive | fixed | off;
 2. gather    per chunk of output frames the element sums of the records of every frame its
-             windows reach, turned into prefix sums over frames on the device; per output frame
-             the window sums as differences of prefix sums, pooled over the photons emitted in
-             the window, distributed to the vertices (kernels/gather.py);
+             windows reach (made once per frame and worker, :class:`FrameSums`), turned into
+             prefix sums over frames on the device; per output frame the window sums as
+             differences of prefix sums, pooled over the photons emitted in the window,
+             distributed to the vertices (kernels/gather.py);
 3. filter    optionally the adaptive object-space filter for vertices that collected too few
              photons (kernels/filter.py, §5.2.5).
 
@@ -17,9 +18,9 @@ photons is its own animation, with its own ends. Frames sharing another frame's 
 
 Memory: output frames are processed in chunks of consecutive frames; a chunk holds the element
 sums of its frames and their windows' reach (F_max/2 each side): (chunk + F_max) x E x 12 doubles
-per photon parity, about 590 MB for ATRIUM (43,000 elements, F_max = 44, chunk 96). Frames in the
-overlap of two chunks are summed twice ((chunk + F_max) / chunk = 1.5x the element sums), which
-costs less than keeping the sums of the whole animation or moving them through host memory.
+per photon parity, about 590 MB for ATRIUM (43,000 elements, F_max = 44, chunk 96), and one
+frame's records at a time. The per-frame sums are kept (:class:`FrameSums`, bounded by bytes), so
+frames in the overlap of two chunks that run on one worker are read and summed once.
 """
 from __future__ import annotations
 
@@ -29,7 +30,7 @@ from typing import Iterator
 import numpy as np
 
 from kernels.filter import adaptive_filter_cl, neighbourhood
-from kernels.gather import gather_flux_cl, irradiance
+from kernels.gather import element_sums_cl, frame_sums_flux_cl, irradiance
 from kernels.temporal import MODES, windows_cl
 
 from .config import RenderConfig
@@ -118,8 +119,9 @@ def illumination_maps(store, elements, scene, frames=None, *, mode: str = "adapt
         segment uses the batches that make up its N_frame (pipeline/coordinator.py).
     with_direct : also give each frame's mesh-based direct estimate from its own direct photons
         (workers/reconstruct.vertex_irradiance, §4), from the records the gather holds already.
-    times : if given, seconds spent are added to its keys ``read_s`` (records), ``windows_s``,
-        ``sums_s`` (gather), ``filter_s`` (filter and irradiance) and ``direct_s``.
+    times : if given, seconds spent are added to its keys ``read_s`` (records), ``frame_sums_s``
+        (a frame's element sums and direct flux, once per worker), ``windows_s``, ``sums_s``
+        (gather), ``filter_s`` (filter and irradiance) and ``direct_s``.
     """
     from workers.reconstruct import frame_geometry
 
@@ -148,24 +150,21 @@ def illumination_maps(store, elements, scene, frames=None, *, mode: str = "adapt
                                    counts_from=first)
     hood = _neighbourhood(elements, config.filter_rings, config.filter_angle) if spatial_filter else None
     clock.lap("windows_s")
-    records: dict[int, object] = {}  # FrameRecords per frame index, kept across chunks
+    n_parity = 2 if split_parity else 1
     for start in range(0, len(frames), chunk):
         part = np.arange(start, min(start + chunk, len(frames)))
         f = frames[part]
         lo = int((f[:, None] - back[part]).min())
         hi = int((f[:, None] + fwd[part]).max()) + 1
-        for g in [g for g in records if g < lo]:
-            del records[g]
         clock.lap(None)
-        records.update({g: store.read_frame(g, batches=None if batches is None else range(int(batches[g])))
-                        for g in range(lo, hi) if g not in records})
-        clock.lap("read_s")
-        flux = gather_flux_cl([records[g] for g in range(lo, hi)], n_emitted[lo:hi], back[part], fwd[part],
-                              f - lo, elements.element_vertices, elements.n_vertices, kind=kind,
-                              split_parity=split_parity)
+        outputs = set(f.tolist()) if with_direct else set()
+        sums = {g: FRAME_SUMS.get(store, g, None if batches is None else int(batches[g]), kind, n_parity,
+                                  elements, direct=g in outputs, times=times) for g in range(lo, hi)}
+        flux = frame_sums_flux_cl([sums[g].sums for g in range(lo, hi)], n_emitted[lo:hi], back[part],
+                                  fwd[part], f - lo, elements.element_vertices, elements.n_vertices)
         areas = np.stack([frame_geometry(scene, elements, store.frame_numbers[g]).vertex_areas for g in f.tolist()])
         clock.lap("sums_s")
-        own = [_direct(records[g], elements, a) if with_direct else None for g, a in zip(f.tolist(), areas)]
+        own = [sums[g].direct_irradiance(a) if with_direct else None for g, a in zip(f.tolist(), areas)]
         clock.lap("direct_s")
         rings = None
         if hood is not None:  # every map of the chunk in one launch
@@ -216,8 +215,76 @@ class _Clock:
         self.last = t
 
 
-def _direct(records, elements, areas) -> np.ndarray:
-    from workers.reconstruct import records_irradiance
+@dataclass
+class SummedFrame:
+    """What the gather reads of one frame's records: element sums (E, P, 3, 4) of a kind, and for
+    output frames the direct photons' vertex flux (V, 3) and the photons emitted."""
 
-    return records_irradiance(records, records.direct, elements, areas)
+    sums: np.ndarray
+    direct_flux: np.ndarray | None
+    photons_emitted: int
+
+    @property
+    def nbytes(self) -> int:
+        return self.sums.nbytes + (0 if self.direct_flux is None else self.direct_flux.nbytes)
+
+    def direct_irradiance(self, vertex_areas: np.ndarray) -> np.ndarray:
+        """The frame's own direct estimate, workers/reconstruct.records_irradiance's bits."""
+        from workers.reconstruct import flux_to_irradiance
+
+        return flux_to_irradiance(self.direct_flux, self.photons_emitted, vertex_areas)
+
+
+class FrameSums:
+    """Per-process cache of :class:`SummedFrame` (least recently used out first, at most
+    ``max_bytes``): a frame's records are read and summed once per worker, however many chunks'
+    windows reach it. At 640,000 photons a frame a chunk of 16 frames reaches 62 frames of 40 MB
+    of records each, which the store's record cache (192 MB) could not keep; their sums take
+    0.5 MB (ROOM). Keyed by store, source frame, the digests of the batches used, kind and parity
+    split, so a rewritten store or another batch count never serves stale sums, and frames that
+    share another frame's photons share its entry."""
+
+    def __init__(self, max_bytes: int):
+        from collections import OrderedDict
+
+        self.max_bytes, self.bytes = int(max_bytes), 0
+        self._entries: OrderedDict = OrderedDict()
+
+    def get(self, store, frame_index: int, n_batches: int | None, kind: str, n_parity: int, elements, *,
+            direct: bool = False, times: dict | None = None) -> SummedFrame:
+        src = store.source_frame(frame_index)
+        chosen = store.done_batches(src) if n_batches is None else list(range(n_batches))
+        digests = tuple((b, (store.batch_info(src, b) or {}).get("digest")) for b in chosen)
+        key = (store.url, src, digests, kind, n_parity)
+        found = self._entries.get(key)
+        if found is not None and (found.direct_flux is not None or not direct):
+            self._entries.move_to_end(key)
+            return found
+        clock = _Clock(times)
+        records = store.read_frame(frame_index, batches=chosen)
+        clock.lap("read_s")
+        sums = element_sums_cl([records], kind=kind, split_parity=n_parity == 2)[0]
+        direct_flux = None
+        if direct:
+            from workers.reconstruct import records_vertex_flux
+
+            direct_flux = records_vertex_flux(records, records.direct, elements.element_vertices, elements.n_vertices)
+        entry = SummedFrame(sums, direct_flux, int(records.photons_emitted))
+        clock.lap("frame_sums_s")
+        self._put(key, entry)
+        return entry
+
+    def _put(self, key, entry: SummedFrame) -> None:
+        old = self._entries.pop(key, None)
+        self.bytes -= 0 if old is None else old.nbytes
+        if entry.nbytes > self.max_bytes:
+            return
+        self._entries[key] = entry
+        self.bytes += entry.nbytes
+        while self.bytes > self.max_bytes:
+            _, gone = self._entries.popitem(last=False)
+            self.bytes -= gone.nbytes
+
+
+FRAME_SUMS = FrameSums(768 << 20)  # ATRIUM (43,000 elements) keeps ~90 frames of split sums
 

@@ -33,7 +33,7 @@ from pipeline.scene import ElementMesh, FrameState
 
 from .raycast import RayCaster, caster_for
 
-CHUNK_RAYS = 1 << 16  # camera samples per wavefront: large Embree batches, bounded memory
+CHUNK_RAYS = 1 << 14  # camera samples per wavefront: a working set two workers keep in the shared L3
 RAY_KINDS = ("camera", "shadow", "area", "reflection")
 _KIND = {"diffuse": 0, "mirror": 1, "glossy": 2}
 _DIMS_PER_DEPTH = 16  # random dimensions per reflection depth: lobe (2) + area samples (3 each)

@@ -54,11 +54,19 @@ def vertex_irradiance(element, b1, b2, energy, elements_mesh, vertex_areas, n_em
 
 def records_irradiance(records, select: np.ndarray, elements_mesh, vertex_areas) -> np.ndarray:
     """:func:`vertex_irradiance` of the records of a FrameRecords where ``select`` (bool (n,)),
-    with the same arithmetic and bits (tested): integer indices instead of boolean masks and the
-    corner weights times every channel in one product instead of np.tile (2x faster)."""
+    with the same arithmetic and bits (tested): :func:`records_vertex_flux` then
+    :func:`flux_to_irradiance`."""
     ev = np.asarray(getattr(elements_mesh, "element_vertices", elements_mesh))
     areas = np.asarray(vertex_areas, dtype=np.float64)
-    n_vertices = areas.shape[0]
+    s = records_vertex_flux(records, select, ev, areas.shape[0])
+    return flux_to_irradiance(s, records.photons_emitted, areas)
+
+
+def records_vertex_flux(records, select: np.ndarray, element_vertices, n_vertices: int) -> np.ndarray:
+    """(V, 3) float64 S_v = sum_j b_k(j) energy_j over the selected records, as
+    :func:`vertex_irradiance` sums them: integer indices instead of boolean masks and the corner
+    weights times every channel in one product instead of np.tile (2x faster)."""
+    ev = np.asarray(element_vertices)
     pick = np.flatnonzero(select)
     n = pick.shape[0]
     w1, w2 = (_bary(np.take(b, pick)) for b in (records.b1, records.b2))
@@ -75,7 +83,12 @@ def records_irradiance(records, select: np.ndarray, elements_mesh, vertex_areas)
     s = np.empty((n_vertices, 3), dtype=np.float64)
     for c in range(3):
         s[:, c] = np.bincount(idx, weights=flux[c].reshape(-1), minlength=n_vertices)
-    denom = float(records.photons_emitted) * areas
+    return s
+
+
+def flux_to_irradiance(s: np.ndarray, n_emitted: int, vertex_areas) -> np.ndarray:
+    """E_v = S_v / (N A_v) (dept.md §1.2); 0 where A_v = 0 or N = 0."""
+    denom = float(n_emitted) * np.asarray(vertex_areas, dtype=np.float64)
     out = np.zeros_like(s)
     ok = denom > 0
     out[ok] = s[ok] / denom[ok, None]
