@@ -236,13 +236,15 @@ class SummedFrame:
 
 
 class FrameSums:
-    """Per-process cache of :class:`SummedFrame` (least recently used out first, at most
-    ``max_bytes``): a frame's records are read and summed once per worker, however many chunks'
-    windows reach it. At 640,000 photons a frame a chunk of 16 frames reaches 62 frames of 40 MB
-    of records each, which the store's record cache (192 MB) could not keep; their sums take
-    0.5 MB (ROOM). Keyed by store, source frame, the digests of the batches used, kind and parity
-    split, so a rewritten store or another batch count never serves stale sums, and frames that
-    share another frame's photons share its entry."""
+    """Per-process cache of the element sums of single photon batches (least recently used out
+    first, at most ``max_bytes``): a batch's records are read and summed once per worker, however
+    many chunks' windows reach its frame and however many doublings of N_frame (§5.2.3) use it. A
+    frame's sums are its batches' sums added in batch order (one batch: exactly element_sums of
+    its records). At 640,000 photons a frame a chunk of 16 frames reaches 62 frames of 40 MB of
+    records each, which the store's record cache (192 MB) could not keep; their sums take 0.5 MB
+    a batch (ROOM). Keyed by store, source frame, batch, its digest, kind and parity split, so a
+    rewritten store never serves stale sums, and frames that share another frame's photons
+    share its entries."""
 
     def __init__(self, max_bytes: int):
         from collections import OrderedDict
@@ -252,23 +254,40 @@ class FrameSums:
 
     def get(self, store, frame_index: int, n_batches: int | None, kind: str, n_parity: int, elements, *,
             direct: bool = False, times: dict | None = None) -> SummedFrame:
+        """The sums of ``frame_index``'s first ``n_batches`` batches (None: every done batch);
+        with ``direct`` also its direct photons' vertex flux."""
         src = store.source_frame(frame_index)
         chosen = store.done_batches(src) if n_batches is None else list(range(n_batches))
-        digests = tuple((b, (store.batch_info(src, b) or {}).get("digest")) for b in chosen)
-        key = (store.url, src, digests, kind, n_parity)
+        if not chosen:
+            raise ValueError(f"frame {frame_index} has no batches to sum")
+        parts = [self._batch(store, src, b, kind, n_parity, elements, direct, times) for b in chosen]
+        sums = parts[0].sums.copy() if len(parts) > 1 else parts[0].sums
+        flux = None if not direct else parts[0].direct_flux.copy() if len(parts) > 1 else parts[0].direct_flux
+        for p in parts[1:]:
+            sums += p.sums
+            if direct:
+                flux += p.direct_flux
+        return SummedFrame(sums, flux, sum(p.photons_emitted for p in parts))
+
+    def _batch(self, store, src: int, batch: int, kind: str, n_parity: int, elements, direct: bool,
+               times: dict | None) -> SummedFrame:
+        digest = (store.batch_info(src, batch) or {}).get("digest")
+        key = (store.url, src, batch, digest, kind, n_parity)
         found = self._entries.get(key)
         if found is not None and (found.direct_flux is not None or not direct):
             self._entries.move_to_end(key)
             return found
         clock = _Clock(times)
-        records = store.read_frame(frame_index, batches=chosen)
+        records = store.read_frame(src, batches=[batch])
         clock.lap("read_s")
         sums = element_sums_cl([records], kind=kind, split_parity=n_parity == 2)[0]
+        sums.flags.writeable = False  # shared by every later reader
         direct_flux = None
         if direct:
             from workers.reconstruct import records_vertex_flux
 
             direct_flux = records_vertex_flux(records, records.direct, elements.element_vertices, elements.n_vertices)
+            direct_flux.flags.writeable = False
         entry = SummedFrame(sums, direct_flux, int(records.photons_emitted))
         clock.lap("frame_sums_s")
         self._put(key, entry)
@@ -286,5 +305,5 @@ class FrameSums:
             self.bytes -= gone.nbytes
 
 
-FRAME_SUMS = FrameSums(768 << 20)  # ATRIUM (43,000 elements) keeps ~90 frames of split sums
+FRAME_SUMS = FrameSums(1 << 30)  # ATRIUM (43,000 elements): ~120 batches of split sums
 
