@@ -160,6 +160,7 @@ def illumination_maps(store, elements, scene, frames=None, *, mode: str = "adapt
         outputs = set(f.tolist()) if with_direct else set()
         sums = {g: FRAME_SUMS.get(store, g, None if batches is None else int(batches[g]), kind, n_parity,
                                   elements, direct=g in outputs, times=times) for g in range(lo, hi)}
+        clock.lap(None)  # FrameSums adds its own read_s and frame_sums_s
         flux = frame_sums_flux_cl([sums[g].sums for g in range(lo, hi)], n_emitted[lo:hi], back[part],
                                   fwd[part], f - lo, elements.element_vertices, elements.n_vertices)
         areas = np.stack([frame_geometry(scene, elements, store.frame_numbers[g]).vertex_areas for g in f.tolist()])
