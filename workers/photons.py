@@ -26,6 +26,7 @@ import numpy as np
 from kernels.emit import AREA, EmitCL, emit_reference
 from kernels.scatter import KIND_CODE, Hits, SceneTables, ScatterCL, scatter_reference
 from pipeline.scene import ElementMesh, FrameState
+from pipeline.scene.shading import SurfaceShading
 
 from .emission import emission_tables
 from .raycast import RayCaster, caster_for
@@ -91,12 +92,13 @@ def trace_batch(state: FrameState, elements: ElementMesh, *, n_photons: int, pho
         raise ValueError(f"n_photons must be positive, got {n_photons}")
     caster = caster or caster_for(state)
     emit, scatter, table = _kernels(state, elements, caster, backend)
+    surface = SurfaceShading(state, caster.normals)
     rays_before = caster.rays_cast
     key = (int(seed) & 0xFFFFFFFF, int(frame) & 0xFFFFFFFF)
     parts = []
     for lo in range(0, n_photons, CHUNK):
         photon = photon_start + lo + np.arange(min(CHUNK, n_photons - lo), dtype=np.int64)
-        parts.extend(_trace_wavefront(state, caster, table, emit, scatter, photon, key, max_depth))
+        parts.extend(_trace_wavefront(state, caster, table, emit, scatter, photon, key, max_depth, surface))
     if parts:
         key_out = np.concatenate([p[0] for p in parts])
         bary = np.concatenate([p[1] for p in parts])
@@ -108,8 +110,9 @@ def trace_batch(state: FrameState, elements: ElementMesh, *, n_photons: int, pho
                        {"records": len(key_out), "direct": direct})
 
 
-def _trace_wavefront(state, caster, table, emit, scatter, photon, key, max_depth):
-    """Yield (key, bary, energy) record arrays of one wavefront of photons, bounce by bounce."""
+def _trace_wavefront(state, caster, table, emit, scatter, photon, key, max_depth, surface):
+    """Yield (key, bary, energy) record arrays of one wavefront of photons, bounce by bounce. The
+    base colour and shading normal at each hit come from ``surface`` (pipeline/scene/shading.py)."""
     origins, dirs, beta, emitter = emit(photon, key)
     for depth in range(max_depth):
         if not len(photon):
@@ -117,7 +120,9 @@ def _trace_wavefront(state, caster, table, emit, scatter, photon, key, max_depth
         tri, u, v, dist = caster.intersect(origins, dirs)
         if depth == 0 and any(li.definition.range is not None for li in state.lights):
             beta = beta * _range_window(state, table, emitter, dist)[:, None]
-        bounce = scatter(Hits(tri, u, v, dirs, beta, photon), depth, key)  # misses end there
+        hits = Hits(tri, u, v, dirs, beta, photon, albedo=surface.base_color(tri, u, v) if surface.varies else None,
+                    shading=surface.normal(tri, u, v) if surface.smooth else None)
+        bounce = scatter(hits, depth, key)  # misses end there
         # Keep the recorded hits and the survivors, in order (np.take: several times faster than
         # fancy indexing for rows of 2-D arrays)
         rec = np.flatnonzero(bounce.recorded)

@@ -16,7 +16,9 @@ from .gltf import GltfDocument
 from .lights import light_def_from_gltf
 from .materials import DEFAULT_MATERIAL, material_from_gltf
 from .scene import DEFAULT_ELEMENT_FRACTION, MeshInstance, Node, Scene
+from .textures import base_color_texture
 from .timeline import DEFAULT_FPS, Timeline
+from .vertex_attributes import read_vertex_attributes
 
 log = logging.getLogger(__name__)
 
@@ -34,6 +36,7 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
     order = _reachable(doc, nodes)
 
     materials = [material_from_gltf(m, i) for i, m in enumerate(g.materials)]
+    materials = _with_textures(doc, materials)
     default_material = len(materials)
     materials.append(DEFAULT_MATERIAL)
 
@@ -227,12 +230,26 @@ def _read_instances(doc, nodes, order, default_material, warnings):
             material = prim.material if prim.material is not None else default_material
             if not 0 <= material < len(g.materials) and material != default_material:
                 raise doc.error(f"refers to missing material {material}", f + ".material")
+            attributes = read_vertex_attributes(doc, prim.attributes, len(verts), f)
             instances.append(MeshInstance(
                 index=len(instances), node=i, mesh=node.mesh, primitive=p,
                 name=f"{node.name}/{mesh.name or f'mesh{node.mesh}'}[{p}]",
                 vertices=verts, faces=faces[keep], material=material, source_faces=source[keep],
+                attributes=None if attributes.empty else attributes,
             ))
     return instances, dropped
+
+
+def _with_textures(doc: GltfDocument, materials: list) -> list:
+    """Materials with their base-colour textures attached, each image decoded once."""
+    from dataclasses import replace
+
+    images: dict = {}
+    out = []
+    for i, m in enumerate(materials):
+        tex = base_color_texture(doc, i, images)
+        out.append(m if tex is None else replace(m, base_color_texture=tex))
+    return out
 
 
 def _read_channels(doc, nodes, warnings) -> dict[int, dict[str, Sampler]]:

@@ -2,7 +2,8 @@
 
 Mapping (DESIGN.md "Units and conventions"; written in the README too):
 
-* ``baseColorFactor`` RGB is the Lambertian albedo (alpha ignored). Textures are ignored.
+* ``baseColorFactor`` RGB is the Lambertian albedo (alpha ignored), times the ``baseColorTexture``
+  and ``COLOR_0`` where present (pipeline/scene/shading.py, pipeline/scene/textures.py).
 * ``metallic >= 0.5`` and ``roughness < 0.2``: an ideal **mirror** whose reflectance is the base colour.
 * ``metallic >= 0.5`` and ``0.2 <= roughness < 0.6``: **glossy**, a normalised Phong lobe about the mirror
   direction with exponent ``2 / alpha^2 - 2``, ``alpha = roughness^2`` (the Blinn-Phong/Beckmann
@@ -30,6 +31,7 @@ class Material:
     kind: str  # "diffuse" | "glossy" | "mirror"
     roughness: float
     emission: tuple[float, float, float]  # emitted radiance, W/(m^2 sr) per channel
+    base_color_texture: object = None  # pipeline.scene.textures.Texture multiplying albedo, or None
 
     @property
     def is_specular(self) -> bool:
