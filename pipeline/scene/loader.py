@@ -64,6 +64,7 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
                                  float(p.aspectRatio) if p.aspectRatio else None))
 
     instances, dropped = _read_instances(doc, nodes, order, default_material, warnings)
+    _texcoord_warnings(materials, instances, warnings)
     if not instances:
         raise doc.error("the scene has no triangle meshes", "meshes")
     emissive = any(materials[inst.material].is_emissive for inst in instances)
@@ -250,6 +251,18 @@ def _with_textures(doc: GltfDocument, materials: list) -> list:
         tex = base_color_texture(doc, i, images)
         out.append(m if tex is None else replace(m, base_color_texture=tex))
     return out
+
+
+def _texcoord_warnings(materials, instances, warnings) -> None:
+    """Warn where a textured material meets a primitive without the texture coordinates it samples."""
+    for inst in instances:
+        tex = materials[inst.material].base_color_texture
+        if tex is None:
+            continue
+        have = inst.attributes.texcoords if inst.attributes is not None else {}
+        if tex.texcoord not in have:
+            warnings.append(f"{inst.name}: material {materials[inst.material].name!r} samples "
+                            f"TEXCOORD_{tex.texcoord}, which the primitive lacks: its texture is read at (0, 0)")
 
 
 def _read_channels(doc, nodes, warnings) -> dict[int, dict[str, Sampler]]:
