@@ -143,6 +143,14 @@ class SurfaceShading:
         return rho
 
 
+def mean_base_color(material) -> np.ndarray:
+    """(3,) a material's base colour averaged over its texture (factor x texel mean): what a
+    mesh-level estimate such as the adaptation luminance (workers/reconstruct.py) can use."""
+    factor = np.asarray(material.albedo, np.float64)
+    tex = getattr(material, "base_color_texture", None)
+    return factor if tex is None else factor * tex.mean
+
+
 def _interpolate(corners: np.ndarray, u, v) -> np.ndarray:
     """Barycentric blend of (n, 3, k) corner values with Embree's (u, v) (corners 1 and 2)."""
     u = np.asarray(u, np.float64)[:, None]
