@@ -70,14 +70,14 @@ def hit_albedo(tables: SceneTables, hits: Hits) -> np.ndarray:
     """(m, 3) float64 albedo of every hit: ``hits.albedo`` or its material's."""
     if hits.albedo is not None:
         return np.asarray(hits.albedo, np.float64)
-    return tables.albedo[tables.tri_mat[np.maximum(hits.tri, 0)]]
+    return np.take(tables.albedo, np.take(tables.tri_mat, np.maximum(hits.tri, 0)), axis=0)
 
 
 def hit_shading(tables: SceneTables, hits: Hits) -> np.ndarray:
     """(m, 3) float64 shading normal of every hit: ``hits.shading`` or the geometric normal."""
     if hits.shading is not None:
         return np.asarray(hits.shading, np.float64)
-    return tables.normals[np.maximum(hits.tri, 0)]
+    return np.take(tables.normals, np.maximum(hits.tri, 0), axis=0)
 
 
 @dataclass

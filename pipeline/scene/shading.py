@@ -87,6 +87,9 @@ class SurfaceShading:
     def __init__(self, state, geometric_normals: np.ndarray):
         self.geometric = np.asarray(geometric_normals, np.float64)
         self.corner_normals = getattr(state, "corner_normals", None)
+        # triangles with vertex normals: the only ones whose hits need interpolating
+        self.smooth_triangle = (None if self.corner_normals is None
+                                else np.any(self.corner_normals != 0, axis=(1, 2)))
         corners = getattr(state, "corners", None)
         self.texcoords = corners.texcoords if corners is not None else {}
         self.color = corners.color if corners is not None else None
@@ -115,12 +118,17 @@ class SurfaceShading:
         geo = np.take(self.geometric, t, axis=0)
         if self.corner_normals is None:
             return geo
-        c = np.take(self.corner_normals, t, axis=0).astype(np.float64)
-        n = _interpolate(c, u, v)
+        rows = np.flatnonzero(self.smooth_triangle[t])
+        if not len(rows):
+            return geo
+        g = geo[rows]
+        c = np.take(self.corner_normals, t[rows], axis=0).astype(np.float64)
+        n = _interpolate(c, np.take(u, rows), np.take(v, rows))
         length = np.sqrt(np.einsum("ij,ij->i", n, n))
         ok = length > 1e-6
-        n = np.where(ok[:, None], n / np.where(ok, length, 1.0)[:, None], geo)
-        return n * np.where(np.einsum("ij,ij->i", n, geo) < 0, -1.0, 1.0)[:, None]
+        n = np.where(ok[:, None], n / np.where(ok, length, 1.0)[:, None], g)
+        geo[rows] = n * np.where(np.einsum("ij,ij->i", n, g) < 0, -1.0, 1.0)[:, None]
+        return geo
 
     def base_color(self, tri: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """(n, 3) float64 base colour at the hits (factor x texture x COLOR_0); -1 rows: triangle 0."""
