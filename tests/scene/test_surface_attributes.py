@@ -60,6 +60,7 @@ def test_texture_transform_is_offset_rotation_scale(tmp_path):
                          texture_transform={"offset": [0.25, -0.5], "rotation": np.pi / 2, "scale": [2.0, 3.0]})
     b.add_node("floor", b.add_mesh("floor", QUAD, FACES, material=mat, texcoords={0: UV}))
     b.add_node("lamp", light=b.add_point_light("lamp", (1, 1, 1), 1.0), translation=(1, 2, 1))
+    b.gltf.extensionsRequired = ["KHR_texture_transform"]  # files may require it: we implement it
     t = Scene.load(b.write(tmp_path / "t.glb")).materials[0].base_color_texture
     uv = np.array([1.0, 1.0])
     # scale (2, 3), rotate by pi/2 with the extension's matrix [[c, s], [-s, c]], then offset
