@@ -4,8 +4,9 @@ The tracer is wavefront-style: all live photons of a chunk advance one bounce pe
 large float32 batches, and one OpenCL kernel (kernels/scatter.cl) records the diffuse hits and
 samples the next directions for the whole wavefront. At a diffuse hit the photon is recorded
 (element, barycentrics inside the element, RGB weight, direct = first hit) and bounces
-Lambertian; mirrors reflect, glossy surfaces sample a normalised Phong lobe. Russian roulette on
-the albedo ends paths; a photon also ends after ``max_depth`` hits. ``backend="numpy"`` runs the
+Lambertian about the shading normal; mirrors reflect, glossy surfaces sample a normalised Phong
+lobe. Russian roulette on the hit's base colour (factor x texture x vertex colour,
+pipeline/scene/shading.py) ends paths; a photon also ends after ``max_depth`` hits. ``backend="numpy"`` runs the
 kernel's NumPy twin instead (kernels/scatter.py).
 
 Determinism: every random number of photon i of frame f is a Philox word of the counter
