@@ -6,8 +6,8 @@ samples the next directions for the whole wavefront. At a diffuse hit the photon
 (element, barycentrics inside the element, RGB weight, direct = first hit) and bounces
 Lambertian about the shading normal; mirrors reflect, glossy surfaces sample a normalised Phong
 lobe. Russian roulette on the hit's base colour (factor x texture x vertex colour,
-pipeline/scene/shading.py) ends paths; a photon also ends after ``max_depth`` hits. ``backend="numpy"`` runs the
-kernel's NumPy twin instead (kernels/scatter.py).
+pipeline/scene/shading.py) ends paths; a photon also ends after ``max_depth`` hits.
+``backend="numpy"`` runs the kernel's NumPy twin instead (kernels/scatter.py).
 
 Determinism: every random number of photon i of frame f is a Philox word of the counter
 (i, stream) under the key (seed, f) (kernels/philox.py), so a photon's path depends on nothing
