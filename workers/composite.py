@@ -2,7 +2,7 @@
 
 For every pixel, ``spp`` jittered camera rays. At each hit:
 
-* an emitter seen from its front face shows its emitted radiance;
+* an emitter seen from its front face shows its emitted radiance (times its emissive texture);
 * a **diffuse** surface gets direct light from every light with shadow rays (point, spot and
   directional exactly; emissive triangles by ``area_samples`` samples chosen by power, i.e. area x
   radiance) and indirect radiance rho/pi x E, E interpolated inside the hit element from its three
@@ -114,7 +114,7 @@ class _Shading:
         self.area_samples = area_samples if len(state.emissive_triangles) else 0
         if self.area_samples:
             tris = state.emissive_triangles.astype(np.int64)
-            power = caster.triangle_area[tris] * self.emission[tris].mean(axis=1)
+            power = caster.triangle_area[tris] * self.surface.mean_emission(tris).mean(axis=1)
             self.area_tris = tris[power > 0]
             power = power[power > 0]
             if not len(self.area_tris):
@@ -262,7 +262,8 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
         if sh.any_emissive:
             lit = np.flatnonzero(sh.emissive[tri] & (hits.cos_in() < 0))
             if len(lit):
-                acc[0, lit] += np.take(sh.emission, tri[lit], axis=0)
+                acc[0, lit] += (sh.surface.emission(tri[lit], u[lit], v[lit]).astype(np.float32)
+                                if sh.surface.emission_varies else np.take(sh.emission, tri[lit], axis=0))
 
         # Diffuse: direct light with shadow rays, indirect from the map; the path ends. Shaded
         # over all hits (cheaper than gathering the diffuse ones when they are most of them):
@@ -463,7 +464,11 @@ def _area(sh: _Shading, key, counter, depth, hits: _Hits, rays, active) -> np.nd
         rays["area"] += len(sel)
         sel = sel[~blocked]
         g = cos_s[sel] * cos_l[sel] / (dist2[sel] * sh.area_pdf[pick[sel]])
-        total[sel] += g.astype(np.float32)[:, None] * np.take(sh.emission, lt[sel], axis=0)
+        if sh.surface.emission_varies:  # the emissive texture at the sampled point
+            radiance = sh.surface.emission(lt[sel], b1[sel], b2[sel]).astype(np.float32)
+        else:
+            radiance = np.take(sh.emission, lt[sel], axis=0)
+        total[sel] += g.astype(np.float32)[:, None] * radiance
     return total / np.float32(sh.area_samples)
 
 

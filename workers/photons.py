@@ -29,7 +29,7 @@ from kernels.scatter import KIND_CODE, Hits, SceneTables, ScatterCL, scatter_ref
 from pipeline.scene import ElementMesh, FrameState
 from pipeline.scene.shading import SurfaceShading
 
-from .emission import emission_tables
+from .emission import emission_tables, textured_emission_weights
 from .raycast import RayCaster, caster_for
 
 CHUNK = 1 << 17  # photons per wavefront: bounds memory per worker (about 0.5 GB at most)
@@ -115,6 +115,8 @@ def _trace_wavefront(state, caster, table, emit, scatter, photon, key, max_depth
     """Yield (key, bary, energy) record arrays of one wavefront of photons, bounce by bounce. The
     base colour and shading normal at each hit come from ``surface`` (pipeline/scene/shading.py)."""
     origins, dirs, beta, emitter = emit(photon, key)
+    if surface.emission_varies:  # emissive textures: weight by the texture at each origin
+        beta = beta * textured_emission_weights(table, surface, caster, photon, emitter, key)
     for depth in range(max_depth):
         if not len(photon):
             return

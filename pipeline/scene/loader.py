@@ -16,7 +16,7 @@ from .gltf import GltfDocument
 from .lights import light_def_from_gltf
 from .materials import DEFAULT_MATERIAL, material_from_gltf
 from .scene import DEFAULT_ELEMENT_FRACTION, MeshInstance, Node, Scene
-from .textures import base_color_texture
+from .textures import base_color_texture, emissive_texture
 from .timeline import DEFAULT_FPS, Timeline
 from .vertex_attributes import read_vertex_attributes
 
@@ -242,27 +242,24 @@ def _read_instances(doc, nodes, order, default_material, warnings):
 
 
 def _with_textures(doc: GltfDocument, materials: list) -> list:
-    """Materials with their base-colour textures attached, each image decoded once."""
+    """Materials with their base-colour and emissive textures attached, each image decoded once."""
     from dataclasses import replace
 
     images: dict = {}
-    out = []
-    for i, m in enumerate(materials):
-        tex = base_color_texture(doc, i, images)
-        out.append(m if tex is None else replace(m, base_color_texture=tex))
-    return out
+    return [replace(m, base_color_texture=base_color_texture(doc, i, images),
+                    emissive_texture=emissive_texture(doc, i, images)) for i, m in enumerate(materials)]
 
 
 def _texcoord_warnings(materials, instances, warnings) -> None:
     """Warn where a textured material meets a primitive without the texture coordinates it samples."""
     for inst in instances:
-        tex = materials[inst.material].base_color_texture
-        if tex is None:
-            continue
+        mat = materials[inst.material]
         have = inst.attributes.texcoords if inst.attributes is not None else {}
-        if tex.texcoord not in have:
-            warnings.append(f"{inst.name}: material {materials[inst.material].name!r} samples "
-                            f"TEXCOORD_{tex.texcoord}, which the primitive lacks: its texture is read at (0, 0)")
+        for tex in (mat.base_color_texture, mat.emissive_texture):
+            if tex is not None and tex.texcoord not in have:
+                warnings.append(f"{inst.name}: material {mat.name!r} samples TEXCOORD_{tex.texcoord}, "
+                                "which the primitive lacks: its texture is read at (0, 0)")
+                break
 
 
 def _read_channels(doc, nodes, warnings) -> dict[int, dict[str, Sampler]]:

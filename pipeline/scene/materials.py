@@ -9,7 +9,8 @@ Mapping (DESIGN.md "Units and conventions"; written in the README too):
   direction with exponent ``2 / alpha^2 - 2``, ``alpha = roughness^2`` (the Blinn-Phong/Beckmann
   correspondence of Walter et al., EGSR 2007, §5.2), reflectance the base colour.
 * everything else is **diffuse**.
-* ``emissiveFactor x KHR_materials_emissive_strength`` is emitted radiance (front face only).
+* ``emissiveFactor x KHR_materials_emissive_strength`` (x the ``emissiveTexture``) is emitted radiance
+  (front face only).
 * A primitive without a material gets :data:`DEFAULT_MATERIAL`, diffuse grey 0.8 (glTF's own default
   would be a white albedo of 1.0, which never loses energy in a closed room).
 """
@@ -32,6 +33,7 @@ class Material:
     roughness: float
     emission: tuple[float, float, float]  # emitted radiance, W/(m^2 sr) per channel
     base_color_texture: object = None  # pipeline.scene.textures.Texture multiplying albedo, or None
+    emissive_texture: object = None  # a Texture multiplying emission (area lights), or None
 
     @property
     def is_specular(self) -> bool:

@@ -11,6 +11,8 @@
   the hit's interpolated ``TEXCOORD_n`` x the interpolated ``COLOR_0`` (glTF 2.0 §3.9.2). The photon
   tracer takes its Russian-roulette albedo from here, so colour bleeding follows the texture; the
   photon records do not change (pipeline/store/records.py).
+* **Emission**: ``emissiveFactor x strength x emissiveTexture`` (glTF 2.0 §3.9.5; vertex colours do
+  not apply): seen emitters and area-light samples in the compositor, photon weights at emission.
 
 Embree's hit barycentrics (u, v) weight a triangle's corners 1 and 2 (workers/raycast.py).
 """
@@ -21,6 +23,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from .textures import sample
+
+MEAN_POINTS = 256  # points per emissive triangle for its mean textured radiance
 
 
 @dataclass(frozen=True, eq=False)
@@ -100,6 +104,9 @@ class SurfaceShading:
                          if getattr(m, "base_color_texture", None) is not None}
         used = set(np.unique(self.tri_mat).tolist()) if len(self.tri_mat) else set()
         self.textures = {j: t for j, t in self.textures.items() if j in used}
+        self.emission_factor = np.array([m.emission for m in mats], np.float64)
+        self.emissive_textures = {j: m.emissive_texture for j, m in enumerate(mats)
+                                  if j in used and m.is_emissive and getattr(m, "emissive_texture", None) is not None}
 
     @property
     def smooth(self) -> bool:
@@ -137,7 +144,40 @@ class SurfaceShading:
         rho = np.take(self.factor, m, axis=0)
         if self.color is not None:
             rho = rho * _interpolate(np.take(self.color, t, axis=0).astype(np.float64), u, v)
-        for j, tex in self.textures.items():
+        return self._textured(self.textures, rho, t, m, u, v)
+
+    @property
+    def emission_varies(self) -> bool:
+        """True when some emitter's radiance varies inside its triangles (emissive textures)."""
+        return bool(self.emissive_textures)
+
+    def emission(self, tri: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """(n, 3) float64 emitted radiance at the hits: emissive factor x strength x texture."""
+        t = np.maximum(np.asarray(tri), 0)
+        m = self.tri_mat[t] if len(self.tri_mat) else np.zeros(len(t), np.int64)
+        return self._textured(self.emissive_textures, np.take(self.emission_factor, m, axis=0), t, m, u, v)
+
+    def mean_emission(self, tri: np.ndarray) -> np.ndarray:
+        """(n, 3) emitted radiance averaged over each triangle: exact without an emissive texture,
+        else the mean of :data:`MEAN_POINTS` stratified, area-uniform points (what emitters are
+        chosen by; photon weights then carry L(x) / this mean, workers/emission.py)."""
+        tri = np.asarray(tri, np.int64)
+        out = np.take(self.emission_factor, self.tri_mat[tri], axis=0) if len(tri) else np.zeros((0, 3))
+        if not self.emission_varies or not len(tri):
+            return out
+        k = int(round(np.sqrt(MEAN_POINTS)))
+        g = (np.arange(k) + 0.5) / k
+        su, w = np.sqrt(np.repeat(g, k)), np.tile(g, k)
+        b1, b2 = su * (1.0 - w), su * w  # pbrt's uniform triangle mapping, cell centres
+        textured = np.flatnonzero(np.isin(self.tri_mat[tri], list(self.emissive_textures)))
+        rep = np.repeat(tri[textured], len(b1))
+        values = self.emission(rep, np.tile(b1, len(textured)), np.tile(b2, len(textured)))
+        out[textured] = values.reshape(len(textured), len(b1), 3).mean(axis=1)
+        return out
+
+    def _textured(self, textures: dict, value: np.ndarray, t, m, u, v) -> np.ndarray:
+        """``value`` (n, 3) times each textured material's texture at its hits' texture coordinates."""
+        for j, tex in textures.items():
             rows = np.flatnonzero(m == j)
             if not len(rows):
                 continue
@@ -147,8 +187,15 @@ class SurfaceShading:
             else:
                 uv = _interpolate(np.take(corners, t[rows], axis=0).astype(np.float64),
                                   np.take(u, rows), np.take(v, rows))
-            rho[rows] *= sample(tex, uv)
-        return rho
+            value[rows] *= sample(tex, uv)
+        return value
+
+
+def mean_emission(material) -> np.ndarray:
+    """(3,) a material's emitted radiance averaged over its emissive texture."""
+    emission = np.asarray(material.emission, np.float64)
+    tex = getattr(material, "emissive_texture", None)
+    return emission if tex is None else emission * tex.mean
 
 
 def mean_base_color(material) -> np.ndarray:

@@ -56,7 +56,7 @@ def describe(scene: Scene, element_size: float | None = None) -> list[str]:
 
 
 # Texture slots of a glTF material that photonloom does not read yet (README "Textures")
-_UNREAD_TEXTURES = ("emissiveTexture", "normalTexture", "occlusionTexture", "metallicRoughnessTexture")
+_UNREAD_TEXTURES = ("normalTexture", "occlusionTexture", "metallicRoughnessTexture")
 
 
 def surface_lines(scene: Scene) -> list[str]:
@@ -83,6 +83,9 @@ def surface_lines(scene: Scene) -> list[str]:
                 n += 1
         if n:
             unread.append(f"{slot} on {n}")
+    emissive = sum(1 for m in used if scene.materials[m].emissive_texture is not None)
+    if emissive:
+        tex += f"; emissive textures on {emissive} material(s)"
     if unread:
         tex += "; ignored (not read yet, factors used): " + ", ".join(unread)
     n = len(scene.instances)

@@ -1,17 +1,17 @@
-"""Base-colour textures: glTF images decoded with OpenImageIO, samplers, ``KHR_texture_transform``.
+"""Base-colour and emissive textures: images decoded with OpenImageIO, samplers, ``KHR_texture_transform``.
 
-A material's ``baseColorTexture`` becomes a :class:`Texture`: the image decoded once when the scene is
-loaded (a worker loads each scene once, workers/scene_cache.py, so once per worker), converted from
-sRGB to linear (glTF 2.0 §3.9.2 says base-colour textures are sRGB-encoded), with the sampler's wrap
-modes and filter and the texture transform. :func:`sample` is a pure function over arrays: the photon
-tracer and the compositor both call it (through pipeline/scene/shading.py), so texture colours are the
-same for photons and pixels.
+A material's ``baseColorTexture`` or ``emissiveTexture`` becomes a :class:`Texture`: the image
+decoded once when the scene is loaded (a worker loads each scene once, workers/scene_cache.py, so
+once per worker), converted from sRGB to linear (glTF 2.0 §3.9.2, §3.9.5: base-colour and emissive
+textures are sRGB-encoded), with the sampler's wrap modes and filter and the texture transform.
+:func:`sample` is a pure function over arrays: the photon tracer and the compositor both call it
+(through pipeline/scene/shading.py), so texture colours are the same for photons and pixels.
 
 Decisions: images are PNG or JPEG (any format OpenImageIO reads is accepted); an image embedded in a
 bufferView or a data URI is written to a temporary file for OpenImageIO, which reads files only from
 Python. There are no mipmaps: minification uses the magnification filter (NEAREST or LINEAR, LINEAR
 when unset), and the compositor's samples per pixel do the averaging. Alpha is ignored (opaque
-surfaces only). Emissive, normal, occlusion and metallic-roughness textures are not read yet.
+surfaces only). Normal, occlusion and metallic-roughness textures are not read yet.
 Spec: glTF 2.0 §5.26-§5.29 (textures, images, samplers); KHR_texture_transform README.
 """
 from __future__ import annotations
@@ -79,13 +79,24 @@ def texture_transform(ext: dict, where: str, doc: GltfDocument) -> np.ndarray:
 
 def base_color_texture(doc: GltfDocument, material_index: int, images: dict[int, np.ndarray]) -> Texture | None:
     """The material's ``baseColorTexture`` or None; ``images`` caches decoded images by index."""
-    g = doc.gltf
-    mat = g.materials[material_index]
-    pbr = mat.pbrMetallicRoughness
+    pbr = doc.gltf.materials[material_index].pbrMetallicRoughness
     info = pbr.baseColorTexture if pbr is not None else None
     if info is None:
         return None
-    where = f"materials[{material_index}].pbrMetallicRoughness.baseColorTexture"
+    return _texture(doc, info, f"materials[{material_index}].pbrMetallicRoughness.baseColorTexture", images)
+
+
+def emissive_texture(doc: GltfDocument, material_index: int, images: dict[int, np.ndarray]) -> Texture | None:
+    """The material's ``emissiveTexture`` (sRGB, multiplied by ``emissiveFactor``) or None."""
+    info = doc.gltf.materials[material_index].emissiveTexture
+    if info is None:
+        return None
+    return _texture(doc, info, f"materials[{material_index}].emissiveTexture", images)
+
+
+def _texture(doc: GltfDocument, info, where: str, images: dict[int, np.ndarray]) -> Texture:
+    """A glTF textureInfo ``info`` (at ``where``) as a :class:`Texture`, checked."""
+    g = doc.gltf
     index = info.index
     if index is None or not 0 <= index < len(g.textures):
         raise doc.error(f"refers to a missing texture {index}", where + ".index")

@@ -2,7 +2,8 @@
 
 Scenes are written here with the real builder: a smooth UV sphere under a directional light against
 the analytic Lambert value; a checkerboard texture on a plane, in the frame and in the colour its
-photons bleed onto a white wall; a texture transform's offset; the furnace with a constant texture.
+photons bleed onto a white wall; a texture transform's offset; the furnace with a constant texture;
+an emissive texture on an area light, in photons, in the frame and in the area lighting.
 Expected values are evaluated at the compositor's own jittered sample directions
 (kernels/camera.py), so the comparisons carry no sampling error.
 """
@@ -15,6 +16,7 @@ from kernels.camera import camera_rays_reference
 from pipeline.scene import ElementMesh, Scene
 from pipeline.scene.builtin import shapes
 from pipeline.scene.builtin.gltf_builder import GltfBuilder
+from pipeline.scene.summary import surface_lines
 from pipeline.scene.textures import srgb_to_linear
 from pipeline.store import DIRECT_BIT, ELEMENT_MASK
 from workers.composite import frame_key, render_frame
@@ -239,3 +241,93 @@ def test_furnace_with_a_constant_texture_equals_the_factor(tmp_path):
     mean, se = np.mean(indirect), np.std(indirect, ddof=1) / np.sqrt(len(indirect))
     expected = phi * rho / (1 - rho)
     assert abs(mean - expected) <= 3 * se + 1e-9 and se < 0.05 * expected, (mean, expected, se)
+
+
+# --- emissive textures ----------------------------------------------------------------------------
+PANEL_H, PANEL_L = 1.0, 3.0  # height of the 1 m x 1 m panel facing down, radiance of its white texels
+DOWN_FACES = np.array([0, 1, 2, 0, 2, 3])  # CCW seen from below: the front face looks down
+
+
+def _panel_scene(path, textured: bool, look_up: bool = True):
+    """A grey floor under a square panel [-0.5, 0.5]^2 at PANEL_H: either the whole panel with an
+    emissive texture white on x < 0 and black on x > 0, or only its x < 0 half emitting PANEL_L
+    uniformly. Both emit the same light from the same place. Camera below it, looking up at the
+    panel or down at the floor."""
+    b = GltfBuilder()
+    grey = b.add_material("floor", (0.5, 0.5, 0.5))
+    b.add_node("floor", b.add_mesh("floor", np.array([[-10, 0, -10], [10, 0, -10], [10, 0, 10], [-10, 0, 10]], float),
+                                   UP_FACES, material=grey))
+    x1 = 0.5 if textured else 0.0
+    quad = np.array([[-0.5, PANEL_H, -0.5], [x1, PANEL_H, -0.5], [x1, PANEL_H, 0.5], [-0.5, PANEL_H, 0.5]], float)
+    if textured:
+        pixels = np.zeros((8, 8, 3), np.uint8)
+        pixels[:, :4] = 255  # u < 0.5 (x < 0) white
+        tex = b.add_texture(pixels, mag_filter=9728)
+        glow = b.add_material("glow", (0, 0, 0), emissive=(1, 1, 1), emissive_strength=PANEL_L, emissive_texture=tex)
+        b.add_node("panel", b.add_mesh("panel", quad, DOWN_FACES, material=glow,
+                                       texcoords={0: quad[:, [0, 2]] + 0.5}))
+    else:
+        glow = b.add_material("glow", (0, 0, 0), emissive=(1, 1, 1), emissive_strength=PANEL_L)
+        b.add_node("panel", b.add_mesh("panel", quad, DOWN_FACES, material=glow))
+    eye = np.array([0.0, 0.3 if look_up else 0.9, 0.0])
+    target = (0, PANEL_H, 0) if look_up else (0, 0, 0)
+    b.add_node("cam", camera=b.add_camera("cam", 2 * np.arctan(0.5 / 0.7 * 0.9), 0.05), translation=tuple(eye),
+               rotation=shapes.look_at(eye, target, (0, 0, -1)))
+    b.set_scene_extras({"photonloom": {"element_size": 0.5}})
+    return b.write(path)
+
+
+def test_emissive_texture_emits_where_its_texels_are_bright(tmp_path):
+    """Photons: the half-white textured panel sends the same flux to the same places as a uniform
+    panel of its white half (floor energy on either side of x = 0, within 3 standard errors)."""
+    n, k = 20_000, 8
+    sums = {}
+    for textured in (True, False):
+        scene = Scene.load(_panel_scene(tmp_path / f"panel{int(textured)}.glb", textured))
+        elements, state = ElementMesh.build(scene), scene.pose_frame(1)
+        rows = []
+        for j in range(k):
+            bt = trace_batch(state, elements, n_photons=n, photon_start=j * n, seed=11, frame=1, max_depth=1)
+            x = elements.element_positions(state)[(bt.key & ELEMENT_MASK).astype(np.int64)].mean(axis=1)[:, 0]
+            e = bt.energy[:, 0].astype(np.float64) / n
+            rows.append([e[x < 0].sum(), e[x >= 0].sum()])
+        sums[textured] = np.array(rows)
+    flux_half = np.pi * PANEL_L * 0.5  # pi L A of the white half
+    for side in (0, 1):
+        a, b = sums[True][:, side], sums[False][:, side]
+        se = np.hypot(a.std(ddof=1), b.std(ddof=1)) / np.sqrt(k)
+        assert abs(a.mean() - b.mean()) <= 3 * se, (side, a.mean(), b.mean(), se)
+    total = sums[True].sum(axis=1).mean()
+    assert 0.97 * flux_half < total <= flux_half * 1.01  # a few per cent pass the floor's edges
+
+
+def test_emissive_texture_in_the_frame(tmp_path):
+    """Seen from below, the panel shows PANEL_L on its white half and nothing on its black half."""
+    w = h = 32
+    scene = Scene.load(_panel_scene(tmp_path / "panel.glb", True))
+    assert "no base-colour textures; emissive textures on 1 material(s)" in surface_lines(scene)[0]
+    state = scene.pose_frame(1)
+    img = render_frame(state, None, None, width=w, height=h, spp=1, seed=SEED, frame=1)
+    d = _sample_dirs(state, w, h, 1)
+    o = state.camera.position
+    p = (o + ((PANEL_H - o[1]) / d[:, 1])[:, None] * d).reshape(h, w, 3)
+    on_panel = (np.abs(p[..., 0]) < 0.5) & (np.abs(p[..., 2]) < 0.5)
+    white, black = on_panel & (p[..., 0] < -0.02), on_panel & (p[..., 0] > 0.02)
+    assert white.sum() > 50 and black.sum() > 50
+    np.testing.assert_allclose(img.direct[white], PANEL_L, rtol=1e-6)
+    assert (img.direct[black] == 0).all()
+
+
+def test_emissive_texture_in_area_lighting(tmp_path):
+    """The floor under the half-white textured panel gets the area lighting of the uniform half
+    panel: direct layers agree on either side of x = 0 (64 area samples x 4 spp a pixel)."""
+    w = h = 32
+    out = {}
+    for textured in (True, False):
+        state = Scene.load(_panel_scene(tmp_path / f"down{int(textured)}.glb", textured, look_up=False)).pose_frame(1)
+        img = render_frame(state, None, None, width=w, height=h, spp=4, seed=SEED, frame=1, area_samples=64)
+        out[textured] = img.direct[..., 0].astype(np.float64)
+    left, right = np.s_[:, : w // 2 - 1], np.s_[:, w // 2 + 1:]  # the camera's x is the world's x
+    for half in (left, right):
+        assert abs(out[True][half].mean() / out[False][half].mean() - 1) < 0.02
+    assert out[True][left].mean() > 1.3 * out[True][right].mean()  # brighter under the white half
