@@ -25,10 +25,10 @@ __kernel void scatter8(
     const long count, const int depth, const uint key0, const uint key1, const double epsilon,
     __global const int *tri, __global const float *hit_u, __global const float *hit_v,
     __global const float *dir_in, __global const double *beta_in, __global const long *photon,
-    __global const double *glossy_cos,
+    __global const double *glossy_cos, __global const double *albedo, __global const double *shading,
     __global const float *corners, __global const double *normals, __global const int *tri_mat,
     __global const int *tri_n, __global const long *tri_offset,
-    __global const double *albedo, __global const int *mat_kind, __global const double *mat_exp,
+    __global const int *mat_kind, __global const double *mat_exp,
     __global uint *rec_key, __global ushort *rec_bary, __global float *rec_energy,
     __global uchar *recorded,
     __global float *origin_out, __global float *dir_out, __global double *beta_out,
@@ -54,8 +54,10 @@ __kernel void scatter8(
                   nz = G8(double8, normals, 3 * t + 2);
     const double8 dx = convert_double8(G8(float8, dir_in, 3 * i)), dy = convert_double8(G8(float8, dir_in, 3 * i + 1)),
                   dz = convert_double8(G8(float8, dir_in, 3 * i + 2));
+    // Sidedness from the geometric normal, lobes about the shading normal (per hit, from the host)
     const double8 fs = select((double8)(-1.0), (double8)(1.0), nx * dx + ny * dy + nz * dz < 0.0);
-    const double8 fx_ = fs * nx, fy_ = fs * ny, fz_ = fs * nz;
+    const double8 fx_ = fs * G8(double8, shading, 3 * i), fy_ = fs * G8(double8, shading, 3 * i + 1),
+                  fz_ = fs * G8(double8, shading, 3 * i + 2);
     double8 bx = G8(double8, beta_in, 3 * i), by = G8(double8, beta_in, 3 * i + 1), bz = G8(double8, beta_in, 3 * i + 2);
     const long8 ph = G8(long8, photon, i);
 
@@ -82,7 +84,7 @@ __kernel void scatter8(
     PHILOX8_10(r0, r1, r2, r3, key0, key1);
 
     // Russian roulette on the albedo: survive with q = max channel, reweight by albedo / q
-    const double8 ax = G8(double8, albedo, 3 * m), ay = G8(double8, albedo, 3 * m + 1), az = G8(double8, albedo, 3 * m + 2);
+    const double8 ax = G8(double8, albedo, 3 * i), ay = G8(double8, albedo, 3 * i + 1), az = G8(double8, albedo, 3 * i + 2);
     const double8 q = fmax(ax, fmax(ay, az));
     long8 survive = uniform8(r0) < q;
     const double8 qs = select((double8)(1.0), q, q > 0.0);
@@ -104,7 +106,9 @@ __kernel void scatter8(
     const double8 gw = select((double8)(1.0), fmax(cos_o, 0.0) * (e + 2.0) / (e + 1.0), is_glossy);
     bx *= gw; by *= gw; bz *= gw;
     survive = survive & (~is_glossy | (cos_o > 0.0));
-    const double8 side = select((double8)(epsilon), (double8)(-epsilon), nx * ox + ny * oy + nz * oz < 0.0);
+    const double8 n_out = nx * ox + ny * oy + nz * oz;
+    survive = survive & (n_out * fs > 0.0);  // leaves on the side it arrived from
+    const double8 side = select((double8)(epsilon), (double8)(-epsilon), n_out < 0.0);
     S8(origin_out, 3 * i, convert_float8(px + nx * side));
     S8(origin_out, 3 * i + 1, convert_float8(py + ny * side));
     S8(origin_out, 3 * i + 2, convert_float8(pz + nz * side));

@@ -5,13 +5,17 @@ same thing from the same Philox numbers (kernels/philox.py); the tracer in worke
 either. Per hit on triangle t with material m, photon index i, bounce d:
 
 * diffuse: record (element, b1, b2, weight) with the element located as ElementMesh.locate does;
-  key bit 30 = i odd, bit 31 = (d == 0); the next direction is cosine-weighted about the normal
-  facing the incoming ray (Malley's method; pbrt-v4 §A.5.3).
-* mirror: next direction is the reflection of the incoming one.
+  key bit 30 = i odd, bit 31 = (d == 0); the next direction is cosine-weighted about the shading
+  normal turned to the side the geometric normal faces the incoming ray (Malley's method; pbrt-v4
+  §A.5.3).
+* mirror: next direction is the reflection of the incoming one about that shading normal.
 * glossy: a normalised Phong lobe about the mirror direction, pdf (e+1)/(2 pi) cos^e, sampled as
   cos = u^(1/(e+1)); the weight gains rho (e+2)/(e+1) cos_o (BRDF x cos / pdf, Lafortune and
   Willems 1994); directions below the surface end the path.
-* Russian roulette: survive with q = max(albedo), weight x albedo / q (Arvo and Kirk 1990).
+* Russian roulette: survive with q = max(albedo), weight x albedo / q (Arvo and Kirk 1990); the
+  albedo is the hit's own base colour (textures, vertex colours: pipeline/scene/shading.py).
+* a new direction that leaves below the geometric surface (possible with shading normals) ends the
+  path, so no photon leaks through a surface; the origin offset follows the geometric normal.
 
 Words of Philox counter (i_lo, i_hi, d, 0) under key (seed, frame): x -> roulette, y, z -> direction.
 """
@@ -58,6 +62,22 @@ class Hits:
     dirs: np.ndarray  # (m, 3) float32 incoming directions
     beta: np.ndarray  # (m, 3) float64 weights
     photon: np.ndarray  # int64 photon indices
+    albedo: np.ndarray | None = None  # (m, 3) float64 base colour at the hit; None: the material's
+    shading: np.ndarray | None = None  # (m, 3) float64 unit shading normal; None: the geometric one
+
+
+def hit_albedo(tables: SceneTables, hits: Hits) -> np.ndarray:
+    """(m, 3) float64 albedo of every hit: ``hits.albedo`` or its material's."""
+    if hits.albedo is not None:
+        return np.asarray(hits.albedo, np.float64)
+    return np.take(tables.albedo, np.take(tables.tri_mat, np.maximum(hits.tri, 0)), axis=0)
+
+
+def hit_shading(tables: SceneTables, hits: Hits) -> np.ndarray:
+    """(m, 3) float64 shading normal of every hit: ``hits.shading`` or the geometric normal."""
+    if hits.shading is not None:
+        return np.asarray(hits.shading, np.float64)
+    return np.take(tables.normals, np.maximum(hits.tri, 0), axis=0)
 
 
 @dataclass
@@ -101,7 +121,8 @@ def scatter_reference(tables: SceneTables, hits: Hits, depth: int, key: tuple[in
     p = (1 - u - v)[:, None] * c[:, 0] + u[:, None] * c[:, 1] + v[:, None] * c[:, 2]
     n = tables.normals[t]
     d = hits.dirs.astype(np.float64)
-    facing = np.where((np.einsum("ij,ij->i", n, d) < 0)[:, None], n, -n)
+    fs = np.where(np.einsum("ij,ij->i", n, d) < 0, 1.0, -1.0)  # the side the photon arrives from
+    facing = hit_shading(tables, hits) * fs[:, None]
     beta = hits.beta.copy()
 
     # Record diffuse hits (the element mesh's own locate)
@@ -119,7 +140,7 @@ def scatter_reference(tables: SceneTables, hits: Hits, depth: int, key: tuple[in
 
     # Russian roulette and the next direction
     w = uniforms(hits.photon, depth, key)
-    rho = tables.albedo[m]
+    rho = hit_albedo(tables, hits)
     q = rho.max(axis=1)
     survive = w[:, 0] < q
     beta = beta * rho / np.where(q > 0, q, 1.0)[:, None]
@@ -138,7 +159,9 @@ def scatter_reference(tables: SceneTables, hits: Hits, depth: int, key: tuple[in
         beta[glossy] *= (np.maximum(cos_o, 0.0) * (e + 2.0) / (e + 1.0))[:, None]
         survive[glossy] &= cos_o > 0
         nd[glossy] = g
-    side = np.where(np.einsum("ij,ij->i", n, nd) < 0, -1.0, 1.0)
+    n_out = np.einsum("ij,ij->i", n, nd)
+    survive &= n_out * fs > 0  # leaves on the side it arrived from
+    side = np.where(n_out < 0, -1.0, 1.0)
     origins = (p + n * (side * tables.epsilon)[:, None]).astype(np.float32)
     return Bounce(key_out, bary, energy, recorded, origins, nd.astype(np.float32), beta, survive & hit)
 
@@ -158,7 +181,7 @@ class ScatterCL:
         self._pool = None  # output arrays reused from call to call (_output_rows)
         self._tables = [device_table(self.ctx, a, dt) for a, dt in (
             (tables.corners, np.float32), (tables.normals, np.float64), (tables.tri_mat, np.int32),
-            (tables.tri_n, np.int32), (tables.tri_offset, np.int64), (tables.albedo, np.float64),
+            (tables.tri_n, np.int32), (tables.tri_offset, np.int64),
             (tables.kind, np.int32), (tables.exponent, np.float64))]
 
     def __call__(self, hits: Hits, depth: int, key: tuple[int, int]) -> Bounce:
@@ -176,7 +199,8 @@ class ScatterCL:
             hits.tri.astype(np.int32, copy=False), hits.u.astype(np.float32, copy=False),
             hits.v.astype(np.float32, copy=False), hits.dirs.astype(np.float32, copy=False),
             hits.beta.astype(np.float64, copy=False), hits.photon.astype(np.int64, copy=False),
-            glossy_cos(self.tables, hits, depth, key))]
+            glossy_cos(self.tables, hits, depth, key), hit_albedo(self.tables, hits),
+            hit_shading(self.tables, hits))]
         out = Bounce(*self._output_rows(m))
         fields = ("key", "bary", "energy", "recorded", "origins", "dirs", "beta", "alive")
         outputs = [device_output(self.ctx, getattr(out, f)) for f in fields]

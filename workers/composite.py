@@ -2,11 +2,14 @@
 
 For every pixel, ``spp`` jittered camera rays. At each hit:
 
-* an emitter seen from its front face shows its emitted radiance;
+* an emitter seen from its front face shows its emitted radiance (times its emissive texture);
 * a **diffuse** surface gets direct light from every light with shadow rays (point, spot and
   directional exactly; emissive triangles by ``area_samples`` samples chosen by power, i.e. area x
   radiance) and indirect radiance rho/pi x E, E interpolated inside the hit element from its three
   vertex irradiances (the illumination map, workers/reconstruct.py); the path ends there;
+* Lambert cosines, reflections and lobes use the shading normal (vertex normals), sidedness and
+  ray offsets the geometric one; the albedo is the hit's base colour (factor x texture x COLOR_0),
+  per sample, so textures are resolved per pixel (pipeline/scene/shading.py);
 * a **mirror** reflects, a **glossy** surface samples its normalised Phong lobe (the photon tracer's
   lobe, pipeline/scene/materials.py) and gets exact highlights of punctual lights; both continue up
   to ``max_depth`` reflections. Area lights reach glossy surfaces through the lobe samples only.
@@ -30,6 +33,7 @@ from kernels.camera import camera_rays_cl, mix64
 from kernels.sampling import around
 from kernels.surface import LookupCL
 from pipeline.scene import ElementMesh, FrameState
+from pipeline.scene.shading import SurfaceShading
 
 from .raycast import RayCaster, caster_for
 
@@ -83,12 +87,12 @@ class _Shading:
         tri_mat = state.triangle_material.astype(np.int64)
         self.kind = np.array([_KIND[m.kind] for m in mats], np.int8)[tri_mat]
         self.albedo = np.array([m.albedo for m in mats], np.float32)[tri_mat]
-        self.diffuse_albedo = np.where((self.kind == 0)[:, None], self.albedo, np.float32(0))
         self.exponent = np.array([m.phong_exponent for m in mats], np.float32)[tri_mat]
         self.emission = np.array([m.emission for m in mats], np.float32)[tri_mat]
         self.emissive = self.emission.max(axis=1) > 0
         self.any_emissive = bool(self.emissive.any())
         self.caster = caster
+        self.surface = SurfaceShading(state, caster.normals)
         self.normals = caster.normals.astype(np.float32)
         self.epsilon = np.float32(caster.epsilon)  # shadow-ray origin offset (workers/raycast.py)
         self.lights = state.lights
@@ -110,7 +114,7 @@ class _Shading:
         self.area_samples = area_samples if len(state.emissive_triangles) else 0
         if self.area_samples:
             tris = state.emissive_triangles.astype(np.int64)
-            power = caster.triangle_area[tris] * self.emission[tris].mean(axis=1)
+            power = caster.triangle_area[tris] * self.surface.mean_emission(tris).mean(axis=1)
             self.area_tris = tris[power > 0]
             power = power[power > 0]
             if not len(self.area_tris):
@@ -161,6 +165,8 @@ class _Hits:
 
     def __init__(self, sh: _Shading, tri, u, v, origins, dirs, t):
         self.tri, self.origins, self.dirs = tri, origins, dirs
+        self.u, self.v = u, v
+        self._surface = sh.surface
         self.cell, self.indirect = tri, None  # light-culling cell of every hit, map irradiance there
         if sh.lookup is not None:
             self.cell, self.indirect = sh.lookup(tri, u, v)
@@ -194,6 +200,25 @@ class _Hits:
             return self._full("facing", lambda _: self._facing(self.normal(), self.cos_in()))
         return self._facing(self.normal(rows), self.cos_in(rows))
 
+    def shading(self, rows=None) -> np.ndarray:
+        """Shading normals turned towards the viewer, in the hemisphere :meth:`facing` gives."""
+        if not self._surface.smooth:
+            return self.facing(rows)
+        if rows is None:
+            return self._full("shading", lambda _: self._shading(None))
+        return self._shading(rows)
+
+    def _shading(self, rows):
+        tri, u, v = (self.tri, self.u, self.v) if rows is None else (self.tri[rows], self.u[rows], self.v[rows])
+        n = self._surface.normal(tri, u, v).astype(np.float32)
+        return n * np.where(self.cos_in(rows) < 0, np.float32(1), np.float32(-1))[:, None]
+
+    def reflect(self, rows) -> np.ndarray:
+        """Mirror directions of the rays ``rows`` about their shading normals."""
+        n = self.shading(rows)
+        d = np.take(self.dirs, rows, axis=0)
+        return d - 2.0 * np.einsum("ij,ij->i", d, n)[:, None] * n
+
     @staticmethod
     def _facing(normal, cos_in):
         return normal * np.where(cos_in < 0, np.float32(1), np.float32(-1))[:, None]
@@ -221,7 +246,10 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
             break
         hits = _Hits(sh, tri, u, v, origins, dirs, t)
         kind = sh.kind[tri]
-        rho = np.take(sh.albedo, tri, axis=0)  # np.take: rows of a table, much faster than fancy indexing
+        if sh.surface.varies:  # textures or vertex colours: the base colour at every hit
+            rho = sh.surface.base_color(tri, u, v).astype(np.float32)
+        else:
+            rho = np.take(sh.albedo, tri, axis=0)  # np.take: rows of a table, much faster than fancy indexing
         # This depth's layers: ``out`` itself while rays and samples correspond one to one,
         # else scattered into it once
         direct_out = path is None and throughput is None
@@ -234,7 +262,8 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
         if sh.any_emissive:
             lit = np.flatnonzero(sh.emissive[tri] & (hits.cos_in() < 0))
             if len(lit):
-                acc[0, lit] += np.take(sh.emission, tri[lit], axis=0)
+                acc[0, lit] += (sh.surface.emission(tri[lit], u[lit], v[lit]).astype(np.float32)
+                                if sh.surface.emission_varies else np.take(sh.emission, tri[lit], axis=0))
 
         # Diffuse: direct light with shadow rays, indirect from the map; the path ends. Shaded
         # over all hits (cheaper than gathering the diffuse ones when they are most of them):
@@ -246,7 +275,7 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
             if sh.area_samples:
                 c = counter if path is None else counter[path]
                 e_direct += _area(sh, key, c, depth, hits, rays, active)
-            scale = (rho if active is None else np.take(sh.diffuse_albedo, tri, axis=0)) * np.float32(1.0 / np.pi)
+            scale = (rho if active is None else rho * diffuse[:, None]) * np.float32(1.0 / np.pi)
             acc[0] += scale * e_direct
             if sh.element_irradiance is not None:
                 acc[1] += scale * _interpolate(sh, hits)
@@ -258,7 +287,7 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
         # Glossy: exact highlights of punctual lights
         glossy = np.flatnonzero(kind == 2)
         if len(glossy):
-            mirror_g = hits.dirs[glossy] - 2.0 * hits.cos_in(glossy)[:, None] * hits.normal(glossy)
+            mirror_g = hits.reflect(glossy)
             lobe = (mirror_g, sh.exponent[tri[glossy]])
             acc[0, glossy] += rho[glossy] * _punctual(sh, hits, glossy, lobe, rays, None)
 
@@ -269,7 +298,7 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
         spec = np.flatnonzero(kind != 0)
         if depth == max_depth or not len(spec):
             break
-        refl = dirs[spec] - 2.0 * hits.cos_in(spec)[:, None] * hits.normal(spec)
+        refl = hits.reflect(spec)
         weight = rho[spec]
         g = np.flatnonzero(kind[spec] == 2)
         if len(g):
@@ -278,11 +307,12 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
             base = 2 + depth * _DIMS_PER_DEPTH
             cos_a = uniform(key, c, base) ** (1.0 / (e + 1.0))  # pdf (e+1)/(2 pi) cos^e
             lobe_dir = around(refl[g].astype(np.float64), cos_a, 2.0 * np.pi * uniform(key, c, base + 1))
-            cos_o = np.einsum("ij,ij->i", lobe_dir, hits.facing(spec[g]))
+            cos_o = np.einsum("ij,ij->i", lobe_dir, hits.shading(spec[g]))
             # normalised Phong BRDF rho (e+2)/(2 pi) cos^e times cos_o over the pdf
             weight[g] *= (np.maximum(cos_o, 0.0) * (e + 2.0) / (e + 1.0))[:, None]
             refl[g] = lobe_dir
-        keep = weight.max(axis=1) > 0
+        # leaving below the geometric surface (shading normals) ends the path, as in the tracer
+        keep = (weight.max(axis=1) > 0) & (np.einsum("ij,ij->i", refl, hits.facing(spec)) > 0)
         spec, refl, weight = spec[keep], refl[keep], weight[keep]
         throughput = weight if throughput is None else throughput[spec] * weight
         origins = sh.caster.offset_origins(hits.points(spec), tri[spec], refl).astype(np.float32)
@@ -355,10 +385,10 @@ def _punctual(sh: _Shading, hits: _Hits, rows, lobe, rays, active) -> np.ndarray
         if idx is not None and not len(idx):
             continue
         where = idx if rows is None else (rows if idx is None else rows[idx])  # rows of ``hits``
-        p, facing = hits.points(where), hits.facing(where)
+        p, facing, shade = hits.points(where), hits.facing(where), hits.shading(where)
         if light.kind == "directional":
             to_light = (-light.direction).astype(np.float32)
-            cos_s = facing @ to_light
+            cos_s = shade @ to_light
             sel = np.flatnonzero(cos_s > 0)
             d = np.broadcast_to(to_light, (len(sel), 3))
             dist = np.full(len(sel), _FAR)
@@ -366,7 +396,7 @@ def _punctual(sh: _Shading, hits: _Hits, rows, lobe, rays, active) -> np.ndarray
             scale = np.ones(len(sel), np.float32)
         else:
             delta = light.position.astype(np.float32) - p
-            ahead = np.einsum("ij,ij->i", facing, delta)  # cos x distance
+            ahead = np.einsum("ij,ij->i", shade, delta)  # cos x distance (shading normal)
             keep = ahead > 0
             if light.kind == "spot":  # inside the outer cone: proj > cos_outer x distance
                 proj = delta @ -light.direction.astype(np.float32)
@@ -393,7 +423,7 @@ def _punctual(sh: _Shading, hits: _Hits, rows, lobe, rays, active) -> np.ndarray
         if not len(sel):
             continue
         d = np.ascontiguousarray(d, np.float32)
-        origin = p[sel] + facing[sel] * sh.epsilon  # the light is on the facing side
+        origin = p[sel] + facing[sel] * sh.epsilon  # geometric offset; a light below it is shadowed
         blocked = sh.caster.occluded(origin, d, dist * (1.0 - 1e-5))
         rays["shadow"] += len(sel)
         free = ~blocked
@@ -405,7 +435,7 @@ def _punctual(sh: _Shading, hits: _Hits, rows, lobe, rays, active) -> np.ndarray
 def _area(sh: _Shading, key, counter, depth, hits: _Hits, rays, active) -> np.ndarray:
     """Irradiance from emissive triangles at every hit: ``area_samples`` samples each, triangle
     chosen by power, point uniform on it (pbrt-v4 SampleUniformTriangle); E = L cos cos' / (d^2 pdf)."""
-    p, facing, tri = hits.points(), hits.facing(), hits.tri
+    p, facing, shade, tri = hits.points(), hits.facing(), hits.shading(), hits.tri
     total = np.zeros((len(p), 3), np.float32)
     base = 2 + depth * _DIMS_PER_DEPTH + 2
     for s in range(sh.area_samples):
@@ -420,7 +450,7 @@ def _area(sh: _Shading, key, counter, depth, hits: _Hits, rays, active) -> np.nd
         dist2 = np.einsum("ij,ij->i", delta, delta)
         dist = np.sqrt(dist2)
         to_light = delta / np.maximum(dist, 1e-30)[:, None]
-        cos_s = np.einsum("ij,ij->i", facing, to_light)
+        cos_s = np.einsum("ij,ij->i", shade, to_light)
         cos_l = -np.einsum("ij,ij->i", np.take(sh.normals, lt, axis=0), to_light)  # front face only
         ok = (cos_s > 0) & (cos_l > 0) & (lt != tri)
         sel = np.flatnonzero(ok if active is None else ok & active)
@@ -434,7 +464,11 @@ def _area(sh: _Shading, key, counter, depth, hits: _Hits, rays, active) -> np.nd
         rays["area"] += len(sel)
         sel = sel[~blocked]
         g = cos_s[sel] * cos_l[sel] / (dist2[sel] * sh.area_pdf[pick[sel]])
-        total[sel] += g.astype(np.float32)[:, None] * np.take(sh.emission, lt[sel], axis=0)
+        if sh.surface.emission_varies:  # the emissive texture at the sampled point
+            radiance = sh.surface.emission(lt[sel], b1[sel], b2[sel]).astype(np.float32)
+        else:
+            radiance = np.take(sh.emission, lt[sel], axis=0)
+        total[sel] += g.astype(np.float32)[:, None] * radiance
     return total / np.float32(sh.area_samples)
 
 

@@ -2,8 +2,9 @@
 
 Every emitter (a punctual light, or one emissive triangle) gets a selection weight equal to its
 mean RGB flux (Light.power: point 4 pi I, spot 2 pi I x the fall-off integral, directional E x the
-area of the disk covering the scene, emissive pi L A). The sampling itself is in kernels/emit.py
-(an OpenCL kernel and its NumPy twin); this module turns a FrameState into their tables.
+area of the disk covering the scene, emissive pi L A, with L averaged over an emissive texture).
+The sampling itself is in kernels/emit.py (an OpenCL kernel and its NumPy twin); this module turns a
+FrameState into their tables, and weights photons of textured emitters (textured_emission_weights).
 Records store photon weights; irradiance is sum(weight) / (N_emitted x area) (dept.md §1.1).
 """
 from __future__ import annotations
@@ -11,7 +12,9 @@ from __future__ import annotations
 import numpy as np
 
 from kernels.emit import AREA, DIRECTIONAL, POINT, SPOT, EmissionTables
+from kernels.philox import EMISSION_STREAM, uniforms
 from pipeline.scene import FrameState
+from pipeline.scene.shading import SurfaceShading
 
 from .raycast import RayCaster
 
@@ -30,7 +33,7 @@ def emission_tables(state: FrameState, caster: RayCaster) -> EmissionTables:
         flux.append(light.power(radius))
     if len(state.emissive_triangles):
         tris = state.emissive_triangles
-        radiance = np.array([state.materials[m].emission for m in state.triangle_material[tris]])
+        radiance = SurfaceShading(state, caster.normals).mean_emission(tris)  # emissive textures: their mean
         kinds.extend([AREA] * len(tris))
         index.extend(tris.tolist())
         flux.extend(np.pi * radiance * caster.triangle_area[tris][:, None])
@@ -52,3 +55,29 @@ def emission_tables(state: FrameState, caster: RayCaster) -> EmissionTables:
         corners=state.vertices[state.faces].reshape(-1, 9).astype(np.float32),
         normals=caster.normals, center=caster.center.astype(np.float64), radius=float(radius),
         epsilon=float(caster.epsilon))
+
+
+def textured_emission_weights(table: EmissionTables, surface: SurfaceShading, caster: RayCaster,
+                              photon: np.ndarray, emitter: np.ndarray, key: tuple[int, int]) -> np.ndarray:
+    """(n, 3) factors L(x) / L_mean of photons leaving textured emissive triangles (1 elsewhere).
+
+    The emitter was chosen by its mean radiance (pi L_mean A); weighting a photon by the texture's
+    radiance at its origin over that mean keeps the emitted flux pi integral(L dA) whatever the mean
+    is. The origin's barycentrics come from the photon's own emission numbers (kernels/emit.py:
+    b1 = sqrt(u1) (1 - u2), b2 = sqrt(u1) u2), so both emission backends get the same weights.
+    """
+    out = np.ones((len(photon), 3))
+    area = np.flatnonzero(table.kind[emitter] == AREA)
+    if not len(area):
+        return out
+    tri = table.index[emitter[area]]
+    textured = np.isin(surface.tri_mat[tri], list(surface.emissive_textures))
+    area, tri = area[textured], tri[textured]
+    if not len(area):
+        return out
+    w = uniforms(photon[area], EMISSION_STREAM, key)
+    su = np.sqrt(w[:, 1])
+    radiance = surface.emission(tri, su * (1.0 - w[:, 2]), su * w[:, 2])
+    mean = table.flux[emitter[area]] / (np.pi * caster.triangle_area[tri])[:, None]
+    out[area] = np.divide(radiance, mean, out=np.zeros_like(radiance), where=mean > 0)
+    return out

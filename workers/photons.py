@@ -4,9 +4,10 @@ The tracer is wavefront-style: all live photons of a chunk advance one bounce pe
 large float32 batches, and one OpenCL kernel (kernels/scatter.cl) records the diffuse hits and
 samples the next directions for the whole wavefront. At a diffuse hit the photon is recorded
 (element, barycentrics inside the element, RGB weight, direct = first hit) and bounces
-Lambertian; mirrors reflect, glossy surfaces sample a normalised Phong lobe. Russian roulette on
-the albedo ends paths; a photon also ends after ``max_depth`` hits. ``backend="numpy"`` runs the
-kernel's NumPy twin instead (kernels/scatter.py).
+Lambertian about the shading normal; mirrors reflect, glossy surfaces sample a normalised Phong
+lobe. Russian roulette on the hit's base colour (factor x texture x vertex colour,
+pipeline/scene/shading.py) ends paths; a photon also ends after ``max_depth`` hits.
+``backend="numpy"`` runs the kernel's NumPy twin instead (kernels/scatter.py).
 
 Determinism: every random number of photon i of frame f is a Philox word of the counter
 (i, stream) under the key (seed, f) (kernels/philox.py), so a photon's path depends on nothing
@@ -26,8 +27,9 @@ import numpy as np
 from kernels.emit import AREA, EmitCL, emit_reference
 from kernels.scatter import KIND_CODE, Hits, SceneTables, ScatterCL, scatter_reference
 from pipeline.scene import ElementMesh, FrameState
+from pipeline.scene.shading import SurfaceShading
 
-from .emission import emission_tables
+from .emission import emission_tables, textured_emission_weights
 from .raycast import RayCaster, caster_for
 
 CHUNK = 1 << 17  # photons per wavefront: bounds memory per worker (about 0.5 GB at most)
@@ -91,12 +93,13 @@ def trace_batch(state: FrameState, elements: ElementMesh, *, n_photons: int, pho
         raise ValueError(f"n_photons must be positive, got {n_photons}")
     caster = caster or caster_for(state)
     emit, scatter, table = _kernels(state, elements, caster, backend)
+    surface = SurfaceShading(state, caster.normals)
     rays_before = caster.rays_cast
     key = (int(seed) & 0xFFFFFFFF, int(frame) & 0xFFFFFFFF)
     parts = []
     for lo in range(0, n_photons, CHUNK):
         photon = photon_start + lo + np.arange(min(CHUNK, n_photons - lo), dtype=np.int64)
-        parts.extend(_trace_wavefront(state, caster, table, emit, scatter, photon, key, max_depth))
+        parts.extend(_trace_wavefront(state, caster, table, emit, scatter, photon, key, max_depth, surface))
     if parts:
         key_out = np.concatenate([p[0] for p in parts])
         bary = np.concatenate([p[1] for p in parts])
@@ -108,16 +111,21 @@ def trace_batch(state: FrameState, elements: ElementMesh, *, n_photons: int, pho
                        {"records": len(key_out), "direct": direct})
 
 
-def _trace_wavefront(state, caster, table, emit, scatter, photon, key, max_depth):
-    """Yield (key, bary, energy) record arrays of one wavefront of photons, bounce by bounce."""
+def _trace_wavefront(state, caster, table, emit, scatter, photon, key, max_depth, surface):
+    """Yield (key, bary, energy) record arrays of one wavefront of photons, bounce by bounce. The
+    base colour and shading normal at each hit come from ``surface`` (pipeline/scene/shading.py)."""
     origins, dirs, beta, emitter = emit(photon, key)
+    if surface.emission_varies:  # emissive textures: weight by the texture at each origin
+        beta = beta * textured_emission_weights(table, surface, caster, photon, emitter, key)
     for depth in range(max_depth):
         if not len(photon):
             return
         tri, u, v, dist = caster.intersect(origins, dirs)
         if depth == 0 and any(li.definition.range is not None for li in state.lights):
             beta = beta * _range_window(state, table, emitter, dist)[:, None]
-        bounce = scatter(Hits(tri, u, v, dirs, beta, photon), depth, key)  # misses end there
+        hits = Hits(tri, u, v, dirs, beta, photon, albedo=surface.base_color(tri, u, v) if surface.varies else None,
+                    shading=surface.normal(tri, u, v) if surface.smooth else None)
+        bounce = scatter(hits, depth, key)  # misses end there
         # Keep the recorded hits and the survivors, in order (np.take: several times faster than
         # fancy indexing for rows of 2-D arrays)
         rec = np.flatnonzero(bounce.recorded)

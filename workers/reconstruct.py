@@ -18,6 +18,7 @@ from collections import OrderedDict
 
 import numpy as np
 
+from pipeline.scene.shading import mean_base_color, mean_emission
 from pipeline.store import BARY_SCALE
 
 
@@ -156,8 +157,8 @@ def _material_tables(state, elements):
     inst_mat = np.zeros(len(state.instance_matrices), np.int64)
     inst_mat[state.triangle_instance] = state.triangle_material
     mat = inst_mat[elements.vertex_instance]
-    albedo = np.array([m.albedo for m in state.materials])[mat]
-    emission = np.array([m.emission for m in state.materials])[mat]
+    albedo = np.array([mean_base_color(m) for m in state.materials])[mat]  # textures: their mean
+    emission = np.array([mean_emission(m) for m in state.materials])[mat]
     tables = (albedo / np.pi, emission, len(state.faces))
     _MATERIALS.clear()
     _MATERIALS[id(elements)] = (elements, state.materials, state.triangle_material.copy(),

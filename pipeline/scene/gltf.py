@@ -35,7 +35,8 @@ _TYPE_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 
 
 # Extensions we implement; anything else in ``extensionsRequired`` is refused.
 SUPPORTED_REQUIRED_EXTENSIONS = frozenset(
-    {"KHR_lights_punctual", "KHR_materials_emissive_strength", "KHR_mesh_quantization"}
+    {"KHR_lights_punctual", "KHR_materials_emissive_strength", "KHR_mesh_quantization",
+     "KHR_texture_transform"}
 )
 
 

@@ -16,7 +16,9 @@ from .gltf import GltfDocument
 from .lights import light_def_from_gltf
 from .materials import DEFAULT_MATERIAL, material_from_gltf
 from .scene import DEFAULT_ELEMENT_FRACTION, MeshInstance, Node, Scene
+from .textures import base_color_texture, emissive_texture
 from .timeline import DEFAULT_FPS, Timeline
+from .vertex_attributes import read_vertex_attributes
 
 log = logging.getLogger(__name__)
 
@@ -34,6 +36,7 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
     order = _reachable(doc, nodes)
 
     materials = [material_from_gltf(m, i) for i, m in enumerate(g.materials)]
+    materials = _with_textures(doc, materials)
     default_material = len(materials)
     materials.append(DEFAULT_MATERIAL)
 
@@ -61,6 +64,7 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
                                  float(p.aspectRatio) if p.aspectRatio else None))
 
     instances, dropped = _read_instances(doc, nodes, order, default_material, warnings)
+    _texcoord_warnings(materials, instances, warnings)
     if not instances:
         raise doc.error("the scene has no triangle meshes", "meshes")
     emissive = any(materials[inst.material].is_emissive for inst in instances)
@@ -227,12 +231,35 @@ def _read_instances(doc, nodes, order, default_material, warnings):
             material = prim.material if prim.material is not None else default_material
             if not 0 <= material < len(g.materials) and material != default_material:
                 raise doc.error(f"refers to missing material {material}", f + ".material")
+            attributes = read_vertex_attributes(doc, prim.attributes, len(verts), f)
             instances.append(MeshInstance(
                 index=len(instances), node=i, mesh=node.mesh, primitive=p,
                 name=f"{node.name}/{mesh.name or f'mesh{node.mesh}'}[{p}]",
                 vertices=verts, faces=faces[keep], material=material, source_faces=source[keep],
+                attributes=None if attributes.empty else attributes,
             ))
     return instances, dropped
+
+
+def _with_textures(doc: GltfDocument, materials: list) -> list:
+    """Materials with their base-colour and emissive textures attached, each image decoded once."""
+    from dataclasses import replace
+
+    images: dict = {}
+    return [replace(m, base_color_texture=base_color_texture(doc, i, images),
+                    emissive_texture=emissive_texture(doc, i, images)) for i, m in enumerate(materials)]
+
+
+def _texcoord_warnings(materials, instances, warnings) -> None:
+    """Warn where a textured material meets a primitive without the texture coordinates it samples."""
+    for inst in instances:
+        mat = materials[inst.material]
+        have = inst.attributes.texcoords if inst.attributes is not None else {}
+        for tex in (mat.base_color_texture, mat.emissive_texture):
+            if tex is not None and tex.texcoord not in have:
+                warnings.append(f"{inst.name}: material {mat.name!r} samples TEXCOORD_{tex.texcoord}, "
+                                "which the primitive lacks: its texture is read at (0, 0)")
+                break
 
 
 def _read_channels(doc, nodes, warnings) -> dict[int, dict[str, Sampler]]:

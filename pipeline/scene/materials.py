@@ -2,13 +2,15 @@
 
 Mapping (DESIGN.md "Units and conventions"; written in the README too):
 
-* ``baseColorFactor`` RGB is the Lambertian albedo (alpha ignored). Textures are ignored.
+* ``baseColorFactor`` RGB is the Lambertian albedo (alpha ignored), times the ``baseColorTexture``
+  and ``COLOR_0`` where present (pipeline/scene/shading.py, pipeline/scene/textures.py).
 * ``metallic >= 0.5`` and ``roughness < 0.2``: an ideal **mirror** whose reflectance is the base colour.
 * ``metallic >= 0.5`` and ``0.2 <= roughness < 0.6``: **glossy**, a normalised Phong lobe about the mirror
   direction with exponent ``2 / alpha^2 - 2``, ``alpha = roughness^2`` (the Blinn-Phong/Beckmann
   correspondence of Walter et al., EGSR 2007, §5.2), reflectance the base colour.
 * everything else is **diffuse**.
-* ``emissiveFactor x KHR_materials_emissive_strength`` is emitted radiance (front face only).
+* ``emissiveFactor x KHR_materials_emissive_strength`` (x the ``emissiveTexture``) is emitted radiance
+  (front face only).
 * A primitive without a material gets :data:`DEFAULT_MATERIAL`, diffuse grey 0.8 (glTF's own default
   would be a white albedo of 1.0, which never loses energy in a closed room).
 """
@@ -30,6 +32,8 @@ class Material:
     kind: str  # "diffuse" | "glossy" | "mirror"
     roughness: float
     emission: tuple[float, float, float]  # emitted radiance, W/(m^2 sr) per channel
+    base_color_texture: object = None  # pipeline.scene.textures.Texture multiplying albedo, or None
+    emissive_texture: object = None  # a Texture multiplying emission (area lights), or None
 
     @property
     def is_specular(self) -> bool:

@@ -24,7 +24,9 @@ from .camera import Camera, CameraDef
 from .gltf import GltfDocument, read_gltf
 from .lights import Light, LightDef
 from .materials import Material
+from .shading import CornerAttributes, corner_attributes, world_corner_normals
 from .timeline import Timeline
+from .vertex_attributes import VertexAttributes
 
 log = logging.getLogger(__name__)
 
@@ -63,6 +65,7 @@ class MeshInstance:
     faces: np.ndarray  # (F, 3) int64, zero-area triangles removed
     material: int  # index into Scene.materials
     source_faces: np.ndarray  # (F,) int64: index of each kept triangle in the primitive
+    attributes: VertexAttributes | None = None  # NORMAL, TEXCOORD_n, COLOR_0 (vertex_attributes.py)
 
 
 @dataclass
@@ -81,6 +84,8 @@ class FrameState:
     camera: Camera | None
     instance_matrices: np.ndarray  # (I, 4, 4) float64 local-to-world of each instance
     state_key: str  # equal for two instants whose geometry and lights are equal
+    corner_normals: np.ndarray | None = None  # (F, 3, 3) float32 world vertex normals (shading.py)
+    corners: CornerAttributes | None = None  # texture coordinates and colours per corner (shading.py)
 
 
 @dataclass
@@ -190,6 +195,8 @@ class Scene:
             camera=cam,
             instance_matrices=inst_mats,
             state_key=self._state_key(world, lights),
+            corner_normals=world_corner_normals(self.instances, inst_mats),
+            corners=self.corner_attributes,
         )
 
     def pose_frame(self, frame: int) -> FrameState:
@@ -201,6 +208,11 @@ class Scene:
     @property
     def n_triangles(self) -> int:
         return sum(len(inst.faces) for inst in self.instances)
+
+    @cached_property
+    def corner_attributes(self) -> CornerAttributes | None:
+        """Texture coordinates and vertex colours of every triangle corner (they do not move)."""
+        return corner_attributes(self.instances)
 
     @property
     def animated_nodes(self) -> list[int]:

@@ -50,5 +50,50 @@ def describe(scene: Scene, element_size: float | None = None) -> list[str]:
             "area lights (emissive triangles)" if scene.has_area_lights else "no area lights",
         ]),
     ]
+    lines += surface_lines(scene)
     lines += [f"warning    {w}" for w in scene.warnings]
     return lines
+
+
+# Texture slots of a glTF material that photonloom does not read yet (README "Textures")
+_UNREAD_TEXTURES = ("normalTexture", "occlusionTexture", "metallicRoughnessTexture")
+
+
+def surface_lines(scene: Scene) -> list[str]:
+    """``textures``, ``normals`` and ``colours`` lines: what the file's surfaces carry and what is used."""
+    used = sorted({inst.material for inst in scene.instances})
+    textured = [scene.materials[m].base_color_texture for m in used
+                if scene.materials[m].base_color_texture is not None]
+    images = {t.image_index: t.image.shape for t in textured}
+    if textured:
+        sets = ", ".join(f"TEXCOORD_{s}" for s in sorted({t.texcoord for t in textured}))
+        moved = sum(t.has_transform for t in textured)
+        sizes = ", ".join(f"{w}x{h}" for h, w, _ in images.values())
+        tex = (f"{len(images)} image(s) ({sizes}) as base colour of {len(textured)} material(s) ({sets}"
+               + (f"; KHR_texture_transform on {moved}" if moved else "") + ")")
+    else:
+        tex = "no base-colour textures"
+    unread = []
+    gltf = scene.document.gltf
+    for slot in _UNREAD_TEXTURES:
+        n = 0
+        for m in gltf.materials:
+            holder = m.pbrMetallicRoughness if slot == "metallicRoughnessTexture" else m
+            if holder is not None and getattr(holder, slot, None) is not None:
+                n += 1
+        if n:
+            unread.append(f"{slot} on {n}")
+    emissive = sum(1 for m in used if scene.materials[m].emissive_texture is not None)
+    if emissive:
+        tex += f"; emissive textures on {emissive} material(s)"
+    if unread:
+        tex += "; ignored (not read yet, factors used): " + ", ".join(unread)
+    n = len(scene.instances)
+    smooth = sum(1 for i in scene.instances if i.attributes is not None and i.attributes.normals is not None)
+    coloured = sum(1 for i in scene.instances if i.attributes is not None and i.attributes.color is not None)
+    return [
+        f"textures   {tex}",
+        f"normals    {smooth} of {n} primitives carry NORMAL (smooth shading)"
+        + ("; the rest are flat shaded" if smooth < n else ""),
+        f"colours    {coloured} of {n} primitives carry COLOR_0 (multiplies the base colour)",
+    ]

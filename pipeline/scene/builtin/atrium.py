@@ -127,7 +127,9 @@ def _add_moving_objects(b: GltfBuilder) -> None:
 
     plinth = b.add_mesh("plinth", *shapes.box((0.8, 1.0, 0.8), (0, 0.5, 0)), material=steel)
     b.add_node("plinth", plinth, translation=(8.0, 0.0, 7.0))
-    sculpture = b.add_node("sculpture", b.add_mesh("sculpture", *shapes.torus(0.7, 0.18, 36, 12), material=blue),
+    ring = shapes.torus(0.7, 0.18, 36, 12)
+    sculpture = b.add_node("sculpture", b.add_mesh("sculpture", *ring, material=blue,
+                                                   normals=shapes.torus_normals(ring[0], 0.7)),
                            translation=(8.0, 1.9, 7.0))
     turn_keys = np.linspace(0.0, TIMELINE.duration, 9)
     turns = [shapes.multiply_quaternions(shapes.axis_angle((0, 1, 0), a), shapes.axis_angle((1, 0, 0), math.pi / 2))

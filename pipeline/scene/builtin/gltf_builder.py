@@ -43,6 +43,7 @@ from pygltflib import (
 
 LIGHTS_EXTENSION = "KHR_lights_punctual"
 EMISSIVE_STRENGTH_EXTENSION = "KHR_materials_emissive_strength"
+TEXTURE_TRANSFORM_EXTENSION = "KHR_texture_transform"
 
 TRIANGLES = 4
 ARRAY_BUFFER = 34962
@@ -73,6 +74,26 @@ def normalized_quaternion(q: Sequence[float]) -> list[float]:
     if not math.isfinite(norm) or norm == 0.0:
         raise ValueError(f"rotation quaternion {q.tolist()} has no direction")
     return _floats(q / norm)
+
+
+def encode_png(pixels: np.ndarray) -> bytes:
+    """8-bit RGB ``pixels`` (H, W, 3) as PNG bytes, written by OpenImageIO."""
+    import os
+    import tempfile
+
+    import OpenImageIO as oiio
+
+    pixels = np.ascontiguousarray(pixels, dtype=np.uint8)
+    fd, name = tempfile.mkstemp(suffix=".png")
+    os.close(fd)
+    try:
+        out = oiio.ImageOutput.create(name)
+        out.open(name, oiio.ImageSpec(pixels.shape[1], pixels.shape[0], pixels.shape[2], "uint8"))
+        out.write_image(pixels)
+        out.close()
+        return Path(name).read_bytes()
+    finally:
+        os.unlink(name)
 
 
 class GltfBuilder:
@@ -128,8 +149,14 @@ class GltfBuilder:
 
     def add_material(self, name: str, base_color: Sequence[float], metallic: float = 0.0,
                      roughness: float = 1.0, emissive: Sequence[float] = (0.0, 0.0, 0.0),
-                     emissive_strength: float = 1.0, double_sided: bool | None = None) -> int:
+                     emissive_strength: float = 1.0, double_sided: bool | None = None,
+                     base_color_texture: int | None = None, texcoord: int = 0,
+                     texture_transform: dict | None = None, emissive_texture: int | None = None) -> int:
         """A metallic-roughness material; ``base_color`` is RGB or RGBA (the Lambertian albedo).
+
+        ``base_color_texture`` is a texture index from :meth:`add_texture`, looked up with
+        ``TEXCOORD_<texcoord>`` and an optional ``KHR_texture_transform`` (offset, rotation, scale);
+        ``emissive_texture`` multiplies the emission, looked up with the same set.
 
         Emitted radiance is ``emissive * emissive_strength``; a strength other than 1 is written as
         ``KHR_materials_emissive_strength``. ``double_sided`` defaults to True for surfaces that do
@@ -153,6 +180,14 @@ class GltfBuilder:
             emissiveFactor=emissive,
             doubleSided=bool(double_sided),
         )
+        if base_color_texture is not None:
+            info = pygltflib.TextureInfo(index=int(base_color_texture), texCoord=int(texcoord))
+            if texture_transform is not None:
+                info.extensions = {TEXTURE_TRANSFORM_EXTENSION: dict(texture_transform)}
+                self._use_extension(TEXTURE_TRANSFORM_EXTENSION)
+            material.pbrMetallicRoughness.baseColorTexture = info
+        if emissive_texture is not None:
+            material.emissiveTexture = pygltflib.TextureInfo(index=int(emissive_texture), texCoord=int(texcoord))
         if emissive_strength != 1.0:
             material.extensions[EMISSIVE_STRENGTH_EXTENSION] = {"emissiveStrength": float(emissive_strength)}
             self._use_extension(EMISSIVE_STRENGTH_EXTENSION)
@@ -161,18 +196,23 @@ class GltfBuilder:
 
     def add_mesh(self, name: str, positions: np.ndarray, indices: np.ndarray | None = None,
                  material: int | None = None, normals: np.ndarray | None = None, mode: int = TRIANGLES,
-                 index_dtype: type = np.uint32) -> int:
+                 index_dtype: type = np.uint32, texcoords: dict | None = None,
+                 colors: np.ndarray | None = None) -> int:
         """A mesh with one primitive; returns the mesh index. See :meth:`add_primitive`."""
         self.gltf.meshes.append(Mesh(name=name))
         mesh = len(self.gltf.meshes) - 1
         self.add_primitive(mesh, positions, indices, material, normals=normals, mode=mode,
-                           index_dtype=index_dtype)
+                           index_dtype=index_dtype, texcoords=texcoords, colors=colors)
         return mesh
 
     def add_primitive(self, mesh: int, positions: np.ndarray, indices: np.ndarray | None = None,
                       material: int | None = None, normals: np.ndarray | None = None, mode: int = TRIANGLES,
-                      index_dtype: type = np.uint32) -> int:
+                      index_dtype: type = np.uint32, texcoords: dict | None = None,
+                      colors: np.ndarray | None = None) -> int:
         """Add a primitive to ``mesh``: float32 POSITION (with min/max), optional NORMAL, indices.
+
+        ``texcoords`` maps a set number to (V, 2) texture coordinates (``TEXCOORD_<set>``),
+        ``colors`` is (V, 3) or (V, 4) linear ``COLOR_0``.
 
         Without ``indices`` the primitive is non-indexed (every 3 positions are a triangle).
         ``mode`` other than TRIANGLES is allowed so tests can write primitives a loader must refuse.
@@ -184,6 +224,16 @@ class GltfBuilder:
             if normals.shape != positions.shape:
                 raise ValueError("normals must have one row per position")
             attributes.NORMAL = self.add_accessor(normals, target=ARRAY_BUFFER)
+        for n_set, uv in (texcoords or {}).items():
+            uv = np.asarray(uv, dtype=np.float32).reshape(-1, 2)
+            if len(uv) != len(positions):
+                raise ValueError("texture coordinates must have one row per position")
+            setattr(attributes, f"TEXCOORD_{int(n_set)}", self.add_accessor(uv, target=ARRAY_BUFFER))
+        if colors is not None:
+            colors = np.asarray(colors, dtype=np.float32)
+            if colors.ndim != 2 or len(colors) != len(positions) or colors.shape[1] not in (3, 4):
+                raise ValueError("colors must be (V, 3) or (V, 4), one row per position")
+            attributes.COLOR_0 = self.add_accessor(colors, target=ARRAY_BUFFER)
         primitive = Primitive(attributes=attributes, material=material, mode=int(mode))
         if indices is not None:
             indices = np.asarray(indices).reshape(-1)
@@ -192,6 +242,29 @@ class GltfBuilder:
             primitive.indices = self.add_accessor(indices.astype(index_dtype), target=ELEMENT_ARRAY_BUFFER)
         self.gltf.meshes[mesh].primitives.append(primitive)
         return len(self.gltf.meshes[mesh].primitives) - 1
+
+    # -- textures -------------------------------------------------------------------------------
+
+    def add_texture(self, pixels: np.ndarray, *, uri: str | None = None, wrap_s: int = 10497,
+                    wrap_t: int = 10497, mag_filter: int | None = None, min_filter: int | None = None) -> int:
+        """A texture of the 8-bit sRGB image ``pixels`` (H, W, 3), PNG-encoded with OpenImageIO and
+        embedded in the buffer (a bufferView), or with ``uri`` referenced as an external file the
+        caller writes (:func:`encode_png`). Returns the texture index."""
+        if uri is None:
+            data = encode_png(pixels)
+            self._pad_blob()
+            offset = len(self._blob)
+            self._blob += data
+            self.gltf.bufferViews.append(BufferView(buffer=0, byteOffset=offset, byteLength=len(data)))
+            image = pygltflib.Image(bufferView=len(self.gltf.bufferViews) - 1, mimeType="image/png")
+        else:
+            image = pygltflib.Image(uri=uri)
+        self.gltf.images.append(image)
+        self.gltf.samplers.append(pygltflib.Sampler(wrapS=int(wrap_s), wrapT=int(wrap_t), magFilter=mag_filter,
+                                                    minFilter=min_filter))
+        self.gltf.textures.append(pygltflib.Texture(sampler=len(self.gltf.samplers) - 1,
+                                                    source=len(self.gltf.images) - 1))
+        return len(self.gltf.textures) - 1
 
     # -- lights and cameras ---------------------------------------------------------------------
 

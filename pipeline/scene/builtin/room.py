@@ -113,7 +113,9 @@ def _add_torus_corner(b: GltfBuilder) -> None:
                             inner_cone_angle=math.radians(9), outer_cone_angle=math.radians(14))
     b.add_node("corner_spot", translation=eye, rotation=shapes.look_at(eye, corner_target), light=spot)
     green = b.add_material("torus_green", (0.05, 0.8, 0.1))
-    torus = b.add_node("torus", b.add_mesh("torus", *shapes.torus(0.42, 0.14, 32, 12), material=green))
+    ring = shapes.torus(0.42, 0.14, 32, 12)
+    torus = b.add_node("torus", b.add_mesh("torus", *ring, material=green,
+                                           normals=shapes.torus_normals(ring[0], 0.42)))
     times = [TIMELINE.time(f) for f in (1, 45, 90, 135)]
     positions = [[5.3, 0.57, 0.7], [5.3, 0.57, 0.7], [3.6, 0.57, 2.1], [3.6, 0.57, 2.1]]
     tilt = shapes.axis_angle((1, 0, 0), math.pi / 2)  # ring stands vertical, its hole along z
@@ -128,7 +130,9 @@ def build() -> GltfBuilder:
     b = GltfBuilder("room")
     _add_shell(b)
     metal = b.add_material("polished_metal", (0.9, 0.9, 0.92), metallic=1.0, roughness=0.05)
-    b.add_node("metal_sphere", b.add_mesh("metal_sphere", *shapes.uv_sphere(0.35, 10, 20), material=metal),
+    ball = shapes.uv_sphere(0.35, 10, 20)
+    smooth = shapes.sphere_normals(ball[0])  # vertex normals: shaded smooth, not faceted
+    b.add_node("metal_sphere", b.add_mesh("metal_sphere", *ball, material=metal, normals=smooth),
                translation=(2.0, 0.35, 3.2))
     _add_aircraft(b)
     _add_torus_corner(b)

@@ -158,6 +158,22 @@ def uv_sphere(radius: float, rings: int = 12, segments: int = 24) -> TriangleMes
     return positions, np.array(tris)
 
 
+def sphere_normals(positions: np.ndarray) -> np.ndarray:
+    """Unit outward vertex normals of a sphere centred at the origin (:func:`uv_sphere`), for
+    smooth shading (glTF NORMAL)."""
+    p = np.asarray(positions, dtype=np.float64)
+    return p / np.linalg.norm(p, axis=1, keepdims=True)
+
+
+def torus_normals(positions: np.ndarray, major_radius: float) -> np.ndarray:
+    """Unit outward vertex normals of a :func:`torus` about the y axis: away from the ring's centre line."""
+    p = np.asarray(positions, dtype=np.float64)
+    radial = p * [1.0, 0.0, 1.0]
+    centre = major_radius * radial / np.linalg.norm(radial, axis=1, keepdims=True)
+    n = p - centre
+    return n / np.linalg.norm(n, axis=1, keepdims=True)
+
+
 def transformed(mesh: TriangleMesh, rotation: Sequence[float] = (0, 0, 0, 1),
                 translation: Sequence[float] = (0, 0, 0), scale: float | Sequence[float] = 1.0) -> TriangleMesh:
     """``mesh`` scaled, rotated (xyzw quaternion) and translated, in that order (glTF's TRS order)."""

@@ -38,7 +38,9 @@ def build() -> GltfBuilder:
                translation=(1.4, 0.0, 1.5))
     b.add_node("cube", b.add_mesh("cube", *shapes.box((0.5, 0.5, 0.5), (0, 0.25, 0)), material=blue),
                translation=(2.8, 0.0, 1.2), rotation=shapes.axis_angle((0, 1, 0), math.radians(30)))
-    b.add_node("metal_sphere", b.add_mesh("metal_sphere", *shapes.uv_sphere(0.3, 8, 16), material=metal),
+    ball = shapes.uv_sphere(0.3, 8, 16)
+    smooth = shapes.sphere_normals(ball[0])  # vertex normals: shaded smooth, not faceted
+    b.add_node("metal_sphere", b.add_mesh("metal_sphere", *ball, material=metal, normals=smooth),
                translation=(2.6, 0.3, 2.6))
 
     lamp = b.add_point_light("ceiling_lamp", (1.0, 0.9, 0.75), 8.0)

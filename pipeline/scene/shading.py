@@ -1,0 +1,213 @@
+"""The surface at a ray hit: shading normal and base colour, the same for photons and pixels.
+
+* **Shading normal**: the primitive's ``NORMAL`` vertex normals, carried to world space by the
+  inverse transpose of the node's matrix and renormalised (:func:`world_corner_normals`, per pose),
+  interpolated with the hit's barycentrics and renormalised again. It is turned into the geometric
+  normal's hemisphere, so which side a surface is seen from (sidedness) and where secondary rays
+  start (offsets, workers/raycast.py) still come from the geometric normal; primitives without
+  ``NORMAL`` are flat shaded, as glTF 2.0 §3.7.2.1 asks. Lambert cosines, mirror and lobe directions
+  use the shading normal (kernels/scatter.py, workers/composite.py).
+* **Base colour**: ``baseColorFactor`` RGB x the ``baseColorTexture`` (pipeline/scene/textures.py) at
+  the hit's interpolated ``TEXCOORD_n`` x the interpolated ``COLOR_0`` (glTF 2.0 §3.9.2). The photon
+  tracer takes its Russian-roulette albedo from here, so colour bleeding follows the texture; the
+  photon records do not change (pipeline/store/records.py).
+* **Emission**: ``emissiveFactor x strength x emissiveTexture`` (glTF 2.0 §3.9.5; vertex colours do
+  not apply): seen emitters and area-light samples in the compositor, photon weights at emission.
+
+Embree's hit barycentrics (u, v) weight a triangle's corners 1 and 2 (workers/raycast.py).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .textures import sample
+
+MEAN_POINTS = 256  # points per emissive triangle for its mean textured radiance
+
+
+@dataclass(frozen=True, eq=False)
+class CornerAttributes:
+    """Pose-independent per-corner data of every source triangle (global triangle order)."""
+
+    texcoords: dict[int, np.ndarray]  # set -> (F, 3, 2) float32; zeros where an instance lacks the set
+    color: np.ndarray | None  # (F, 3, 3) float32 linear RGB; ones where an instance has no COLOR_0
+
+    @property
+    def empty(self) -> bool:
+        return not self.texcoords and self.color is None
+
+
+def corner_attributes(instances) -> CornerAttributes | None:
+    """TEXCOORD sets and COLOR_0 of every triangle corner, None when no instance has any."""
+    attrs = [inst.attributes for inst in instances]
+    sets = sorted({s for a in attrs if a is not None for s in a.texcoords})
+    has_color = any(a is not None and a.color is not None for a in attrs)
+    if not sets and not has_color:
+        return None
+    texcoords = {}
+    for s in sets:
+        texcoords[s] = np.concatenate([
+            a.texcoords[s][inst.faces] if a is not None and s in a.texcoords
+            else np.zeros((len(inst.faces), 3, 2), np.float32)
+            for inst, a in zip(instances, attrs)])
+    color = None
+    if has_color:
+        color = np.concatenate([
+            a.color[inst.faces] if a is not None and a.color is not None
+            else np.ones((len(inst.faces), 3, 3), np.float32)
+            for inst, a in zip(instances, attrs)])
+    return CornerAttributes(texcoords, color)
+
+
+def world_corner_normals(instances, matrices: np.ndarray) -> np.ndarray | None:
+    """(F, 3, 3) float32 world-space unit vertex normals at every triangle corner, zero where an
+    instance has no NORMAL (flat there); None when no instance has normals. A normal transforms by
+    the inverse transpose of the linear part of its node's matrix."""
+    if not any(inst.attributes is not None and inst.attributes.normals is not None for inst in instances):
+        return None
+    parts = []
+    for inst, m in zip(instances, matrices):
+        a = inst.attributes
+        if a is None or a.normals is None:
+            parts.append(np.zeros((len(inst.faces), 3, 3), np.float32))
+            continue
+        try:
+            inverse_t = np.linalg.inv(m[:3, :3]).T
+        except np.linalg.LinAlgError:  # a node scaled to nothing: its triangles have no area
+            parts.append(np.zeros((len(inst.faces), 3, 3), np.float32))
+            continue
+        n = a.normals @ inverse_t.T
+        length = np.linalg.norm(n, axis=1, keepdims=True)
+        n = np.divide(n, length, out=np.zeros_like(n), where=length > 1e-12)
+        parts.append(n[inst.faces].astype(np.float32))
+    return np.concatenate(parts)
+
+
+class SurfaceShading:
+    """Shading normals and base colours at hits of one frame state (see the module docstring)."""
+
+    def __init__(self, state, geometric_normals: np.ndarray):
+        self.geometric = np.asarray(geometric_normals, np.float64)
+        self.corner_normals = getattr(state, "corner_normals", None)
+        # triangles with vertex normals: the only ones whose hits need interpolating
+        self.smooth_triangle = (None if self.corner_normals is None
+                                else np.any(self.corner_normals != 0, axis=(1, 2)))
+        corners = getattr(state, "corners", None)
+        self.texcoords = corners.texcoords if corners is not None else {}
+        self.color = corners.color if corners is not None else None
+        self.tri_mat = state.triangle_material.astype(np.int64)
+        mats = state.materials
+        self.factor = np.array([m.albedo for m in mats], np.float64)
+        self.textures = {j: m.base_color_texture for j, m in enumerate(mats)
+                         if getattr(m, "base_color_texture", None) is not None}
+        used = set(np.unique(self.tri_mat).tolist()) if len(self.tri_mat) else set()
+        self.textures = {j: t for j, t in self.textures.items() if j in used}
+        self.emission_factor = np.array([m.emission for m in mats], np.float64)
+        self.emissive_textures = {j: m.emissive_texture for j, m in enumerate(mats)
+                                  if j in used and m.is_emissive and getattr(m, "emissive_texture", None) is not None}
+
+    @property
+    def smooth(self) -> bool:
+        """True when some triangle has vertex normals."""
+        return self.corner_normals is not None
+
+    @property
+    def varies(self) -> bool:
+        """True when the base colour varies inside a triangle (textures or vertex colours)."""
+        return bool(self.textures) or self.color is not None
+
+    def normal(self, tri: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """(n, 3) float64 unit shading normals at the hits, in the geometric normal's hemisphere.
+        ``tri`` may hold -1 (a miss): those rows get triangle 0's normal and mean nothing."""
+        t = np.maximum(np.asarray(tri), 0)
+        geo = np.take(self.geometric, t, axis=0)
+        if self.corner_normals is None:
+            return geo
+        rows = np.flatnonzero(self.smooth_triangle[t])
+        if not len(rows):
+            return geo
+        g = geo[rows]
+        c = np.take(self.corner_normals, t[rows], axis=0).astype(np.float64)
+        n = _interpolate(c, np.take(u, rows), np.take(v, rows))
+        length = np.sqrt(np.einsum("ij,ij->i", n, n))
+        ok = length > 1e-6
+        n = np.where(ok[:, None], n / np.where(ok, length, 1.0)[:, None], g)
+        geo[rows] = n * np.where(np.einsum("ij,ij->i", n, g) < 0, -1.0, 1.0)[:, None]
+        return geo
+
+    def base_color(self, tri: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """(n, 3) float64 base colour at the hits (factor x texture x COLOR_0); -1 rows: triangle 0."""
+        t = np.maximum(np.asarray(tri), 0)
+        m = self.tri_mat[t] if len(self.tri_mat) else np.zeros(len(t), np.int64)
+        rho = np.take(self.factor, m, axis=0)
+        if self.color is not None:
+            rho = rho * _interpolate(np.take(self.color, t, axis=0).astype(np.float64), u, v)
+        return self._textured(self.textures, rho, t, m, u, v)
+
+    @property
+    def emission_varies(self) -> bool:
+        """True when some emitter's radiance varies inside its triangles (emissive textures)."""
+        return bool(self.emissive_textures)
+
+    def emission(self, tri: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """(n, 3) float64 emitted radiance at the hits: emissive factor x strength x texture."""
+        t = np.maximum(np.asarray(tri), 0)
+        m = self.tri_mat[t] if len(self.tri_mat) else np.zeros(len(t), np.int64)
+        return self._textured(self.emissive_textures, np.take(self.emission_factor, m, axis=0), t, m, u, v)
+
+    def mean_emission(self, tri: np.ndarray) -> np.ndarray:
+        """(n, 3) emitted radiance averaged over each triangle: exact without an emissive texture,
+        else the mean of :data:`MEAN_POINTS` stratified, area-uniform points (what emitters are
+        chosen by; photon weights then carry L(x) / this mean, workers/emission.py)."""
+        tri = np.asarray(tri, np.int64)
+        out = np.take(self.emission_factor, self.tri_mat[tri], axis=0) if len(tri) else np.zeros((0, 3))
+        if not self.emission_varies or not len(tri):
+            return out
+        k = int(round(np.sqrt(MEAN_POINTS)))
+        g = (np.arange(k) + 0.5) / k
+        su, w = np.sqrt(np.repeat(g, k)), np.tile(g, k)
+        b1, b2 = su * (1.0 - w), su * w  # pbrt's uniform triangle mapping, cell centres
+        textured = np.flatnonzero(np.isin(self.tri_mat[tri], list(self.emissive_textures)))
+        rep = np.repeat(tri[textured], len(b1))
+        values = self.emission(rep, np.tile(b1, len(textured)), np.tile(b2, len(textured)))
+        out[textured] = values.reshape(len(textured), len(b1), 3).mean(axis=1)
+        return out
+
+    def _textured(self, textures: dict, value: np.ndarray, t, m, u, v) -> np.ndarray:
+        """``value`` (n, 3) times each textured material's texture at its hits' texture coordinates."""
+        for j, tex in textures.items():
+            rows = np.flatnonzero(m == j)
+            if not len(rows):
+                continue
+            corners = self.texcoords.get(tex.texcoord)
+            if corners is None:
+                uv = np.zeros((len(rows), 2))
+            else:
+                uv = _interpolate(np.take(corners, t[rows], axis=0).astype(np.float64),
+                                  np.take(u, rows), np.take(v, rows))
+            value[rows] *= sample(tex, uv)
+        return value
+
+
+def mean_emission(material) -> np.ndarray:
+    """(3,) a material's emitted radiance averaged over its emissive texture."""
+    emission = np.asarray(material.emission, np.float64)
+    tex = getattr(material, "emissive_texture", None)
+    return emission if tex is None else emission * tex.mean
+
+
+def mean_base_color(material) -> np.ndarray:
+    """(3,) a material's base colour averaged over its texture (factor x texel mean): what a
+    mesh-level estimate such as the adaptation luminance (workers/reconstruct.py) can use."""
+    factor = np.asarray(material.albedo, np.float64)
+    tex = getattr(material, "base_color_texture", None)
+    return factor if tex is None else factor * tex.mean
+
+
+def _interpolate(corners: np.ndarray, u, v) -> np.ndarray:
+    """Barycentric blend of (n, 3, k) corner values with Embree's (u, v) (corners 1 and 2)."""
+    u = np.asarray(u, np.float64)[:, None]
+    v = np.asarray(v, np.float64)[:, None]
+    return (1.0 - u - v) * corners[:, 0] + u * corners[:, 1] + v * corners[:, 2]
