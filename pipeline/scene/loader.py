@@ -325,5 +325,5 @@ def _choose_camera(doc, nodes, order, cameras, name):
     for i in candidates:
         if name in (nodes[i].name, cameras[nodes[i].camera].name):
             return i
-    names = ", ".join(sorted({cameras[nodes[i].camera].name for i in candidates}) | {AUTO})
+    names = ", ".join(sorted({cameras[nodes[i].camera].name for i in candidates} | {AUTO}))
     raise doc.error(f"no camera named {name!r} (cameras: {names})", "cameras")
