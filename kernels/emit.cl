@@ -105,7 +105,8 @@ __kernel void emit8(
     const double8 koy = cy + (kty * krc + ksy * krs) - kdy * back;
     const double8 koz = cz + (ktz * krc + ksz * krs) - kdz * back;
     const long8 is_sky = k == (long8)(EMIT_SKY);
-    const double8 scale = select(select(select(select((double8)(M_PI * radius * radius), spot_s, k == (long8)(EMIT_SPOT)),
+    const double8 disk = (double8)(M_PI * radius * radius);
+    const double8 scale = select(select(select(select(disk, spot_s, k == (long8)(EMIT_SPOT)),
                                                (double8)(4.0 * M_PI), k == (long8)(EMIT_POINT)),
                                         (double8)(2.0 * M_PI * (M_PI * radius * radius)), is_sky),
                                  (double8)(0.0), is_area);

@@ -175,7 +175,8 @@ def _job_arguments(scene_file, frames, out_dir, resolution, spp, photons, fmax, 
     fields = load_config(config_file) if config_file else {}
     fields.update(seed=seed, photon_depth=photon_depth, **({} if d_thr is None else {"d_thr": d_thr}))
     return dict(scene_path=scene_file, frames=frames, out_dir=out_dir, n_photons=photons, fmax=fmax,
-                temporal=temporal, store_url=store_url, camera=camera, config=RenderConfig.from_dict(fields), light=light,
+                temporal=temporal, store_url=store_url, camera=camera, config=RenderConfig.from_dict(fields),
+                light=light,
                 settings=RenderSettings(width=width, height=height, spp=spp, reflection_depth=reflection_depth))
 
 
