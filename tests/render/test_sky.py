@@ -95,6 +95,19 @@ def test_rays_leaving_the_scene_show_the_sky(tmp_path):
     np.testing.assert_array_equal(img.albedo[miss], 0.0)
 
 
+def test_a_mirror_reflects_the_sky(tmp_path):
+    """An ideal mirror floor seen from above its horizon reflects rays upwards: reflectance x the
+    zenith radiance, exactly (no light reaches an ideal mirror but through its reflection)."""
+    b = GltfBuilder()
+    mirror = b.add_material("mirror", ALBEDO, metallic=1.0, roughness=0.0)
+    b.add_node("plane", b.add_mesh("plane", quad_y(2.0), UP_FACES, material=mirror))
+    scene = _lit(b.write(tmp_path / "m.glb"), sun=True, sky=Sky(ZENITH, GROUND))
+    img = render_frame(scene.pose_frame(1), None, None, width=32, height=24, spp=1, seed=1, frame=1)
+    on = img.alpha == 1.0
+    assert on.sum() > 30
+    np.testing.assert_allclose(img.direct[on], np.broadcast_to(ALBEDO * np.array(ZENITH), (on.sum(), 3)), rtol=1e-6)
+
+
 def _square_view_factor(a: float, h: float) -> float:
     """View factor from a differential area to a parallel square of half side a centred h above
     it: four corner rectangles of Howell C-11, F = 1/(2 pi) [A/sqrt(1+A^2) atan(B/sqrt(1+A^2)) + (A<->B)]."""

@@ -126,3 +126,13 @@ def test_loom_info_lists_what_it_ignores_and_why(tmp_path):
     assert not any("KHR_lights_punctual" in line for line in ignored)  # implemented
     clean = CliRunner().invoke(main, ["info", str(plane_scene(tmp_path / "plane.glb"))]).output
     assert "ignored" not in clean
+
+
+@pytest.mark.parametrize("command", ["shoot", "render"])
+def test_light_none_refuses_before_writing_anything(tmp_path, command):
+    path = box_in_box(tmp_path / "bib.glb")
+    target = tmp_path / "out"
+    args = (["--store", str(target)] if command == "shoot" else ["--out", str(target)])
+    result = CliRunner().invoke(main, [command, str(path), *args, "--light", "none", "--scheduler", "synchronous"])
+    assert result.exit_code == 2 and "has no light" in result.output
+    assert not target.exists()
