@@ -1,16 +1,20 @@
 """The light a file without any light is rendered with: a directional sun and a uniform sky.
 
 Decision (issue 13): many glTF files, from sample collections and DCC exports, carry no light;
-refusing them (``--light none`` still does) leaves a new user with nothing. The default is an
-outdoor daylight rig in the file's own units (DESIGN.md: radiometric, no 683 lm/W):
+refusing them (``--light none`` still does) leaves a new user with nothing. The default is a
+clear day in the file's units (DESIGN.md: radiometric, no 683 lm/W), with a clear day's values:
+1000 W/m^2 of direct sun at normal incidence and about 130 W/m^2 of diffuse sky on a horizontal
+surface. The level matters because tone mapping is absolute (pipeline/tonemap.py, Ward 1994,
+one unit of radiance = ``nits_per_unit`` cd/m^2): at daylight levels a sunlit white surface
+shows near display white and shadows stay readable, where a dim rig would look like dusk.
 
 * the **sun**, a ``directional`` light of irradiance ``SUN_IRRADIANCE x SUN_COLOR`` on a surface
   facing it, from azimuth ``SUN_AZIMUTH`` (degrees from +Z towards +X) and elevation
   ``SUN_ELEVATION``: front-left and above, so a model facing +Z (glTF's front) is lit on its
   front and top and casts its shadow behind it, away from the default camera
   (pipeline/scene/default_camera.py looks from the front-right);
-* the **sky** (pipeline/scene/sky.py), radiance ``SKY_ZENITH`` from the upper hemisphere (about a
-  fifth of a horizontal surface's irradiance, as on a clear day) and, from the lower hemisphere,
+* the **sky** (pipeline/scene/sky.py), radiance ``SKY_ZENITH`` from the upper hemisphere (bluish;
+  pi x its mean is the diffuse horizontal irradiance, a sixth of the total) and, from the lower hemisphere,
   the radiance of an endless ground of albedo ``GROUND_ALBEDO`` under that sun and sky, so the
   undersides of floating objects are not black.
 
@@ -24,11 +28,11 @@ import numpy as np
 from .lights import Light, LightDef
 from .sky import Sky, direction_from
 
-SUN_IRRADIANCE = 3.0
+SUN_IRRADIANCE = 1000.0
 SUN_COLOR = (1.0, 0.95, 0.88)
 SUN_AZIMUTH = -45.0
 SUN_ELEVATION = 50.0
-SKY_ZENITH = (0.15, 0.19, 0.26)
+SKY_ZENITH = (32.0, 40.0, 54.0)
 GROUND_ALBEDO = 0.1
 
 

@@ -20,7 +20,7 @@ from kernels.camera import camera_rays_reference
 from pipeline.scene import ElementMesh, Scene
 from pipeline.scene.builtin.gltf_builder import GltfBuilder
 from pipeline.scene.builtin.shapes import look_at, merge, quad
-from pipeline.scene.default_lights import SUN_ELEVATION, default_sun
+from pipeline.scene.default_lights import SUN_COLOR, SUN_ELEVATION, SUN_IRRADIANCE, default_sun
 from pipeline.scene.sky import Sky
 from workers.composite import frame_key, render_frame
 from workers.photons import trace_batch
@@ -59,7 +59,7 @@ def _lit(path, *, sun: bool, sky: Sky | None) -> Scene:
     return scene
 
 
-SUN_E = 3.0 * np.array([1.0, 0.95, 0.88]) * np.sin(np.radians(SUN_ELEVATION))  # the default sun, horizontal
+SUN_E = SUN_IRRADIANCE * np.array(SUN_COLOR) * np.sin(np.radians(SUN_ELEVATION))  # the default sun, horizontal
 
 
 @pytest.mark.parametrize("case", ["sky", "sun", "both"])
