@@ -44,7 +44,7 @@ class RenderSettings:
     height: int = 480
     spp: int = 4  # jittered camera samples per pixel
     reflection_depth: int = 4  # mirror/glossy reflections followed per camera path
-    area_samples: int = 2  # area-light samples per diffuse hit (scenes with emissive triangles)
+    area_samples: int = 2  # area-light (or sky) samples per diffuse hit (scenes with emissive triangles or a sky)
     tonemap: ToneMapping = field(default_factory=ToneMapping)
 
     def __post_init__(self) -> None:
