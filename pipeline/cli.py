@@ -235,6 +235,8 @@ def farm_command(step: str, out_dir: str, numbers: tuple[int, ...]) -> None:
     """One target of a `loom plan` Makefile (pipeline/farm.py)."""
     from .farm import step as run_step
 
+    logging.getLogger("pipeline.scene.notices").setLevel(logging.WARNING)  # `loom plan` showed them once
+
     want = {"decide": 1, "reconstruct": 2, "frames": 2, "done": 1, "finish": 0}[step]
     if len(numbers) != want or any(n < 0 for n in numbers):
         raise LoomError(f"{step} takes {want} index(es) >= 0, got {list(numbers)}", field="farm")
