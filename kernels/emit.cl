@@ -8,6 +8,7 @@
 #define EMIT_SPOT 1
 #define EMIT_DIRECTIONAL 2
 #define EMIT_AREA 3
+#define EMIT_SKY 4
 #define EMISSION_STREAM 0xFFFF0000u
 
 // Eight photons a work item in explicit vector types, for the reasons given in lanes.cl: every
@@ -92,17 +93,32 @@ __kernel void emit8(
     const double8 dox = cx + (tx * rc + sx * rs) - ax * back;
     const double8 doy = cy + (ty * rc + sy * rs) - ay * back;
     const double8 doz = cz + (tz * rc + sz * rs) - az * back;
-    const double8 scale = select(select(select((double8)(M_PI * radius * radius), spot_s, k == (long8)(EMIT_SPOT)),
-                                        (double8)(4.0 * M_PI), k == (long8)(EMIT_POINT)), (double8)(0.0), is_area);
+    // sky half: uniform on the hemisphere about its axis, from a disk facing that direction
+    double8 kdx, kdy, kdz;
+    around8(ax, ay, az, u1, 2.0 * M_PI * u2, &kdx, &kdy, &kdz);
+    const double8 kr = radius * sqrt(u3);
+    double8 ktx, kty, ktz, ksx, ksy, ksz, ksp, kcp;
+    basis8(kdx, kdy, kdz, &ktx, &kty, &ktz, &ksx, &ksy, &ksz);
+    sincos8(2.0 * M_PI * u4, &ksp, &kcp);
+    const double8 krc = kr * kcp, krs = kr * ksp;
+    const double8 kox = cx + (ktx * krc + ksx * krs) - kdx * back;
+    const double8 koy = cy + (kty * krc + ksy * krs) - kdy * back;
+    const double8 koz = cz + (ktz * krc + ksz * krs) - kdz * back;
+    const long8 is_sky = k == (long8)(EMIT_SKY);
+    const double8 disk = (double8)(M_PI * radius * radius);
+    const double8 scale = select(select(select(select(disk, spot_s, k == (long8)(EMIT_SPOT)),
+                                               (double8)(4.0 * M_PI), k == (long8)(EMIT_POINT)),
+                                        (double8)(2.0 * M_PI * (M_PI * radius * radius)), is_sky),
+                                 (double8)(0.0), is_area);
 
     const long8 is_point = k == (long8)(EMIT_POINT), is_spot = k == (long8)(EMIT_SPOT);
     const long8 is_dir = k == (long8)(EMIT_DIRECTIONAL);
-    const double8 ox = select(select(lx, dox, is_dir), aox, is_area);
-    const double8 oy = select(select(ly, doy, is_dir), aoy, is_area);
-    const double8 oz = select(select(lz, doz, is_dir), aoz, is_area);
-    const double8 dx = select(select(select(ax, sdx, is_spot), pdx, is_point), adx, is_area);
-    const double8 dy = select(select(select(ay, sdy, is_spot), pdy, is_point), ady, is_area);
-    const double8 dz = select(select(select(az, sdz, is_spot), pdz, is_point), adz, is_area);
+    const double8 ox = select(select(select(lx, dox, is_dir), kox, is_sky), aox, is_area);
+    const double8 oy = select(select(select(ly, doy, is_dir), koy, is_sky), aoy, is_area);
+    const double8 oz = select(select(select(lz, doz, is_dir), koz, is_sky), aoz, is_area);
+    const double8 dx = select(select(select(select(ax, sdx, is_spot), pdx, is_point), kdx, is_sky), adx, is_area);
+    const double8 dy = select(select(select(select(ay, sdy, is_spot), pdy, is_point), kdy, is_sky), ady, is_area);
+    const double8 dz = select(select(select(select(az, sdz, is_spot), pdz, is_point), kdz, is_sky), adz, is_area);
     const double8 wr = select(rr * scale, G8(double8, flux, 3 * e), is_area);
     const double8 wg = select(rg * scale, G8(double8, flux, 3 * e + 1), is_area);
     const double8 wb = select(rb * scale, G8(double8, flux, 3 * e + 2), is_area);

@@ -14,6 +14,11 @@ tables; pbrt-v4 "Light Sources" for the sampling):
                weight E * pi R^2
   emissive     uniform on the triangle (sqrt(u1) warp), cosine-weighted about its front normal,
                weight pi * L * A (the emitter's flux)
+  sky          one half of a uniform sky (pipeline/scene/sky.py), its travel axis and radiance L as
+               a light's direction and radiant: direction uniform on the hemisphere about the axis
+               (cos = u1, phi = 2 pi u2), origin uniform on a disk of radius R facing it (u3, u4),
+               1.05 R upstream of the scene centre, weight L * 2 pi * pi R^2 (pbrt-v4 "Infinite
+               lights": radiance over the pdfs of direction, 1 / 2 pi, and disk point, 1 / pi R^2)
 """
 from __future__ import annotations
 
@@ -25,15 +30,15 @@ from .philox import EMISSION_STREAM, uniforms
 from .sampling import around, orthonormal_basis, sincos_poly
 from .scatter import LANES, WORK_GROUP, device_input, device_output, device_table, read_back
 
-POINT, SPOT, DIRECTIONAL, AREA = 0, 1, 2, 3
+POINT, SPOT, DIRECTIONAL, AREA, SKY = 0, 1, 2, 3, 4
 
 
 @dataclass
 class EmissionTables:
     cdf: np.ndarray  # (K,) cumulative selection probability, last = 1
     prob: np.ndarray  # (K,) selection probability
-    kind: np.ndarray  # (K,) int32 POINT | SPOT | DIRECTIONAL | AREA
-    index: np.ndarray  # (K,) int64 light index, or global triangle for AREA
+    kind: np.ndarray  # (K,) int32 POINT | SPOT | DIRECTIONAL | AREA | SKY
+    index: np.ndarray  # (K,) int64 light index (a sky half's row in the light tables), or global triangle for AREA
     flux: np.ndarray  # (K, 3) emitter flux (used as the weight of AREA photons)
     light_pos: np.ndarray  # (L, 3)
     light_dir: np.ndarray  # (L, 3) unit direction the light points to
@@ -96,6 +101,16 @@ def emit_reference(t: EmissionTables, photon: np.ndarray, key: tuple[int, int]):
         origins[sub] = t.center + (tt * rc[:, None] + ss * rs[:, None]) - axis[dl] * (t.radius * 1.05)
         d[dl] = axis[dl]
         wgt[dl] = rad[dl] * (np.pi * t.radius * t.radius)
+    sk = k == SKY
+    if sk.any():
+        d[sk] = around(axis[sk], sub_u1[sk], 2.0 * np.pi * sub_u2[sk], polynomial=True)
+        r = t.radius * np.sqrt(u3[lights][sk])
+        tt, ss = orthonormal_basis(d[sk])
+        sp, cp = sincos_poly(2.0 * np.pi * u4[lights][sk])
+        rc, rs = r * cp, r * sp
+        sub = np.flatnonzero(lights)[sk]
+        origins[sub] = t.center + (tt * rc[:, None] + ss * rs[:, None]) - d[sk] * (t.radius * 1.05)
+        wgt[sk] = rad[sk] * (2.0 * np.pi * (np.pi * t.radius * t.radius))
     dirs[lights] = d
     weights[lights] = wgt
     weights /= t.prob[e][:, None]

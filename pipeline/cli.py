@@ -47,6 +47,7 @@ class _LoomGroup(click.Group):
 def main() -> None:
     """photonloom: perception-guided global illumination for animations."""
     logging.basicConfig(level=logging.WARNING, format="loom: %(levelname)s: %(message)s")
+    logging.getLogger("pipeline.scene.notices").setLevel(logging.INFO)  # default camera and lights chosen
 
 
 @main.command("scene")
@@ -60,16 +61,23 @@ def scene_command(name: str, output: str) -> None:
     click.echo(f"wrote {path}")
 
 
+_CAMERA_HELP = ("Camera or camera-node name, or auto: frame the whole animation (pipeline/scene/default_camera.py). "
+                "Default: the first camera, auto when the file has none.")
+_LIGHT_HELP = ("auto: a file without any light is lit by a default sun and sky (pipeline/scene/default_lights.py); "
+               "none: refuse it.")
+
+
 @main.command("info")
 @click.argument("scene_file", type=click.Path(dir_okay=False))
-@click.option("--camera", default=None, help="Camera or camera-node name (default: the first camera).")
+@click.option("--camera", default=None, help=_CAMERA_HELP)
 @click.option("--element-size", type=float, default=None, help="Element edge bound (default: the scene's).")
-def info_command(scene_file: str, camera: str | None, element_size: float | None) -> None:
+@click.option("--light", type=click.Choice(["auto", "none"]), default="auto", show_default=True, help=_LIGHT_HELP)
+def info_command(scene_file: str, camera: str | None, element_size: float | None, light: str) -> None:
     """Summarise SCENE_FILE: timeline, geometry, elements, lights, materials, cameras, needs."""
     from .scene import Scene
     from .scene.summary import describe
 
-    scene = Scene.load(scene_file, camera=camera)
+    scene = Scene.load(scene_file, camera=camera, light=light)
     for line in describe(scene, element_size):
         click.echo(line)
 
@@ -92,16 +100,17 @@ def _scheduler_options(f):
 @click.option("--element-size", type=float, default=None, help="Element edge bound (default: the scene's).")
 @click.option("--photon-depth", type=int, default=8, show_default=True, help="Maximum photon bounces.")
 @click.option("--quiet", is_flag=True, help="No progress bar.")
+@click.option("--light", type=click.Choice(["auto", "none"]), default="auto", show_default=True, help=_LIGHT_HELP)
 @_scheduler_options
 def shoot_command(scene_file, frames, photons, store_url, seed, element_size, photon_depth, quiet,
-                  scheduler, workers) -> None:
+                  light, scheduler, workers) -> None:
     """Trace photons for every frame of SCENE_FILE into a photon store (resumable)."""
     from .config import RenderConfig
     from .shoot import shoot
 
     config = RenderConfig(seed=seed, element_size=element_size, photon_depth=photon_depth)
     summary = shoot(scene_file, frames=frames, n_photons=photons, store_url=store_url, config=config,
-                    scheduler=scheduler, workers=workers, progress=not quiet)
+                    scheduler=scheduler, workers=workers, progress=not quiet, light=light)
     click.echo(
         f"shot {summary['frames']} frames ({summary['traced_frames']} traced, {summary['shared_frames']} "
         f"sharing a traced frame's photons): {summary['tasks']} batches run, {summary['skipped']} already "
@@ -139,7 +148,7 @@ def _job_options(f):
                      show_default=True, help="Temporal photon collection with --photons N: Condition (1) windows "
                      "(§5.1), always +-F_max/2 (§6), or each frame's own photons."),
         click.option("--store", "store_url", default=None, help="Photon store (default: OUT/photons.zarr)."),
-        click.option("--camera", default=None, help="Camera or camera-node name (default: the first camera)."),
+        click.option("--camera", default=None, help=_CAMERA_HELP),
         click.option("--seed", type=int, default=0, show_default=True),
         click.option("--reflection-depth", type=int, default=4, show_default=True,
                      help="Mirror/glossy reflections followed per camera path."),
@@ -148,6 +157,8 @@ def _job_options(f):
                      help="d_thr, share of AQM pixels allowed above 1 JND (0.03)."),
         click.option("--config", "config_file", type=click.Path(dir_okay=False), default=None,
                      help="JSON object of RenderConfig fields (pipeline/config.py); the options above override it."),
+        click.option("--light", type=click.Choice(["auto", "none"]), default="auto", show_default=True,
+                     help=_LIGHT_HELP),
     ]
     for option in reversed(options):
         f = option(f)
@@ -155,7 +166,7 @@ def _job_options(f):
 
 
 def _job_arguments(scene_file, frames, out_dir, resolution, spp, photons, fmax, temporal, store_url, camera, seed,
-                   reflection_depth, photon_depth, d_thr, config_file) -> dict:
+                   reflection_depth, photon_depth, d_thr, config_file, light="auto") -> dict:
     """The keyword arguments of pipeline.render.prepare_job / render from the job options."""
     from .config import RenderConfig, load_config
     from .render import RenderSettings, parse_resolution
@@ -165,6 +176,7 @@ def _job_arguments(scene_file, frames, out_dir, resolution, spp, photons, fmax, 
     fields.update(seed=seed, photon_depth=photon_depth, **({} if d_thr is None else {"d_thr": d_thr}))
     return dict(scene_path=scene_file, frames=frames, out_dir=out_dir, n_photons=photons, fmax=fmax,
                 temporal=temporal, store_url=store_url, camera=camera, config=RenderConfig.from_dict(fields),
+                light=light,
                 settings=RenderSettings(width=width, height=height, spp=spp, reflection_depth=reflection_depth))
 
 
@@ -222,6 +234,8 @@ def plan_command(loom_command, decide_workers, **job) -> None:
 def farm_command(step: str, out_dir: str, numbers: tuple[int, ...]) -> None:
     """One target of a `loom plan` Makefile (pipeline/farm.py)."""
     from .farm import step as run_step
+
+    logging.getLogger("pipeline.scene.notices").setLevel(logging.WARNING)  # `loom plan` showed them once
 
     want = {"decide": 1, "reconstruct": 2, "frames": 2, "done": 1, "finish": 0}[step]
     if len(numbers) != want or any(n < 0 for n in numbers):

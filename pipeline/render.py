@@ -44,7 +44,7 @@ class RenderSettings:
     height: int = 480
     spp: int = 4  # jittered camera samples per pixel
     reflection_depth: int = 4  # mirror/glossy reflections followed per camera path
-    area_samples: int = 2  # area-light samples per diffuse hit (scenes with emissive triangles)
+    area_samples: int = 2  # area-light (or sky) samples per diffuse hit (scenes with emissive triangles or a sky)
     tonemap: ToneMapping = field(default_factory=ToneMapping)
 
     def __post_init__(self) -> None:
@@ -80,7 +80,8 @@ def check_out_dir(out: Path) -> None:
 
 def prepare_job(scene_path, *, frames: str | None, out_dir, settings: RenderSettings = RenderSettings(),
                 n_photons: int | None = None, store_url: str | None = None, camera: str | None = None,
-                config: RenderConfig = RenderConfig(), temporal: str = "adaptive", fmax: int | None = None):
+                config: RenderConfig = RenderConfig(), temporal: str = "adaptive", fmax: int | None = None,
+                light: str = "auto"):
     """Check every input (one-line LoomErrors, before anything is written), then create the output
     folder, the photon store and its illumination arrays (only the client creates arrays: zarr 3
     has no locks) and return the coordinator's Job (pipeline/coordinator.py)."""
@@ -88,13 +89,11 @@ def prepare_job(scene_path, *, frames: str | None, out_dir, settings: RenderSett
 
     out = Path(out_dir)
     check_out_dir(out)
-    scene = Scene.load(scene_path, camera=camera)
-    if scene.camera_node is None:
-        raise LoomError("has no perspective camera to render from", path=str(scene_path), field="cameras")
+    scene = Scene.load(scene_path, camera=camera, light=light)
     p = plan(scene, frames, n_photons if n_photons is not None else 1, config)
     store_url = store_url or str(out / "photons.zarr")
     check_store_location(store_url)
-    cam_name = scene.nodes[scene.camera_node].name
+    cam_name = scene.camera_name  # a node's, or "auto" (pipeline/scene/default_camera.py)
     if temporal not in ("adaptive", "fixed", "off"):
         raise LoomError(f"must be adaptive, fixed or off, got {temporal!r}", field="--temporal")
     fmax = config.fmax_initial if fmax is None else fmax
@@ -143,7 +142,8 @@ def render(scene_path, *, frames: str | None, out_dir, settings: RenderSettings 
            n_photons: int | None = None, store_url: str | None = None, camera: str | None = None,
            config: RenderConfig = RenderConfig(), scheduler: str = "local", workers: int | None = None,
            progress: bool = True, temporal: str = "adaptive", fmax: int | None = None,
-           segment: int | None = None, echo=None, performance_report: str | None = None) -> dict:
+           segment: int | None = None, echo=None, performance_report: str | None = None,
+           light: str = "auto") -> dict:
     """Render ``frames`` of a scene into ``out_dir``; returns the report (also ``report.json``).
 
     ``n_photons`` None (``--photons auto``): the segment coordinator chooses N_frame and F_max per
@@ -175,7 +175,8 @@ def render(scene_path, *, frames: str | None, out_dir, settings: RenderSettings 
     # leaves no output folder behind
     with connect(scheduler, workers, performance_report=performance_report, echo=echo) as client:
         job = prepare_job(scene_path, frames=frames, out_dir=out_dir, settings=settings, n_photons=n_photons,
-                          store_url=store_url, camera=camera, config=config, temporal=temporal, fmax=fmax)
+                          store_url=store_url, camera=camera, config=config, temporal=temporal, fmax=fmax,
+                          light=light)
         if segment is not None:
             report_segment(*reprocess(job, client, segment))
             from .segment_records import read_records

@@ -95,11 +95,12 @@ def tasks(p: ShootPlan, store: PhotonStore, url: str) -> list[tuple[str, dict]]:
 
 def shoot(scene_path: str, *, frames: str | None, n_photons: int, store_url: str,
           config: RenderConfig = RenderConfig(), scheduler: str = "local", workers: int | None = None,
-          progress: bool = True) -> dict:
-    """Trace every requested frame's photons into the store; returns a summary of the run."""
+          progress: bool = True, light: str = "auto") -> dict:
+    """Trace every requested frame's photons into the store; returns a summary of the run.
+    ``light`` none refuses a file without light instead of lighting it by default."""
     from workers.photons import shoot_task
 
-    scene = Scene.load(scene_path)
+    scene = Scene.load(scene_path, light=light)
     p = plan(scene, frames, n_photons, config)
     check_store_location(store_url)
     store = open_store(p, store_url)

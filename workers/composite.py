@@ -5,19 +5,21 @@ For every pixel, ``spp`` jittered camera rays. At each hit:
 * an emitter seen from its front face shows its emitted radiance (times its emissive texture);
 * a **diffuse** surface gets direct light from every light with shadow rays (point, spot and
   directional exactly; emissive triangles by ``area_samples`` samples chosen by power, i.e. area x
-  radiance) and indirect radiance rho/pi x E, E interpolated inside the hit element from its three
+  radiance; a sky, pipeline/scene/sky.py, by ``area_samples`` cosine-weighted directions) and
+  indirect radiance rho/pi x E, E interpolated inside the hit element from its three
   vertex irradiances (the illumination map, workers/reconstruct.py); the path ends there;
 * Lambert cosines, reflections and lobes use the shading normal (vertex normals), sidedness and
   ray offsets the geometric one; the albedo is the hit's base colour (factor x texture x COLOR_0),
   per sample, so textures are resolved per pixel (pipeline/scene/shading.py);
+* a ray that leaves the scene shows the sky's radiance, if there is a sky (coverage stays 0);
 * a **mirror** reflects, a **glossy** surface samples its normalised Phong lobe (the photon tracer's
   lobe, pipeline/scene/materials.py) and gets exact highlights of punctual lights; both continue up
   to ``max_depth`` reflections. Area lights reach glossy surfaces through the lobe samples only.
 
 Layers per pixel (linear, radiance units): ``direct`` (emission and direct light, through the
 specular chain), ``indirect`` (the map term), beauty = direct + indirect, and ``albedo`` of the
-first surface hit. Ray counts per kind: camera, shadow (punctual lights), area (area-light shadow
-rays), reflection. Scenes without specular materials cast no reflection rays, scenes without
+first surface hit. Ray counts per kind: camera, shadow (punctual lights), area (area-light and sky
+shadow rays), reflection. Scenes without specular materials cast no reflection rays, scenes without
 emissive triangles no area rays.
 
 Determinism: every random number is a hash of (seed, frame, pixel, sample, dimension)
@@ -41,7 +43,8 @@ CHUNK_RAYS = 1 << 14  # camera samples per wavefront: a working set two workers 
 RAY_KINDS = ("camera", "shadow", "area", "reflection")
 _KIND = {"diffuse": 0, "mirror": 1, "glossy": 2}
 _DIMS_PER_DEPTH = 16  # random dimensions per reflection depth: lobe (2) + area samples (3 each)
-_FAR = 1e30  # shadow-ray length towards a directional light
+_FAR = 1e30  # shadow-ray length towards a directional light or the sky
+_SKY_DIMS, _SKY_DIMS_PER_DEPTH = 1 << 20, 512  # random dimensions of sky samples (2 each, up to 256)
 
 
 # --- counter-based random numbers -------------------------------------------------------------
@@ -96,6 +99,8 @@ class _Shading:
         self.normals = caster.normals.astype(np.float32)
         self.epsilon = np.float32(caster.epsilon)  # shadow-ray origin offset (workers/raycast.py)
         self.lights = state.lights
+        self.sky = state.sky
+        self.sky_samples = area_samples if state.sky is not None else 0
         # Light culling cells: elements when there is an element mesh (small, so a spot's cone
         # culls tightly), else source triangles; hits carry their cell id
         corners = (elements.element_positions(state) if elements is not None
@@ -239,6 +244,12 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
         rays["camera" if depth == 0 else "reflection"] += len(tri)
         hit = tri >= 0
         if not hit.all():
+            if sh.sky is not None:  # rays that leave the scene see the sky
+                miss = np.flatnonzero(~hit)
+                glow = sh.sky.radiance(dirs[miss])
+                if throughput is not None:
+                    glow = (glow * throughput[miss]).astype(np.float32)
+                out[0, miss if path is None else path[miss]] += glow
             path = np.flatnonzero(hit) if path is None else path[hit]
             tri, u, v, t, dirs, origins = tri[hit], u[hit], v[hit], t[hit], dirs[hit], origins[hit]
             throughput = None if throughput is None else throughput[hit]
@@ -275,6 +286,9 @@ def _trace_samples(state, sh: _Shading, key, counter, spp, width, height, max_de
             if sh.area_samples:
                 c = counter if path is None else counter[path]
                 e_direct += _area(sh, key, c, depth, hits, rays, active)
+            if sh.sky_samples:
+                c = counter if path is None else counter[path]
+                e_direct += _sky(sh, key, c, depth, hits, rays, active)
             scale = (rho if active is None else rho * diffuse[:, None]) * np.float32(1.0 / np.pi)
             acc[0] += scale * e_direct
             if sh.element_irradiance is not None:
@@ -470,6 +484,29 @@ def _area(sh: _Shading, key, counter, depth, hits: _Hits, rays, active) -> np.nd
             radiance = np.take(sh.emission, lt[sel], axis=0)
         total[sel] += g.astype(np.float32)[:, None] * radiance
     return total / np.float32(sh.area_samples)
+
+
+def _sky(sh: _Shading, key, counter, depth, hits: _Hits, rays, active) -> np.ndarray:
+    """Irradiance from the sky at the hits (``active`` ones; None: all): ``sky_samples``
+    cosine-weighted directions about the shading normal (pdf cos / pi), E = pi x mean of L(dir)
+    over the unoccluded ones, so an open horizontal plane gets pi L exactly (no noise); directions
+    below the geometric surface see nothing (as photon bounces, pipeline/scene/shading.py)."""
+    rows = np.arange(len(hits.tri)) if active is None else np.flatnonzero(active)
+    total = np.zeros((len(hits.tri), 3), np.float32)
+    if not len(rows):
+        return total
+    facing, lobe = hits.facing(rows), hits.shading(rows).astype(np.float64)
+    origin = hits.points(rows) + facing * sh.epsilon  # the sky is on the facing side
+    c = counter[rows]
+    base = _SKY_DIMS + depth * _SKY_DIMS_PER_DEPTH
+    for s in range(sh.sky_samples):
+        u1, u2 = uniform(key, c, base + 2 * s), uniform(key, c, base + 2 * s + 1)
+        d = np.ascontiguousarray(around(lobe, np.sqrt(u1), 2.0 * np.pi * u2), np.float32)
+        free = ~sh.caster.occluded(origin, d, np.full(len(rows), _FAR, np.float32))
+        free &= np.einsum("ij,ij->i", d, facing) > 0
+        rays["area"] += len(rows)
+        total[rows[free]] += sh.sky.radiance(d[free])
+    return total * np.float32(np.pi / sh.sky_samples)
 
 
 def composite_task(*, scene_path: str, scene_hash: str, camera: str | None, element_size: float,

@@ -2,7 +2,9 @@
 
 Every emitter (a punctual light, or one emissive triangle) gets a selection weight equal to its
 mean RGB flux (Light.power: point 4 pi I, spot 2 pi I x the fall-off integral, directional E x the
-area of the disk covering the scene, emissive pi L A, with L averaged over an emissive texture).
+area of the disk covering the scene, emissive pi L A, with L averaged over an emissive texture;
+each half of a sky, Sky.power, L x 2 pi x the disk's area). A sky half is a row of the light
+tables after the frame's lights: its travel axis as the direction, its radiance as the radiant.
 The sampling itself is in kernels/emit.py (an OpenCL kernel and its NumPy twin); this module turns a
 FrameState into their tables, and weights photons of textured emitters (textured_emission_weights).
 Records store photon weights; irradiance is sum(weight) / (N_emitted x area) (dept.md §1.1).
@@ -11,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from kernels.emit import AREA, DIRECTIONAL, POINT, SPOT, EmissionTables
+from kernels.emit import AREA, DIRECTIONAL, POINT, SKY, SPOT, EmissionTables
 from kernels.philox import EMISSION_STREAM, uniforms
 from pipeline.scene import FrameState
 from pipeline.scene.shading import SurfaceShading
@@ -31,6 +33,14 @@ def emission_tables(state: FrameState, caster: RayCaster) -> EmissionTables:
         kinds.append(code[light.kind])
         index.append(i)
         flux.append(light.power(radius))
+    rows = [(li.position, li.direction, li.radiant, np.cos(li.definition.outer_cone),
+             np.cos(li.definition.inner_cone)) for li in state.lights]
+    if state.sky is not None:
+        for (radiance, axis), power in zip(state.sky.hemispheres, state.sky.power(radius)):
+            kinds.append(SKY)
+            index.append(len(rows))
+            flux.append(power)
+            rows.append((np.zeros(3), axis, radiance, np.cos(np.pi / 4), 1.0))  # cones unused
     if len(state.emissive_triangles):
         tris = state.emissive_triangles
         radiance = SurfaceShading(state, caster.normals).mean_emission(tris)  # emissive textures: their mean
@@ -43,15 +53,14 @@ def emission_tables(state: FrameState, caster: RayCaster) -> EmissionTables:
         raise ValueError("the scene's lights emit no power")
     cdf = np.cumsum(weight) / weight.sum()
     cdf[-1] = 1.0
-    lights = state.lights
     return EmissionTables(
         cdf=cdf, prob=np.diff(np.concatenate([[0.0], cdf])), kind=np.asarray(kinds, np.int32),
         index=np.asarray(index, np.int64), flux=flux,
-        light_pos=np.array([li.position for li in lights], np.float64).reshape(-1, 3),
-        light_dir=np.array([li.direction for li in lights], np.float64).reshape(-1, 3),
-        light_rad=np.array([li.radiant for li in lights], np.float64).reshape(-1, 3),
-        cos_outer=np.array([np.cos(li.definition.outer_cone) for li in lights], np.float64),
-        cos_inner=np.array([np.cos(li.definition.inner_cone) for li in lights], np.float64),
+        light_pos=np.array([r[0] for r in rows], np.float64).reshape(-1, 3),
+        light_dir=np.array([r[1] for r in rows], np.float64).reshape(-1, 3),
+        light_rad=np.array([r[2] for r in rows], np.float64).reshape(-1, 3),
+        cos_outer=np.array([r[3] for r in rows], np.float64),
+        cos_inner=np.array([r[4] for r in rows], np.float64),
         corners=state.vertices[state.faces].reshape(-1, 9).astype(np.float32),
         normals=caster.normals, center=caster.center.astype(np.float64), radius=float(radius),
         epsilon=float(caster.epsilon))

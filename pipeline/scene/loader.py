@@ -12,6 +12,8 @@ import numpy as np
 
 from .animation import INTERPOLATIONS, PATHS, Sampler
 from .camera import CameraDef
+from .default_camera import AUTO, AZIMUTH, ELEVATION, YFOV_DEG, frame_animation
+from .default_lights import default_sky, default_sun
 from .gltf import GltfDocument
 from .lights import light_def_from_gltf
 from .materials import DEFAULT_MATERIAL, material_from_gltf
@@ -21,6 +23,11 @@ from .timeline import DEFAULT_FPS, Timeline
 from .vertex_attributes import read_vertex_attributes
 
 log = logging.getLogger(__name__)
+# What the loader chose for a file that lacks it (default camera, default lights): the CLI shows
+# this logger's INFO lines (pipeline/cli.py); Dask workers, which load the scene again, do not.
+notices_log = logging.getLogger("pipeline.scene.notices")
+_noticed: set[tuple[str, str]] = set()  # one notice per file and process
+LIGHT_CHOICES = ("auto", "none")  # --light: a default sun and sky for a file without light, or refuse it
 
 # Primitive modes (glTF §3.7.2.1): 4 TRIANGLES, 5 TRIANGLE_STRIP, 6 TRIANGLE_FAN.
 _TRIANGLE_MODES = {4, 5, 6}
@@ -29,9 +36,13 @@ _MODE_NAMES = {0: "POINTS", 1: "LINES", 2: "LINE_LOOP", 3: "LINE_STRIP"}
 _ZERO_AREA = 1e-14
 
 
-def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | None = None) -> Scene:
+def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | None = None,
+                light: str = "auto") -> Scene:
+    if light not in LIGHT_CHOICES:
+        raise ValueError(f"light must be one of {LIGHT_CHOICES}, got {light!r}")
     g = doc.gltf
     warnings: list[str] = []
+    notices: list[str] = []
     nodes = _read_nodes(doc)
     order = _reachable(doc, nodes)
 
@@ -68,9 +79,13 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
     if not instances:
         raise doc.error("the scene has no triangle meshes", "meshes")
     emissive = any(materials[inst.material].is_emissive for inst in instances)
-    if not any(nodes[i].light is not None for i in order) and not emissive:
-        raise doc.error("the scene has no light: no KHR_lights_punctual light on a node and no emissive material",
-                        "lights")
+    unlit = not any(nodes[i].light is not None for i in order) and not emissive
+    if unlit and light == "none":
+        raise doc.error("the scene has no light: no KHR_lights_punctual light on a node and no emissive material "
+                        "(--light auto lights it with a default sun and sky)", "lights")
+    if unlit:
+        notices.append("the file has no light: lit by the default sun and sky of pipeline/scene/default_lights.py "
+                       "(loom info describes them; --light none refuses such a file)")
 
     channels = _read_channels(doc, nodes, warnings)
     extras = _scene_extras(doc)
@@ -97,12 +112,24 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
         warnings.append(f"dropped {dropped} zero-area triangle(s)")
     for w in warnings:
         log.warning("%s: %s", doc.path, w)
-    return Scene(
+    scene = Scene(
         path=doc.path, document=doc, nodes=nodes, order=order, instances=instances,
         materials=materials, light_defs=light_defs, cameras=cameras, channels=channels,
         timeline=Timeline(fps=fps, frames=int(n_frames)), camera_node=camera_node,
-        element_size=float(element_size), dropped_triangles=dropped, warnings=warnings,
+        element_size=float(element_size), dropped_triangles=dropped, warnings=warnings, notices=notices,
+        default_lights=(default_sun(),) if unlit else (), sky=default_sky() if unlit else None,
     )
+    if camera_node is None:  # --camera auto, or the file has no perspective camera
+        scene.framing = frame_animation(scene)
+        if camera != AUTO:
+            notices.insert(0, f"the file has no perspective camera: rendering with the auto camera from azimuth "
+                              f"{AZIMUTH:g} deg, elevation {ELEVATION:g} deg, yfov {YFOV_DEG:g} deg, framing the "
+                              "whole animation (--camera auto chooses it for any file)")
+    for n in notices:
+        if (str(doc.path), n) not in _noticed:
+            _noticed.add((str(doc.path), n))
+            notices_log.info("%s: %s", doc.path, n)
+    return scene
 
 
 def _vec(value, default, n, doc, field):
@@ -316,11 +343,14 @@ def _scene_extras(doc: GltfDocument) -> dict:
 
 
 def _choose_camera(doc, nodes, order, cameras, name):
+    """The camera node to render from; None for the auto camera (``name`` auto, or no camera)."""
     candidates = [i for i in order if nodes[i].camera is not None and cameras[nodes[i].camera] is not None]
     if name is None:
         return candidates[0] if candidates else None
+    if name == AUTO:
+        return None
     for i in candidates:
         if name in (nodes[i].name, cameras[nodes[i].camera].name):
             return i
-    names = ", ".join(sorted({cameras[nodes[i].camera].name for i in candidates})) or "none"
+    names = ", ".join(sorted({cameras[nodes[i].camera].name for i in candidates} | {AUTO}))
     raise doc.error(f"no camera named {name!r} (cameras: {names})", "cameras")

@@ -21,10 +21,12 @@ import numpy as np
 
 from .animation import Sampler, trs_matrix
 from .camera import Camera, CameraDef
+from .default_camera import AUTO, Framing
 from .gltf import GltfDocument, read_gltf
 from .lights import Light, LightDef
 from .materials import Material
 from .shading import CornerAttributes, corner_attributes, world_corner_normals
+from .sky import Sky
 from .timeline import Timeline
 from .vertex_attributes import VertexAttributes
 
@@ -86,6 +88,7 @@ class FrameState:
     state_key: str  # equal for two instants whose geometry and lights are equal
     corner_normals: np.ndarray | None = None  # (F, 3, 3) float32 world vertex normals (shading.py)
     corners: CornerAttributes | None = None  # texture coordinates and colours per corner (shading.py)
+    sky: Sky | None = None  # the uniform sky emitter (pipeline/scene/sky.py), if the scene has one
 
 
 @dataclass
@@ -104,15 +107,23 @@ class Scene:
     element_size: float
     dropped_triangles: int
     warnings: list[str]
+    # What the loader chose for a file that lacks it (pipeline/scene/loader.py), one line each
+    notices: list[str] = field(default_factory=list)
+    default_lights: tuple[Light, ...] = ()  # pipeline/scene/default_lights.py: the file has no light
+    sky: Sky | None = None
+    framing: Framing | None = None  # the auto camera (pipeline/scene/default_camera.py), no camera_node
 
     # --- loading --------------------------------------------------------------------------------
 
     @classmethod
-    def load(cls, path: str | Path, *, camera: str | None = None, fps: float | None = None) -> "Scene":
-        """Load a ``.glb``/``.gltf`` file. ``camera`` picks a camera by camera or node name."""
+    def load(cls, path: str | Path, *, camera: str | None = None, fps: float | None = None,
+             light: str = "auto") -> "Scene":
+        """Load a ``.glb``/``.gltf`` file. ``camera`` picks a camera by camera or node name, or
+        ``auto`` (pipeline/scene/default_camera.py); ``light`` ``auto`` lights a file without light
+        with the default sun and sky (pipeline/scene/default_lights.py), ``none`` refuses it."""
         from .loader import build_scene
 
-        return build_scene(read_gltf(path), camera=camera, fps=fps)
+        return build_scene(read_gltf(path), camera=camera, fps=fps, light=light)
 
     # --- identity ---------------------------------------------------------------------------------
 
@@ -150,7 +161,7 @@ class Scene:
             norm = np.linalg.norm(d)
             lights.append(Light(self.light_defs[node.light], i, m[:3, 3].copy(),
                                 d / norm if norm > 0 else np.array([0.0, 0.0, -1.0])))
-        return lights
+        return lights + list(self.default_lights)
 
     def _state_key(self, world: np.ndarray, lights: list[Light]) -> str:
         h = hashlib.sha256(self.document.digest.encode())  # keys of different scenes never collide
@@ -158,6 +169,8 @@ class Scene:
             h.update(np.round(world[inst.node], _STATE_DECIMALS).tobytes())
         for light in lights:
             h.update(np.round(light.state(), _STATE_DECIMALS).tobytes())
+        if self.sky is not None:
+            h.update(np.round(self.sky.state(), _STATE_DECIMALS).tobytes())
         return h.hexdigest()[:16]
 
     def state_key(self, frame: int) -> str:
@@ -182,6 +195,8 @@ class Scene:
         if self.camera_node is not None:
             node = self.nodes[self.camera_node]
             cam = Camera(self.cameras[node.camera], self.camera_node, world[self.camera_node].copy())
+        elif self.framing is not None:
+            cam = self.framing.camera
         return FrameState(
             time=float(t),
             frame=frame,
@@ -197,6 +212,7 @@ class Scene:
             state_key=self._state_key(world, lights),
             corner_normals=world_corner_normals(self.instances, inst_mats),
             corners=self.corner_attributes,
+            sky=self.sky,
         )
 
     def pose_frame(self, frame: int) -> FrameState:
@@ -204,6 +220,13 @@ class Scene:
         return self.pose(self.timeline.time(frame), frame=frame)
 
     # --- summaries ------------------------------------------------------------------------------
+
+    @property
+    def camera_name(self) -> str | None:
+        """The rendering camera's node name, ``auto`` for the auto camera, None without a camera."""
+        if self.camera_node is not None:
+            return self.nodes[self.camera_node].name
+        return AUTO if self.framing is not None else None
 
     @property
     def n_triangles(self) -> int:

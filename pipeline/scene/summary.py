@@ -3,7 +3,9 @@ from __future__ import annotations
 
 from collections import Counter
 
+from .default_lights import describe_default_lights
 from .elements import ElementMesh
+from .ignored import ignored
 from .scene import Scene
 
 
@@ -21,7 +23,9 @@ def describe(scene: Scene, element_size: float | None = None) -> list[str]:
     n_area = sum(len(i.faces) for i in scene.instances if scene.materials[i.material].is_emissive)
     cams = [f"{scene.cameras[scene.nodes[i].camera].name} (node {scene.nodes[i].name})"
             for i in scene.order if scene.nodes[i].camera is not None and scene.cameras[scene.nodes[i].camera]]
-    chosen = scene.nodes[scene.camera_node].name if scene.camera_node is not None else "none"
+    chosen = scene.camera_name or "none"
+    if scene.framing is not None:
+        chosen = f"the {scene.framing.describe()}"
     animated = [f"{scene.nodes[i].name} [{', '.join(sorted(scene.channels[i]))}]" for i in scene.animated_nodes]
     meshes = {inst.mesh for inst in scene.instances}
     if scene.has_moving_geometry:
@@ -40,7 +44,8 @@ def describe(scene: Scene, element_size: float | None = None) -> list[str]:
         f"elements   {elements.n_elements} elements, {elements.n_vertices} vertices "
         f"at element size {elements.element_size:g}",
         "lights     " + (", ".join(f"{n} {k}" for k, n in sorted(light_kinds.items())) or "no punctual lights")
-        + (f"; {n_area} emissive triangles" if n_area else ""),
+        + (f"; {n_area} emissive triangles" if n_area else "")
+        + (f"; the file has none, rendering with the {describe_default_lights()}" if scene.default_lights else ""),
         "materials  " + ", ".join(f"{kinds[k]} {k}" for k in ("diffuse", "specular", "emissive")),
         f"cameras    {len(cams)}: " + (", ".join(cams) or "none") + f"; rendering with {chosen}",
         f"animated   {len(animated)} nodes" + (": " + ", ".join(animated) if animated else ""),
@@ -52,6 +57,7 @@ def describe(scene: Scene, element_size: float | None = None) -> list[str]:
     ]
     lines += surface_lines(scene)
     lines += [f"warning    {w}" for w in scene.warnings]
+    lines += [f"ignored    {w}" for w in ignored(scene)]
     return lines
 
 

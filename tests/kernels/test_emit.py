@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kernels.emit import AREA, DIRECTIONAL, POINT, SPOT, EmissionTables, EmitCL, emit_reference
+from kernels.emit import AREA, DIRECTIONAL, POINT, SKY, SPOT, EmissionTables, EmitCL, emit_reference
 
 
 def _tables(rng, kinds=(POINT, SPOT, DIRECTIONAL, AREA)) -> EmissionTables:
@@ -33,7 +33,8 @@ def _tables(rng, kinds=(POINT, SPOT, DIRECTIONAL, AREA)) -> EmissionTables:
         corners=corners, normals=nrm, center=rng.normal(size=3), radius=3.0, epsilon=1e-4)
 
 
-@pytest.mark.parametrize("kinds", [(POINT,), (SPOT,), (DIRECTIONAL,), (AREA,), (POINT, SPOT, DIRECTIONAL, AREA)])
+@pytest.mark.parametrize("kinds", [(POINT,), (SPOT,), (DIRECTIONAL,), (AREA,), (SKY,),
+                                   (POINT, SPOT, DIRECTIONAL, AREA, SKY)])
 @pytest.mark.parametrize("n", [1, 100, 4097])
 def test_kernel_equals_reference(rng, kinds, n):
     tables = _tables(rng, kinds)
@@ -46,7 +47,7 @@ def test_kernel_equals_reference(rng, kinds, n):
 
 def test_emitted_flux_is_unbiased(rng):
     """Mean photon weight = total flux; directions are unit; spots stay inside their cone."""
-    tables = _tables(rng, (POINT, SPOT, DIRECTIONAL))
+    tables = _tables(rng, (POINT, SPOT, DIRECTIONAL, SKY))
     n = 400_000
     origins, dirs, weights, emitter = emit_reference(tables, np.arange(n), (1, 1))
     np.testing.assert_allclose(np.linalg.norm(dirs, axis=1), 1.0, atol=1e-6)
@@ -54,11 +55,29 @@ def test_emitted_flux_is_unbiased(rng):
     light = tables.index[emitter[spot]]
     cos = np.einsum("ij,ij->i", dirs[spot].astype(np.float64), tables.light_dir[light])
     assert (cos >= tables.cos_outer[light] - 1e-6).all()
-    # expected flux: point 4 pi I, spot 2 pi I ((1 - ci) + (ci - co) / 3), directional pi R^2 E
+    # expected flux: point 4 pi I, spot 2 pi I ((1 - ci) + (ci - co) / 3), directional pi R^2 E,
+    # a sky half 2 pi x pi R^2 L
     ci, co = tables.cos_inner, tables.cos_outer
     per_kind = {POINT: 4 * np.pi * np.ones_like(ci), SPOT: 2 * np.pi * ((1 - ci) + (ci - co) / 3),
-                DIRECTIONAL: np.pi * tables.radius**2 * np.ones_like(ci)}
+                DIRECTIONAL: np.pi * tables.radius**2 * np.ones_like(ci),
+                SKY: 2 * np.pi * np.pi * tables.radius**2 * np.ones_like(ci)}
     expected = sum(tables.light_rad[i] * per_kind[k][i] for i, k in enumerate(tables.kind))
     mean = weights.mean(axis=0)
     se = weights.std(axis=0) / np.sqrt(n)
     assert np.all(np.abs(mean - expected) < 4 * se)
+
+
+def test_sky_photons_cross_the_disk_into_their_hemisphere(rng):
+    """Sky photons travel into the hemisphere about their half's axis, uniformly in solid angle
+    (mean cosine 1/2), and start on a disk of radius R facing their direction, 1.05 R upstream."""
+    tables = _tables(rng, (SKY,))
+    origins, dirs, _, emitter = emit_reference(tables, np.arange(200_000), (2, 7))
+    axis = tables.light_dir[tables.index[emitter]]
+    d = dirs.astype(np.float64)
+    cos = np.einsum("ij,ij->i", d, axis)
+    assert cos.min() >= -1e-7 and abs(cos.mean() - 0.5) < 0.005
+    rel = origins.astype(np.float64) - tables.center
+    along = np.einsum("ij,ij->i", rel, d)
+    np.testing.assert_allclose(along, -1.05 * tables.radius, rtol=1e-5)
+    across = np.linalg.norm(rel - along[:, None] * d, axis=1)
+    assert across.max() <= tables.radius * (1 + 1e-5) and abs((across ** 2).mean() / tables.radius ** 2 - 0.5) < 0.01

@@ -81,10 +81,6 @@ def _nan_vertex(tmp_path):
     (tmp_path / "bad.glb").write_bytes(_pack_glb(doc, bytes(binary)))
 
 
-def _no_light(tmp_path):
-    basic_builder(light=False).write(tmp_path / "bad.glb")
-
-
 def _lines_primitive(tmp_path):
     b = basic_builder()
     b.add_node("wire", b.add_mesh("wire", QUAD, np.array([0, 1, 1, 2]), material=0, mode=1))
@@ -105,7 +101,6 @@ CASES = {
     "missing-buffer": (_missing_buffer, "missing buffer file"),
     "accessor-out-of-range": (_accessor_out_of_range, "out of range"),
     "nan-vertex": (_nan_vertex, "NaN"),
-    "no-light": (_no_light, "no light"),
     "lines": (_lines_primitive, "LINES is not supported"),
     "extension": (_unsupported_required_extension, "KHR_draco_mesh_compression"),
 }

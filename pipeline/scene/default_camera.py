@@ -1,0 +1,95 @@
+"""The camera a file without one is rendered with (``--camera auto``): the whole animation in view.
+
+Decision (issue 13): the camera looks at the centre of the world-space bounding box of every
+mesh over every frame of the timeline, from azimuth ``AZIMUTH`` (degrees from +Z, glTF's front,
+towards +X) and elevation ``ELEVATION`` above the horizon (front-right and a little above, the
+three-quarter view of a product shot), with vertical field of view ``YFOV_DEG``. It stands back
+just far enough that the box's eight corners, grown by ``MARGIN``, fall inside a square of that
+field of view, so any frame at least as wide as it is tall shows everything that ever moves; a
+portrait frame (narrower) may crop the sides. It does not move: a fixed camera shows the
+animation itself and lets one photon set serve frames whose geometry stands still.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import TYPE_CHECKING
+
+import numpy as np
+
+from .camera import Camera, CameraDef
+from .sky import UP, direction_from
+
+if TYPE_CHECKING:
+    from .scene import Scene
+
+AZIMUTH = 30.0
+ELEVATION = 20.0
+YFOV_DEG = 40.0
+MARGIN = 1.05
+AUTO = "auto"  # the --camera value, and the camera's name
+
+
+def animation_bounds(scene: "Scene") -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) world bounds of every instance's vertices over all frames of the timeline; each
+    distinct instance matrix is applied once (standing instances cost one transform)."""
+    lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
+    seen: set[tuple[int, bytes]] = set()
+    for frame in scene.timeline.all_frames():
+        world = scene.world_matrices(scene.timeline.time(frame))
+        for inst in scene.instances:
+            m = world[inst.node]
+            mark = (inst.index, m.tobytes())
+            if mark in seen:
+                continue
+            seen.add(mark)
+            v = inst.vertices @ m[:3, :3].T + m[:3, 3]
+            lo, hi = np.minimum(lo, v.min(0)), np.maximum(hi, v.max(0))
+    return lo, hi
+
+
+def framing_camera(lo: np.ndarray, hi: np.ndarray) -> Camera:
+    """A static camera from AZIMUTH, ELEVATION with YFOV_DEG that frames the box [lo, hi]."""
+    target = (lo + hi) / 2.0
+    back = direction_from(AZIMUTH, ELEVATION)  # from the target towards the camera: its +Z
+    right = np.cross(UP, back)
+    right /= np.linalg.norm(right)
+    up = np.cross(back, right)
+    corners = np.array([[x, y, z] for x in (lo[0], hi[0]) for y in (lo[1], hi[1]) for z in (lo[2], hi[2])])
+    rel = (corners - target) * MARGIN
+    x, y, z = rel @ right, rel @ up, rel @ back
+    tan_half = np.tan(np.radians(YFOV_DEG) / 2.0)
+    diagonal = max(float(np.linalg.norm(hi - lo)), 1e-6)
+    # depth of a corner is distance - z; it must be at least max(|x|, |y|) / tan(yfov / 2)
+    distance = float(np.max(z + np.maximum(np.abs(x), np.abs(y)) / tan_half))
+    distance = max(distance, float(z.max()) + 1e-3 * diagonal)
+    to_world = np.eye(4)
+    to_world[:3, 0], to_world[:3, 1], to_world[:3, 2] = right, up, back
+    to_world[:3, 3] = target + back * distance
+    znear = max(1e-4 * diagonal, 0.5 * (distance - float(z.max())))
+    return Camera(CameraDef(AUTO, float(np.radians(YFOV_DEG)), znear, None, None), -1, to_world)
+
+
+@dataclass(frozen=True)
+class Framing:
+    """The auto camera and the animation bounds it frames."""
+
+    camera: Camera
+    lo: np.ndarray
+    hi: np.ndarray
+
+    def describe(self) -> str:
+        """One line for notices and ``loom info``."""
+        p, c = self.camera.position, (self.lo + self.hi) / 2.0
+        return (f"auto camera from azimuth {AZIMUTH:g} deg, elevation {ELEVATION:g} deg, yfov {YFOV_DEG:g} deg "
+                f"at {_xyz(p)} looking at {_xyz(c)}, framing the bounds {_xyz(self.lo)}-{_xyz(self.hi)} "
+                "of the whole animation")
+
+
+def frame_animation(scene: "Scene") -> Framing:
+    """The auto camera of ``scene``: it frames the bounds of the whole animation."""
+    lo, hi = animation_bounds(scene)
+    return Framing(framing_camera(lo, hi), lo, hi)
+
+
+def _xyz(v) -> str:
+    return "(" + ", ".join(f"{c:.3g}" for c in v) + ")"
