@@ -42,12 +42,13 @@ def furnace_box(path, *, rho: float, radiance: float, element_size: float = 0.5)
     return b.write(path)
 
 
-def lit_room(path, *, scale: float = 1.0, dim_ratio: float | None = None, frames: int = 1,
-             extra=None, element_size: float = 0.5):
+def lit_room(path, *, scale: float = 1.0, dim_ratio: float | None = None, bright: bool = True,
+             frames: int = 1, extra=None, element_size: float = 0.5):
     """A closed 4 x 4 x 4 room with coloured walls, a box on the floor, a point light, a spot and an
     emissive ceiling panel, every light's power times ``scale``; the camera inside looks at the
-    box. ``dim_ratio`` adds a second point light ``dim_ratio`` times dimmer than the first in an
-    alcove of its own. ``extra(builder)`` adds geometry. With ``frames`` > 1 the point light moves."""
+    box. ``dim_ratio`` adds a closed 2 x 2 x 2 room of its own outside the first (centred at
+    x = 5) with a point light ``dim_ratio`` times dimmer than the first; ``bright`` False leaves out
+    the first room's lights. ``extra(builder)`` adds geometry. With ``frames`` > 1 the point light moves."""
     b = GltfBuilder()
     colours = [(0.7, 0.2, 0.2), (0.2, 0.7, 0.2), (0.7, 0.7, 0.7), (0.6, 0.6, 0.6), (0.7, 0.7, 0.7),
                (0.5, 0.5, 0.8)]
@@ -56,26 +57,29 @@ def lit_room(path, *, scale: float = 1.0, dim_ratio: float | None = None, frames
         b.add_node(f"wall{i}", b.add_mesh(f"wall{i}", q, QUAD_FACES, material=mat))
     grey = b.add_material("box", (0.6, 0.5, 0.4))
     box = [q * 0.5 + [0.5, -1.5, -0.5] for q in inward_quads(1.0)]
-    b.add_node("box", b.add_mesh("box", np.concatenate(box), np.concatenate([QUAD_FACES + 4 * i for i in range(6)]),
-                                 material=grey))
-    glow = b.add_material("panel", (0.8, 0.8, 0.8), emissive=(1.0, 0.9, 0.8), emissive_strength=2.0 * scale)
-    panel = np.array([[-0.4, 1.99, -0.4], [0.4, 1.99, -0.4], [0.4, 1.99, 0.4], [-0.4, 1.99, 0.4]])
-    b.add_node("panel", b.add_mesh("panel", panel, QUAD_FACES, material=glow))  # faces down
-    lamp = b.add_node("lamp", light=b.add_point_light("lamp", (1.0, 0.9, 0.8), 3.0 * scale),
-                      translation=(-1.0, 1.0, 0.5))
-    if frames > 1:
-        b.add_animation("lamp", lamp, "translation", [0.0, (frames - 1) / 30.0],
-                        [(-1.0, 1.0, 0.5), (-0.6, 1.0, 0.2)])
-    spot = b.add_spot_light("spot", (0.9, 0.9, 1.0), 8.0 * scale, inner_cone_angle=0.3, outer_cone_angle=0.6)
-    b.add_node("spot", light=spot, translation=(1.5, 1.5, 1.5), rotation=look_at((1.5, 1.5, 1.5), (0.5, -1.5, -0.5)))
+    faces = np.concatenate([QUAD_FACES + 4 * i for i in range(6)])
+    b.add_node("box", b.add_mesh("box", np.concatenate(box), faces, material=grey))
+    if bright:
+        glow = b.add_material("panel", (0.8, 0.8, 0.8), emissive=(1.0, 0.9, 0.8),
+                              emissive_strength=2.0 * scale)
+        panel = np.array([[-0.4, 1.99, -0.4], [0.4, 1.99, -0.4], [0.4, 1.99, 0.4], [-0.4, 1.99, 0.4]])
+        b.add_node("panel", b.add_mesh("panel", panel, QUAD_FACES, material=glow))  # faces down
+        lamp = b.add_node("lamp", light=b.add_point_light("lamp", (1.0, 0.9, 0.8), 3.0 * scale),
+                          translation=(-1.0, 1.0, 0.5))
+        if frames > 1:
+            b.add_animation("lamp", lamp, "translation", [0.0, (frames - 1) / 30.0],
+                            [(-1.0, 1.0, 0.5), (-0.6, 1.0, 0.2)])
+        spot = b.add_spot_light("spot", (0.9, 0.9, 1.0), 8.0 * scale, inner_cone_angle=0.3,
+                                outer_cone_angle=0.6)
+        b.add_node("spot", light=spot, translation=(1.5, 1.5, 1.5),
+                   rotation=look_at((1.5, 1.5, 1.5), (0.5, -1.5, -0.5)))
     if dim_ratio is not None:
-        # An alcove closed on five sides, open to the room only through a slot: the dim lamp is inside
-        alcove = b.add_material("alcove", (0.8, 0.8, 0.8))
-        quads = [q * [0.4, 0.4, 0.4] + [-1.5, -1.55, -1.5] for q in inward_quads(1.0)]
-        b.add_node("alcove", b.add_mesh("alcove", np.concatenate(quads[:5]),
-                                        np.concatenate([QUAD_FACES + 4 * i for i in range(5)]), material=alcove))
+        white = b.add_material("far", (0.7, 0.7, 0.7))
+        quads = [q + [5.0, 0.0, 0.0] for q in inward_quads(1.0)]
+        faces = np.concatenate([QUAD_FACES + 4 * i for i in range(6)])
+        b.add_node("far", b.add_mesh("far", np.concatenate(quads), faces, material=white))
         b.add_node("dim", light=b.add_point_light("dim", (1.0, 1.0, 1.0), 3.0 * scale / dim_ratio),
-                   translation=(-1.5, -1.6, -1.5))
+                   translation=(5.3, 0.2, -0.1))
     if extra is not None:
         extra(b)
     eye = np.array([-1.2, 0.2, 1.8])
