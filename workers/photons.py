@@ -172,5 +172,5 @@ def shoot_task(*, store_url: str, scene_path: str, scene_hash: str, element_size
                       photons_emitted=n_photons, photon_start=photon_start)
     t3 = time.perf_counter()
     return {"frame": frame, "batch": batch, "skipped": False, "photons": n_photons,
-            "records": len(result.key), "rays": result.rays_cast,
+            "records": len(result.key), "rays": result.rays_cast, "capped": result.stats["capped"],
             "pose_s": t1 - t0, "trace_s": t2 - t1, "write_s": t3 - t2}

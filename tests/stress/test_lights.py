@@ -70,3 +70,18 @@ def test_total_flux_is_unbiased_with_both_lights(tmp_path):
 def _areas(state):
     c = state.vertices[state.faces].astype(np.float64)
     return 0.5 * np.linalg.norm(np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0]), axis=1)
+
+
+def test_selection_probability_floor():
+    from workers.emission import LIGHT_FLOOR, selection_probability
+
+    # a lamp, a 1e6x dimmer lamp, and an emissive material of three triangles (one light)
+    weight = np.array([1e6, 1.0, 2.0, 1.0, 1.0])
+    group = np.array([0, 1, 5, 5, 5])
+    p = selection_probability(weight, group)
+    assert np.isclose(p.sum(), 1.0)
+    assert p[1] >= LIGHT_FLOOR / 3  # every light gets its floor share
+    np.testing.assert_allclose(p[2:] / p[2:].sum(), [0.5, 0.25, 0.25])  # by power inside a light
+    assert p[0] > 0.9  # the rest by power
+    # a light that emits nothing gets nothing
+    assert selection_probability(np.array([1.0, 0.0]), np.array([0, 1]))[1] == 0
