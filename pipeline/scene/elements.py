@@ -128,15 +128,19 @@ class ElementMesh:
         world = state.vertices.astype(np.float64)[state.faces]
         edges = np.stack([np.linalg.norm(world[:, (k + 1) % 3] - world[:, k], axis=1) for k in range(3)], 1)
         wanted = np.maximum(1, np.ceil(edges.max(1) / size - 1e-9))
+        capped = wanted > MAX_SPLIT
+        # A few huge triangles (a ground plane) get coarser elements; an element size too small for
+        # most of the scene is refused as asked, not silently coarsened everywhere
+        asked = float((wanted ** 2).sum())
         tri_n = np.minimum(wanted, MAX_SPLIT).astype(np.int64)
-        if (wanted > MAX_SPLIT).any():
-            log.warning("%s: %d triangle(s) longer than %d x element_size %g are split %d x %d (elements up to "
-                        "%.3g wide)", scene.path, int((wanted > MAX_SPLIT).sum()), MAX_SPLIT, size, MAX_SPLIT,
-                        MAX_SPLIT, float(edges.max() / MAX_SPLIT))
         total = int((tri_n ** 2).sum())
-        if total > MAX_ELEMENTS:
-            raise SceneError(f"element_size {size} gives {total} elements, more than {MAX_ELEMENTS}",
+        if total > MAX_ELEMENTS or (asked > MAX_ELEMENTS and capped.mean() > 0.5):
+            raise SceneError(f"element_size {size} gives {asked:.0f} elements, more than {MAX_ELEMENTS}",
                              path=str(scene.path), field="element_size")
+        if capped.any():
+            log.warning("%s: %d triangle(s) longer than %d x element_size %g are split %d x %d (elements up to "
+                        "%.3g wide)", scene.path, int(capped.sum()), MAX_SPLIT, size, MAX_SPLIT,
+                        MAX_SPLIT, float(edges.max() / MAX_SPLIT))
         offsets = np.concatenate([[0], np.cumsum(tri_n ** 2)])
 
         # Local-space corners of every global source triangle
