@@ -62,3 +62,16 @@ def test_pixels_show_the_closed_form_radiance(furnace):
     np.testing.assert_allclose(beauty.mean(axis=(0, 1)), L / (1 - RHO), rtol=0.01)
     indirect = np.stack([channels[f"indirect.{c}"] for c in "RGB"], axis=-1).astype(np.float64)
     np.testing.assert_allclose(indirect.mean(axis=(0, 1)), L * RHO * RHO / (1 - RHO), rtol=0.01)
+
+
+def test_a_depth_cap_of_eight_loses_rho_to_the_seventh(tmp_path):
+    """The test has power: the old cap (8 hits, 7 of them indirect) keeps 1 - rho^7 of the
+    indirect light, 79 %, which the 1 % tolerance above rejects."""
+    path = furnace_box(tmp_path / "furnace.glb", rho=RHO, radiance=L)
+    render(path, frames="1", out_dir=tmp_path / "out", n_photons=100_000, temporal="off",
+           config=RenderConfig(photon_depth=8), settings=RenderSettings(width=8, height=6, spp=1),
+           scheduler="synchronous", progress=False)
+    scene = Scene.load(path)
+    areas = ElementMesh.build(scene).vertex_areas(scene.pose_frame(1))
+    indirect = IlluminationMaps.open(str(tmp_path / "out" / "photons.zarr")).read(0, "indirect").astype(np.float64)
+    np.testing.assert_allclose(_area_mean(indirect, areas) / (np.pi * L * RHO / (1 - RHO)), 1 - RHO ** 7, rtol=0.01)
