@@ -9,7 +9,11 @@ import sys
 
 import click
 
+from .config import RenderConfig as _RenderConfig
 from .errors import LoomError
+
+_PHOTON_DEPTH = _RenderConfig().photon_depth
+_PHOTON_DEPTH_HELP = "Safety cap on photon hits (Russian roulette ends paths; pipeline/config.py)."
 
 
 class _LoomGroup(click.Group):
@@ -98,7 +102,7 @@ def _scheduler_options(f):
 @click.option("--store", "store_url", required=True, help="Photon store: a directory or an fsspec URL.")
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--element-size", type=float, default=None, help="Element edge bound (default: the scene's).")
-@click.option("--photon-depth", type=int, default=8, show_default=True, help="Maximum photon bounces.")
+@click.option("--photon-depth", type=int, default=_PHOTON_DEPTH, show_default=True, help=_PHOTON_DEPTH_HELP)
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--light", type=click.Choice(["auto", "none"]), default="auto", show_default=True, help=_LIGHT_HELP)
 @_scheduler_options
@@ -152,7 +156,7 @@ def _job_options(f):
         click.option("--seed", type=int, default=0, show_default=True),
         click.option("--reflection-depth", type=int, default=4, show_default=True,
                      help="Mirror/glossy reflections followed per camera path."),
-        click.option("--photon-depth", type=int, default=8, show_default=True, help="Maximum photon bounces."),
+        click.option("--photon-depth", type=int, default=_PHOTON_DEPTH, show_default=True, help=_PHOTON_DEPTH_HELP),
         click.option("--d-thr", type=float, default=None,
                      help="d_thr, share of AQM pixels allowed above 1 JND (0.03)."),
         click.option("--config", "config_file", type=click.Path(dir_okay=False), default=None,

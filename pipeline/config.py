@@ -37,7 +37,10 @@ class RenderConfig:
     # --- photons: tracing and the element mesh they are bucketed on (§4), workers/photons.py --------
     element_size: float | None = _param(None, "photons", "element size (§4, §5.3)", 0.0, optional=True)
     seed: int = _param(0, "photons", "run seed: Philox key (seed, frame), counter = photon index", 0)
-    photon_depth: int = _param(8, "photons", "photon bounces before termination (§4)", 1, 1024)
+    # Paths end by Russian roulette (§4); this cap is only a safety net for albedo-1 rooms: a
+    # photon in a closed room of albedo rho survives it with probability rho^256 (1e-25 at 0.8)
+    photon_depth: int = _param(256, "photons", "safety cap on photon hits; Russian roulette ends paths (§4)",
+                               1, 1024)
 
     # --- collection: temporal windows, Condition (1) (§5.1), kernels/temporal.py ------------------
     k_sigma: float = _param(2.0, "collection", "k in mu - k sigma <= x <= mu + k sigma, §5.1 Eq. (1)", 0.0)

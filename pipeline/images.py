@@ -1,6 +1,6 @@
 """Frame files through OpenImageIO and the preview video through imageio-ffmpeg.
 
-* ``beauty.####.exr``: linear Rec.709, half float, zip-compressed, one multichannel image with
+* ``beauty.####.exr``: linear Rec.709, 32-bit float, zip-compressed, one multichannel image with
   channels ``R,G,B,A`` (beauty) then ``albedo.R..``, ``direct.R..``, ``indirect.R..``, and metadata
   ``photonloom:*`` (scene, frame, camera, photons, config and render hashes).
 * ``beauty.####.png``: the tone-mapped 8-bit sRGB picture.
@@ -49,10 +49,14 @@ def _write(path: Path, fmt: str, spec: oiio.ImageSpec, pixels: np.ndarray) -> No
 
 
 def write_exr(path, beauty, alpha, layers: dict, metadata: dict) -> None:
-    """Write the multichannel half-float EXR atomically (channels :data:`EXR_CHANNELS`)."""
+    """Write the multichannel float32 EXR atomically (channels :data:`EXR_CHANNELS`).
+
+    float32, not half: the maps and shading are float32, and half overflows to +Inf above 65504 and
+    flushes to 0 below 6e-8 (a light 1e10 or 1e-10 times as bright, tests/stress/test_scale.py),
+    and keeps 3 digits; one pixel type for every frame of an animation (README "Outputs")."""
     h, w = alpha.shape
     pixels = np.concatenate([beauty, alpha[..., None]] + [layers[name] for name in LAYERS], axis=2)
-    spec = oiio.ImageSpec(w, h, len(EXR_CHANNELS), "half")
+    spec = oiio.ImageSpec(w, h, len(EXR_CHANNELS), "float")
     spec.channelnames = EXR_CHANNELS
     spec.alpha_channel = 3
     spec.attribute("compression", "zip")
@@ -60,8 +64,7 @@ def write_exr(path, beauty, alpha, layers: dict, metadata: dict) -> None:
     spec.attribute("DateTime", "")  # no wall-clock stamp: equal renders give equal files
     for key, value in metadata.items():
         spec.attribute(META_PREFIX + key, value if isinstance(value, (int, float)) else str(value))
-    # Converted to half here (the same rounding as OIIO's, bit-identical files, and faster)
-    _write(Path(path), "openexr", spec, np.ascontiguousarray(pixels, np.float16))
+    _write(Path(path), "openexr", spec, np.ascontiguousarray(pixels, np.float32))
 
 
 def write_png(path, rgb8: np.ndarray) -> None:

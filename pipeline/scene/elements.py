@@ -2,7 +2,8 @@
 
 Every source triangle is split uniformly into ``n x n`` congruent sub-triangles (elements),
 ``n = ceil(longest edge / element_size)`` measured in world space at the first frame, so every
-element edge is at most ``element_size``. A uniform split keeps element shapes as good as the
+element edge is at most ``element_size`` (``n`` at most ``MAX_SPLIT``: a huge triangle gets
+coarser elements, with a warning). A uniform split keeps element shapes as good as the
 source triangle's and makes locating a hit analytic: the photon tracer intersects the *source*
 triangles with Embree and maps the hit's barycentric coordinates to (element, barycentrics)
 with :meth:`ElementMesh.locate`, with no per-element geometry in the ray-tracing scene.
@@ -21,6 +22,7 @@ and posed on demand; nothing is stored per frame.
 """
 from __future__ import annotations
 
+import logging
 from dataclasses import dataclass
 
 import numpy as np
@@ -28,12 +30,16 @@ import numpy as np
 from ..errors import SceneError
 from .scene import FrameState, Scene
 
+log = logging.getLogger(__name__)
 # Vertices of one instance closer than this fraction of its bounding-box diagonal are merged.
 _MERGE_TOLERANCE = 1e-6
 # Coincident lattice points are one shared vertex only when their triangles' normals agree this well.
 _SHARE_COS = np.cos(np.radians(45.0))
 # A guard against an element size that would exhaust memory.
 MAX_ELEMENTS = 20_000_000
+# The largest split of one source triangle (512 x 512 = 262,144 elements): a ground plane
+# kilometres wide gets coarser elements instead of refusing the scene's element size.
+MAX_SPLIT = 512
 
 
 def up_index(a, b, n):
@@ -121,11 +127,20 @@ class ElementMesh:
         state = scene.pose_frame(scene.timeline.first)
         world = state.vertices.astype(np.float64)[state.faces]
         edges = np.stack([np.linalg.norm(world[:, (k + 1) % 3] - world[:, k], axis=1) for k in range(3)], 1)
-        tri_n = np.maximum(1, np.ceil(edges.max(1) / size - 1e-9)).astype(np.int64)
+        wanted = np.maximum(1, np.ceil(edges.max(1) / size - 1e-9))
+        capped = wanted > MAX_SPLIT
+        # A few huge triangles (a ground plane) get coarser elements; an element size too small for
+        # most of the scene is refused as asked, not silently coarsened everywhere
+        asked = float((wanted ** 2).sum())
+        tri_n = np.minimum(wanted, MAX_SPLIT).astype(np.int64)
         total = int((tri_n ** 2).sum())
-        if total > MAX_ELEMENTS:
-            raise SceneError(f"element_size {size} gives {total} elements, more than {MAX_ELEMENTS}",
+        if total > MAX_ELEMENTS or (asked > MAX_ELEMENTS and capped.mean() > 0.5):
+            raise SceneError(f"element_size {size} gives {asked:.0f} elements, more than {MAX_ELEMENTS}",
                              path=str(scene.path), field="element_size")
+        if capped.any():
+            log.warning("%s: %d triangle(s) longer than %d x element_size %g are split %d x %d (elements up to "
+                        "%.3g wide)", scene.path, int(capped.sum()), MAX_SPLIT, size, MAX_SPLIT,
+                        MAX_SPLIT, float(edges.max() / MAX_SPLIT))
         offsets = np.concatenate([[0], np.cumsum(tri_n ** 2)])
 
         # Local-space corners of every global source triangle

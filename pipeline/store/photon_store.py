@@ -2,6 +2,7 @@
 from __future__ import annotations
 
 import json
+import logging
 import os
 from collections import OrderedDict
 import re
@@ -22,8 +23,10 @@ from zarr.storage import FsspecStore, LocalStore
 
 from ..errors import LoomError
 from .records import (BARY_SCALE, CATEGORIES, ELEMENT_MASK, FIELDS, RECORD_BYTES, FrameRecords,
-                      SortedBatch, as_int, prepare_records, records_digest, unpack_records)
+                      SortedBatch, as_int, prepare_records, records_digest, unpack_records,
+                      valid_records)
 
+log = logging.getLogger(__name__)
 FORMAT = "photonloom.photons"
 FORMAT_VERSION = 3  # 3: SHA-256 digest, raw done markers, lz4 counts; 2: BLAKE2b, zstd tables;
 # 1: key/bary/energy/offsets arrays
@@ -674,8 +677,15 @@ class PhotonStore:
             self._records.move_to_end(key)
             return found
         meta = self._meta(g, chosen)
-        parts = [self._read_batch(g, b, int(row[3])) for b, row in zip(chosen, meta)]
-        records = FrameRecords.merge(f, g, chosen, parts, self.n_elements, int(meta[:, 2].sum()))
+        parts, dropped = [], 0
+        for b, row in zip(chosen, meta):
+            rows, bad = valid_records(self._read_rows(g, b, int(row[3])), self.n_elements)
+            if bad:
+                log.warning("%s: frame %d batch %d: %d damaged record(s) dropped (NaN, infinite or negative "
+                            "energy, or an unknown element)", self.url, g, b, bad)
+            dropped += bad
+            parts.append(unpack_records(rows, self.n_elements))
+        records = FrameRecords.merge(f, g, chosen, parts, self.n_elements, int(meta[:, 2].sum()), dropped)
         if self.record_cache_bytes > 0:
             self._keep(key, records)
         return records
@@ -701,10 +711,6 @@ class PhotonStore:
         f = self.source_frame(frame_index)
         rows = self._read_rows(f, int(batch), info["n_records"])
         return records_digest(rows, info["photon_start"], info["photons_emitted"]) == info["digest"]
-
-    def _read_batch(self, f: int, b: int, n: int):
-        """(key, bary, energy, offsets) of a done batch of ``n`` records, straight from its chunks."""
-        return unpack_records(self._read_rows(f, b, n), self.n_elements)
 
     def _read_rows(self, f: int, b: int, n: int) -> np.ndarray:
         """u32 (5, n): the packed rows of a done batch of ``n`` records."""

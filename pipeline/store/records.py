@@ -58,13 +58,14 @@ class FrameRecords:
     energy: np.ndarray  # f32 (n, 3)
     offsets: np.ndarray  # i64 (n_elements + 1,): element e is [offsets[e], offsets[e + 1])
     photons_emitted: int
+    dropped: int = 0  # damaged records left out on reading (valid_records)
 
     def __len__(self) -> int:
         return int(self.key.shape[0])
 
     @classmethod
     def merge(cls, frame_index: int, source_frame: int, batches, parts, n_elements: int,
-              photons_emitted: int) -> FrameRecords:
+              photons_emitted: int, dropped: int = 0) -> FrameRecords:
         """Merge element-sorted batches ``parts`` [(key, bary, energy, offsets)] in batch order:
         element-major, and within an element batch 0's records first (what a stable sort by
         element of the concatenation gives, computed from the offsets in O(n))."""
@@ -88,7 +89,7 @@ class FrameRecords:
         element = key & np.uint32(ELEMENT_MASK)
         return cls(frame_index, source_frame, tuple(batches), key, element,
                    (key & DIRECT_BIT) != 0, ((key & PARITY_BIT) != 0).astype(np.uint8),
-                   bary[:, 0].copy(), bary[:, 1].copy(), energy, offsets, photons_emitted)
+                   bary[:, 0].copy(), bary[:, 1].copy(), energy, offsets, photons_emitted, dropped)
 
 
 @dataclass(frozen=True)
@@ -125,6 +126,23 @@ def pack_records(key: np.ndarray, bary: np.ndarray, energy: np.ndarray) -> np.nd
     out[1] |= bary[:, 1].astype(np.uint32) << np.uint32(16)
     out[2:5] = np.ascontiguousarray(energy, np.float32).view(np.uint32).T
     return out
+
+
+# Energy bits of a finite float32 >= 0 lie below those of +Inf (sign bit clear, exponent not all ones)
+_INF_BITS = np.uint32(0x7F800000)
+
+
+def valid_records(rows: np.ndarray, n_elements: int) -> tuple[np.ndarray, int]:
+    """(rows, dropped): the packed rows (:func:`pack_records`) without records that no tracer
+    writes (the store refuses them): a NaN, infinite or negative energy, or an element id the
+    mesh does not have. They come from damage or a foreign writer, and one NaN would spread
+    through every window sum and filter ring of its element into frames. Checked on the bits:
+    one u32 comparison a value, nothing copied when every record is valid."""
+    if not rows.shape[1] or (rows[2:5].max() < _INF_BITS
+                             and int((rows[0] & np.uint32(ELEMENT_MASK)).max()) < n_elements):
+        return rows, 0
+    ok = (rows[2:5] < _INF_BITS).all(axis=0) & ((rows[0] & np.uint32(ELEMENT_MASK)) < n_elements)
+    return np.ascontiguousarray(rows[:, ok]), int(rows.shape[1] - np.count_nonzero(ok))
 
 
 def unpack_records(rows: np.ndarray, n_elements: int):
