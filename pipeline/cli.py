@@ -148,6 +148,11 @@ def _job_options(f):
                      help="d_thr, share of AQM pixels allowed above 1 JND (0.03)."),
         click.option("--config", "config_file", type=click.Path(dir_okay=False), default=None,
                      help="JSON object of RenderConfig fields (pipeline/config.py); the options above override it."),
+        click.option("--tonemap", type=click.Choice(["filmic", "exposure", "ward"]), default="filmic",
+                     show_default=True, help="How frames are shown: a filmic curve or a linear exposure keyed to the "
+                     "eye's adaptation, or Ward's visibility-matching operator (pipeline/tonemap.py)."),
+        click.option("--exposure", type=float, default=0.0, show_default=True,
+                     help="Exposure offset in EV (x 2^EV) on top of the operator's own."),
     ]
     for option in reversed(options):
         f = option(f)
@@ -155,17 +160,19 @@ def _job_options(f):
 
 
 def _job_arguments(scene_file, frames, out_dir, resolution, spp, photons, fmax, temporal, store_url, camera, seed,
-                   reflection_depth, photon_depth, d_thr, config_file) -> dict:
+                   reflection_depth, photon_depth, d_thr, config_file, tonemap="filmic", exposure=0.0) -> dict:
     """The keyword arguments of pipeline.render.prepare_job / render from the job options."""
     from .config import RenderConfig, load_config
     from .render import RenderSettings, parse_resolution
+    from .tonemap import ToneMapping
 
     width, height = parse_resolution(resolution)
     fields = load_config(config_file) if config_file else {}
     fields.update(seed=seed, photon_depth=photon_depth, **({} if d_thr is None else {"d_thr": d_thr}))
     return dict(scene_path=scene_file, frames=frames, out_dir=out_dir, n_photons=photons, fmax=fmax,
                 temporal=temporal, store_url=store_url, camera=camera, config=RenderConfig.from_dict(fields),
-                settings=RenderSettings(width=width, height=height, spp=spp, reflection_depth=reflection_depth))
+                settings=RenderSettings(width=width, height=height, spp=spp, reflection_depth=reflection_depth,
+                                        tonemap=ToneMapping(operator=tonemap, exposure=exposure)))
 
 
 @main.command("render")

@@ -29,7 +29,7 @@ from .errors import LoomError
 from .images import frame_paths, write_video
 from .scene import Scene
 from .shoot import check_store_location, open_store, plan
-from .tonemap import ToneMapping
+from .tonemap import LOOK_FIELDS, ToneMapping
 
 log = logging.getLogger(__name__)
 MAX_SIDE = 16384
@@ -120,7 +120,9 @@ def prepare_job(scene_path, *, frames: str | None, out_dir, settings: RenderSett
                 width=settings.width, height=settings.height, spp=settings.spp,
                 reflection_depth=settings.reflection_depth, area_samples=settings.area_samples,
                 tonemap=settings.tonemap.to_dict())
-    decision = dict(look, first=p.frames[0], last=p.frames[-1], fmax=fmax, n_photons=n_photons,
+    # The AQM judges with Ward's operator whatever the look (pipeline/tonemap.py): a new look re-decides nothing
+    decision = dict(look, tonemap={k: v for k, v in look["tonemap"].items() if k not in LOOK_FIELDS},
+                    first=p.frames[0], last=p.frames[-1], fmax=fmax, n_photons=n_photons,
                     temporal=temporal, selection=p.frames, **{s: config.stage_hash(s) for s in
                                                                ("collection", "filter", "segments")})
     if not guided:  # fixed settings read no segment parameter
