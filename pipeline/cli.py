@@ -201,6 +201,7 @@ def render_command(segment, quiet, verbose, performance_report, scheduler, worke
                f"{len(report['segments'])} segment(s)")
     click.echo(f"frames: {out_dir}/beauty.####.exr, .png  video: {report['video']}  "
                f"report: {out_dir}/report.json  segments: loom segments {out_dir}")
+    click.echo(f"report: {out_dir}/report.html")
 
 
 @main.command("plan")
@@ -257,6 +258,15 @@ def segments_command(out_dir: str, as_json: bool, plot_file: str | None) -> None
         return
     for line in table(records):
         click.echo(line)
+
+
+@main.command("report")
+@click.argument("out_dir", type=click.Path(file_okay=False))
+def report_command(out_dir: str) -> None:
+    """Write OUT/report.html: segments, costs, windows, AQM maps, frames, video, skips, settings (one file)."""
+    from .report import write_report
+
+    click.echo(f"wrote {write_report(out_dir)}")
 
 
 @main.group()
