@@ -139,6 +139,7 @@ class SegmentRun:
         self.times = {"shoot_s": 0.0, "aqm_s": 0.0, "temporal_s": 0.0}
         self.batches_traced = 0
         self._index = None  # the segment being decided, for progress lines
+        self._windows_at_k: dict = {}  # Fig. 5 at K of the segment being decided (its last d_AQM step)
 
     def add_times(self, result: dict, keys) -> None:
         """Sum a task's own timings (seconds of work, whichever worker did it) into this segment's."""
@@ -282,7 +283,7 @@ class SegmentRun:
     # --- Steps 1-3 for one segment -----------------------------------------------------------
     def decide(self, index: int, start: int, fmax: int) -> SegmentRecord:
         job, cfg = self.job, self.config
-        self._index = index
+        self._index, self._windows_at_k = index, {}
         t_start = time.perf_counter()
         if job.n_photons is not None:  # fixed settings: nothing to decide
             return self._fixed_record(index)
@@ -331,7 +332,7 @@ class SegmentRun:
             index=index, start=place.start, end=place.end, k=place.k, fmax=place.fmax, n_frame=n,
             temporal=temporal, guided=True, decision_hash=job.decision_hash, end_frames=ends,
             end_factor=cfg.end_photons, pilot=pilot, fmax_steps=fmax_steps, n_frame_steps=n_steps, capped=capped,
-            windows_at_k=getattr(self, "_windows_at_k", {}),
+            windows_at_k=self._windows_at_k,
             times_s={"init_s": t_init - t_start, "fmax_s": t_fmax - t_init, "n_frame_s": t_n - t_fmax,
                      "decide_s": time.perf_counter() - t_start})
         write_record(job.out_dir, rec)
