@@ -149,9 +149,9 @@ def _summary(report: dict, records: list[SegmentRecord]) -> str:
             ["resolution, spp", f"{res[0]}x{res[1]}, {report.get('spp', '?')}"],
             ["photons", report.get("photons", "?")], ["segments", len(records)],
             ["photon batches traced", report.get("photon_batches_traced", "?")],
-            ["wall time", f"{t.get('total_s', 0.0):.1f} s (photons {t.get('shoot_s', 0.0):.1f}, "
-                          f"AQM {t.get('aqm_s', 0.0):.1f}, temporal {t.get('temporal_s', 0.0):.1f}, "
-                          f"composite {t.get('composite_s', 0.0):.1f}, video {t.get('video_s', 0.0):.1f})"],
+            ["wall time", (f"{t.get('total_s', 0.0):.1f} s (photons {t.get('shoot_s', 0.0):.1f}, "
+                           f"AQM {t.get('aqm_s', 0.0):.1f}, temporal {t.get('temporal_s', 0.0):.1f}, "
+                           f"composite {t.get('composite_s', 0.0):.1f}, video {t.get('video_s', 0.0):.1f})")],
             ["rays", ", ".join(f"{k} {v:,}" for k, v in report.get("rays", {}).items())]]
     return _table(None, rows, left=1, cls="summary")
 

@@ -48,7 +48,7 @@ def skipped_work(frames, *, sources: dict[int, int], has_specular: bool, has_are
     for items in per_frame.values():
         for item in items:
             counts[item["what"]] = counts.get(item["what"], 0) + 1
-    distinct = len(set(sources[f] for f in frames))
+    distinct = len({sources[f] for f in frames})
     return {"per_frame": per_frame, "frames_skipping": counts, "segments_done": segments_done,
             "photon_sets": distinct, "frames": len(list(frames))}
 

@@ -91,8 +91,8 @@ def load(url: str, expressions: dict[str, str], width: int = 1280, height: int =
                    mobile=False)
             s.call("Page.navigate", url=url)
             s.wait_for("Page.loadEventFired", timeout=120)
-            values = {k: s.call("Runtime.evaluate", expression=e, returnByValue=True, awaitPromise=True)["result"].get("value")
-                      for k, e in expressions.items()}
+            values = {k: s.call("Runtime.evaluate", expression=e, returnByValue=True,
+                                awaitPromise=True)["result"].get("value") for k, e in expressions.items()}
             metrics = s.call("Page.getLayoutMetrics")
             full = metrics.get("cssContentSize") or metrics["contentSize"]
             shot = s.call("Page.captureScreenshot", format="png", captureBeyondViewport=True,

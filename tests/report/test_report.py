@@ -53,7 +53,7 @@ def rendered(tmp_path_factory):
 
 
 def test_render_writes_a_self_contained_report(rendered):
-    out, first, again = rendered
+    out = rendered[0]
     page = (out / "report.html").read_text()
     records = read_records(out)
     assert len(records) >= 2 and all(r.windows_at_k for r in records)
@@ -67,7 +67,7 @@ def test_render_writes_a_self_contained_report(rendered):
 
 
 def test_report_opens_in_chromium_and_shows_tables_and_plots(rendered, tmp_path):
-    out, first, again = rendered
+    out = rendered[0]
     result = CliRunner().invoke(main, ["report", str(out)])
     assert result.exit_code == 0 and "report.html" in result.output
     alone = tmp_path / "elsewhere" / "report.html"
@@ -100,7 +100,7 @@ def test_report_opens_in_chromium_and_shows_tables_and_plots(rendered, tmp_path)
     assert np.all(background == 255)
     for sel, box in v["geometry"].items():
         assert box is not None, sel
-        x, y, w, h, natural = (int(round(c)) for c in box)
+        x, y, w, h, natural = (round(c) for c in box)
         assert w > 50 and h > 20 and natural != 0, sel
         if y + h > shot.shape[0]:
             continue  # below what the screenshot holds
