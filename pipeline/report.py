@@ -153,7 +153,7 @@ def _summary(report: dict, records: list[SegmentRecord]) -> str:
                            f"AQM {t.get('aqm_s', 0.0):.1f}, temporal {t.get('temporal_s', 0.0):.1f}, "
                            f"composite {t.get('composite_s', 0.0):.1f}, video {t.get('video_s', 0.0):.1f})")],
             ["rays", ", ".join(f"{k} {v:,}" for k, v in report.get("rays", {}).items())]]
-    return _table(None, rows, left=1, cls="summary")
+    return _table(None, rows, left=2, cls="summary")
 
 
 def _ranges(frames: list[int]) -> str:
@@ -251,7 +251,8 @@ def _costs(report: dict, records: list[SegmentRecord]) -> str:
         rows.append([label, n] + [f"{wall[row] / n:.4f}" for row in ROWS])
     note = ("<p class=\"muted\">Wall-clock seconds of each stage, as the segment records hold them from the "
             "run that did the segment, divided by its frames (stage split as in <code>loom bench render</code>). "
-            "A segment redone in part (frames found done) shows what that run spent.</p>")
+            "Steps 1-3 of segment i + 1 run in segment i's task (§5.2) and their photon tracing and AQM count "
+            "there; a segment redone in part (frames found done) shows what that run spent.</p>")
     return _table(head, rows, left=1, cls="table2") + note + _img(_per_frame_plot(report, records), "frame-plot",
                                                                  "Per frame: compositing seconds, photons traced "
                                                                  "and mean collection window")
