@@ -279,7 +279,7 @@ def _per_frame_plot(report: dict, records: list[SegmentRecord]) -> str:
         axes[1].plot(f, [info[i].get("photons", 0) for i in f], ".-")
         axes[2].plot(f, [info[i].get("window", 0) for i in f], ".-")
     axes[0].set(xlabel="frame", ylabel="s", title="compositing per frame")
-    axes[1].set(xlabel="frame", ylabel="photons", title="photons per frame", yscale="log")
+    axes[1].set(xlabel="frame", ylabel="photons", title="photons per frame", ylim=(0, None))
     axes[2].set(xlabel="frame", ylabel="frames", title="mean collection window per frame")
     for ax in axes:
         ax.grid(alpha=0.3)
