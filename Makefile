@@ -37,6 +37,7 @@ demo: setup
 	$(LOOM) render $(DEMO)/room.glb --out $(DEMO)/room --resolution 320x240 --spp 2
 	$(LOOM) segments $(DEMO)/room
 	@echo "frames: $(DEMO)/room/beauty.####.exr and .png; video: $(DEMO)/room/preview.mp4"
+	@echo "report: $(DEMO)/room/report.html (one file: open it in a browser)"
 
 # A make-driven farm render: make render SCENE=room.glb FRAMES=1-135 OUT=out/room [JOBS=2] [OPTS="--spp 4"]
 # (`loom plan` writes OUT/Makefile, whose targets make then runs; a rerun does only what is missing).

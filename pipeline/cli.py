@@ -163,6 +163,11 @@ def _job_options(f):
                      help="JSON object of RenderConfig fields (pipeline/config.py); the options above override it."),
         click.option("--light", type=click.Choice(["auto", "none"]), default="auto", show_default=True,
                      help=_LIGHT_HELP),
+        click.option("--tonemap", type=click.Choice(["filmic", "exposure", "ward"]), default="filmic",
+                     show_default=True, help="How frames are shown: a filmic curve or a linear exposure keyed to the "
+                     "eye's adaptation, or Ward's visibility-matching operator (pipeline/tonemap.py)."),
+        click.option("--exposure", type=float, default=0.0, show_default=True,
+                     help="Exposure offset in EV (x 2^EV) on top of the operator's own."),
     ]
     for option in reversed(options):
         f = option(f)
@@ -170,10 +175,12 @@ def _job_options(f):
 
 
 def _job_arguments(scene_file, frames, out_dir, resolution, spp, photons, fmax, temporal, store_url, camera, seed,
-                   reflection_depth, photon_depth, d_thr, config_file, light="auto") -> dict:
+                   reflection_depth, photon_depth, d_thr, config_file, light="auto", tonemap="filmic",
+                   exposure=0.0) -> dict:
     """The keyword arguments of pipeline.render.prepare_job / render from the job options."""
     from .config import RenderConfig, load_config
     from .render import RenderSettings, parse_resolution
+    from .tonemap import ToneMapping
 
     width, height = parse_resolution(resolution)
     fields = load_config(config_file) if config_file else {}
@@ -181,7 +188,8 @@ def _job_arguments(scene_file, frames, out_dir, resolution, spp, photons, fmax, 
     return dict(scene_path=scene_file, frames=frames, out_dir=out_dir, n_photons=photons, fmax=fmax,
                 temporal=temporal, store_url=store_url, camera=camera, config=RenderConfig.from_dict(fields),
                 light=light,
-                settings=RenderSettings(width=width, height=height, spp=spp, reflection_depth=reflection_depth))
+                settings=RenderSettings(width=width, height=height, spp=spp, reflection_depth=reflection_depth,
+                                        tonemap=ToneMapping(operator=tonemap, exposure=exposure)))
 
 
 @main.command("render")
@@ -210,6 +218,7 @@ def render_command(segment, quiet, verbose, performance_report, scheduler, worke
                f"{len(report['segments'])} segment(s)")
     click.echo(f"frames: {out_dir}/beauty.####.exr, .png  video: {report['video']}  "
                f"report: {out_dir}/report.json  segments: loom segments {out_dir}")
+    click.echo(f"report: {out_dir}/report.html")
 
 
 @main.command("plan")
@@ -268,6 +277,15 @@ def segments_command(out_dir: str, as_json: bool, plot_file: str | None) -> None
         return
     for line in table(records):
         click.echo(line)
+
+
+@main.command("report")
+@click.argument("out_dir", type=click.Path(file_okay=False))
+def report_command(out_dir: str) -> None:
+    """Write OUT/report.html: segments, costs, windows, AQM maps, frames, video, skips, settings (one file)."""
+    from .report import write_report
+
+    click.echo(f"wrote {write_report(out_dir)}")
 
 
 @main.group()

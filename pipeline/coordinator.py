@@ -139,6 +139,7 @@ class SegmentRun:
         self.times = {"shoot_s": 0.0, "aqm_s": 0.0, "temporal_s": 0.0}
         self.batches_traced = 0
         self._index = None  # the segment being decided, for progress lines
+        self._windows_at_k: dict = {}  # Fig. 5 at K of the segment being decided (its last d_AQM step)
 
     def add_times(self, result: dict, keys) -> None:
         """Sum a task's own timings (seconds of work, whichever worker did it) into this segment's."""
@@ -270,6 +271,8 @@ class SegmentRun:
         flow = camera_flow(self.scene, k, job.width, job.height, params)
         result = displayed_difference(images[0], images[1], adaptation, params=params,
                                       aqm_size=self.config.aqm_size, flow=flow)
+        self._windows_at_k = window_histogram(lit.back, lit.fwd, place.fmax,
+                                              self.store.counts(kind="all", batches=use)[place.start - 1:place.end])
         picture = record_path(job.out_dir, index).with_suffix(".aqm.png")
         picture.parent.mkdir(parents=True, exist_ok=True)
         write_png(picture, difference_picture(images[0], result.visible))
@@ -280,7 +283,7 @@ class SegmentRun:
     # --- Steps 1-3 for one segment -----------------------------------------------------------
     def decide(self, index: int, start: int, fmax: int) -> SegmentRecord:
         job, cfg = self.job, self.config
-        self._index = index
+        self._index, self._windows_at_k = index, {}
         t_start = time.perf_counter()
         if job.n_photons is not None:  # fixed settings: nothing to decide
             return self._fixed_record(index)
@@ -329,6 +332,7 @@ class SegmentRun:
             index=index, start=place.start, end=place.end, k=place.k, fmax=place.fmax, n_frame=n,
             temporal=temporal, guided=True, decision_hash=job.decision_hash, end_frames=ends,
             end_factor=cfg.end_photons, pilot=pilot, fmax_steps=fmax_steps, n_frame_steps=n_steps, capped=capped,
+            windows_at_k=self._windows_at_k,
             times_s={"init_s": t_init - t_start, "fmax_s": t_fmax - t_init, "n_frame_s": t_n - t_fmax,
                      "decide_s": time.perf_counter() - t_start})
         write_record(job.out_dir, rec)
@@ -440,6 +444,16 @@ class SegmentRun:
         return out, written
 
 
+def window_histogram(back: np.ndarray, fwd: np.ndarray, fmax: int, counts: np.ndarray) -> dict:
+    """Fig. 5: how many elements collect 0..F_max/2 frames back and forward at K, over the elements
+    some photon of the segment hit (``counts``: (frames, E) records; never-hit ones say nothing)."""
+    hit = counts.sum(axis=0) > 0
+    half = max(int(fmax) // 2, int(back.max(initial=0)), int(fwd.max(initial=0)))
+    return {"back": np.bincount(back[hit].astype(np.int64), minlength=half + 1).tolist(),
+            "fwd": np.bincount(fwd[hit].astype(np.int64), minlength=half + 1).tolist(),
+            "elements": int(hit.sum()), "fmax": int(fmax)}
+
+
 def frame_hash(render_hash: str, info: dict, adaptation: float) -> str:
     """What a frame's files depend on: the render's settings, its indirect map and its exposure."""
     return stable_digest({"render": render_hash, "map": info["digest"], "adaptation": float(adaptation)})
@@ -538,7 +552,9 @@ def segment_task(job: dict, index: int, force: bool = False) -> dict:
                             "composite_s": time.perf_counter() - t1, **{k: round(v, 4) for k, v in run.times.items()}})
         write_record(job.out_dir, rec)
         return {"record": rec.to_dict(), "rays": {str(f): r["rays"] for f, r in written.items()},
-                "batches": run.batches_traced}
+                "batches": run.batches_traced,
+                "frame_times": {str(f): {k: round(v, 4) for k, v in r.items() if k.endswith("_s")}
+                                for f, r in written.items()}}
 
 
 def segment_done(job: Job, index: int) -> SegmentRecord | None:
@@ -592,7 +608,7 @@ def _progress_to(client, on_progress):
 def _coordinate(job, client, on_segment, records, index, start) -> list:
     while start <= job.last:
         rec = segment_done(job, index)
-        result = {"rays": {}, "batches": 0}
+        result = {"rays": {}, "batches": 0, "already_done": rec is not None}
         if rec is None or (records and rec.start != start):
             if client is None:
                 result = segment_task(job.to_dict(), index)

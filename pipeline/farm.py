@@ -247,7 +247,8 @@ def _finish(job: Job) -> str:
 
     from .render import finish
 
-    report = finish(job, read_records(job.out_dir), rays={}, batches=0, t_start=time.perf_counter())
+    report = finish(job, read_records(job.out_dir), rays={}, batches=0, t_start=time.perf_counter(),
+                    ran_here=False)
     return f"finished: {report['video']}"
 
 

@@ -29,7 +29,7 @@ from .errors import LoomError
 from .images import frame_paths, write_video
 from .scene import Scene
 from .shoot import check_store_location, open_store, plan
-from .tonemap import ToneMapping
+from .tonemap import LOOK_FIELDS, ToneMapping
 
 log = logging.getLogger(__name__)
 MAX_SIDE = 16384
@@ -119,7 +119,9 @@ def prepare_job(scene_path, *, frames: str | None, out_dir, settings: RenderSett
                 width=settings.width, height=settings.height, spp=settings.spp,
                 reflection_depth=settings.reflection_depth, area_samples=settings.area_samples,
                 tonemap=settings.tonemap.to_dict())
-    decision = dict(look, first=p.frames[0], last=p.frames[-1], fmax=fmax, n_photons=n_photons,
+    # The AQM judges with Ward's operator whatever the look (pipeline/tonemap.py): a new look re-decides nothing
+    decision = dict(look, tonemap={k: v for k, v in look["tonemap"].items() if k not in LOOK_FIELDS},
+                    first=p.frames[0], last=p.frames[-1], fmax=fmax, n_photons=n_photons,
                     temporal=temporal, selection=p.frames, **{s: config.stage_hash(s) for s in
                                                                ("collection", "filter", "segments")})
     if not guided:  # fixed settings read no segment parameter
@@ -158,11 +160,16 @@ def render(scene_path, *, frames: str | None, out_dir, settings: RenderSettings 
         raise LoomError(f"must be a segment index >= 0, got {segment}", field="--segment")
     t_start = time.perf_counter()
     rays: dict[int, dict] = {}
+    frame_times: dict[int, dict] = {}
+    segments_done: list[dict] = []
     batches = 0
 
     def report_segment(rec, result):
         nonlocal batches
         rays.update({int(f): r for f, r in result["rays"].items()})
+        frame_times.update({int(f): t for f, t in result.get("frame_times", {}).items()})
+        if result.get("already_done"):
+            segments_done.append({"index": rec.index, "frames": [rec.start, rec.end]})
         batches += result["batches"]
         if echo is None:
             return
@@ -184,11 +191,20 @@ def render(scene_path, *, frames: str | None, out_dir, settings: RenderSettings 
         else:
             records = coordinate(job, client, on_segment=report_segment,
                                  on_progress=None if echo is None else (lambda line: echo(f"  {line}")))
-    return finish(job, records, rays=rays, batches=batches, t_start=t_start)
+    report = finish(job, records, rays=rays, batches=batches, t_start=t_start, frame_times=frame_times,
+                    segments_done=segments_done)
+    if echo is not None:
+        from .skipped import summary_lines
+        for line in summary_lines(report["skipped_work"]):
+            echo(f"skipped: {line}")
+    return report
 
 
-def finish(job, records, *, rays: dict, batches: int, t_start: float) -> dict:
-    """The segment figure, ``preview.mp4`` and ``report.json`` of a rendered job."""
+def finish(job, records, *, rays: dict, batches: int, t_start: float, frame_times: dict | None = None,
+           segments_done: list | None = None, ran_here: bool = True) -> dict:
+    """The segment figure, ``preview.mp4``, ``report.json`` and ``report.html`` (pipeline/report.py)
+    of a rendered job. ``ran_here`` False: the frames were written by other processes (a farm's
+    recipes), whose ray counts and timings this one does not know."""
     out = Path(job.out_dir)
     config = RenderConfig.from_dict(job.config)
     t0 = time.perf_counter()
@@ -197,7 +213,8 @@ def finish(job, records, *, rays: dict, batches: int, t_start: float) -> dict:
         plot_segments(records, out / "segments" / "segments.png", d_thr=config.d_thr, p_thr=config.p_thr)
     video = out / "preview.mp4"
     from workers.scene_cache import load_scene
-    fps = load_scene(job.scene_path, job.scene_hash, job.camera).timeline.fps
+    scene = load_scene(job.scene_path, job.scene_hash, job.camera)
+    fps = scene.timeline.fps
     write_video([frame_paths(out, f)[1] for f in job.selection], video, fps)
     video_s = time.perf_counter() - t0
     times = {k: round(sum(r.times_s.get(k, 0.0) for r in records), 3)
@@ -214,12 +231,29 @@ def finish(job, records, *, rays: dict, batches: int, t_start: float) -> dict:
         "photon_batches_traced": batches, "times_s": times,
         "rays": {k: sum(r[k] for r in rays.values()) for k in RAY_KINDS},
         "rays_per_frame": {str(f): rays[f] for f in sorted(rays)},
+        "frame_times_s": {str(f): frame_times[f] for f in sorted(frame_times or {})},
+        "skipped_work": _skipped(job, scene, rays if ran_here else None, segments_done or []),
+        "settings": {"job": {k: v for k, v in job.to_dict().items() if k not in ("config", "selection")},
+                     "config": job.config},
     }
     tmp = out / f".report.json.{os.getpid()}.partial"
     tmp.write_text(json.dumps(report, indent=1))
     os.replace(tmp, out / "report.json")
+    from .report import write_report
+    write_report(out)
     _remove_leftovers(out, job.store_url)
     return report
+
+
+def _skipped(job, scene, rays: dict | None, segments_done: list) -> dict:
+    """pipeline/skipped.py's account of the frames of ``job``, from the store's sharing table."""
+    from .skipped import skipped_work
+    from .store import PhotonStore
+
+    store = PhotonStore.open(job.store_url)
+    sources = {f: store.source_frame(f - 1) + 1 for f in job.selection}
+    return skipped_work(job.selection, sources=sources, has_specular=scene.has_specular,
+                        has_area_lights=scene.has_area_lights, rays=rays, segments_done=segments_done)
 
 
 def _remove_leftovers(out: Path, store_url: str) -> None:

@@ -3,6 +3,7 @@ F_max steps of §5.2.2 (p_me both ways at each F_max tried), one PNG (``OUT/segm
 ``loom segments OUT --plot FILE``)."""
 from __future__ import annotations
 
+import math
 import os
 from pathlib import Path
 
@@ -36,6 +37,14 @@ def plot_segments(records: list[SegmentRecord], path, *, d_thr: float | None = N
         right.axhline(p_thr, color="red", lw=1, label=f"p_thr = {p_thr:g}")
     left.set(xscale="log", xlabel="N_frame (photons per frame)", ylabel="d_AQM (% of pixels > 1 JND)",
              title="N_frame at the central frames (Fig. 6, §5.2.3)")
+    from matplotlib.ticker import FuncFormatter
+
+    def short(n, _pos):  # 20k, 50k, 100k, ...: matplotlib's labelled minor log ticks overlap
+        lead = n / 10 ** math.floor(math.log10(n)) if n > 0 else 0
+        return "" if round(lead) not in (1, 2, 5) else (f"{n / 1e6:g}M" if n >= 1e6 else f"{n / 1e3:g}k")
+
+    left.xaxis.set_major_formatter(FuncFormatter(short))
+    left.xaxis.set_minor_formatter(FuncFormatter(short))
     right.set(xlabel="F_max (frames)", ylabel="p_me", ylim=(0, 1), title="Segment length (§5.2.2)")
     for ax in (left, right):
         ax.grid(alpha=0.3)

@@ -42,6 +42,7 @@ class SegmentRecord:
     fmax_steps: list = field(default_factory=list)  # [{fmax, k, p_me_back, p_me_fwd}] (§5.2.2)
     n_frame_steps: list = field(default_factory=list)  # [{n_frame, d_aqm}] (§5.2.3), d_aqm in %
     capped: bool = False  # the doubling loop stopped at n_frame_max with d_AQM > d_thr
+    windows_at_k: dict = field(default_factory=dict)  # Fig. 5 at K's last d_AQM (coordinator.window_histogram)
     frames: dict = field(default_factory=dict)  # str(frame) -> {adaptation, digest, filtered, window}
     times_s: dict = field(default_factory=dict)
 

@@ -5,8 +5,8 @@ import numpy as np
 import pytest
 
 from pipeline.errors import LoomError
-from pipeline.tonemap import (ToneMapping, log_average, smooth_adaptation, srgb_encode, tonemap,
-                              ward_scale)
+from pipeline.tonemap import (KEY, ToneMapping, aces_filmic, display_linear, log_average, smooth_adaptation,
+                              srgb_encode, tonemap, ward_scale)
 
 
 def test_ward_scale_closed_form():
@@ -33,8 +33,47 @@ def test_smoothing_follows_a_step_exponentially_in_log_space():
 
 def test_tonemap_is_monotone_srgb_8bit():
     ramp = np.linspace(0, 10, 50)[:, None] * np.ones(3)
-    out = tonemap(ramp, 1.0)
+    out = tonemap(ramp, 1.0, ToneMapping(operator="ward"))
     assert out.dtype == np.uint8 and np.all(np.diff(out[:, 0].astype(int)) >= 0) and out[-1, 0] == 255
     assert srgb_encode(np.array([0.0, 0.0031308, 1.0])).tolist() == pytest.approx([0.0, 0.04045, 1.0], abs=1e-5)
     with pytest.raises(LoomError):
         ToneMapping(display_max=0)
+
+
+@pytest.mark.parametrize("operator", ["filmic", "exposure", "ward"])
+def test_every_operator_is_monotone_and_bounded(operator):
+    ramp = np.geomspace(1e-6, 1e4, 200)[:, None] * np.ones(3)
+    out = display_linear(ramp, 0.05, ToneMapping(operator=operator))
+    assert np.all(np.diff(out[:, 0]) >= 0) and out.min() >= 0 and out.max() == pytest.approx(1.0, abs=0.02)
+    assert np.all(np.isfinite(display_linear(np.zeros((2, 3)), 0.0, ToneMapping(operator=operator))))
+
+
+def test_exposure_operator_puts_the_adaptation_on_middle_grey_and_ev_doubles():
+    la = 0.057  # ROOM's adaptation luminance (README): shown at middle grey, not at Ward's 1.7 %
+    grey = np.full((1, 3), la)
+    assert display_linear(grey, la, ToneMapping(operator="exposure"))[0, 0] == pytest.approx(KEY)
+    one_up = display_linear(grey, la, ToneMapping(operator="exposure", exposure=1.0))[0, 0]
+    assert one_up == pytest.approx(2 * KEY)
+    ward = display_linear(grey, la, ToneMapping(operator="ward"))[0, 0]
+    assert ward == pytest.approx(ward_scale(la) * la / 100.0) and ward < 0.03
+    # Ward's operator takes EV too: a factor 2^EV on its scale
+    assert display_linear(grey, la, ToneMapping(operator="ward", exposure=-2.0))[0, 0] == pytest.approx(ward / 4)
+
+
+def test_filmic_curve_is_narkowicz_aces_fit_with_a_shoulder():
+    x = np.array([0.0, KEY, 1.0, 100.0])
+    expected = x * (2.51 * x + 0.03) / (x * (2.43 * x + 0.59) + 0.14)
+    np.testing.assert_allclose(aces_filmic(x), np.minimum(expected, 1.0))
+    grey = display_linear(np.full((1, 3), 2.0), 2.0, ToneMapping())[0, 0]
+    assert grey == pytest.approx(aces_filmic(np.array([KEY]))[0])  # adaptation at the key, then the curve
+    # highlights roll off: 8x the key is not clipped, unlike the linear exposure
+    bright = np.full((1, 3), 8 * 2.0 / KEY * KEY)
+    assert display_linear(bright, 2.0, ToneMapping())[0, 0] < 1.0
+    assert display_linear(bright, 2.0, ToneMapping(operator="exposure"))[0, 0] == 1.0
+
+
+def test_bad_operator_and_exposure_are_one_line_errors():
+    with pytest.raises(LoomError, match="tonemap"):
+        ToneMapping(operator="reinhard")
+    with pytest.raises(LoomError, match="exposure"):
+        ToneMapping(exposure=float("nan"))

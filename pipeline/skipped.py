@@ -1,0 +1,72 @@
+"""What a render did not do, frame by frame, and why (``report.json`` "skipped_work", the report).
+
+Work a production renderer should skip, and says it skipped:
+
+* photon tracing of a frame whose scene state (geometry and lights) equals an earlier frame's:
+  camera-only motion shares that frame's photons (pipeline/store, ``source_frame``);
+* reflection rays where no mirror or glossy surface is in view (the compositor casts them only
+  from specular hits, workers/composite.py), and in every frame of a scene without one;
+* area-light sampling in a scene without emissive triangles;
+* segments a rerun found done (record current, every frame valid) and frames whose files carry
+  their current frame hash (pipeline/coordinator.py ``segment_done``, ``composite_calls``).
+
+Pure: it reads the scene's flags, the store's sharing table and the counts the render returned.
+"""
+from __future__ import annotations
+
+SHARED = "photons"
+REFLECTION = "reflection rays"
+AREA = "area-light sampling"
+DONE = "frame"
+
+
+def skipped_work(frames, *, sources: dict[int, int], has_specular: bool, has_area_lights: bool,
+                 rays: dict[int, dict] | None, segments_done: list[dict]) -> dict:
+    """The skipped work of a render of ``frames``: ``sources`` maps each frame to the frame whose
+    photons it uses, ``rays`` the ray counts per kind of the frames written by this run (frames
+    absent were already done; None: written by other processes, a farm's recipes, so unknown),
+    ``segments_done`` the records ({index, frames}) a rerun skipped."""
+    per_frame: dict[str, list[dict]] = {}
+    for f in frames:
+        items = []
+        if sources[f] != f:
+            items.append({"what": SHARED, "why": f"camera-only motion: shares frame {sources[f]}'s photons"})
+        if rays is not None and f not in rays:
+            items.append({"what": DONE, "why": "already done: its files carry the current frame hash"})
+        seen = None if rays is None else rays.get(f)  # ray counts: known for the frames written here
+        if not has_specular:
+            items.append({"what": REFLECTION, "why": "no mirror or glossy material in the scene"})
+        elif seen is not None and seen.get("reflection", 0) == 0:
+            items.append({"what": REFLECTION, "why": "no specular surface in view"})
+        if not has_area_lights:
+            items.append({"what": AREA, "why": "no emissive triangles in the scene"})
+        elif seen is not None and seen.get("area", 0) == 0:
+            items.append({"what": AREA, "why": "no diffuse surface in view takes area light"})
+        if items:
+            per_frame[str(f)] = items
+    counts: dict[str, int] = {}
+    for items in per_frame.values():
+        for item in items:
+            counts[item["what"]] = counts.get(item["what"], 0) + 1
+    distinct = len({sources[f] for f in frames})
+    return {"per_frame": per_frame, "frames_skipping": counts, "segments_done": segments_done,
+            "photon_sets": distinct, "frames": len(list(frames))}
+
+
+def summary_lines(skipped: dict) -> list[str]:
+    """One line a kind of skipped work, for the report and the terminal."""
+    n = skipped["frames"]
+    counts = skipped["frames_skipping"]
+    lines = [f"photon sets traced: {skipped['photon_sets']} for {n} frames"
+             + (" (one set for the whole animation: nothing in it moves but the camera)"
+                if skipped["photon_sets"] == 1 and n > 1 else "")]
+    for what, label in ((SHARED, "frames sharing another frame's photons (camera-only motion)"),
+                        (REFLECTION, "frames casting no reflection rays"),
+                        (AREA, "frames with no area-light sampling"),
+                        (DONE, "frames already done (kept as they were)")):
+        lines.append(f"{label}: {counts.get(what, 0)} of {n}")
+    segs = skipped["segments_done"]
+    lines.append(f"segments already done: {len(segs)}"
+                 + (" (" + ", ".join(f"{s['index']}: frames {s['frames'][0]}-{s['frames'][1]}" for s in segs) + ")"
+                    if segs else ""))
+    return lines

@@ -1,0 +1,48 @@
+"""What a render skips (pipeline/skipped.py): the pure account, and camera-only motion end to end."""
+from __future__ import annotations
+
+import json
+
+from click.testing import CliRunner
+
+from pipeline.cli import main
+from pipeline.scene.builtin import write_builtin
+from pipeline.skipped import skipped_work, summary_lines
+from pipeline.store import PhotonStore
+
+
+def test_each_kind_of_skip_names_its_reason():
+    rays = {1: {"reflection": 0, "area": 5}, 2: {"reflection": 9, "area": 0}}
+    s = skipped_work([1, 2, 3], sources={1: 1, 2: 1, 3: 3}, has_specular=True, has_area_lights=True, rays=rays,
+                     segments_done=[{"index": 0, "frames": [3, 3]}])
+    why = {f: {i["what"]: i["why"] for i in items} for f, items in s["per_frame"].items()}
+    assert why["1"] == {"reflection rays": "no specular surface in view"}
+    assert why["2"]["photons"].startswith("camera-only motion: shares frame 1")
+    assert why["2"]["area-light sampling"] == "no diffuse surface in view takes area light"
+    assert why["3"] == {"frame": "already done: its files carry the current frame hash"}
+    assert s["photon_sets"] == 2 and s["frames_skipping"] == {"reflection rays": 1, "photons": 1,
+                                                             "area-light sampling": 1, "frame": 1}
+    plain = skipped_work([1, 2], sources={1: 1, 2: 2}, has_specular=False, has_area_lights=False, rays=None,
+                         segments_done=[])
+    assert all({i["what"] for i in items} == {"reflection rays", "area-light sampling"}
+               for items in plain["per_frame"].values())
+    assert any("segments already done: 1 (0: frames 3-3)" == line for line in summary_lines(s))
+
+
+def test_camera_only_motion_traces_one_photon_set_at_fixed_settings(tmp_path):
+    scene = write_builtin("static", tmp_path / "static.glb")
+    out = tmp_path / "out"
+    result = CliRunner().invoke(main, ["render", str(scene), "--frames", "1-12", "--out", str(out), "--resolution",
+                                       "40x30", "--spp", "1", "--photons", "3000", "--fmax", "4", "--scheduler",
+                                       "synchronous"])
+    assert result.exit_code == 0, result.output
+    report = json.loads((out / "report.json").read_text())
+    store = PhotonStore.open(out / "photons.zarr")
+    assert [store.source_frame(f) for f in range(12)] == [0] * 12
+    assert report["photon_batches_traced"] == 1 and store.photons_emitted(0) == 3000
+    assert all(store.photons_emitted(f) == 3000 for f in range(12))  # shared, not traced again
+    s = report["skipped_work"]
+    assert s["photon_sets"] == 1 and s["frames_skipping"]["photons"] == 11
+    assert "1" not in s["per_frame"] or all(i["what"] != "photons" for i in s["per_frame"]["1"])
+    assert "skipped: photon sets traced: 1 for 12 frames (one set for the whole animation" in result.output
+    assert (out / "report.html").is_file()
