@@ -72,8 +72,8 @@ class Plan:
         return self.reference_factor * max(self.budgets)
 
 
-QUICK = {"room": Plan((61, 80), (5_000, 10_000, 20_000), 14, (0.03, 0.3, 0.6), aqm_every=2),
-         "cornell": Plan((1, 30), (5_000, 10_000, 20_000), 14, (0.03, 0.3, 0.6), aqm_every=2)}
+QUICK = {"room": Plan((61, 80), (5_000, 10_000, 20_000), 14, (0.03, 0.8), aqm_every=4),
+         "cornell": Plan((1, 30), (5_000, 10_000, 20_000), 14, (0.03, 0.8), aqm_every=4)}
 FULL = {"room": Plan((46, 90), (10_000, 20_000, 40_000, 80_000), 30, (0.03, 0.1, 0.3)),
         "cornell": Plan((1, 30), (10_000, 20_000, 40_000, 80_000), 30, (0.03, 0.1, 0.3))}
 
@@ -174,6 +174,7 @@ class Evaluation:
         self.ref_images = self.images(refs[0])
         self.adaptation = log_average(luminance(self.ref_images))  # the frozen tone mapping's L_wa
         self.ref_displayed = self.displayed(self.ref_images)
+        self.floor_flicker = None  # per interval, set from the second reference (see run)
         self.aqm_frames = sorted(set(range(0, len(self.frames), plan.aqm_every)) | {self.event_index})
 
     @property
@@ -192,21 +193,28 @@ class Evaluation:
         refs, areas = self.refs[0], self.areas
         images = self.images(maps)
         shown = self.displayed(images)
-        futures = self.client.map(displayed_d_aqm, [images[i] for i in self.aqm_frames],
-                                  [self.ref_images[i] for i in self.aqm_frames],
+        pairs = self.client.scatter([images[i] for i in self.aqm_frames] + [self.ref_images[i] for i in self.aqm_frames])
+        n = len(self.aqm_frames)
+        futures = self.client.map(displayed_d_aqm, pairs[:n], pairs[n:],
                                   [self.adaptation] * len(self.aqm_frames), pure=False)
         rel = [em.relative_l2(m, r, a) for m, r, a in zip(maps, refs, areas)]
         img = np.array([em.image_errors(s, r) for s, r in zip(shown, self.ref_displayed)])
         hl = [em.region_energy(m, a, h) / em.region_energy(r, a, h) - 1.0
               for m, r, a, h in zip(maps, refs, areas, self.highlight)]
+        keep = np.arange(len(maps) - 1) != self.event_index - 1  # the change itself is the lag's, not flicker
+        fl = em.flicker(maps, refs, areas)[keep]
+        own = np.array([em.relative_l2(maps[t], maps[t - 1], areas[t]) for t in range(1, len(maps))])[keep]
+        floor = self.floor_flicker if self.floor_flicker is not None else np.zeros_like(fl)
+        net = np.sqrt(np.maximum(fl ** 2 - floor ** 2 / 2.0, 0.0))
         response = em.step_response(maps, refs, areas, self.event_index)
         lag, reached = em.lag(response)
         d_aqm = self.client.gather(futures)
         return {"rel_l2": float(np.mean(rel)), "rmse": float(img[:, 0].mean()), "mean_rel": float(img[:, 1].mean()),
-                "d_aqm": float(np.mean(d_aqm)), "flicker": float(np.mean(em.flicker(maps, refs, areas))),
-                "image_flicker": float(np.mean(em.image_flicker(shown, self.ref_displayed))),
+                "d_aqm": float(np.mean(d_aqm)), "flicker": float(np.mean(fl)), "flicker_net": float(np.mean(net)),
+                "change": float(np.mean(own)),
+                "image_flicker": float(np.mean(em.image_flicker(shown, self.ref_displayed)[keep])),
                 "highlight": float(np.mean(hl)), "lag": lag, "lag_reached": reached,
-                "per_frame": {"rel_l2": rel, "d_aqm": dict(zip(map(int, np.array(self.frames)[self.aqm_frames]),
+                "per_frame": {"rel_l2": rel, "flicker": fl.tolist(), "d_aqm": dict(zip(map(int, np.array(self.frames)[self.aqm_frames]),
                                                                   d_aqm)),
                               "response": response.tolist()}}
 
@@ -225,26 +233,28 @@ def highlight_regions(scene, elements, states, refs, areas) -> tuple[list[np.nda
     return [em.brightest_region(r, a) for r, a in zip(refs, areas)], "brightest 2 % of the reference's indirect light"
 
 
-def summarise(runs: list[dict]) -> list[dict]:
-    """Per guided (and windowed) run: per-frame rendering's error at its wall time and the time
-    per-frame rendering needs for its error (log-log between the per-frame runs), and ratios."""
+def summarise(runs: list[dict]) -> dict:
+    """Every other run against per-frame rendering: per-frame's error at its wall time and the time
+    per-frame rendering needs for its error (photons on the per-frame cost line, error against
+    photons log-log: error_measures.equal_time / equal_error), and their ratios."""
     base = [r for r in runs if r["method"] == "per-frame"]
-    times = [r["wall_s"] for r in base]
-    out = []
+    photons, times = [r["photons"] for r in base], [r["wall_s"] for r in base]
+    a, b = em.cost_model(photons, times)
+    rows = []
     for r in runs:
         if r["method"] == "per-frame":
             continue
-        row = {"run": r["label"], "wall_s": r["wall_s"]}
-        for key in ("d_aqm", "rel_l2", "flicker", "image_flicker"):
-            at_t, extra = em.equal_time(times, [b["measures"][key] for b in base], r["wall_s"])
-            row[key] = {"run": r["measures"][key], "per_frame_at_equal_time": at_t, "ratio": r["measures"][key] / at_t,
-                        "extrapolated": extra}
-        t_eq, extra = em.equal_error(times, [b["measures"]["d_aqm"] for b in base], r["measures"]["d_aqm"])
-        row["speedup_at_equal_d_aqm"] = {"per_frame_s": t_eq, "speedup": t_eq / r["wall_s"], "extrapolated": extra}
-        t_eq, extra = em.equal_error(times, [b["measures"]["rel_l2"] for b in base], r["measures"]["rel_l2"])
-        row["speedup_at_equal_rel_l2"] = {"per_frame_s": t_eq, "speedup": t_eq / r["wall_s"], "extrapolated": extra}
-        out.append(row)
-    return out
+        row = {"run": r["label"], "method": r["method"], "wall_s": r["wall_s"]}
+        for key in ("d_aqm", "rel_l2", "flicker", "flicker_net", "image_flicker"):
+            at_t, extra = em.equal_time(photons, times, [b_["measures"][key] for b_ in base], r["wall_s"])
+            row[key] = {"run": r["measures"][key], "per_frame_at_equal_time": at_t, "extrapolated": extra,
+                        "ratio": None if not at_t else r["measures"][key] / at_t}
+        for key in ("d_aqm", "rel_l2"):
+            t_eq, extra = em.equal_error(photons, times, [b_["measures"][key] for b_ in base], r["measures"][key])
+            row[f"speedup_at_equal_{key}"] = {"per_frame_s": t_eq, "speedup": t_eq / r["wall_s"],
+                                              "extrapolated": extra}
+        rows.append(row)
+    return {"per_frame_cost": {"fixed_s": a, "s_per_million_photons": b * 1e6}, "rows": rows}
 
 
 def plot(result: dict, path: Path) -> list[Path]:
@@ -308,16 +318,25 @@ def _table(echo, result: dict) -> None:
              f"| {m['rmse']:.4f} | {m['mean_rel']:.4f} | {m['d_aqm']:.2f} | {m['flicker']:.4f} "
              f"| {m['image_flicker']:.4f} | {100 * m['highlight']:+.1f} % | {lag} |")
     echo("")
-    echo("| run | d_AQM / per-frame's at equal time | flicker / per-frame's | image flicker / per-frame's "
+    cost = result["comparison"]["per_frame_cost"]
+    echo(f"against per-frame rendering (its cost line: {cost['fixed_s']:.1f} s + "
+         f"{cost['s_per_million_photons']:.2f} s per million photons)")
+    echo("| run | d_AQM, per-frame's at equal time, ratio | flicker ratio | net flicker ratio | image flicker ratio "
          "| speed-up at equal d_AQM | at equal rel L2 |")
-    echo("|---|---|---|---|---|---|")
-    for s in result["comparison"]:
-        x = lambda d: "*" if d["extrapolated"] else ""  # noqa: E731
-        echo(f"| {s['run']} | {s['d_aqm']['ratio']:.3f}{x(s['d_aqm'])} | {s['flicker']['ratio']:.3f}{x(s['flicker'])} "
-             f"| {s['image_flicker']['ratio']:.3f}{x(s['image_flicker'])} "
-             f"| {s['speedup_at_equal_d_aqm']['speedup']:.2f}x{x(s['speedup_at_equal_d_aqm'])} "
-             f"| {s['speedup_at_equal_rel_l2']['speedup']:.2f}x{x(s['speedup_at_equal_rel_l2'])} |")
-    echo("(* per-frame figure extrapolated along the power law of its two nearest runs)")
+    echo("|---|---|---|---|---|---|---|")
+
+    def ratio(d):
+        return "n/a (per-frame cannot finish)" if d["ratio"] is None else \
+            f"{d['ratio']:.3f}{'*' if d['extrapolated'] else ''}"
+
+    for s in result["comparison"]["rows"]:
+        d = s["d_aqm"]
+        pf = "n/a" if d["per_frame_at_equal_time"] is None else f"{d['per_frame_at_equal_time']:.2f}"
+        echo(f"| {s['run']} | {d['run']:.2f} vs {pf}: {ratio(d)} | {ratio(s['flicker'])} | {ratio(s['flicker_net'])} "
+             f"| {ratio(s['image_flicker'])} "
+             f"| {s['speedup_at_equal_d_aqm']['speedup']:.2f}x{'*' if s['speedup_at_equal_d_aqm']['extrapolated'] else ''} "
+             f"| {s['speedup_at_equal_rel_l2']['speedup']:.2f}x{'*' if s['speedup_at_equal_rel_l2']['extrapolated'] else ''} |")
+    echo("(* per-frame figure extrapolated beyond its runs along the power law of the two nearest)")
 
 
 def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, echo=click.echo) -> dict:
@@ -373,6 +392,7 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, echo=cl
             echo(f"abrupt lighting change at frame {event} ({100 * size:.0f} % of the indirect light); "
                  f"highlight: {highlight_is}")
             floor = ev.measure(refs[1])
+            ev.floor_flicker = np.asarray(floor["per_frame"]["flicker"])
             specs = [("per-frame", dict(n_photons=n, fmax=0, temporal="off", config=config)) for n in plan.budgets]
             specs += [(m, dict(n_photons=n, fmax=plan.fmax, temporal=m, config=config))
                       for m in ("fixed", "adaptive") for n in plan.budgets]

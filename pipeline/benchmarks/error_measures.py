@@ -104,11 +104,30 @@ def loglog(xs, ys, x: float) -> tuple[float, bool]:
     return float(np.exp(ys[i] + slope * (lx - xs[i]))), not xs[0] <= lx <= xs[-1]
 
 
-def equal_time(times, errors, t: float) -> tuple[float, bool]:
-    """A method's error at time ``t``, from its runs' (time, error) points (:func:`loglog`)."""
-    return loglog(times, errors, t)
+def cost_model(photons, times) -> tuple[float, float]:
+    """(a, b) of time = a + b x photons, least squares over a method's runs. Measured times of small
+    runs are mostly fixed costs and jitter on a loaded machine; the photons are exact, so a method's
+    error is read against its photons and its photons against time through this line. A slope the
+    jitter made <= 0 falls back to no fixed cost, b = sum t / sum p."""
+    p, t = np.asarray(photons, float), np.asarray(times, float)
+    b, a = np.polyfit(p, t, 1) if len(p) > 1 and np.ptp(p) > 0 else (0.0, 0.0)
+    if not b > 0:
+        a, b = 0.0, float(t.sum() / p.sum())
+    return float(a), float(b)
 
 
-def equal_error(times, errors, e: float) -> tuple[float, bool]:
-    """The time a method needs to reach error ``e``, from its runs' (time, error) points."""
-    return loglog(errors, times, e)
+def equal_time(photons, times, errors, t: float) -> tuple[float | None, bool]:
+    """A method's error at time ``t`` (None: not even a fixed cost fits in ``t``) and whether it is
+    extrapolated: the photons ``t`` buys on its cost line, their error by :func:`loglog`."""
+    a, b = cost_model(photons, times)
+    n = (t - a) / b
+    if n <= 0:
+        return None, True
+    return loglog(photons, errors, n)
+
+
+def equal_error(photons, times, errors, e: float) -> tuple[float, bool]:
+    """The time a method needs for error ``e``: the photons giving ``e`` (:func:`loglog`) on its cost line."""
+    a, b = cost_model(photons, times)
+    n, extrapolated = loglog(errors, photons, e)
+    return a + b * n, extrapolated
