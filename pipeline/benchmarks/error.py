@@ -271,7 +271,8 @@ def plot(result: dict, path: Path) -> list[Path]:
     colours = {"per-frame": "tab:red", "fixed": "tab:orange", "adaptive": "tab:blue", "guided": "tab:green"}
     for ax, key, label in ((axes[0], "d_aqm", "d_AQM vs reference (%)"), (axes[1], "rel_l2", "relative L2, indirect")):
         for method, colour in colours.items():
-            pts = sorted((r["wall_s"], r["measures"][key]) for r in runs if r["method"] == method)
+            pts = [(r["wall_s"], r["measures"][key]) for r in sorted(runs, key=lambda r: r["photons"])
+                   if r["method"] == method]  # joined in budget order: wall times jitter on a loaded machine
             if pts:
                 ax.plot(*zip(*pts), "o-", color=colour, label=method)
         ax.axhline(max(floor[key], 1e-4), color="grey", ls="--", label="reference noise floor")
