@@ -233,25 +233,25 @@ def highlight_regions(scene, elements, states, refs, areas) -> tuple[list[np.nda
     return [em.brightest_region(r, a) for r, a in zip(refs, areas)], "brightest 2 % of the reference's indirect light"
 
 
-def summarise(runs: list[dict]) -> dict:
-    """Every other run against per-frame rendering: per-frame's error at its wall time and the time
-    per-frame rendering needs for its error (photons on the per-frame cost line, error against
-    photons log-log: error_measures.equal_time / equal_error), and their ratios."""
+def summarise(runs: list[dict], clock: str = "wall_s") -> dict:
+    """Every other run against per-frame rendering: per-frame's error at its time (``clock``: wall_s or
+    cpu_s) and the time per-frame rendering needs for its error (photons on the per-frame cost line,
+    error against photons log-log: error_measures.equal_time / equal_error), and their ratios."""
     base = [r for r in runs if r["method"] == "per-frame"]
-    photons, times = [r["photons"] for r in base], [r["wall_s"] for r in base]
+    photons, times = [r["photons"] for r in base], [r[clock] for r in base]
     a, b = em.cost_model(photons, times)
     rows = []
     for r in runs:
         if r["method"] == "per-frame":
             continue
-        row = {"run": r["label"], "method": r["method"], "wall_s": r["wall_s"]}
+        row = {"run": r["label"], "method": r["method"], clock: r[clock]}
         for key in ("d_aqm", "rel_l2", "flicker", "flicker_net", "image_flicker"):
-            at_t, extra = em.equal_time(photons, times, [b_["measures"][key] for b_ in base], r["wall_s"])
+            at_t, extra = em.equal_time(photons, times, [b_["measures"][key] for b_ in base], r[clock])
             row[key] = {"run": r["measures"][key], "per_frame_at_equal_time": at_t, "extrapolated": extra,
                         "ratio": None if not at_t else r["measures"][key] / at_t}
         for key in ("d_aqm", "rel_l2"):
             t_eq, extra = em.equal_error(photons, times, [b_["measures"][key] for b_ in base], r["measures"][key])
-            row[f"speedup_at_equal_{key}"] = {"per_frame_s": t_eq, "speedup": t_eq / r["wall_s"],
+            row[f"speedup_at_equal_{key}"] = {"per_frame_s": t_eq, "speedup": t_eq / r[clock],
                                               "extrapolated": extra}
         rows.append(row)
     return {"per_frame_cost": {"fixed_s": a, "s_per_million_photons": b * 1e6}, "rows": rows}
@@ -302,6 +302,12 @@ def plot(result: dict, path: Path) -> list[Path]:
     return written
 
 
+def _ratio(d: dict) -> str:
+    if d["ratio"] is None:
+        return "n/a (per-frame cannot finish)"
+    return f"{d['ratio']:.3f}{'*' if d['extrapolated'] else ''}"
+
+
 def _table(echo, result: dict) -> None:
     floor = result["reference"]["floor"]
     echo("")
@@ -319,24 +325,21 @@ def _table(echo, result: dict) -> None:
              f"| {m['rmse']:.4f} | {m['mean_rel']:.4f} | {m['d_aqm']:.2f} | {m['flicker']:.4f} "
              f"| {m['image_flicker']:.4f} | {100 * m['highlight']:+.1f} % | {lag} |")
     echo("")
-    cost = result["comparison"]["per_frame_cost"]
-    echo(f"against per-frame rendering (its cost line: {cost['fixed_s']:.1f} s + "
-         f"{cost['s_per_million_photons']:.2f} s per million photons)")
-    echo("| run | d_AQM, per-frame's at equal time, ratio | flicker ratio | net flicker ratio | image flicker ratio "
-         "| speed-up at equal d_AQM | at equal rel L2 |")
-    echo("|---|---|---|---|---|---|---|")
-
-    def ratio(d):
-        return "n/a (per-frame cannot finish)" if d["ratio"] is None else \
-            f"{d['ratio']:.3f}{'*' if d['extrapolated'] else ''}"
-
-    for s in result["comparison"]["rows"]:
-        d = s["d_aqm"]
-        pf = "n/a" if d["per_frame_at_equal_time"] is None else f"{d['per_frame_at_equal_time']:.2f}"
-        echo(f"| {s['run']} | {d['run']:.2f} vs {pf}: {ratio(d)} | {ratio(s['flicker'])} | {ratio(s['flicker_net'])} "
-             f"| {ratio(s['image_flicker'])} "
-             f"| {s['speedup_at_equal_d_aqm']['speedup']:.2f}x{'*' if s['speedup_at_equal_d_aqm']['extrapolated'] else ''} "
-             f"| {s['speedup_at_equal_rel_l2']['speedup']:.2f}x{'*' if s['speedup_at_equal_rel_l2']['extrapolated'] else ''} |")
+    for clock, name in (("cpu_s", "CPU"), ("wall_s", "wall")):
+        comparison = result["comparison"][clock]
+        cost = comparison["per_frame_cost"]
+        echo(f"\nagainst per-frame rendering at equal {name} time (per-frame cost line: {cost['fixed_s']:.1f} s + "
+             f"{cost['s_per_million_photons']:.2f} s per million photons)")
+        echo("| run | d_AQM, per-frame's at equal time: ratio | flicker ratio | net flicker ratio "
+             "| image flicker ratio | speed-up at equal d_AQM | at equal rel L2 |")
+        echo("|---|---|---|---|---|---|---|")
+        for s in comparison["rows"]:
+            d = s["d_aqm"]
+            pf = "n/a" if d["per_frame_at_equal_time"] is None else f"{d['per_frame_at_equal_time']:.2f}"
+            up = [f"{s[k]['speedup']:.2f}x{'*' if s[k]['extrapolated'] else ''}"
+                  for k in ("speedup_at_equal_d_aqm", "speedup_at_equal_rel_l2")]
+            echo(f"| {s['run']} | {d['run']:.2f} vs {pf}: {_ratio(d)} | {_ratio(s['flicker'])} "
+                 f"| {_ratio(s['flicker_net'])} | {_ratio(s['image_flicker'])} | {up[0]} | {up[1]} |")
     echo("(* per-frame figure extrapolated beyond its runs along the power law of the two nearest)")
 
 
@@ -417,7 +420,7 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, echo=cl
               "reference": {"photons": plan.reference_photons, "seeds": [101, 202], "wall_s": ref_s,
                             "floor": {k: v for k, v in floor.items() if k != "per_frame"},
                             "floor_per_frame": floor["per_frame"]["rel_l2"]},
-              "runs": runs, "comparison": summarise(runs), "total_s": time.perf_counter() - t_start}
+              "runs": runs, "comparison": {c: summarise(runs, c) for c in ("cpu_s", "wall_s")}, "total_s": time.perf_counter() - t_start}
     _table(echo, result)
     (out_dir / "error.json").write_text(json.dumps(result, indent=1, default=float))
     written = plot(result, out_dir / "error")

@@ -110,7 +110,7 @@ def test_bench_error_runs_end_to_end_on_a_tiny_cornell(tmp_path):
         assert r["wall_s"] > 0 and r["cpu_s"] > 0
         # Every method is farther from the reference than the reference's second seed
         assert r["measures"]["rel_l2"] > floor["rel_l2"]
-    assert len(saved["comparison"]["rows"]) == 5
+    assert len(saved["comparison"]["wall_s"]["rows"]) == len(saved["comparison"]["cpu_s"]["rows"]) == 5
     assert saved["event"]["frame"] == plan.event == 3
     assert any(line.startswith("| per-frame 1,000 |") for line in lines)
     # No temporary folder is left beside the results
