@@ -193,7 +193,8 @@ class Evaluation:
         refs, areas = self.refs[0], self.areas
         images = self.images(maps)
         shown = self.displayed(images)
-        pairs = self.client.scatter([images[i] for i in self.aqm_frames] + [self.ref_images[i] for i in self.aqm_frames])
+        pairs = self.client.scatter([images[i] for i in self.aqm_frames]
+                                    + [self.ref_images[i] for i in self.aqm_frames])
         n = len(self.aqm_frames)
         futures = self.client.map(displayed_d_aqm, pairs[:n], pairs[n:],
                                   [self.adaptation] * len(self.aqm_frames), pure=False)
@@ -214,9 +215,8 @@ class Evaluation:
                 "change": float(np.mean(own)),
                 "image_flicker": float(np.mean(em.image_flicker(shown, self.ref_displayed)[keep])),
                 "highlight": float(np.mean(hl)), "lag": lag, "lag_reached": reached,
-                "per_frame": {"rel_l2": rel, "flicker": fl.tolist(), "d_aqm": dict(zip(map(int, np.array(self.frames)[self.aqm_frames]),
-                                                                  d_aqm)),
-                              "response": response.tolist()}}
+                "per_frame": {"rel_l2": rel, "flicker": fl.tolist(), "response": response.tolist(),
+                              "d_aqm": dict(zip((self.frames[i] for i in self.aqm_frames), d_aqm))}}
 
 
 def highlight_regions(scene, elements, states, refs, areas) -> tuple[list[np.ndarray], str]:
@@ -233,24 +233,26 @@ def highlight_regions(scene, elements, states, refs, areas) -> tuple[list[np.nda
     return [em.brightest_region(r, a) for r, a in zip(refs, areas)], "brightest 2 % of the reference's indirect light"
 
 
-def summarise(runs: list[dict], clock: str = "wall_s") -> dict:
+def summarise(runs: list[dict], clock: str = "wall_s", slope: float | None = None) -> dict:
     """Every other run against per-frame rendering: per-frame's error at its time (``clock``: wall_s or
     cpu_s) and the time per-frame rendering needs for its error (photons on the per-frame cost line,
-    error against photons log-log: error_measures.equal_time / equal_error), and their ratios."""
+    error against photons log-log: error_measures.equal_time / equal_error), and their ratios.
+    ``slope``: seconds a photon on that clock from the reference, where the runs' own jitter hides it."""
     base = [r for r in runs if r["method"] == "per-frame"]
     photons, times = [r["photons"] for r in base], [r[clock] for r in base]
-    a, b = em.cost_model(photons, times)
+    a, b = em.cost_model(photons, times, slope)
     rows = []
     for r in runs:
         if r["method"] == "per-frame":
             continue
         row = {"run": r["label"], "method": r["method"], clock: r[clock]}
         for key in ("d_aqm", "rel_l2", "flicker", "flicker_net", "image_flicker"):
-            at_t, extra = em.equal_time(photons, times, [b_["measures"][key] for b_ in base], r[clock])
+            at_t, extra = em.equal_time(photons, times, [b_["measures"][key] for b_ in base], r[clock], slope)
             row[key] = {"run": r["measures"][key], "per_frame_at_equal_time": at_t, "extrapolated": extra,
                         "ratio": None if not at_t else r["measures"][key] / at_t}
         for key in ("d_aqm", "rel_l2"):
-            t_eq, extra = em.equal_error(photons, times, [b_["measures"][key] for b_ in base], r["measures"][key])
+            t_eq, extra = em.equal_error(photons, times, [b_["measures"][key] for b_ in base], r["measures"][key],
+                                          slope)
             row[f"speedup_at_equal_{key}"] = {"per_frame_s": t_eq, "speedup": t_eq / r[clock],
                                               "extrapolated": extra}
         rows.append(row)
@@ -371,7 +373,7 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, echo=cl
              f"{', '.join(f'{d:g}' for d in plan.d_thr)}; reference {plan.reference_photons:,} photons a frame "
              f"x 2 seeds; {elements.n_elements:,} elements; {workers} workers")
         with connect("local", workers) as client:
-            t0 = time.perf_counter()
+            cpu0, t0 = _cpu_seconds(client), time.perf_counter()
             refs = []
             for seed in (101, 202):
                 futures = [client.submit(reference_map, scene_path=str(Path(path).resolve()),
@@ -380,7 +382,7 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, echo=cl
                                          pure=False) for f in range(first, last + 1)]
                 refs.append(np.stack(client.gather(futures)))
             refs = np.stack(refs)
-            ref_s = time.perf_counter() - t0
+            ref_s, ref_cpu = time.perf_counter() - t0, _cpu_seconds(client) - cpu0
             echo(f"references: {ref_s:.1f} s")
             states = [scene.pose_frame(f) for f in range(first, last + 1)]
             areas = np.stack([elements.vertex_areas(s) for s in states])
@@ -414,13 +416,15 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, echo=cl
                      f"rel L2 {r['measures']['rel_l2']:.4f}, d_AQM {r['measures']['d_aqm']:.2f} %, flicker "
                      f"{r['measures']['flicker']:.4f}, lag {r['measures']['lag']}")
                 runs.append(r)
+    ref_photons = 2 * plan.reference_photons * (last - first + 1)
     result = {"scene": Path(path).stem, "plan": {**plan.__dict__, "event": plan.event},
               "elements": elements.n_elements, "workers": workers, "adaptation": ev.adaptation,
               "event": {"frame": event, "size": size}, "highlight_region": highlight_is,
-              "reference": {"photons": plan.reference_photons, "seeds": [101, 202], "wall_s": ref_s,
+              "reference": {"photons": plan.reference_photons, "seeds": [101, 202], "wall_s": ref_s, "cpu_s": ref_cpu,
                             "floor": {k: v for k, v in floor.items() if k != "per_frame"},
                             "floor_per_frame": floor["per_frame"]["rel_l2"]},
-              "runs": runs, "comparison": {c: summarise(runs, c) for c in ("cpu_s", "wall_s")}, "total_s": time.perf_counter() - t_start}
+              "runs": runs, "comparison": {c: summarise(runs, c, {"cpu_s": ref_cpu, "wall_s": ref_s}[c] / ref_photons)
+                                          for c in ("cpu_s", "wall_s")}, "total_s": time.perf_counter() - t_start}
     _table(echo, result)
     (out_dir / "error.json").write_text(json.dumps(result, indent=1, default=float))
     written = plot(result, out_dir / "error")

@@ -104,30 +104,35 @@ def loglog(xs, ys, x: float) -> tuple[float, bool]:
     return float(np.exp(ys[i] + slope * (lx - xs[i]))), not xs[0] <= lx <= xs[-1]
 
 
-def cost_model(photons, times) -> tuple[float, float]:
+def cost_model(photons, times, slope: float | None = None) -> tuple[float, float]:
     """(a, b) of time = a + b x photons, least squares over a method's runs. Measured times of small
     runs are mostly fixed costs and jitter on a loaded machine; the photons are exact, so a method's
-    error is read against its photons and its photons against time through this line. A slope the
-    jitter made <= 0 falls back to no fixed cost, b = sum t / sum p."""
+    error is read against its photons and its photons against time through this line. Where the
+    jitter makes the fitted slope <= 0, ``slope`` (seconds a photon measured on a larger job, e.g.
+    the reference's) is taken instead with a = the mean remainder; without it, a = 0, b = sum t / sum p."""
     p, t = np.asarray(photons, float), np.asarray(times, float)
     b, a = np.polyfit(p, t, 1) if len(p) > 1 and np.ptp(p) > 0 else (0.0, 0.0)
     if not b > 0:
-        a, b = 0.0, float(t.sum() / p.sum())
+        if slope:
+            b = slope
+            a = max(float(np.mean(t - b * p)), 0.0)
+        else:
+            a, b = 0.0, float(t.sum() / p.sum())
     return float(a), float(b)
 
 
-def equal_time(photons, times, errors, t: float) -> tuple[float | None, bool]:
+def equal_time(photons, times, errors, t: float, slope: float | None = None) -> tuple[float | None, bool]:
     """A method's error at time ``t`` (None: not even a fixed cost fits in ``t``) and whether it is
-    extrapolated: the photons ``t`` buys on its cost line, their error by :func:`loglog`."""
-    a, b = cost_model(photons, times)
+    extrapolated: the photons ``t`` buys on its cost line (:func:`cost_model`), their error by :func:`loglog`."""
+    a, b = cost_model(photons, times, slope)
     n = (t - a) / b
     if n <= 0:
         return None, True
     return loglog(photons, errors, n)
 
 
-def equal_error(photons, times, errors, e: float) -> tuple[float, bool]:
+def equal_error(photons, times, errors, e: float, slope: float | None = None) -> tuple[float, bool]:
     """The time a method needs for error ``e``: the photons giving ``e`` (:func:`loglog`) on its cost line."""
-    a, b = cost_model(photons, times)
+    a, b = cost_model(photons, times, slope)
     n, extrapolated = loglog(errors, photons, e)
     return a + b * n, extrapolated

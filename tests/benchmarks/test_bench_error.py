@@ -82,6 +82,9 @@ def test_equal_time_and_equal_error_on_a_known_power_law():
     assert em.equal_time(photons, times, errors, 0.5) == (None, True)  # less than the fixed cost
     t, extrapolated = em.equal_error(photons, times, errors, 0.05)
     assert t == pytest.approx(5.0) and not extrapolated
+    # Jitter hiding the per-photon cost (times falling with photons): the given slope, mean remainder
+    jittered = np.array([5.0, 4.9, 4.8])
+    assert em.cost_model(photons, jittered, 1e-6) == pytest.approx((np.mean(jittered - 1e-6 * photons), 1e-6))
 
 
 def test_brightest_region_holds_its_share_of_the_area(rng):
