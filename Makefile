@@ -54,6 +54,7 @@ bench: setup
 	$(LOOM) bench temporal
 	$(LOOM) bench aqm
 	$(LOOM) bench render
+	$(LOOM) bench error room --quick --out out/bench-error-room
 
 clean:
 	rm -rf out .pytest_cache

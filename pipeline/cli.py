@@ -321,3 +321,5 @@ from .benchmarks.noise import bench_noise  # noqa: E402
 bench.add_command(bench_noise, "noise")
 from .benchmarks.render import bench_render  # noqa: E402
 bench.add_command(bench_render, "render")
+from .benchmarks.error import bench_error  # noqa: E402
+bench.add_command(bench_error, "error")

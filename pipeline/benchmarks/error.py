@@ -1,0 +1,494 @@
+"""``loom bench error SCENE``: run time against error, for our method and the ways a user would otherwise
+render the same animation (issue 11).
+
+Every method is a real ``loom render`` (pipeline/render.py) of the same frames on one LocalCluster,
+timed whole (wall; CPU = this process plus every worker process), into a fresh output folder:
+
+* per-frame: ``--photons N --temporal off``, the traditional approach of §6;
+* fixed windows: ``--photons N --fmax F --temporal fixed`` (Fig. 3b);
+* adaptive windows: ``--photons N --fmax F --temporal adaptive`` (§5.1, fixed N_frame and F_max);
+* guided: ``--photons auto`` (the coordinator of §5.2) at several d_thr, its doubling loop capped at
+  the largest budget (``n_frame_max``), so that the reference is >= 50x every run's N_frame.
+
+The reference is per-frame photon tracing with no temporal reuse, ``--reference-factor`` (>= 50) x the
+largest budget per frame, traced on the workers straight into vertex maps (:func:`reference_map`:
+the same tracer, elements and estimator as a render, so discretisation is common to both and every
+difference is noise or temporal bias), twice with different seeds: the second reference against
+the first is the noise floor printed beside every error.
+
+Measures per run (pipeline/benchmarks/error_measures.py), all frames: relative L2 of the indirect
+vertex irradiance; after one frozen tone mapping (Ward's scale at the log-average luminance of the
+reference's frames, pipeline/perceived.py) RMSE and mean relative error of the displayed frames
+and d_AQM (every ``--aqm-every``-th frame, on the workers); the flicker of the error field
+(vertex maps and displayed frames); the Fig. 3 highlight's energy (ROOM: floor vertices within
+0.5 m under the aircraft, tests/temporal/test_room.py; elsewhere the brightest 2 % of the
+reference's indirect light) against the reference's; the lag after an abrupt lighting change.
+Frames are composited here from each run's indirect maps with the same camera samples and direct
+light (workers/composite.py), so image differences are in the indirect light only.
+
+The abrupt change: built-in ROOM and CORNELL get a STEP jump of one light (``EVENTS``) at the middle
+frame of the benchmark's range, written into the benchmark's copy of the scene; for any other scene
+the largest frame-to-frame change of the reference is taken.
+"""
+from __future__ import annotations
+
+import json
+import shutil
+import tempfile
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import click
+import numpy as np
+
+from . import error_measures as em
+
+# Built-in scene -> (light node, offset of its STEP jump in metres): the abrupt lighting change
+EVENTS = {"room": ("corner_spot", (-2.0, 0.0, 1.5)), "cornell": ("ceiling_lamp", (-0.3, 0.0, 0.0))}
+REFERENCE_BATCH = 250_000  # photons traced per call into a reference map (bounded worker memory)
+
+
+@dataclass(frozen=True)
+class Plan:
+    """What one ``loom bench error`` run renders."""
+
+    frames: tuple[int, int]
+    budgets: tuple[int, ...]  # N_frame of the fixed-budget methods; the largest caps the guided loop
+    fmax: int  # F_max of fixed and adaptive windows
+    d_thr: tuple[float, ...]
+    width: int = 320
+    height: int = 240
+    spp: int = 2
+    reference_factor: int = 50
+    aqm_every: int = 1
+
+    @property
+    def event(self) -> int:
+        return (self.frames[0] + self.frames[1] + 1) // 2
+
+    @property
+    def reference_photons(self) -> int:
+        return self.reference_factor * max(self.budgets)
+
+
+QUICK = {"room": Plan((61, 80), (5_000, 10_000, 20_000), 14, (0.03, 0.8), aqm_every=4),
+         "cornell": Plan((1, 30), (5_000, 10_000, 20_000), 14, (0.03, 0.8), aqm_every=4)}
+FULL = {"room": Plan((46, 90), (10_000, 20_000, 40_000, 80_000), 30, (0.03, 0.1, 0.3)),
+        "cornell": Plan((1, 30), (10_000, 20_000, 40_000, 80_000), 30, (0.03, 0.1, 0.3))}
+
+
+def write_scene(name: str, path: Path, event: int) -> Path:
+    """The built-in scene ``name`` with its light jumping at frame ``event`` (``EVENTS``)."""
+    from pipeline.scene.builtin import BUILTIN_SCENES
+    from pipeline.scene.timeline import Timeline
+
+    b = BUILTIN_SCENES[name]()
+    if name in EVENTS:
+        node_name, offset = EVENTS[name]
+        (node,) = [i for i, n in enumerate(b.gltf.nodes) if n.name == node_name]
+        base = np.asarray(b.gltf.nodes[node].translation or (0.0, 0.0, 0.0), float)
+        extras = b.gltf.scenes[0].extras["photonloom"]
+        # Half a frame before the event's time: a float32 key time exactly on a frame could land after it
+        t = Timeline(fps=extras["fps"], frames=extras["frames"]).time(event) - 0.5 / extras["fps"]
+        b.add_animation("bench_light_jump", node, "translation", [0.0, t], [base, base + offset],
+                        interpolation="STEP")
+    return b.write(path)
+
+
+def reference_map(*, scene_path: str, scene_hash: str, element_size: float, frame: int, n_photons: int,
+                  seed: int, max_depth: int) -> np.ndarray:
+    """Dask task: (V, 3) indirect vertex irradiance of ``n_photons`` of the frame's own photons,
+    traced in batches and summed in float64 (no store: nothing is reused across frames)."""
+    from workers.photons import trace_batch
+    from workers.reconstruct import vertex_irradiance
+    from workers.scene_cache import load_elements, load_scene
+
+    scene = load_scene(scene_path, scene_hash)
+    elements = load_elements(scene_path, scene_hash, element_size)
+    state = scene.pose_frame(frame)
+    areas = elements.vertex_areas(state)
+    total = np.zeros((elements.n_vertices, 3))
+    for start in range(0, n_photons, REFERENCE_BATCH):
+        n = min(REFERENCE_BATCH, n_photons - start)
+        b = trace_batch(state, elements, n_photons=n, photon_start=start, seed=seed, frame=frame, max_depth=max_depth)
+        ind = (b.key >> np.uint32(31)) == 0
+        total += vertex_irradiance(b.key[ind] & np.uint32(0x3FFFFFFF), b.bary[ind, 0], b.bary[ind, 1],
+                                   b.energy[ind], elements, areas, 1)
+    return total / n_photons
+
+
+def displayed_d_aqm(test: np.ndarray, ref: np.ndarray, adaptation: float) -> float:
+    """Dask task: d_AQM (%) of two linear frames as the viewer sees them (pipeline/perceived.py)."""
+    from pipeline.perceived import displayed_difference
+
+    return float(displayed_difference(test, ref, adaptation).d_aqm)
+
+
+def _cpu_seconds(client) -> float:
+    return time.process_time() + sum(client.run(time.process_time).values())
+
+
+def run_method(client, scene_path: Path, out: Path, plan: Plan, *, method: str, n_photons: int | None,
+               config, fmax: int | None, temporal: str) -> dict:
+    """One timed ``loom render`` of the plan's frames; its indirect maps and what it cost."""
+    from pipeline.render import RenderSettings, render
+    from pipeline.store import PhotonStore
+    from pipeline.store.illumination import IlluminationMaps
+
+    settings = RenderSettings(width=plan.width, height=plan.height, spp=plan.spp)
+    cpu0, t0 = _cpu_seconds(client), time.perf_counter()
+    report = render(scene_path, frames=f"{plan.frames[0]}-{plan.frames[1]}", out_dir=out, settings=settings,
+                    n_photons=n_photons, config=config, scheduler=client.scheduler.address, progress=False,
+                    temporal=temporal, fmax=fmax)
+    wall = time.perf_counter() - t0
+    cpu = _cpu_seconds(client) - cpu0
+    store = PhotonStore.open(str(out / "photons.zarr"))
+    sources = {store.source_frame(i) for i in range(store.n_frames)}
+    photons = sum(store.photons_emitted(i) for i in sources)
+    maps = IlluminationMaps.open(str(out / "photons.zarr"))
+    indirect = np.stack([np.asarray(maps.read(f - 1), np.float64) for f in range(plan.frames[0], plan.frames[1] + 1)])
+    shutil.rmtree(out)
+    return {"method": method, "n_photons": n_photons, "fmax": fmax, "d_thr": config.d_thr if n_photons is None
+            else None, "wall_s": wall, "cpu_s": cpu, "photons": photons, "segments": report["segments"],
+            "indirect": indirect}
+
+
+class Evaluation:
+    """The reference's frames, and every measure of a run's maps against them."""
+
+    def __init__(self, client, scene, elements, plan: Plan, refs: np.ndarray, highlight):
+        from pipeline.tonemap import log_average, luminance
+        from workers.composite import render_frame
+        from workers.raycast import caster_for
+
+        self.client, self.plan, self.refs = client, plan, refs
+        self.frames = list(range(plan.frames[0], plan.frames[1] + 1))
+        self.states = [scene.pose_frame(f) for f in self.frames]
+        self.casters = [caster_for(s) for s in self.states]
+        self.areas = np.stack([elements.vertex_areas(s) for s in self.states])
+        self.highlight = highlight
+        self._render = lambda i, m: render_frame(self.states[i], elements, m, width=plan.width, height=plan.height,
+                                                 spp=plan.spp, seed=0, frame=self.frames[i],
+                                                 caster=self.casters[i]).beauty
+        self.ref_images = self.images(refs[0])
+        self.adaptation = log_average(luminance(self.ref_images))  # the frozen tone mapping's L_wa
+        self.ref_displayed = self.displayed(self.ref_images)
+        self.floor_flicker = None  # per interval, set from the second reference (see run)
+        self.aqm_frames = sorted(set(range(0, len(self.frames), plan.aqm_every)) | {self.event_index})
+
+    @property
+    def event_index(self) -> int:
+        return self.plan.event - self.plan.frames[0]
+
+    def images(self, maps: np.ndarray) -> np.ndarray:
+        return np.stack([self._render(i, m) for i, m in enumerate(maps)])
+
+    def displayed(self, images: np.ndarray) -> np.ndarray:
+        from pipeline.perceived import display_values
+
+        return display_values(images, self.adaptation)
+
+    def measure(self, maps: np.ndarray) -> dict:
+        refs, areas = self.refs[0], self.areas
+        images = self.images(maps)
+        shown = self.displayed(images)
+        pairs = self.client.scatter([images[i] for i in self.aqm_frames]
+                                    + [self.ref_images[i] for i in self.aqm_frames])
+        n = len(self.aqm_frames)
+        futures = self.client.map(displayed_d_aqm, pairs[:n], pairs[n:],
+                                  [self.adaptation] * len(self.aqm_frames), pure=False)
+        rel = [em.relative_l2(m, r, a) for m, r, a in zip(maps, refs, areas)]
+        img = np.array([em.image_errors(s, r) for s, r in zip(shown, self.ref_displayed)])
+        hl = [em.region_energy(m, a, h) / em.region_energy(r, a, h) - 1.0
+              for m, r, a, h in zip(maps, refs, areas, self.highlight)]
+        keep = np.arange(len(maps) - 1) != self.event_index - 1  # the change itself is the lag's, not flicker
+        fl = em.flicker(maps, refs, areas)[keep]
+        own = np.array([em.relative_l2(maps[t], maps[t - 1], areas[t]) for t in range(1, len(maps))])[keep]
+        floor = self.floor_flicker if self.floor_flicker is not None else np.zeros_like(fl)
+        net = np.sqrt(np.maximum(fl ** 2 - floor ** 2 / 2.0, 0.0))
+        response = em.step_response(maps, refs, areas, self.event_index)
+        lag, reached = em.lag(response)
+        d_aqm = self.client.gather(futures)
+        return {"rel_l2": float(np.mean(rel)), "rmse": float(img[:, 0].mean()), "mean_rel": float(img[:, 1].mean()),
+                "d_aqm": float(np.mean(d_aqm)), "flicker": float(np.mean(fl)), "flicker_net": float(np.mean(net)),
+                "change": float(np.mean(own)),
+                "image_flicker": float(np.mean(em.image_flicker(shown, self.ref_displayed)[keep])),
+                "highlight": float(np.mean(hl)), "lag": lag, "lag_reached": reached,
+                "per_frame": {"rel_l2": rel, "flicker": fl.tolist(), "response": response.tolist(),
+                              "d_aqm": dict(zip((self.frames[i] for i in self.aqm_frames), d_aqm))}}
+
+
+def highlight_regions(scene, elements, states, refs, areas) -> tuple[list[np.ndarray], str]:
+    """Per frame the Fig. 3 highlight's vertices, and how they were chosen."""
+    names = [inst.name.split("/")[0] for inst in scene.instances]
+    if "aircraft_body" in names and "floor" in names:
+        body, floor = names.index("aircraft_body"), names.index("floor")
+        out = []
+        for s in states:
+            pos = elements.vertex_positions(s)
+            c = s.instance_matrices[body][:3, 3]
+            out.append((elements.vertex_instance == floor) & (np.hypot(pos[:, 0] - c[0], pos[:, 2] - c[2]) < 0.5))
+        return out, "floor within 0.5 m under the aircraft (Fig. 3)"
+    return [em.brightest_region(r, a) for r, a in zip(refs, areas)], "brightest 2 % of the reference's indirect light"
+
+
+def summarise(runs: list[dict], clock: str = "wall_s", slope: float | None = None) -> dict:
+    """Every other run against per-frame rendering: per-frame's error at its time (``clock``: wall_s or
+    cpu_s) and the time per-frame rendering needs for its error (photons on the per-frame cost line,
+    error against photons log-log: error_measures.equal_time / equal_error), and their ratios.
+    ``slope``: seconds a photon on that clock from the reference, where the runs' own jitter hides it."""
+    base = [r for r in runs if r["method"] == "per-frame"]
+    photons, times = [r["photons"] for r in base], [r[clock] for r in base]
+    a, b = em.cost_model(photons, times, slope)
+    rows = []
+    for r in runs:
+        if r["method"] == "per-frame":
+            continue
+        row = {"run": r["label"], "method": r["method"], clock: r[clock]}
+        for key in ("d_aqm", "rel_l2", "flicker", "flicker_net", "image_flicker"):
+            at_t, extra = em.equal_time(photons, times, [b_["measures"][key] for b_ in base], r[clock], slope)
+            row[key] = {"run": r["measures"][key], "per_frame_at_equal_time": at_t, "extrapolated": extra,
+                        "ratio": None if not at_t else r["measures"][key] / at_t}
+        for key in ("d_aqm", "rel_l2"):
+            t_eq, extra = em.equal_error(photons, times, [b_["measures"][key] for b_ in base], r["measures"][key],
+                                          slope)
+            row[f"speedup_at_equal_{key}"] = {"per_frame_s": t_eq, "speedup": t_eq / r[clock],
+                                              "extrapolated": extra}
+        rows.append(row)
+    return {"per_frame_cost": {"fixed_s": a, "s_per_million_photons": b * 1e6}, "rows": rows}
+
+
+def plot(result: dict, path: Path) -> list[Path]:
+    """Error against time: (a) d_AQM and (b) relative L2 against wall seconds per method, the
+    reference's noise floor dashed; (c) relative L2 per frame of each method's largest run, the
+    abrupt change marked. PNG and SVG."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    runs, floor = result["runs"], result["reference"]["floor"]
+    fig, axes = plt.subplots(1, 3, figsize=(16, 4.8))
+    colours = {"per-frame": "tab:red", "fixed": "tab:orange", "adaptive": "tab:blue", "guided": "tab:green"}
+    for ax, key, label in ((axes[0], "d_aqm", "d_AQM vs reference (%)"), (axes[1], "rel_l2", "relative L2, indirect")):
+        for method, colour in colours.items():
+            pts = [(r["wall_s"], r["measures"][key]) for r in sorted(runs, key=lambda r: r["photons"])
+                   if r["method"] == method]  # joined in budget order: wall times jitter on a loaded machine
+            if pts:
+                ax.plot(*zip(*pts), "o-", color=colour, label=method)
+        ax.axhline(max(floor[key], 1e-4), color="grey", ls="--", label="reference noise floor")
+        ax.set(xscale="log", yscale="log", xlabel="wall seconds (whole render)", ylabel=label)
+        ax.grid(True, which="both", alpha=0.3)
+    axes[0].legend(fontsize=8)
+    ax = axes[2]
+    frames = np.arange(result["plan"]["frames"][0], result["plan"]["frames"][1] + 1)
+    for method, colour in colours.items():
+        mine = [r for r in runs if r["method"] == method]
+        if mine:
+            r = max(mine, key=lambda r: r["photons"])
+            ax.plot(frames, r["measures"]["per_frame"]["rel_l2"], color=colour, label=r["label"])
+    ax.plot(frames, result["reference"]["floor_per_frame"], color="grey", ls="--", label="reference noise floor")
+    ax.axvline(result["event"]["frame"], color="k", lw=0.8, ls=":", label="abrupt lighting change")
+    ax.set(yscale="log", xlabel="frame", ylabel="relative L2, indirect")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    fig.suptitle(f"loom bench error {result['scene']}: error against time")
+    fig.tight_layout()
+    written = []
+    for suffix in (".png", ".svg"):
+        p = path.with_suffix(suffix)
+        fig.savefig(p, dpi=110)
+        written.append(p)
+    plt.close(fig)
+    return written
+
+
+def _ratio(d: dict) -> str:
+    if d["ratio"] is None:
+        return "n/a (per-frame cannot finish)"
+    return f"{d['ratio']:.3f}{'*' if d['extrapolated'] else ''}"
+
+
+def _table(echo, result: dict) -> None:
+    floor = result["reference"]["floor"]
+    echo("")
+    echo("| run | wall s | CPU s | photons | rel L2 | RMSE | mean rel | d_AQM % | flicker | image flicker "
+         "| highlight | lag (frames) |")
+    echo("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    echo(f"| reference noise floor (2nd seed) | {result['reference']['wall_s']:.1f} | | "
+         f"{result['reference']['photons']:,} x 2 | {floor['rel_l2']:.4f} | {floor['rmse']:.4f} "
+         f"| {floor['mean_rel']:.4f} | {floor['d_aqm']:.2f} | {floor['flicker']:.4f} | {floor['image_flicker']:.4f} "
+         f"| {100 * floor['highlight']:+.1f} % | {floor['lag']} |")
+    for r in result["runs"]:
+        m = r["measures"]
+        lag = f"{m['lag']}" if m["lag_reached"] else f">= {m['lag']}"
+        echo(f"| {r['label']} | {r['wall_s']:.1f} | {r['cpu_s']:.1f} | {r['photons']:,} | {m['rel_l2']:.4f} "
+             f"| {m['rmse']:.4f} | {m['mean_rel']:.4f} | {m['d_aqm']:.2f} | {m['flicker']:.4f} "
+             f"| {m['image_flicker']:.4f} | {100 * m['highlight']:+.1f} % | {lag} |")
+    echo("")
+    for clock, name in (("cpu_s", "CPU"), ("wall_s", "wall")):
+        comparison = result["comparison"][clock]
+        cost = comparison["per_frame_cost"]
+        echo(f"\nagainst per-frame rendering at equal {name} time (per-frame cost line: {cost['fixed_s']:.1f} s + "
+             f"{cost['s_per_million_photons']:.2f} s per million photons)")
+        echo("| run | d_AQM, per-frame's at equal time: ratio | flicker ratio | net flicker ratio "
+             "| image flicker ratio | speed-up at equal d_AQM | at equal rel L2 |")
+        echo("|---|---|---|---|---|---|---|")
+        for s in comparison["rows"]:
+            d = s["d_aqm"]
+            pf = "n/a" if d["per_frame_at_equal_time"] is None else f"{d['per_frame_at_equal_time']:.2f}"
+            up = [f"{s[k]['speedup']:.2f}x{'*' if s[k]['extrapolated'] else ''}"
+                  for k in ("speedup_at_equal_d_aqm", "speedup_at_equal_rel_l2")]
+            echo(f"| {s['run']} | {d['run']:.2f} vs {pf}: {_ratio(d)} | {_ratio(s['flicker'])} "
+                 f"| {_ratio(s['flicker_net'])} | {_ratio(s['image_flicker'])} | {up[0]} | {up[1]} |")
+    echo("(* per-frame figure extrapolated beyond its runs along the power law of the two nearest)")
+
+
+def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, echo=click.echo) -> dict:
+    """Render, measure, print the tables, write ``error.json`` and ``error.png``/``.svg`` in ``out_dir``."""
+    from pipeline.cluster import connect
+    from pipeline.config import RenderConfig
+    from pipeline.errors import LoomError
+    from pipeline.scene import ElementMesh, Scene
+    from pipeline.scene.builtin import BUILTIN_SCENES
+
+    if plan.reference_factor < 50:
+        raise LoomError(f"must be at least 50, got {plan.reference_factor}", field="--reference-factor")
+    out_dir.mkdir(parents=True, exist_ok=True)
+    t_start = time.perf_counter()
+    with tempfile.TemporaryDirectory(prefix="loom-bench-error-", dir=out_dir) as tmp:
+        tmp = Path(tmp)
+        builtin = scene_name in BUILTIN_SCENES
+        path = write_scene(scene_name, tmp / f"{scene_name}.glb", plan.event) if builtin else Path(scene_name)
+        scene = Scene.load(path)
+        first, last = plan.frames
+        if not (scene.timeline.first <= first < last <= scene.timeline.last):
+            raise LoomError(f"frames {first}-{last} are not inside the scene's {scene.timeline.first}-"
+                            f"{scene.timeline.last}", path=str(path), field="--frames")
+        elements = ElementMesh.build(scene)
+        config = RenderConfig()
+        echo(f"loom bench error {Path(path).stem}: frames {first}-{last}, {plan.width}x{plan.height}, {plan.spp} spp, "
+             f"budgets {', '.join(f'{n:,}' for n in plan.budgets)}, F_max {plan.fmax}, d_thr "
+             f"{', '.join(f'{d:g}' for d in plan.d_thr)}; reference {plan.reference_photons:,} photons a frame "
+             f"x 2 seeds; {elements.n_elements:,} elements; {workers} workers")
+        with connect("local", workers) as client:
+            cpu0, t0 = _cpu_seconds(client), time.perf_counter()
+            refs = []
+            for seed in (101, 202):
+                futures = [client.submit(reference_map, scene_path=str(Path(path).resolve()),
+                                         scene_hash=scene.scene_hash, element_size=elements.element_size, frame=f,
+                                         n_photons=plan.reference_photons, seed=seed, max_depth=config.photon_depth,
+                                         pure=False) for f in range(first, last + 1)]
+                refs.append(np.stack(client.gather(futures)))
+            refs = np.stack(refs)
+            ref_s, ref_cpu = time.perf_counter() - t0, _cpu_seconds(client) - cpu0
+            echo(f"references: {ref_s:.1f} s")
+            states = [scene.pose_frame(f) for f in range(first, last + 1)]
+            areas = np.stack([elements.vertex_areas(s) for s in states])
+            highlight, highlight_is = highlight_regions(scene, elements, states, refs[0], areas)
+            ev = Evaluation(client, scene, elements, plan, refs, highlight)
+            if not builtin or scene_name not in EVENTS:
+                t, size = em.largest_change(refs[0], areas)
+                event = first + t
+            else:
+                event = plan.event
+                size = em.largest_change(refs[0][ev.event_index - 1:ev.event_index + 1],
+                                         areas[ev.event_index - 1:ev.event_index + 1])[1]
+            echo(f"abrupt lighting change at frame {event} ({100 * size:.0f} % of the indirect light); "
+                 f"highlight: {highlight_is}")
+            floor = ev.measure(refs[1])
+            ev.floor_flicker = np.asarray(floor["per_frame"]["flicker"])
+            specs = [("per-frame", dict(n_photons=n, fmax=0, temporal="off", config=config)) for n in plan.budgets]
+            specs += [(m, dict(n_photons=n, fmax=plan.fmax, temporal=m, config=config))
+                      for m in ("fixed", "adaptive") for n in plan.budgets]
+            specs += [("guided", dict(n_photons=None, fmax=None, temporal="adaptive",
+                                      config=config.replace(d_thr=d, n_frame_max=max(plan.budgets))))
+                      for d in plan.d_thr]
+            # Warm-up, not timed: the workers' first render builds kernels and caches the first run would pay
+            run_method(client, path, tmp / "warm-up", plan, **{**specs[0][1], "method": "warm-up"})
+            runs = []
+            for i, (method, kw) in enumerate(specs):
+                r = run_method(client, path, tmp / f"run-{i}", plan, method=method, **kw)
+                r["measures"] = ev.measure(r.pop("indirect"))
+                r["label"] = _label(r)
+                echo(f"  {r['label']}: {r['wall_s']:.1f} s wall, {r['cpu_s']:.1f} s CPU, {r['photons']:,} photons; "
+                     f"rel L2 {r['measures']['rel_l2']:.4f}, d_AQM {r['measures']['d_aqm']:.2f} %, flicker "
+                     f"{r['measures']['flicker']:.4f}, lag {r['measures']['lag']}")
+                runs.append(r)
+    ref_photons = 2 * plan.reference_photons * (last - first + 1)
+    result = {"scene": Path(path).stem, "plan": {**plan.__dict__, "event": plan.event},
+              "elements": elements.n_elements, "workers": workers, "adaptation": ev.adaptation,
+              "event": {"frame": event, "size": size}, "highlight_region": highlight_is,
+              "reference": {"photons": plan.reference_photons, "seeds": [101, 202], "wall_s": ref_s, "cpu_s": ref_cpu,
+                            "floor": {k: v for k, v in floor.items() if k != "per_frame"},
+                            "floor_per_frame": floor["per_frame"]["rel_l2"]},
+              "runs": runs, "comparison": {c: summarise(runs, c, {"cpu_s": ref_cpu, "wall_s": ref_s}[c] / ref_photons)
+                                          for c in ("cpu_s", "wall_s")}, "total_s": time.perf_counter() - t_start}
+    _table(echo, result)
+    (out_dir / "error.json").write_text(json.dumps(result, indent=1, default=float))
+    written = plot(result, out_dir / "error")
+    echo(f"\nwrote {out_dir / 'error.json'}, {', '.join(str(p) for p in written)} ({result['total_s']:.0f} s)")
+    return result
+
+
+def _label(r: dict) -> str:
+    if r["method"] == "guided":
+        n = ", ".join(f"{s['n_frame']:,}" for s in r["segments"])
+        f = ", ".join(str(s["fmax"]) for s in r["segments"])
+        return f"guided d_thr {r['d_thr']:g} (N_frame {n}; F_max {f})"
+    if r["method"] == "per-frame":
+        return f"per-frame {r['n_photons']:,}"
+    return f"{r['method']} {r['n_photons']:,}, F_max {r['fmax']}"
+
+
+@click.command("error")
+@click.argument("scene", default="room")
+@click.option("--quick", is_flag=True, help="Small budgets and frame range (under 3 minutes for room).")
+@click.option("--frames", default=None, help="FIRST-LAST (default: the plan's, e.g. 46-90 for room).")
+@click.option("--budgets", default=None, help="N_frame values, comma-separated (default: the plan's).")
+@click.option("--fmax", type=int, default=None, help="F_max of the fixed and adaptive windows.")
+@click.option("--d-thr", "d_thr", default=None, help="d_thr values of the guided runs, comma-separated.")
+@click.option("--resolution", default="320x240", show_default=True)
+@click.option("--spp", type=int, default=2, show_default=True)
+@click.option("--reference-factor", type=int, default=50, show_default=True,
+              help="Reference photons a frame as a multiple of the largest budget (at least 50).")
+@click.option("--aqm-every", type=int, default=None, help="d_AQM on every n-th frame (and the change's).")
+@click.option("--workers", type=int, default=2, show_default=True)
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
+              help="Folder of error.json, error.png and error.svg (default: bench-error-SCENE).")
+def bench_error(scene, quick, frames, budgets, fmax, d_thr, resolution, spp, reference_factor, aqm_every, workers,
+                out_dir):
+    """Run time against error vs a converged per-frame reference: per-frame, fixed and adaptive windows at
+    several budgets, the guided coordinator at several d_thr (default: ROOM)."""
+    from pipeline.errors import LoomError
+    from pipeline.render import parse_resolution
+
+    name = Path(scene).stem if Path(scene).suffix else scene
+    plans = QUICK if quick else FULL
+    plan = plans.get(name, plans["cornell"])  # other scenes: CORNELL's budgets, frames from --frames
+    if name not in plans and not frames:
+        raise LoomError("give the frames to render (FIRST-LAST) for a scene without a plan", field="--frames")
+    changes: dict = {"reference_factor": reference_factor}
+    changes["width"], changes["height"] = parse_resolution(resolution)
+    changes["spp"] = spp
+    try:
+        if frames:
+            a, b = frames.split("-")
+            changes["frames"] = (int(a), int(b))
+        if budgets:
+            changes["budgets"] = tuple(int(n) for n in budgets.split(","))
+        if d_thr:
+            changes["d_thr"] = tuple(float(d) for d in d_thr.split(","))
+    except ValueError as err:
+        raise LoomError(f"cannot read the list: {err}", field="--frames/--budgets/--d-thr") from None
+    if fmax is not None:
+        changes["fmax"] = fmax
+    if aqm_every is not None:
+        if aqm_every < 1:
+            raise LoomError(f"must be >= 1, got {aqm_every}", field="--aqm-every")
+        changes["aqm_every"] = aqm_every
+    if any(n <= 0 for n in changes.get("budgets", plan.budgets)):
+        raise LoomError("budgets must be positive photon counts", field="--budgets")
+    plan = Plan(**{**plan.__dict__, **changes})
+    run(scene, plan, Path(out_dir or f"bench-error-{name}"), workers=workers)

@@ -1,0 +1,138 @@
+"""The measures of ``loom bench error``: pure functions over arrays (pipeline/benchmarks/error.py runs them).
+
+Maps are (V, 3) vertex irradiance with (V,) hat-function areas as weights (workers/reconstruct.py);
+sequences are over consecutive frames. The error of a frame is a field, e(t) = M(t) - R(t), and its
+*flicker* is how much that field changes from one frame to the next, mean_t ||e(t) - e(t-1)|| relative
+to the reference: independent per-frame noise flickers by sqrt(2) x its amplitude, an error that
+stays put (a temporal method's bias) does not flicker at all. The *lag* after an abrupt lighting
+change is read off the step response along the change (see :func:`step_response`).
+"""
+from __future__ import annotations
+
+import numpy as np
+
+LUMA = np.array([0.2126, 0.7152, 0.0722])  # Rec.709, as pipeline/tonemap.py
+LAG_LEVEL = 0.9  # a method has caught up with a change once 90 % of it shows (a rise time)
+
+
+def _norm(x: np.ndarray, areas: np.ndarray) -> float:
+    """Area-weighted L2 norm of a (V, 3) map."""
+    return float(np.sqrt(np.sum(areas[:, None] * np.square(x))))
+
+
+def relative_l2(test: np.ndarray, ref: np.ndarray, areas: np.ndarray) -> float:
+    """||test - ref|| / ||ref|| over the surface (area-weighted, RGB)."""
+    return _norm(test - ref, areas) / _norm(ref, areas)
+
+
+def flicker(tests: np.ndarray, refs: np.ndarray, areas: np.ndarray) -> np.ndarray:
+    """(T - 1,) ||e(t) - e(t-1)|| / ||R(t)|| of the error fields e = test - ref of frames (T, V, 3);
+    ``areas`` (V,) or (T, V)."""
+    areas = np.broadcast_to(areas, tests.shape[:2])
+    e = tests - refs
+    return np.array([_norm(e[t] - e[t - 1], areas[t]) / _norm(refs[t], areas[t]) for t in range(1, len(e))])
+
+
+def image_flicker(tests: np.ndarray, refs: np.ndarray) -> np.ndarray:
+    """(T - 1,) mean |e(t) - e(t-1)| / mean R(t) of displayed frames (T, H, W, 3), e = test - ref."""
+    e = tests - refs
+    return np.array([np.mean(np.abs(e[t] - e[t - 1])) / np.mean(refs[t]) for t in range(1, len(e))])
+
+
+def image_errors(test: np.ndarray, ref: np.ndarray) -> tuple[float, float]:
+    """(RMSE, mean relative error = mean |test - ref| / mean ref) of two displayed frames (H, W, 3)."""
+    d = test - ref
+    return float(np.sqrt(np.mean(d * d))), float(np.mean(np.abs(d)) / np.mean(ref))
+
+
+def region_energy(irradiance: np.ndarray, areas: np.ndarray, region: np.ndarray) -> float:
+    """Luminous flux sum_v A_v Y(E_v) over a set of vertices (the Fig. 3 highlight)."""
+    return float(np.sum(areas[region] * (irradiance[region] @ LUMA)))
+
+
+def brightest_region(ref: np.ndarray, areas: np.ndarray, share: float = 0.02) -> np.ndarray:
+    """The vertices of highest indirect luminance holding ``share`` of the surface area: the
+    highlight of a scene without a known one."""
+    y = ref @ LUMA
+    order = np.argsort(-y, kind="stable")
+    cum = np.cumsum(areas[order])
+    region = np.zeros(len(y), bool)
+    region[order[: int(np.searchsorted(cum, share * cum[-1])) + 1]] = True
+    return region
+
+
+def step_response(tests: np.ndarray, refs: np.ndarray, areas: np.ndarray, event: int) -> np.ndarray:
+    """How much of the abrupt change at frame index ``event`` each frame from ``event`` on shows.
+
+    The change is D = R(event) - R(event - 1). A frame's response is 1 - <R(t) - M(t), D> / <D, D>
+    (area-weighted): 1 when the method shows the reference, 0 when its error is the whole change
+    (it still shows the light before the change). Noise orthogonal to D does not move it."""
+    w = np.broadcast_to(areas, tests.shape[:2])
+    d = refs[event] - refs[event - 1]
+    dd = float(np.sum(w[event][:, None] * d * d))
+    return np.array([1.0 - float(np.sum(w[t][:, None] * (refs[t] - tests[t]) * d)) / dd
+                     for t in range(event, len(tests))])
+
+
+def lag(response: np.ndarray, level: float = LAG_LEVEL) -> tuple[int, bool]:
+    """(frames until the response first reaches ``level``, reached): 0 if the frame of the change
+    already shows it; ``len(response)`` and False if no frame of the run does."""
+    hit = np.flatnonzero(np.asarray(response) >= level)
+    return (int(hit[0]), True) if hit.size else (len(response), False)
+
+
+def largest_change(refs: np.ndarray, areas: np.ndarray) -> tuple[int, float]:
+    """(t, ||R(t) - R(t-1)|| / ||R(t-1)||) of the largest frame-to-frame change of a reference."""
+    w = np.broadcast_to(areas, refs.shape[:2])
+    steps = [_norm(refs[t] - refs[t - 1], w[t]) / _norm(refs[t - 1], w[t]) for t in range(1, len(refs))]
+    t = int(np.argmax(steps))
+    return t + 1, float(steps[t])
+
+
+def loglog(xs, ys, x: float) -> tuple[float, bool]:
+    """y(x) on the piecewise power law through the points (xs, ys), and whether x lies outside
+    them (extrapolated from the nearest segment). Error against time falls as a power of the
+    time spent (N^-1/2 for photon noise), so straight lines in log-log are the natural model."""
+    xs, ys = np.log(np.asarray(xs, float)), np.log(np.asarray(ys, float))
+    order = np.argsort(xs)
+    xs, ys = xs[order], ys[order]
+    lx = np.log(x)
+    if len(xs) == 1:
+        return float(np.exp(ys[0])), lx != xs[0]
+    i = int(np.clip(np.searchsorted(xs, lx) - 1, 0, len(xs) - 2))
+    slope = (ys[i + 1] - ys[i]) / (xs[i + 1] - xs[i]) if xs[i + 1] != xs[i] else 0.0
+    return float(np.exp(ys[i] + slope * (lx - xs[i]))), not xs[0] <= lx <= xs[-1]
+
+
+def cost_model(photons, times, slope: float | None = None) -> tuple[float, float]:
+    """(a, b) of time = a + b x photons, least squares over a method's runs. Measured times of small
+    runs are mostly fixed costs and jitter on a loaded machine; the photons are exact, so a method's
+    error is read against its photons and its photons against time through this line. Where the
+    jitter makes the fitted slope <= 0, ``slope`` (seconds a photon measured on a larger job, e.g.
+    the reference's) is taken instead with a = the mean remainder; without it, a = 0, b = sum t / sum p."""
+    p, t = np.asarray(photons, float), np.asarray(times, float)
+    b, a = np.polyfit(p, t, 1) if len(p) > 1 and np.ptp(p) > 0 else (0.0, 0.0)
+    if not b > 0:
+        if slope:
+            b = slope
+            a = max(float(np.mean(t - b * p)), 0.0)
+        else:
+            a, b = 0.0, float(t.sum() / p.sum())
+    return float(a), float(b)
+
+
+def equal_time(photons, times, errors, t: float, slope: float | None = None) -> tuple[float | None, bool]:
+    """A method's error at time ``t`` (None: not even a fixed cost fits in ``t``) and whether it is
+    extrapolated: the photons ``t`` buys on its cost line (:func:`cost_model`), their error by :func:`loglog`."""
+    a, b = cost_model(photons, times, slope)
+    n = (t - a) / b
+    if n <= 0:
+        return None, True
+    return loglog(photons, errors, n)
+
+
+def equal_error(photons, times, errors, e: float, slope: float | None = None) -> tuple[float, bool]:
+    """The time a method needs for error ``e``: the photons giving ``e`` (:func:`loglog`) on its cost line."""
+    a, b = cost_model(photons, times, slope)
+    n, extrapolated = loglog(errors, photons, e)
+    return a + b * n, extrapolated

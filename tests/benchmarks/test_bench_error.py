@@ -1,0 +1,132 @@
+"""``loom bench error``: its measures on synthetic inputs with known answers, and the whole machinery
+(real renders on a LocalCluster, real references) on a tiny CORNELL run."""
+from __future__ import annotations
+
+import json
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+
+from pipeline.benchmarks import error_measures as em
+from pipeline.benchmarks.error import Plan, run
+from pipeline.errors import LoomError
+
+
+def _maps(rng, frames=10, vertices=50):
+    areas = rng.uniform(0.5, 2.0, vertices)
+    base = rng.uniform(0.2, 1.0, (vertices, 3))
+    return areas, base
+
+
+def test_relative_l2_and_image_errors_known_values(rng):
+    areas, ref = _maps(rng)
+    assert em.relative_l2(1.1 * ref, ref, areas) == pytest.approx(0.1)
+    img = np.full((4, 5, 3), 0.5)
+    rmse, mean_rel = em.image_errors(img + 0.1, img)
+    assert rmse == pytest.approx(0.1) and mean_rel == pytest.approx(0.2)
+
+
+def test_flicker_of_an_alternating_error_and_of_a_steady_bias(rng):
+    areas, ref = _maps(rng)
+    refs = np.stack([ref] * 6)
+    sign = np.array([1, -1, 1, -1, 1, -1], float)[:, None, None]
+    # e(t) = +-0.05 R: |e(t) - e(t-1)| = 0.1 ||R|| every interval
+    assert np.allclose(em.flicker(refs * (1 + 0.05 * sign), refs, areas), 0.1)
+    # a bias that stays put does not flicker, however large
+    assert np.allclose(em.flicker(refs * 1.3, refs, areas), 0.0)
+    imgs = np.full((6, 3, 4, 3), 0.4)
+    assert np.allclose(em.image_flicker(imgs * (1 + 0.05 * sign[:, :, :, None]), imgs), 0.1)
+
+
+def _step(rng, n=12, event=5):
+    areas, r0 = _maps(rng)
+    r1 = r0 * rng.uniform(1.5, 3.0, r0.shape)  # a light jumps: every vertex changes
+    refs = np.stack([r0 if t < event else r1 for t in range(n)])
+    return areas, refs
+
+
+def test_lag_of_per_frame_fixed_windows_and_a_frozen_method(rng):
+    areas, refs = _step(rng)
+    event = 5
+    # Per-frame rendering shows the change at once
+    assert em.lag(em.step_response(refs, refs, areas, event)) == (0, True)
+    # Fixed +-3 windows: at frame event + k the window holds 4 + k of its 7 frames after the change:
+    # responses 4/7, 5/7, 6/7, 7/7, so 90 % is reached 3 frames late
+    padded = np.concatenate([refs[:1].repeat(3, 0), refs, refs[-1:].repeat(3, 0)])
+    fixed = np.stack([padded[t:t + 7].mean(axis=0) for t in range(len(refs))])
+    response = em.step_response(fixed, refs, areas, event)
+    assert np.allclose(response[:4], [4 / 7, 5 / 7, 6 / 7, 1.0])
+    assert em.lag(response) == (3, True)
+    # A method that never shows the change: censored at the frames it had
+    frozen = np.stack([refs[0]] * len(refs))
+    assert em.lag(em.step_response(frozen, refs, areas, event)) == (len(refs) - event, False)
+    # Noise orthogonal to the change does not move the response
+    d = (refs[event] - refs[event - 1]).ravel()
+    noise = rng.standard_normal(d.shape)
+    w = np.repeat(areas, 3)
+    noise -= d * np.sum(w * noise * d) / np.sum(w * d * d)
+    noisy = refs + noise.reshape(refs.shape[1:])
+    assert np.allclose(em.step_response(noisy, refs, areas, event), 1.0)
+    assert em.largest_change(refs, areas)[0] == event
+
+
+def test_equal_time_and_equal_error_on_a_known_power_law():
+    photons = np.array([1e5, 2e5, 4e5])
+    times = 1.0 + 1e-5 * photons  # 1 s fixed cost, 10 s per million photons
+    errors = 0.1 * (photons / 1e5) ** -0.5
+    assert em.cost_model(photons, times) == pytest.approx((1.0, 1e-5))
+    assert em.equal_time(photons, times, errors, 3.0) == (pytest.approx(0.1 / np.sqrt(2)), False)
+    e, extrapolated = em.equal_time(photons, times, errors, 9.0)  # 800,000 photons: beyond the runs
+    assert e == pytest.approx(0.1 / np.sqrt(8)) and extrapolated
+    assert em.equal_time(photons, times, errors, 0.5) == (None, True)  # less than the fixed cost
+    t, extrapolated = em.equal_error(photons, times, errors, 0.05)
+    assert t == pytest.approx(5.0) and not extrapolated
+    # Jitter hiding the per-photon cost (times falling with photons): the given slope, mean remainder
+    jittered = np.array([5.0, 4.9, 4.8])
+    assert em.cost_model(photons, jittered, 1e-6) == pytest.approx((np.mean(jittered - 1e-6 * photons), 1e-6))
+
+
+def test_brightest_region_holds_its_share_of_the_area(rng):
+    areas, ref = _maps(rng, vertices=400)
+    region = em.brightest_region(ref, areas, share=0.1)
+    y = ref @ em.LUMA
+    assert areas[region].sum() >= 0.1 * areas.sum()
+    assert y[region].min() >= y[~region].max()
+    assert em.region_energy(2 * ref, areas, region) == pytest.approx(2 * em.region_energy(ref, areas, region))
+
+
+def test_bench_error_runs_end_to_end_on_a_tiny_cornell(tmp_path):
+    plan = Plan((1, 4), (1_000, 2_000), 2, (0.5,), width=48, height=36, spp=1)
+    lines = []
+    result = run("cornell", plan, tmp_path / "out", workers=1, echo=lines.append)
+    for name in ("error.json", "error.png", "error.svg"):
+        assert (tmp_path / "out" / name).stat().st_size > 0
+    saved = json.loads((tmp_path / "out" / "error.json").read_text())
+    methods = [r["method"] for r in saved["runs"]]
+    assert methods == ["per-frame"] * 2 + ["fixed"] * 2 + ["adaptive"] * 2 + ["guided"]
+    per_frame = {r["n_photons"]: r for r in result["runs"] if r["method"] == "per-frame"}
+    assert per_frame[1_000]["photons"] == 4 * 1_000 and per_frame[2_000]["photons"] == 4 * 2_000
+    assert saved["reference"]["photons"] == 50 * 2_000
+    floor = saved["reference"]["floor"]
+    for r in saved["runs"]:
+        assert r["wall_s"] > 0 and r["cpu_s"] > 0
+        # Every method is farther from the reference than the reference's second seed
+        assert r["measures"]["rel_l2"] > floor["rel_l2"]
+    assert len(saved["comparison"]["wall_s"]["rows"]) == len(saved["comparison"]["cpu_s"]["rows"]) == 5
+    assert saved["event"]["frame"] == plan.event == 3
+    assert any(line.startswith("| per-frame 1,000 |") for line in lines)
+    # No temporary folder is left beside the results
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["error.json", "error.png", "error.svg"]
+
+
+def test_bench_error_refuses_a_reference_under_50x(tmp_path):
+    with pytest.raises(LoomError, match="at least 50"):
+        run("cornell", Plan((1, 4), (1_000,), 2, (0.5,), reference_factor=10), tmp_path / "out")
+
+
+def test_bench_error_is_a_bench_command():
+    from pipeline.cli import main
+
+    out = CliRunner().invoke(main, ["bench", "error", "--help"])
+    assert out.exit_code == 0 and "--quick" in out.output
