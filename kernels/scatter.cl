@@ -104,7 +104,8 @@ __kernel void scatter8(
     const double8 gw = select((double8)(1.0), fmax(cos_o, 0.0) * (e + 2.0) / (e + 1.0), is_glossy);
     bx *= gw; by *= gw; bz *= gw;
     survive = survive & (~is_glossy | (cos_o > 0.0));
-    const double8 side = select((double8)(epsilon), (double8)(-epsilon), nx * ox + ny * oy + nz * oz < 0.0);
+    const double8 off = surface_offset8(corners, c9, epsilon);
+    const double8 side = select(off, -off, nx * ox + ny * oy + nz * oz < 0.0);
     S8(origin_out, 3 * i, convert_float8(px + nx * side));
     S8(origin_out, 3 * i + 1, convert_float8(py + ny * side));
     S8(origin_out, 3 * i + 2, convert_float8(pz + nz * side));
