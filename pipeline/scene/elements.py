@@ -120,6 +120,9 @@ class ElementMesh:
             raise SceneError(f"element_size {size} must be positive", path=str(scene.path), field="element_size")
         state = scene.pose_frame(scene.timeline.first)
         world = state.vertices.astype(np.float64)[state.faces]
+        if not np.isfinite(world).all():  # node transforms that overflow float32 (or a NaN on the way)
+            raise SceneError("the posed triangles of the first frame have NaN or Inf coordinates (a node's "
+                             "transform overflows float32)", path=str(scene.path), field="nodes")
         edges = np.stack([np.linalg.norm(world[:, (k + 1) % 3] - world[:, k], axis=1) for k in range(3)], 1)
         tri_n = np.maximum(1, np.ceil(edges.max(1) / size - 1e-9)).astype(np.int64)
         total = int((tri_n ** 2).sum())

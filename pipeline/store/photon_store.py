@@ -762,3 +762,18 @@ class PhotonStore:
 
 def _reopen(url: str, mode: str) -> PhotonStore:
     return PhotonStore.open(url, mode=mode)
+
+
+def remove_partials(url: str) -> int:
+    """Delete the temp files killed writers left in a local store (ours ``.NAME.PID.ID.partial`` and
+    zarr LocalStore's ``*.partial``); returns how many. Call it only when no writer of the store is
+    alive (a run that has finished all its writes): zarr never reads them, but they take space and
+    a rerun should leave a clean store. Remote stores write objects whole and have none."""
+    if "://" in url and not url.startswith("file://"):
+        return 0
+    root = Path(url.removeprefix("file://"))
+    removed = 0
+    for tmp in root.rglob("*.partial"):
+        tmp.unlink(missing_ok=True)
+        removed += 1
+    return removed
