@@ -41,7 +41,9 @@ class RayCaster:
         tri = state.vertices.astype(np.float64)[state.faces]
         n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         self.triangle_area = 0.5 * np.linalg.norm(n, axis=1)
-        self.normals = n / (2.0 * self.triangle_area[:, None])  # unit, counter-clockwise front face
+        # unit, counter-clockwise front face; zero for a triangle a zero scale collapsed (never hit)
+        self.normals = np.divide(n, 2.0 * self.triangle_area[:, None], out=np.zeros_like(n),
+                                 where=self.triangle_area[:, None] > 0)
         lo, hi = state.vertices.min(0), state.vertices.max(0)
         self.center = (lo + hi).astype(np.float64) / 2
         self.radius = float(np.linalg.norm(hi - lo)) / 2

@@ -124,11 +124,13 @@ class ElementMesh:
             raise SceneError("the posed triangles of the first frame have NaN or Inf coordinates (a node's "
                              "transform overflows float32)", path=str(scene.path), field="nodes")
         edges = np.stack([np.linalg.norm(world[:, (k + 1) % 3] - world[:, k], axis=1) for k in range(3)], 1)
-        tri_n = np.maximum(1, np.ceil(edges.max(1) / size - 1e-9)).astype(np.int64)
-        total = int((tri_n ** 2).sum())
-        if total > MAX_ELEMENTS:
-            raise SceneError(f"element_size {size} gives {total} elements, more than {MAX_ELEMENTS}",
+        splits = np.maximum(1.0, np.ceil(edges.max(1) / size - 1e-9))  # float64: counted before any cast
+        total = float((splits ** 2).sum())
+        if not total <= MAX_ELEMENTS:
+            raise SceneError(f"element_size {size:g} gives {total:.4g} elements, more than {MAX_ELEMENTS}",
                              path=str(scene.path), field="element_size")
+        tri_n = splits.astype(np.int64)
+        total = int(total)
         offsets = np.concatenate([[0], np.cumsum(tri_n ** 2)])
 
         # Local-space corners of every global source triangle

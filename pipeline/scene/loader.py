@@ -122,11 +122,12 @@ def _timeline_numbers(doc, extras: dict, channels, fps: float | None) -> tuple[f
             raise doc.error(f"frames {n_frames} must be in [1, {MAX_FRAMES:,}]", where + ".frames")
         return fps, n_frames
     end = max((s.end for ch in channels.values() for s in ch.values()), default=0.0)
-    if end * fps + 1 > MAX_FRAMES:
+    n_frames = round(end * fps) + 1 if end * fps < MAX_FRAMES else MAX_FRAMES + 1
+    if n_frames > MAX_FRAMES:
         raise doc.error(f"the last animation key at {end:g} s gives {end * fps + 1:,.0f} frames at {fps:g} fps, "
                         f"more than {MAX_FRAMES:,}; state the frames to render in "
                         f"{where}.frames", "animations")
-    return fps, int(round(end * fps)) + 1
+    return fps, int(n_frames)
 
 
 def _check_material(doc, m, i: int) -> None:
