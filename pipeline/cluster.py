@@ -143,17 +143,17 @@ def run_tasks(client, func: Callable, calls: Iterable[tuple[str, dict]], *, desc
         bar.close()
 
 
-def completed(client, futures) -> Iterator[tuple[object, object]]:
+def completed(client, futures, workerless_timeout: float = WORKERLESS_TIMEOUT_S) -> Iterator[tuple[object, object]]:
     """``(future, result)`` as futures finish, like ``distributed.as_completed(with_results=True)``,
-    but bounded: a LoomError once tasks have waited WORKERLESS_TIMEOUT_S with no worker in the
-    cluster (all died, or none ever started), instead of waiting forever."""
+    but bounded: a LoomError once tasks have waited ``workerless_timeout`` seconds with no worker in
+    the cluster (all died, or none ever started), instead of waiting forever."""
     from distributed import wait
 
     pending = list(futures)
     since = None
     while pending:
         try:
-            done, _ = wait(pending, timeout=_POLL_S, return_when="FIRST_COMPLETED")
+            done, _ = wait(pending, timeout=min(_POLL_S, workerless_timeout), return_when="FIRST_COMPLETED")
         except TimeoutError:
             done = set()
         if done:
@@ -166,8 +166,8 @@ def completed(client, futures) -> Iterator[tuple[object, object]]:
             since = None
         elif since is None:
             since = time.monotonic()
-        elif time.monotonic() - since > WORKERLESS_TIMEOUT_S:
-            raise LoomError(f"{len(pending)} task(s) waited {WORKERLESS_TIMEOUT_S:.0f} s for a Dask worker and the "
+        elif time.monotonic() - since > workerless_timeout:
+            raise LoomError(f"{len(pending)} task(s) waited {workerless_timeout:.0f} s for a Dask worker and the "
                             "cluster has none (its workers died or never started)", field="--scheduler")
 
 
