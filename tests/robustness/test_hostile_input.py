@@ -109,10 +109,9 @@ def test_loom_info(batches, case):
         assert "frames " in result["stdout"] and "elements " in result["stdout"]
 
 
-@pytest.mark.parametrize("case", [c for c in CASES if c.command in (None, "render")], ids=lambda c: c.name)
+@pytest.mark.parametrize("case", [pytest.param(c, marks=pytest.mark.slow) if c.name in SLOW_RENDERS else c
+                                  for c in CASES if c.command in (None, "render")], ids=lambda c: c.name)
 def test_tiny_render(batches, case):
-    if case.name not in batches["render"]:
-        pytest.skip("rendered in the slow sweep (make test-all)")
     result = batches["render"][case.name]
     _check(case, result)
     out = batches["outs"][case.name]
