@@ -60,12 +60,13 @@ __kernel void emit8(
                   nz = G8(double8, normals, 3 * tri + 2);
     double8 adx, ady, adz;
     around8(nx, ny, nz, sqrt(1.0 - u3), 2.0 * M_PI * u4, &adx, &ady, &adz);
+    const double8 off = surface_offset8(corners, c9, epsilon);
     const double8 aox = b0 * convert_double8(G8(float8, corners, c9)) + b1 * convert_double8(G8(float8, corners, c9 + 3))
-                      + b2 * convert_double8(G8(float8, corners, c9 + 6)) + nx * epsilon;
+                      + b2 * convert_double8(G8(float8, corners, c9 + 6)) + nx * off;
     const double8 aoy = b0 * convert_double8(G8(float8, corners, c9 + 1)) + b1 * convert_double8(G8(float8, corners, c9 + 4))
-                      + b2 * convert_double8(G8(float8, corners, c9 + 7)) + ny * epsilon;
+                      + b2 * convert_double8(G8(float8, corners, c9 + 7)) + ny * off;
     const double8 aoz = b0 * convert_double8(G8(float8, corners, c9 + 2)) + b1 * convert_double8(G8(float8, corners, c9 + 5))
-                      + b2 * convert_double8(G8(float8, corners, c9 + 8)) + nz * epsilon;
+                      + b2 * convert_double8(G8(float8, corners, c9 + 8)) + nz * off;
 
     // Punctual lights
     const double8 ax = G8(double8, light_dir, 3 * li), ay = G8(double8, light_dir, 3 * li + 1),

@@ -28,7 +28,7 @@ import numpy as np
 
 from .philox import EMISSION_STREAM, uniforms
 from .sampling import around, orthonormal_basis, sincos_poly
-from .scatter import LANES, WORK_GROUP, device_input, device_output, device_table, read_back
+from .scatter import LANES, surface_offset, WORK_GROUP, device_input, device_output, device_table, read_back
 
 POINT, SPOT, DIRECTIONAL, AREA, SKY = 0, 1, 2, 3, 4
 
@@ -49,7 +49,7 @@ class EmissionTables:
     normals: np.ndarray  # (F, 3) unit front normals
     center: np.ndarray  # (3,) centre of the scene's bounds
     radius: float  # radius of the disk that covers the scene (directional lights)
-    epsilon: float  # offset of area-light origins off their surface
+    epsilon: float  # relative offset of area-light origins off their surface (scatter.py::surface_offset)
 
 
 def emit_reference(t: EmissionTables, photon: np.ndarray, key: tuple[int, int]):
@@ -70,7 +70,8 @@ def emit_reference(t: EmissionTables, photon: np.ndarray, key: tuple[int, int]):
         c = t.corners[src[a]].astype(np.float64)
         nrm = t.normals[src[a]]
         dirs[a] = around(nrm, np.sqrt(1.0 - u3[a]), 2.0 * np.pi * u4[a], polynomial=True)
-        origins[a] = b0[:, None] * c[:, 0:3] + b1[:, None] * c[:, 3:6] + b2[:, None] * c[:, 6:9] + nrm * t.epsilon
+        origins[a] = b0[:, None] * c[:, 0:3] + b1[:, None] * c[:, 3:6] + b2[:, None] * c[:, 6:9] \
+            + nrm * surface_offset(t.corners[src[a]], t.epsilon)[:, None]
         weights[a] = t.flux[e[a]]
     lights = ~a
     li = src[lights]

@@ -25,6 +25,15 @@
         (c0) = n0_; (c2) = n2_; \
     } while (0)
 
+// Self-intersection offset of the triangles at c9 (9 float corners each): epsilon times the largest
+// corner magnitude, never below FLT_MIN (workers/raycast.py says why). Twin: scatter.py::surface_offset.
+inline double8 surface_offset8(__global const float *corners, const long8 c9, const double epsilon) {
+    double8 s = (double8)(FLT_MIN);
+    for (int j = 0; j < 9; ++j)
+        s = fmax(s, fabs(convert_double8(G8(float8, corners, c9 + (long8)(j)))));
+    return epsilon * s;
+}
+
 inline double8 uniform8(uint8 x) { return convert_double8(x >> 8) * (1.0 / 16777216.0); }
 
 inline void sincos8(const double8 phi, double8 *s, double8 *c) {

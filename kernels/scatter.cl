@@ -108,7 +108,8 @@ __kernel void scatter8(
     survive = survive & (~is_glossy | (cos_o > 0.0));
     const double8 n_out = nx * ox + ny * oy + nz * oz;
     survive = survive & (n_out * fs > 0.0);  // leaves on the side it arrived from
-    const double8 side = select((double8)(epsilon), (double8)(-epsilon), n_out < 0.0);
+    const double8 off = surface_offset8(corners, c9, epsilon);
+    const double8 side = select(off, -off, n_out < 0.0);
     S8(origin_out, 3 * i, convert_float8(px + nx * side));
     S8(origin_out, 3 * i + 1, convert_float8(py + ny * side));
     S8(origin_out, 3 * i + 2, convert_float8(pz + nz * side));

@@ -49,7 +49,7 @@ class SceneTables:
     albedo: np.ndarray  # (M, 3) float64
     kind: np.ndarray  # (M,) int32
     exponent: np.ndarray  # (M,) float64
-    epsilon: float
+    epsilon: float  # relative self-intersection offset (surface_offset)
 
 
 @dataclass
@@ -92,6 +92,15 @@ class Bounce:
     dirs: np.ndarray  # (m, 3) float32
     beta: np.ndarray  # (m, 3) float64
     alive: np.ndarray  # bool
+
+
+def surface_offset(corners: np.ndarray, epsilon: float) -> np.ndarray:
+    """Self-intersection offset of triangles with float32 ``corners`` (n, 9): ``epsilon`` times the
+    largest corner magnitude, at least FLT_MIN (workers/raycast.py says why); lanes.cl's
+    ``surface_offset8``, to the bit."""
+    scale = np.abs(np.asarray(corners, np.float32).astype(np.float64).reshape(len(corners), 9)).max(
+        axis=1, initial=0.0)
+    return epsilon * np.maximum(scale, float(np.finfo(np.float32).tiny))
 
 
 def glossy_cos(tables: SceneTables, hits: Hits, depth: int, key: tuple[int, int]) -> np.ndarray:
@@ -162,7 +171,7 @@ def scatter_reference(tables: SceneTables, hits: Hits, depth: int, key: tuple[in
     n_out = np.einsum("ij,ij->i", n, nd)
     survive &= n_out * fs > 0  # leaves on the side it arrived from
     side = np.where(n_out < 0, -1.0, 1.0)
-    origins = (p + n * (side * tables.epsilon)[:, None]).astype(np.float32)
+    origins = (p + n * (side * surface_offset(tables.corners[t], tables.epsilon))[:, None]).astype(np.float32)
     return Bounce(key_out, bary, energy, recorded, origins, nd.astype(np.float32), beta, survive & hit)
 
 

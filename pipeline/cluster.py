@@ -7,6 +7,7 @@ plain functions with readable keys, retries failed tasks, and shows a progress b
 from __future__ import annotations
 
 import os
+import time
 from contextlib import contextmanager
 from typing import Callable, Iterable, Iterator
 
@@ -28,6 +29,23 @@ WORKER_ENV = {
     "MALLOC_TRIM_THRESHOLD_": "134217728",
 }
 TASK_RETRIES = 3
+# Bounds on waiting for a cluster: worker processes of --scheduler local (more than 4 per core
+# only thrash), and how long tasks may wait while the cluster has no worker at all (a cluster
+# that lost or never got its workers) before the run stops with an error instead of hanging.
+MAX_WORKERS_PER_CORE = 4
+WORKERLESS_TIMEOUT_S = 60.0
+_POLL_S = 2.0
+
+
+def check_workers(workers) -> int | None:
+    """``--workers``: None (one per core) or an integer in [1, 4 x cores]; 0 and negatives are errors."""
+    if workers is None:
+        return None
+    limit = MAX_WORKERS_PER_CORE * (os.cpu_count() or 1)
+    if isinstance(workers, bool) or not isinstance(workers, int) or not 1 <= workers <= limit:
+        raise LoomError(f"must be a number of worker processes in [1, {limit}] ({MAX_WORKERS_PER_CORE} per core), "
+                        f"got {workers!r}", field="--workers")
+    return workers
 
 
 @contextmanager
@@ -40,6 +58,7 @@ def connect(scheduler: str = "local", workers: int | None = None, *, performance
     ``echo`` gets the dashboard link; ``performance_report`` is an HTML file for Dask's own report
     of the run (distributed.performance_report).
     """
+    workers = check_workers(workers)
     if scheduler == "synchronous":
         if performance_report:
             raise LoomError("needs a Dask cluster (--scheduler local or an address)", field="--performance-report")
@@ -53,7 +72,7 @@ def connect(scheduler: str = "local", workers: int | None = None, *, performance
     logging.getLogger("distributed").setLevel(logging.WARNING)
 
     if scheduler == "local":
-        n = workers or os.cpu_count() or 1
+        n = workers if workers is not None else os.cpu_count() or 1
         with dask.config.set({"distributed.nanny.pre-spawn-environ": WORKER_ENV,
                               "distributed.worker.daemon": False}):
             # The scheduler serves HTTP (metrics) even without a dashboard, on 8787 unless told
@@ -114,13 +133,44 @@ def run_tasks(client, func: Callable, calls: Iterable[tuple[str, dict]], *, desc
                 results[key] = func(**kwargs)
                 bar.update()
             return results
-        from distributed import as_completed
-
         futures = [client.submit(func, key=key, retries=TASK_RETRIES, pure=False, **kwargs)
                    for key, kwargs in calls]
-        for future, result in as_completed(futures, with_results=True):
+        for future, result in completed(client, futures):
             results[future.key] = result
             bar.update()
         return results
     finally:
         bar.close()
+
+
+def completed(client, futures, workerless_timeout: float = WORKERLESS_TIMEOUT_S) -> Iterator[tuple[object, object]]:
+    """``(future, result)`` as futures finish, like ``distributed.as_completed(with_results=True)``,
+    but bounded: a LoomError once tasks have waited ``workerless_timeout`` seconds with no worker in
+    the cluster (all died, or none ever started), instead of waiting forever."""
+    from distributed import wait
+
+    pending = list(futures)
+    since = None
+    while pending:
+        try:
+            done, _ = wait(pending, timeout=min(_POLL_S, workerless_timeout), return_when="FIRST_COMPLETED")
+        except TimeoutError:
+            done = set()
+        if done:
+            since = None
+            for future in [f for f in pending if f in done]:
+                yield future, future.result()
+            pending = [f for f in pending if f not in done]
+            continue
+        if client.nthreads():
+            since = None
+        elif since is None:
+            since = time.monotonic()
+        elif time.monotonic() - since > workerless_timeout:
+            raise LoomError(f"{len(pending)} task(s) waited {workerless_timeout:.0f} s for a Dask worker and the "
+                            "cluster has none (its workers died or never started)", field="--scheduler")
+
+
+def result(client, future):
+    """The result of one future, waited for as :func:`completed` waits."""
+    return next(completed(client, [future]))[1]

@@ -37,7 +37,7 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from .cluster import run_tasks
+from .cluster import result as wait_result, run_tasks
 from .config import RenderConfig, stable_digest
 from .segment_records import SegmentRecord, read_record, write_record
 from .segments import (Placement, calibrated_start, clamp_n_frame, doubling_loop, energy_error, fmax_loop, p_me,
@@ -417,7 +417,7 @@ class SegmentRun:
                     written[int(r["frame"])] = r
             self.times["temporal_s"] += time.perf_counter() - t0
             return out, written
-        from distributed import as_completed
+        from .cluster import completed
 
         submit = self.client.submit
         # Consecutive chunks share the frames their windows reach: contiguous runs of chunks go to
@@ -432,14 +432,14 @@ class SegmentRun:
                            allow_other_workers=True, **kw): i
                     for i, (key, kw) in enumerate(calls)}
         ready, following, composites = {}, 0, []
-        for future, result in as_completed(list(chunk_of), with_results=True):
+        for future, result in completed(self.client, list(chunk_of)):
             ready[chunk_of[future]] = result
             while following in ready:
                 for key, ckw in take(ready.pop(following), calls[following][1]["frames"]):
                     composites.append(submit(composite_task, key=key, retries=TASK_RETRIES, pure=False, priority=0, **ckw))
                 following += 1
         self.times["temporal_s"] += time.perf_counter() - t0
-        for _, r in as_completed(composites, with_results=True):
+        for _, r in completed(self.client, composites):
             written[int(r["frame"])] = r
         return out, written
 
@@ -613,8 +613,9 @@ def _coordinate(job, client, on_segment, records, index, start) -> list:
             if client is None:
                 result = segment_task(job.to_dict(), index)
             else:
-                result = client.submit(segment_task, job.to_dict(), index, key=f"segment-{job.decision_hash[:8]}-"
-                                       f"{index:03d}-{time.time_ns()}", pure=False).result()
+                result = wait_result(client, client.submit(
+                    segment_task, job.to_dict(), index, key=f"segment-{job.decision_hash[:8]}-{index:03d}-"
+                    f"{time.time_ns()}", pure=False))
             rec = SegmentRecord.from_dict(result["record"])
         records.append(rec)
         if on_segment:
@@ -646,8 +647,9 @@ def reprocess(job: Job, client, index: int) -> tuple[SegmentRecord, dict]:
     if client is None:
         result = segment_task(job.to_dict(), index, True)
     else:
-        result = client.submit(segment_task, job.to_dict(), index, True, pure=False,
-                               key=f"segment-{job.decision_hash[:8]}-{index:03d}-redo-{time.time_ns()}").result()
+        result = wait_result(client, client.submit(
+            segment_task, job.to_dict(), index, True, pure=False,
+            key=f"segment-{job.decision_hash[:8]}-{index:03d}-redo-{time.time_ns()}"))
     rec = SegmentRecord.from_dict(result["record"])
     rays = {int(f): r for f, r in result["rays"].items()}
     # Neighbours: their windows reach into this segment; recompute their maps, redo changed frames

@@ -28,7 +28,7 @@ from .config import RenderConfig, stable_digest
 from .errors import LoomError
 from .images import frame_paths, write_video
 from .scene import Scene
-from .shoot import check_store_location, open_store, plan
+from .shoot import check_store_location, plan
 from .tonemap import LOOK_FIELDS, ToneMapping
 
 log = logging.getLogger(__name__)
@@ -110,10 +110,7 @@ def prepare_job(scene_path, *, frames: str | None, out_dir, settings: RenderSett
             raise LoomError("--photons auto collects photons adaptively (§5.2); use --photons N for "
                             f"--temporal {temporal}", field="--temporal")
 
-    out.mkdir(parents=True, exist_ok=True)
-    open_store(p, store_url)
-    from .store.illumination import IlluminationMaps
-    IlluminationMaps.create(store_url, n_frames=scene.timeline.frames, n_vertices=p.elements.n_vertices)
+    _create_outputs(out, store_url, p)
     photon_hash = config.photon_hash(p.elements.element_size)
     look = dict(scene_hash=scene.scene_hash, camera=cam_name, seed=config.seed, photon_hash=photon_hash,
                 width=settings.width, height=settings.height, spp=settings.spp,
@@ -138,6 +135,27 @@ def prepare_job(scene_path, *, frames: str | None, out_dir, settings: RenderSett
                render_hash=stable_digest(look), decision_hash=stable_digest(decision), fmax=fmax,
                n_photons=n_photons, temporal=temporal,
                single_state=len(set(p.sources[f] for f in p.frames)) == 1 and guided)
+
+
+def _create_outputs(out: Path, store_url: str, p) -> None:
+    """The output folder, the photon store and its illumination arrays; an OSError (``--out`` under
+    /proc, a full disk) is a one-line LoomError, and what this call made is removed again."""
+    import shutil
+
+    from .shoot import open_store
+    from .store.illumination import IlluminationMaps
+
+    local_store = "://" not in store_url or store_url.startswith("file://")
+    store_path = Path(store_url.removeprefix("file://"))
+    made = [path for path in (out, store_path if local_store else None) if path is not None and not path.exists()]
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+        open_store(p, store_url)
+        IlluminationMaps.create(store_url, n_frames=p.scene.timeline.frames, n_vertices=p.elements.n_vertices)
+    except OSError as err:
+        for path in reversed(made):
+            shutil.rmtree(path, ignore_errors=True)
+        raise LoomError(f"cannot create the output: {err.strerror or err}", path=str(out), field="--out") from None
 
 
 def render(scene_path, *, frames: str | None, out_dir, settings: RenderSettings = RenderSettings(),
@@ -260,8 +278,8 @@ def _remove_leftovers(out: Path, store_url: str) -> None:
     """Temporary files killed writers left (``.NAME.PID[.ID].partial``, zarr's ``zarr.UUID.partial``)
     in the output folder and a local photon store: with every frame done, no writer of this run is alive that could still
     rename one into place (zarr never reads them either way)."""
-    leftovers = [*out.glob(".*.partial*"), *out.glob("segments/.*.partial*"), *out.glob(".farm/.*.partial*")]
-    if "://" not in store_url or store_url.startswith("file://"):
-        leftovers += Path(store_url.removeprefix("file://")).rglob("*.partial")  # ours and zarr's LocalStore's
-    for tmp in leftovers:
+    from .store import remove_partials
+
+    for tmp in [*out.glob(".*.partial*"), *out.glob("segments/.*.partial*"), *out.glob(".farm/.*.partial*")]:
         tmp.unlink(missing_ok=True)
+    remove_partials(store_url)

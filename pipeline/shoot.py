@@ -17,7 +17,7 @@ from .cluster import connect, run_tasks
 from .config import RenderConfig
 from .errors import LoomError
 from .scene import ElementMesh, Scene
-from .store import PhotonStore
+from .store import PhotonStore, remove_partials
 
 
 @dataclass
@@ -103,13 +103,14 @@ def shoot(scene_path: str, *, frames: str | None, n_photons: int, store_url: str
     scene = Scene.load(scene_path, light=light)
     p = plan(scene, frames, n_photons, config)
     check_store_location(store_url)
-    store = open_store(p, store_url)
-    todo = tasks(p, store, store_url)
     t0 = time.perf_counter()
-    results = {}
-    if todo:
-        with connect(scheduler, workers) as client:
-            results = run_tasks(client, shoot_task, todo, desc="shoot", progress=progress)
+    # The cluster is up before the store is created: a scheduler that cannot start or be reached
+    # leaves no empty store behind
+    with connect(scheduler, workers) as client:
+        store = open_store(p, store_url)
+        todo = tasks(p, store, store_url)
+        results = run_tasks(client, shoot_task, todo, desc="shoot", progress=progress) if todo else {}
+    remove_partials(store_url)  # every batch is written: what killed writers left can go
     elapsed = time.perf_counter() - t0
     traced = [r for r in results.values() if not r.get("skipped")]
     return {

@@ -97,7 +97,8 @@ class _Shading:
         self.caster = caster
         self.surface = SurfaceShading(state, caster.normals)
         self.normals = caster.normals.astype(np.float32)
-        self.epsilon = np.float32(caster.epsilon)  # shadow-ray origin offset (workers/raycast.py)
+        self.corners = state.vertices[state.faces].astype(np.float32)  # (F, 3, 3), for hit points
+        self.offsets = caster.offsets.astype(np.float32)  # shadow-ray origin offset per triangle (raycast.py)
         self.lights = state.lights
         self.sky = state.sky
         self.sky_samples = area_samples if state.sky is not None else 0
@@ -176,7 +177,8 @@ class _Hits:
         if sh.lookup is not None:
             self.cell, self.indirect = sh.lookup(tri, u, v)
         self.t = t.astype(np.float32)
-        self._normals = sh.normals
+        self.u, self.v = u.astype(np.float32), v.astype(np.float32)
+        self._normals, self._corners = sh.normals, sh.corners
         self._cache = {}
 
     def _full(self, name, make):
@@ -185,10 +187,16 @@ class _Hits:
         return self._cache[name]
 
     def points(self, rows=None) -> np.ndarray:
+        """Hit points from the triangle's corners and Embree's barycentrics, not origin + t dir:
+        their error follows the hit triangle's own scale, which the ray offsets assume
+        (workers/raycast.py), however far the ray came."""
         if rows is None:
-            return self._full("points", lambda _: self.origins + self.t[:, None] * self.dirs)
-        return (np.take(self.origins, rows, axis=0)
-                + np.take(self.t, rows)[:, None] * np.take(self.dirs, rows, axis=0))
+            return self._full("points", lambda _: self._interpolate(self.tri, self.u, self.v))
+        return self._interpolate(np.take(self.tri, rows), np.take(self.u, rows), np.take(self.v, rows))
+
+    def _interpolate(self, tri, u, v) -> np.ndarray:
+        c = np.take(self._corners, tri, axis=0)
+        return c[:, 0] + u[:, None] * (c[:, 1] - c[:, 0]) + v[:, None] * (c[:, 2] - c[:, 0])
 
     def normal(self, rows=None) -> np.ndarray:
         return np.take(self._normals, self.tri if rows is None else self.tri[rows], axis=0)
@@ -437,7 +445,9 @@ def _punctual(sh: _Shading, hits: _Hits, rows, lobe, rays, active) -> np.ndarray
         if not len(sel):
             continue
         d = np.ascontiguousarray(d, np.float32)
-        origin = p[sel] + facing[sel] * sh.epsilon  # geometric offset; a light below it is shadowed
+        tri = hits.tri if where is None else hits.tri[where]
+        # geometric offset; a light below it is shadowed
+        origin = p[sel] + facing[sel] * sh.offsets[tri[sel]][:, None]
         blocked = sh.caster.occluded(origin, d, dist * (1.0 - 1e-5))
         rays["shadow"] += len(sel)
         free = ~blocked
@@ -470,11 +480,14 @@ def _area(sh: _Shading, key, counter, depth, hits: _Hits, rays, active) -> np.nd
         sel = np.flatnonzero(ok if active is None else ok & active)
         if not len(sel):
             continue
-        d = np.ascontiguousarray(to_light[sel])
-        origin = p[sel] + facing[sel] * sh.epsilon  # the emitter is on the facing side
-        # stop short of the emitter itself: the length from the offset origin less 2 epsilon
-        reach = np.sqrt(((y[sel] - origin) ** 2).sum(axis=1)) - 2.0 * sh.caster.epsilon
-        blocked = sh.caster.occluded(origin, d, np.maximum(reach, 0.0))
+        # Both ends offset off their surfaces, towards each other, and the ray aimed from one to the
+        # other (pbrt-v4's SpawnRayTo): a ray parallel to y - p would miss the shifted target
+        origin = p[sel] + facing[sel] * sh.offsets[tri[sel]][:, None]  # the emitter is on the facing side
+        target = y[sel] + np.take(sh.normals, lt[sel], axis=0) * sh.offsets[lt[sel]][:, None]
+        span = target - origin
+        reach = np.sqrt(np.einsum("ij,ij->i", span, span))
+        d = np.ascontiguousarray(span / np.maximum(reach, 1e-30)[:, None], np.float32)
+        blocked = sh.caster.occluded(origin, d, reach)
         rays["area"] += len(sel)
         sel = sel[~blocked]
         g = cos_s[sel] * cos_l[sel] / (dist2[sel] * sh.area_pdf[pick[sel]])
@@ -496,7 +509,7 @@ def _sky(sh: _Shading, key, counter, depth, hits: _Hits, rays, active) -> np.nda
     if not len(rows):
         return total
     facing, lobe = hits.facing(rows), hits.shading(rows).astype(np.float64)
-    origin = hits.points(rows) + facing * sh.epsilon  # the sky is on the facing side
+    origin = hits.points(rows) + facing * sh.offsets[hits.tri[rows]][:, None]  # the sky is on the facing side
     c = counter[rows]
     base = _SKY_DIMS + depth * _SKY_DIMS_PER_DEPTH
     for s in range(sh.sky_samples):

@@ -4,6 +4,14 @@ An Embree scene cannot be pickled, so each worker process builds one per distinc
 key* and keeps the most recent few (frames with camera-only motion share one). embreex has no
 ray ``tnear`` (it is fixed at 0), so secondary rays start offset along the surface normal
 (:func:`offset_origins`); see shared/notes/ecosystem.md §4.
+
+The offset follows the hit's own scale, not the scene's: a float32 point on a triangle whose
+corners reach a coordinate of magnitude ``s`` is only known to about ``s x 2^-24`` (pbrt-v4 §6.8,
+"Managing Rounding Error": error bounds grow with the magnitude of the corners, OffsetRayOrigin
+pushes the origin past them; Mitsuba 3 does the same with ``math::RayEpsilon x (1 + max|p|)``), and
+Embree's float32 intersection adds a few roundings of the same size. So each triangle's offset is
+``OFFSET_REL x`` its largest corner magnitude: a box beside a kilometre-wide ground plane keeps
+its millimetre offsets, and the ground plane gets the larger ones its coordinates need.
 """
 from __future__ import annotations
 
@@ -12,10 +20,14 @@ from collections import OrderedDict
 import numpy as np
 from embreex import mesh_construction, rtcore_scene
 
+from kernels.scatter import surface_offset
 from pipeline.scene import FrameState
 
 MISS = -1
 _CACHE_SIZE = 4
+# Relative self-intersection offset: 2^-16 = 256 float32 ulps of the triangle's largest corner
+# magnitude, well above the ~10 roundings of Embree's test and the float32 origin (see above).
+OFFSET_REL = 2.0 ** -16
 
 
 class RayCaster:
@@ -29,12 +41,16 @@ class RayCaster:
         tri = state.vertices.astype(np.float64)[state.faces]
         n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
         self.triangle_area = 0.5 * np.linalg.norm(n, axis=1)
-        self.normals = n / (2.0 * self.triangle_area[:, None])  # unit, counter-clockwise front face
+        # unit, counter-clockwise front face; zero for a triangle a zero scale collapsed (never hit)
+        self.normals = np.divide(n, 2.0 * self.triangle_area[:, None], out=np.zeros_like(n),
+                                 where=self.triangle_area[:, None] > 0)
         lo, hi = state.vertices.min(0), state.vertices.max(0)
         self.center = (lo + hi).astype(np.float64) / 2
         self.radius = float(np.linalg.norm(hi - lo)) / 2
-        # Self-intersection offset: relative to the scene size, well above float32 resolution.
-        self.epsilon = max(self.radius, 1e-3) * 2e-5
+        # Self-intersection offsets: ``epsilon`` is relative (the kernels scale it per triangle
+        # from its corners, kernels/scatter.cl), ``offsets`` the absolute offset of each triangle
+        self.epsilon = OFFSET_REL
+        self.offsets = triangle_offsets(tri)
         self.rays_cast = 0
         # Commit the BVH now (embreex commits lazily on the first query).
         self._scene.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32))
@@ -62,7 +78,13 @@ class RayCaster:
         n = self.normals[triangles]
         side = np.sign(np.einsum("ij,ij->i", n, directions))[:, None]
         side[side == 0] = 1.0
-        return points + n * side * self.epsilon
+        return points + n * (side * self.offsets[triangles][:, None])
+
+
+def triangle_offsets(corners: np.ndarray) -> np.ndarray:
+    """Absolute self-intersection offset of each triangle of ``corners`` (n, 3, 3): ``OFFSET_REL``
+    times its largest corner magnitude, as the photon kernels compute it (kernels/scatter.py)."""
+    return surface_offset(np.asarray(corners).reshape(len(corners), 9), OFFSET_REL)
 
 
 _casters: OrderedDict[str, RayCaster] = OrderedDict()

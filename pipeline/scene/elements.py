@@ -37,9 +37,13 @@ _MERGE_TOLERANCE = 1e-6
 _SHARE_COS = np.cos(np.radians(45.0))
 # A guard against an element size that would exhaust memory.
 MAX_ELEMENTS = 20_000_000
-# The largest split of one source triangle (512 x 512 = 262,144 elements): a ground plane
-# kilometres wide gets coarser elements instead of refusing the scene's element size.
-MAX_SPLIT = 512
+# The largest split of one source triangle (128 x 128 = 16,384 elements): a ground plane
+# kilometres wide gets coarser elements instead of refusing the scene's element size. 512 x 512
+# let a two-triangle ground make half a million elements, which took a tiny render to 2 GB.
+MAX_SPLIT = 128
+# Posed coordinates beyond this are refused: squared lengths (dot products in float32, in the
+# kernels and the compositor) would overflow float32's 3.4e38.
+MAX_COORDINATE = 1e18
 
 
 def up_index(a, b, n):
@@ -126,6 +130,13 @@ class ElementMesh:
             raise SceneError(f"element_size {size} must be positive", path=str(scene.path), field="element_size")
         state = scene.pose_frame(scene.timeline.first)
         world = state.vertices.astype(np.float64)[state.faces]
+        if not np.isfinite(world).all():  # node transforms that overflow float32 (or a NaN on the way)
+            raise SceneError("the posed triangles of the first frame have NaN or Inf coordinates (a node's "
+                             "transform overflows float32)", path=str(scene.path), field="nodes")
+        if np.abs(world).max(initial=0.0) > MAX_COORDINATE:
+            raise SceneError(f"the posed triangles of the first frame have coordinates up to "
+                             f"{np.abs(world).max():.3g}, beyond {MAX_COORDINATE:g} (squared lengths overflow "
+                             "float32)", path=str(scene.path), field="nodes")
         edges = np.stack([np.linalg.norm(world[:, (k + 1) % 3] - world[:, k], axis=1) for k in range(3)], 1)
         wanted = np.maximum(1, np.ceil(edges.max(1) / size - 1e-9))
         capped = wanted > MAX_SPLIT
@@ -134,8 +145,8 @@ class ElementMesh:
         asked = float((wanted ** 2).sum())
         tri_n = np.minimum(wanted, MAX_SPLIT).astype(np.int64)
         total = int((tri_n ** 2).sum())
-        if total > MAX_ELEMENTS or (asked > MAX_ELEMENTS and capped.mean() > 0.5):
-            raise SceneError(f"element_size {size} gives {asked:.0f} elements, more than {MAX_ELEMENTS}",
+        if not total <= MAX_ELEMENTS or (asked > MAX_ELEMENTS and capped.mean() > 0.5):
+            raise SceneError(f"element_size {size:g} gives {asked:.0f} elements, more than {MAX_ELEMENTS}",
                              path=str(scene.path), field="element_size")
         if capped.any():
             log.warning("%s: %d triangle(s) longer than %d x element_size %g are split %d x %d (elements up to "

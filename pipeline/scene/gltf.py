@@ -10,6 +10,8 @@ from __future__ import annotations
 import base64
 import hashlib
 import json
+import os
+import stat
 import struct
 from dataclasses import dataclass
 from pathlib import Path
@@ -18,6 +20,7 @@ import numpy as np
 import pygltflib
 
 from ..errors import SceneError
+from .gltf_schema import check_structure
 
 GLB_MAGIC = 0x46546C67  # "glTF"
 CHUNK_JSON = 0x4E4F534A
@@ -32,6 +35,15 @@ _COMPONENT_DTYPES = {
     5126: np.float32,
 }
 _TYPE_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+
+# What a scene file may claim (README "Input limits and hostile input"). A buffer may not exceed a
+# GLB's own uint32 length; an accessor without a bufferView is zeros that no byte backs, so its
+# size is capped on its own (it is only meaningful with sparse data, which we refuse).
+MAX_BUFFER_BYTES = (1 << 32) - 1
+MAX_UNBACKED_ACCESSOR_BYTES = 1 << 28
+# Buffer and image URIs must stay inside the scene's folder unless this is set to 1 (an explicit
+# opt-in: a scene file should not read /etc/passwd or /dev/zero because it says so).
+ALLOW_OUTSIDE_ENV = "PHOTONLOOM_ALLOW_OUTSIDE_FILES"
 
 # Extensions we implement; anything else in ``extensionsRequired`` is refused.
 SUPPORTED_REQUIRED_EXTENSIONS = frozenset(
@@ -52,30 +64,43 @@ class GltfDocument:
     def error(self, message: str, field: str | None = None) -> SceneError:
         return SceneError(message, path=str(self.path), field=field)
 
-    def accessor(self, index: int, field: str) -> np.ndarray:
+    def accessor(self, index: int, field: str, *, types: tuple[str, ...] | None = None,
+                 components: tuple[int, ...] | None = None) -> np.ndarray:
         """Accessor ``index`` as an array of shape (count,) or (count, width), bounds-checked.
 
         Normalized integer accessors are mapped to [0, 1] or [-1, 1] as the spec's
-        "normalized" rules (§3.11) say. Sparse accessors are refused.
+        "normalized" rules (§3.11) say. Sparse accessors are refused. ``types`` and
+        ``components`` restrict what the use allows (indices: unsigned SCALAR). Every size is
+        checked against the bytes that back it before anything is allocated.
         """
         g = self.gltf
         where = f"{field} -> accessors[{index}]"
-        if index is None or not 0 <= index < len(g.accessors):
+        if not _is_int(index) or not 0 <= index < len(g.accessors):
             raise self.error(f"refers to a missing accessor {index}", field)
         acc = g.accessors[index]
         if acc.sparse is not None:
             raise self.error("sparse accessors are not supported", where)
-        dtype = _COMPONENT_DTYPES.get(acc.componentType)
-        width = _TYPE_WIDTH.get(acc.type)
+        dtype = _COMPONENT_DTYPES.get(acc.componentType) if _is_int(acc.componentType) else None
+        width = _TYPE_WIDTH.get(acc.type) if isinstance(acc.type, str) else None
         if dtype is None or width is None:
             raise self.error(f"unknown componentType {acc.componentType} or type {acc.type!r}", where)
-        count = int(acc.count or 0)
-        if count <= 0:
-            raise self.error("count must be positive", where)
-        if acc.bufferView is None:  # all zeros, per spec
+        if types is not None and acc.type not in types:
+            raise self.error(f"type {acc.type} is not allowed here ({', '.join(types)})", where)
+        if components is not None and acc.componentType not in components:
+            raise self.error(f"componentType {acc.componentType} is not allowed here "
+                             f"({', '.join(map(str, components))})", where)
+        count = _integer(acc.count, 1, self, where + ".count")
+        offset = _integer(acc.byteOffset, 0, self, where + ".byteOffset", default=0)
+        itemsize = np.dtype(dtype).itemsize
+        if offset % itemsize:
+            raise self.error(f"byteOffset {offset} is not a multiple of the component size {itemsize}", where)
+        if acc.bufferView is None:  # all zeros, per spec: nothing backs them, so they are capped
+            if count * width * itemsize > MAX_UNBACKED_ACCESSOR_BYTES:
+                raise self.error(f"count {count} claims {count * width * itemsize:,} bytes of zeros without a "
+                                 f"bufferView, more than {MAX_UNBACKED_ACCESSOR_BYTES:,}", where)
             out = np.zeros((count, width), dtype=dtype)
         else:
-            out = self._read_view(acc.bufferView, int(acc.byteOffset or 0), dtype, width, count, where)
+            out = self._read_view(acc.bufferView, offset, dtype, width, count, where)
         if acc.normalized and np.issubdtype(dtype, np.integer):
             info = np.iinfo(dtype)
             out = np.maximum(out.astype(np.float64) / info.max, -1.0)
@@ -83,27 +108,38 @@ class GltfDocument:
 
     def _read_view(self, view_index, offset, dtype, width, count, where) -> np.ndarray:
         g = self.gltf
-        if not 0 <= view_index < len(g.bufferViews):
+        if not _is_int(view_index) or not 0 <= view_index < len(g.bufferViews):
             raise self.error(f"refers to a missing bufferView {view_index}", where)
         view = g.bufferViews[view_index]
-        if view.buffer is None or not 0 <= view.buffer < len(self.buffers):
-            raise self.error(f"bufferViews[{view_index}] refers to a missing buffer {view.buffer}", where)
+        vf = f"bufferViews[{view_index}]"
+        if not _is_int(view.buffer) or not 0 <= view.buffer < len(self.buffers):
+            raise self.error(f"{vf} refers to a missing buffer {view.buffer}", where)
         data = self.buffers[view.buffer]
         itemsize = np.dtype(dtype).itemsize
         elem_bytes = itemsize * width
-        stride = int(view.byteStride or elem_bytes)
-        view_start = int(view.byteOffset or 0)
-        view_len = int(view.byteLength or 0)
+        view_start = _integer(view.byteOffset, 0, self, vf + ".byteOffset", default=0)
+        view_len = _integer(view.byteLength, 1, self, vf + ".byteLength")
+        stride = elem_bytes
+        if view.byteStride is not None:  # glTF §3.6.2.4: 4..252, a multiple of 4, at least one element
+            stride = _integer(view.byteStride, 4, self, vf + ".byteStride")
+            if stride > 252 or stride % 4:
+                raise self.error(f"byteStride {stride} must be a multiple of 4 in [4, 252]", vf + ".byteStride")
+            if stride < elem_bytes:
+                raise self.error(f"byteStride {stride} is smaller than the {elem_bytes}-byte element of {where}",
+                                 vf + ".byteStride")
+        if (view_start + offset) % itemsize:
+            raise self.error(f"starts at buffer byte {view_start + offset}, not a multiple of the component "
+                             f"size {itemsize}", where)
         if view_start + view_len > len(data):
             raise self.error(
-                f"bufferViews[{view_index}] spans bytes {view_start}..{view_start + view_len} "
+                f"{vf} spans bytes {view_start}..{view_start + view_len} "
                 f"but buffer {view.buffer} has {len(data)}",
                 where,
             )
         needed = offset + stride * (count - 1) + elem_bytes
         if needed > view_len:
             raise self.error(
-                f"out of range: needs {needed} bytes of bufferViews[{view_index}], which has {view_len}",
+                f"out of range: needs {needed} bytes of {vf}, which has {view_len}",
                 where,
             )
         start = view_start + offset
@@ -116,15 +152,25 @@ class GltfDocument:
         return rows.copy()
 
 
+def _is_int(value) -> bool:
+    return isinstance(value, (int, np.integer)) and not isinstance(value, bool)
+
+
+def _integer(value, minimum: int, doc: GltfDocument, field: str, default: int | None = None) -> int:
+    """A glTF integer property at least ``minimum`` (absent: ``default``, or an error without one)."""
+    if value is None and default is not None:
+        return default
+    if not _is_int(value):
+        raise doc.error(f"must be an integer, got {value!r}", field)
+    if value < minimum:
+        raise doc.error(f"must be at least {minimum}, got {value}", field)
+    return int(value)
+
+
 def read_gltf(path: str | Path) -> GltfDocument:
     """Load a ``.glb`` or ``.gltf`` file (external or data-URI buffers) with its buffers."""
     path = Path(path)
-    try:
-        raw = path.read_bytes()
-    except FileNotFoundError:
-        raise SceneError("no such file", path=str(path)) from None
-    except OSError as err:
-        raise SceneError(f"cannot read: {err.strerror}", path=str(path)) from None
+    raw = _read_regular(path, MAX_BUFFER_BYTES, path=str(path), field=None)
 
     bin_chunk = None
     if raw[:4] == b"glTF":
@@ -135,10 +181,12 @@ def read_gltf(path: str | Path) -> GltfDocument:
         json_bytes = raw
     try:
         text = json_bytes.decode("utf-8")
-        json.loads(text)  # pygltflib swallows some errors; validate strictly first
-        gltf = pygltflib.GLTF2.from_json(text)
-    except (UnicodeDecodeError, ValueError) as err:
+        tree = json.loads(text)  # pygltflib swallows some errors; validate strictly first
+    except (UnicodeDecodeError, ValueError, RecursionError) as err:
         raise SceneError(f"broken JSON: {err}", path=str(path), field="json") from None
+    check_structure(tree, str(path))
+    try:
+        gltf = pygltflib.GLTF2.from_json(text)
     except Exception as err:  # pygltflib's schema mapping (wrong types for fields)
         raise SceneError(f"malformed glTF JSON: {err}", path=str(path), field="json") from None
 
@@ -153,6 +201,9 @@ def read_gltf(path: str | Path) -> GltfDocument:
             field="extensionsRequired",
         )
 
+    for i, image in enumerate(gltf.images):  # read by nobody here, but a scene may not point outside
+        if isinstance(image.uri, str) and not image.uri.startswith("data:"):
+            scene_file(path, image.uri, f"images[{i}].uri")
     buffers = [_load_buffer(gltf, i, path, bin_chunk) for i in range(len(gltf.buffers))]
     digest = hashlib.sha256(json_bytes)
     for buf in buffers:
@@ -202,6 +253,8 @@ def _load_buffer(gltf: pygltflib.GLTF2, index: int, path: Path, bin_chunk: bytes
             raise SceneError("has no uri and there is no GLB binary chunk", path=p, field=field)
         data = bin_chunk
     elif uri.startswith("data:"):
+        if len(uri) > MAX_BUFFER_BYTES * 4 // 3 + 100:
+            raise SceneError(f"data URI is longer than a {MAX_BUFFER_BYTES:,}-byte buffer", path=p, field=field)
         header, _, payload = uri.partition(",")
         if not header.endswith(";base64"):
             raise SceneError("data URI is not base64", path=p, field=field)
@@ -210,14 +263,51 @@ def _load_buffer(gltf: pygltflib.GLTF2, index: int, path: Path, bin_chunk: bytes
         except ValueError as err:
             raise SceneError(f"bad base64 data URI: {err}", path=p, field=field) from None
     else:
-        from urllib.parse import unquote
-
-        target = path.parent / unquote(uri)
-        try:
-            data = target.read_bytes()
-        except OSError:
-            raise SceneError(f"missing buffer file {uri!r}", path=p, field=field) from None
+        data = _read_regular(scene_file(path, uri, field + ".uri"), MAX_BUFFER_BYTES, path=p, field=field,
+                             what=f"buffer file {uri!r}")
     need = int(buf.byteLength or 0)
+    if need < 1:
+        raise SceneError(f"byteLength must be at least 1, got {buf.byteLength!r}", path=p, field=field)
     if len(data) < need:
         raise SceneError(f"byteLength is {need} but only {len(data)} bytes are present", path=p, field=field)
     return data
+
+
+def scene_file(scene: Path, uri: str, field: str) -> Path:
+    """The file a relative ``uri`` of ``scene`` names (percent-decoded, glTF §3.3), refused when it
+    is absolute, has a scheme or leads outside the scene's folder (symbolic links resolved), unless
+    ``PHOTONLOOM_ALLOW_OUTSIDE_FILES=1`` allows it explicitly."""
+    from urllib.parse import unquote, urlsplit
+
+    p = str(scene)
+    parts = urlsplit(uri)
+    if parts.scheme and len(parts.scheme) > 1:  # "C:" is a Windows drive, not a scheme
+        raise SceneError(f"URI {uri!r}: only relative file paths and data: URIs are read", path=p, field=field)
+    relative = unquote(uri)
+    folder = scene.parent.resolve()
+    target = (folder / relative).resolve()
+    if os.environ.get(ALLOW_OUTSIDE_ENV) == "1":
+        return target
+    if Path(relative).is_absolute() or not target.is_relative_to(folder):
+        raise SceneError(f"URI {uri!r} leads outside the scene's folder {folder} (set {ALLOW_OUTSIDE_ENV}=1 "
+                         "to allow it)", path=p, field=field)
+    return target
+
+
+def _read_regular(target: Path, limit: int, *, path: str, field: str | None, what: str = "the file") -> bytes:
+    """The bytes of a regular file of at most ``limit`` bytes: a device (/dev/zero), pipe or folder
+    would never end or is not data, so it is refused before it is opened."""
+    try:
+        st = target.stat()
+    except FileNotFoundError:
+        raise SceneError(f"missing {what}" if field else "no such file", path=path, field=field) from None
+    except OSError as err:
+        raise SceneError(f"cannot read {what}: {err.strerror}", path=path, field=field) from None
+    if not stat.S_ISREG(st.st_mode):
+        raise SceneError(f"{what} is not a regular file (a device, pipe or folder)", path=path, field=field)
+    if st.st_size > limit:
+        raise SceneError(f"{what} has {st.st_size:,} bytes, more than {limit:,}", path=path, field=field)
+    try:
+        return target.read_bytes()
+    except OSError as err:
+        raise SceneError(f"cannot read {what}: {err.strerror}", path=path, field=field) from None

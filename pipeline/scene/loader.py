@@ -19,7 +19,7 @@ from .lights import light_def_from_gltf
 from .materials import DEFAULT_MATERIAL, material_from_gltf
 from .scene import DEFAULT_ELEMENT_FRACTION, MeshInstance, Node, Scene
 from .textures import base_color_texture, emissive_texture
-from .timeline import DEFAULT_FPS, Timeline
+from .timeline import DEFAULT_FPS, MAX_FRAMES, Timeline
 from .vertex_attributes import read_vertex_attributes
 
 log = logging.getLogger(__name__)
@@ -31,6 +31,7 @@ LIGHT_CHOICES = ("auto", "none")  # --light: a default sun and sky for a file wi
 
 # Primitive modes (glTF §3.7.2.1): 4 TRIANGLES, 5 TRIANGLE_STRIP, 6 TRIANGLE_FAN.
 _TRIANGLE_MODES = {4, 5, 6}
+_INDEX_COMPONENTS = (5121, 5123, 5125)  # indices are UNSIGNED_BYTE, UNSIGNED_SHORT or UNSIGNED_INT (§3.7.2.1)
 _MODE_NAMES = {0: "POINTS", 1: "LINES", 2: "LINE_LOOP", 3: "LINE_STRIP"}
 # Triangles whose area is below this fraction of the squared bounding-box diagonal are "zero-area".
 _ZERO_AREA = 1e-14
@@ -46,6 +47,8 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
     nodes = _read_nodes(doc)
     order = _reachable(doc, nodes)
 
+    for i, m in enumerate(g.materials):
+        _check_material(doc, m, i)
     materials = [material_from_gltf(m, i) for i, m in enumerate(g.materials)]
     materials = _with_textures(doc, materials)
     default_material = len(materials)
@@ -89,19 +92,13 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
 
     channels = _read_channels(doc, nodes, warnings)
     extras = _scene_extras(doc)
-    fps = float(fps or extras.get("fps") or DEFAULT_FPS)
-    if not fps > 0:
-        raise doc.error(f"fps {fps} must be positive", "scenes.extras.photonloom.fps")
-    end = max((s.end for ch in channels.values() for s in ch.values()), default=0.0)
-    n_frames = extras.get("frames")
-    if n_frames is None:
-        n_frames = int(round(end * fps)) + 1
-    if int(n_frames) < 1:
-        raise doc.error(f"frames {n_frames} must be at least 1", "scenes.extras.photonloom.frames")
+    fps, n_frames = _timeline_numbers(doc, extras, channels, fps)
 
     camera_node = _choose_camera(doc, nodes, order, cameras, camera)
 
     element_size = extras.get("element_size")
+    if element_size is not None and not _is_number(element_size):
+        raise doc.error(f"element_size {element_size!r} must be a number", "scenes.extras.photonloom.element_size")
     if element_size is None:
         allv = np.concatenate([inst.vertices for inst in instances])
         element_size = float(np.linalg.norm(allv.max(0) - allv.min(0))) * DEFAULT_ELEMENT_FRACTION
@@ -132,6 +129,67 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
     return scene
 
 
+def _is_number(value) -> bool:
+    return isinstance(value, (int, float)) and not isinstance(value, bool) and bool(np.isfinite(value))
+
+
+def _timeline_numbers(doc, extras: dict, channels, fps: float | None) -> tuple[float, int]:
+    """fps and the number of frames: the caller's fps, else the scene's, else 30; the scene's
+    frames, else one past the last key. Each is checked (a stated 0 fps is an error, not 30), and
+    the frames are refused above MAX_FRAMES before anything is planned per frame."""
+    where = "scenes.extras.photonloom"
+    if fps is None:
+        fps = extras.get("fps", DEFAULT_FPS)
+    if not _is_number(fps) or not fps > 0:
+        raise doc.error(f"fps {fps!r} must be a positive number", where + ".fps")
+    fps = float(fps)
+    n_frames = extras.get("frames")
+    if n_frames is not None:
+        if isinstance(n_frames, float) and n_frames.is_integer():
+            n_frames = int(n_frames)
+        if isinstance(n_frames, bool) or not isinstance(n_frames, int):
+            raise doc.error(f"frames {n_frames!r} must be an integer", where + ".frames")
+        if not 1 <= n_frames <= MAX_FRAMES:
+            raise doc.error(f"frames {n_frames} must be in [1, {MAX_FRAMES:,}]", where + ".frames")
+        return fps, n_frames
+    end = max((s.end for ch in channels.values() for s in ch.values()), default=0.0)
+    n_frames = round(end * fps) + 1 if end * fps < MAX_FRAMES else MAX_FRAMES + 1
+    if n_frames > MAX_FRAMES:
+        raise doc.error(f"the last animation key at {end:g} s gives {end * fps + 1:,.0f} frames at {fps:g} fps, "
+                        f"more than {MAX_FRAMES:,}; state the frames to render in "
+                        f"{where}.frames", "animations")
+    return fps, int(n_frames)
+
+
+def _check_material(doc, m, i: int) -> None:
+    """Emission and factors in the ranges glTF gives them (shapes are checked in gltf_schema.py):
+    a negative emission is an error of its own, not a scene "without light"."""
+    f = f"materials[{i}]"
+    if m.emissiveFactor is not None:
+        if len(m.emissiveFactor) != 3 or min(m.emissiveFactor) < 0:
+            raise doc.error(f"must be 3 non-negative numbers, got {list(m.emissiveFactor)}", f + ".emissiveFactor")
+    strength = (m.extensions or {}).get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)
+    if strength < 0:
+        raise doc.error(f"must be non-negative, got {strength}",
+                        f + ".extensions.KHR_materials_emissive_strength.emissiveStrength")
+    pbr = m.pbrMetallicRoughness
+    if pbr is not None:
+        if pbr.baseColorFactor is not None and len(pbr.baseColorFactor) not in (3, 4):
+            raise doc.error(f"must be 4 numbers, got {len(pbr.baseColorFactor)}", f + ".pbrMetallicRoughness.baseColorFactor")
+        for name in ("metallicFactor", "roughnessFactor"):
+            value = getattr(pbr, name)
+            if value is not None and not 0 <= value <= 1:
+                raise doc.error(f"must be in [0, 1], got {value}", f"{f}.pbrMetallicRoughness.{name}")
+
+
+def _unit_quaternion(q: np.ndarray, doc, field: str) -> np.ndarray:
+    """``q`` normalised; a (near) zero quaternion is no rotation at all and is refused."""
+    norm = float(np.linalg.norm(q))
+    if not norm > 1e-6:
+        raise doc.error(f"rotation {q.tolist()} is not a unit quaternion (its length is {norm:g})", field)
+    return q / norm
+
+
 def _vec(value, default, n, doc, field):
     if value is None:
         return np.array(default, dtype=np.float64)
@@ -151,6 +209,7 @@ def _read_nodes(doc: GltfDocument) -> list[Node]:
             if c in parents:
                 raise doc.error(f"node {c} has two parents ({parents[c]} and {i})", f"nodes[{i}].children")
             parents[c] = i
+    _refuse_cycles(doc, parents)
     nodes = []
     for i, n in enumerate(g.nodes):
         f = f"nodes[{i}]"
@@ -165,11 +224,26 @@ def _read_nodes(doc: GltfDocument) -> list[Node]:
         nodes.append(Node(
             index=i, name=n.name or f"node{i}", parent=parents.get(i), children=tuple(n.children or ()),
             translation=_vec(n.translation, (0, 0, 0), 3, doc, f + ".translation"),
-            rotation=_vec(n.rotation, (0, 0, 0, 1), 4, doc, f + ".rotation"),
+            rotation=_unit_quaternion(_vec(n.rotation, (0, 0, 0, 1), 4, doc, f + ".rotation"), doc, f + ".rotation"),
             scale=_vec(n.scale, (1, 1, 1), 3, doc, f + ".scale"),
             matrix=matrix, mesh=n.mesh, camera=n.camera, light=light,
         ))
     return nodes
+
+
+def _refuse_cycles(doc: GltfDocument, parents: dict[int, int]) -> None:
+    """A node that is its own ancestor (glTF §3.5.3: the hierarchy is a set of disjoint trees)."""
+    done: set[int] = set()
+    for start in parents:
+        path, seen, node = [], set(), start
+        while node in parents and node not in done:
+            if node in seen:
+                loop = path[path.index(node):] + [node]
+                raise doc.error(f"the node hierarchy has a cycle: {' -> '.join(map(str, loop))}", "nodes")
+            seen.add(node)
+            path.append(node)
+            node = parents[node]
+        done.update(path)
 
 
 def _reachable(doc: GltfDocument, nodes: list[Node]) -> list[int]:
@@ -240,7 +314,8 @@ def _read_instances(doc, nodes, order, default_material, warnings):
                 bad = int(np.flatnonzero(~np.isfinite(verts).all(1))[0])
                 raise doc.error(f"vertex {bad} has a NaN or Inf position", f + ".attributes.POSITION")
             if prim.indices is not None:
-                idx = np.asarray(doc.accessor(prim.indices, f + ".indices")).astype(np.int64).ravel()
+                idx = np.asarray(doc.accessor(prim.indices, f + ".indices", types=("SCALAR",),
+                                              components=_INDEX_COMPONENTS)).astype(np.int64).ravel()
             else:
                 idx = np.arange(len(verts), dtype=np.int64)
             if len(idx) and (idx.min() < 0 or idx.max() >= len(verts)):
@@ -314,7 +389,8 @@ def _read_channels(doc, nodes, warnings) -> dict[int, dict[str, Sampler]]:
             interp = s.interpolation or "LINEAR"
             if interp not in INTERPOLATIONS:
                 raise doc.error(f"interpolation {interp!r} is not one of {', '.join(INTERPOLATIONS)}", sf)
-            times = np.asarray(doc.accessor(s.input, sf + ".input"), dtype=np.float64).ravel()
+            times = np.asarray(doc.accessor(s.input, sf + ".input", types=("SCALAR",), components=(5126,)),
+                               dtype=np.float64).ravel()
             values = np.asarray(doc.accessor(s.output, sf + ".output"), dtype=np.float64)
             width = 4 if target.path == "rotation" else 3
             if values.ndim != 2 or values.shape[1] != width:
@@ -328,6 +404,11 @@ def _read_channels(doc, nodes, warnings) -> dict[int, dict[str, Sampler]]:
                 raise doc.error(f"has {len(values)} outputs for {len(times)} keys ({interp})", sf + ".output")
             if interp == "CUBICSPLINE":
                 values = values.reshape(len(times), 3, width)
+            if target.path == "rotation":  # keys (not cubic tangents) must be rotations
+                keys = values[:, 1] if interp == "CUBICSPLINE" else values
+                bad = np.flatnonzero(np.linalg.norm(keys, axis=1) <= 1e-6)
+                if len(bad):
+                    raise doc.error(f"rotation key {int(bad[0])} is a zero quaternion", sf + ".output")
             channels.setdefault(target.node, {})[target.path] = Sampler(times, values, interp, target.path)
     return channels
 

@@ -197,10 +197,12 @@ class Scene:
             cam = Camera(self.cameras[node.camera], self.camera_node, world[self.camera_node].copy())
         elif self.framing is not None:
             cam = self.framing.camera
+        with np.errstate(over="ignore"):  # beyond float32 becomes Inf, which ElementMesh.build refuses
+            vertices = np.concatenate(verts).astype(np.float32)
         return FrameState(
             time=float(t),
             frame=frame,
-            vertices=np.concatenate(verts).astype(np.float32),
+            vertices=vertices,
             faces=faces.astype(np.int32),
             triangle_instance=tri_inst,
             triangle_material=tri_mat,

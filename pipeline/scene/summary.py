@@ -3,10 +3,14 @@ from __future__ import annotations
 
 from collections import Counter
 
+import numpy as np
+
 from .default_lights import describe_default_lights
 from .elements import ElementMesh
 from .ignored import ignored
 from .scene import Scene
+
+INFO_STATE_FRAMES = 2_000
 
 
 def describe(scene: Scene, element_size: float | None = None) -> list[str]:
@@ -28,10 +32,14 @@ def describe(scene: Scene, element_size: float | None = None) -> list[str]:
         chosen = f"the {scene.framing.describe()}"
     animated = [f"{scene.nodes[i].name} [{', '.join(sorted(scene.channels[i]))}]" for i in scene.animated_nodes]
     meshes = {inst.mesh for inst in scene.instances}
-    if scene.has_moving_geometry:
+    # Scene states of at most INFO_STATE_FRAMES evenly spread frames: `loom info` does not pose
+    # every frame of a long timeline (a render does, in pipeline/shoot.py's plan)
+    sampled = sorted({round(x) for x in np.linspace(tl.first, tl.last, min(tl.frames, INFO_STATE_FRAMES))})
+    distinct = len({scene.state_key(f) for f in sampled})
+    if distinct > 1:
         motion = "moving geometry or lights (photons traced per frame)"
-        distinct = len(set(scene.frame_state_keys))
-        motion += f", {distinct} distinct scene states"
+        motion += f", {distinct} distinct scene states" + (
+            f" in {len(sampled):,} sampled frames" if len(sampled) < tl.frames else "")
     elif scene.has_camera_motion:
         motion = "camera-only motion (one photon set serves every frame)"
     else:

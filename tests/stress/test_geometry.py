@@ -120,9 +120,6 @@ def test_huge_ground_turns_into_no_nan_or_inf(ground):
 
 
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="the ray offset grows with the scene's radius (workers/raycast.py): "
-                   "1e6-unit ground -> offset 20 units, the room's photons leave through its walls; "
-                   "fixed by float-precision offsets (issue 12 item 1, branch i12)")
 def test_huge_ground_leaves_the_room_light_unchanged(runs, ground):
     assert (ground["indirect"][0][ground["positions"][:, 1] < -2.5] == 0).all()  # no photon leaves the room
     np.testing.assert_allclose(_room_mean(ground), _room_mean(runs["plain"]), rtol=0.03)
