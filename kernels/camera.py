@@ -8,7 +8,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .scatter import LANES, WORK_GROUP, device_output, read_back
+from .context import LANES, WORK_GROUP, device_output, read_back
 
 def mix64(x: np.ndarray) -> np.ndarray:
     """splitmix64 finaliser on uint64 arrays (wrapping arithmetic)."""

@@ -4,7 +4,10 @@ Platform choice is explicit (shared/notes/ecosystem.md §3): ``PYOPENCL_CTX`` if
 first platform whose name or version mentions PoCL, else any CPU device. PoCL caches compiled
 kernels under ``POCL_CACHE_DIR`` (default ``~/.cache/pocl/kcache``); pyopencl's own invoker cache
 lives under ``XDG_CACHE_HOME``. Programs are built once per process and source text, and kernels
-are fetched once (``prg.name`` would build a new ``cl.Kernel`` on every access).
+are fetched once (``prg.name`` would build a new ``cl.Kernel`` on every access). Every program is
+built with :data:`BUILD_OPTIONS`, the ``-D`` defines of the facts the Python side owns (the record
+layout of kernels/record_layout.py, the luminance weights of kernels/colour.py), so the ``.cl``
+files hold no copies. The buffer helpers at the end are shared by the kernels' wrappers.
 """
 from __future__ import annotations
 
@@ -14,11 +17,20 @@ import warnings
 from functools import lru_cache
 from pathlib import Path
 
+import numpy as np
 import pyopencl as cl
 
-from pipeline.errors import LoomError
+from . import colour, record_layout
 
 SOURCE_DIR = Path(__file__).resolve().parent
+BUILD_OPTIONS = tuple(f"-D{name}={value}" for module in (record_layout, colour)
+                      for name, value in module.BUILD_DEFINES.items())
+WORK_GROUP = 64  # fixed local size of the lane kernels (PoCL compiles one kernel per local size)
+LANES = 8  # rays or photons per work item of the lane kernels (lanes.cl)
+
+
+class DeviceError(RuntimeError):
+    """No OpenCL CPU device is available (an installation problem, not a bug of the caller)."""
 
 
 @lru_cache(maxsize=1)
@@ -30,8 +42,7 @@ def device_context() -> tuple[cl.Context, cl.CommandQueue]:
     try:
         platforms = cl.get_platforms()
     except cl.Error as err:
-        raise LoomError(f"no OpenCL platform ({err}); install Debian's pocl-opencl-icd (make setup)",
-                        field="opencl") from None
+        raise DeviceError(f"no OpenCL platform ({err}); install Debian's pocl-opencl-icd (make setup)") from None
     ranked = sorted(platforms, key=lambda p: 0 if "pocl" in (p.name + p.version).lower() else 1)
     for platform in ranked:
         try:
@@ -41,8 +52,7 @@ def device_context() -> tuple[cl.Context, cl.CommandQueue]:
         if devices:
             ctx = cl.Context([devices[0]])
             return ctx, cl.CommandQueue(ctx)
-    raise LoomError("no OpenCL CPU device found; install Debian's pocl-opencl-icd (make setup)",
-                    field="opencl")
+    raise DeviceError("no OpenCL CPU device found; install Debian's pocl-opencl-icd (make setup)")
 
 
 _INCLUDE = re.compile(r'^\s*#include\s+"([^"]+)"\s*$', re.MULTILINE)
@@ -61,13 +71,14 @@ def expanded_source(name: str, seen: frozenset[str] = frozenset()) -> str:
 
 @lru_cache(maxsize=None)
 def program(name: str, options: tuple[str, ...] = ()) -> cl.Program:
-    """Build ``kernels/<name>.cl`` (includes inlined) once per process."""
+    """Build ``kernels/<name>.cl`` (includes inlined) with :data:`BUILD_OPTIONS` and ``options``
+    once per process."""
     ctx, _ = device_context()
     with warnings.catch_warnings():
         # PoCL's build log carries ABI notes on some CPUs (double8 arguments without AVX-512);
         # pyopencl turns a non-empty log into a CompilerWarning although the build succeeded.
         warnings.simplefilter("ignore", cl.CompilerWarning)
-        return cl.Program(ctx, expanded_source(name)).build(options=list(options))
+        return cl.Program(ctx, expanded_source(name)).build(options=[*BUILD_OPTIONS, *options])
 
 
 @lru_cache(maxsize=None)
@@ -89,3 +100,30 @@ def scratch(name: str, nbytes: int) -> cl.Buffer:
         ctx, _ = device_context()
         buf = _SCRATCH[name] = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, size=max(int(nbytes), 8))
     return buf
+
+
+def device_table(ctx, a: np.ndarray, dtype):
+    """A read-only device copy of a table (one element of zeros stands in for an empty one)."""
+    a = np.ascontiguousarray(a, dtype=dtype)
+    return cl.Buffer(ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
+                     hostbuf=a if a.size else np.zeros(1, dtype))
+
+
+def device_input(ctx, a: np.ndarray):
+    """A read-only device buffer over the host array (PoCL's CPU device uses host memory directly)."""
+    return cl.Buffer(ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=np.ascontiguousarray(a))
+
+
+def device_output(ctx, a: np.ndarray):
+    """A write-only device buffer over the host array ``a``; :func:`read_back` makes it current."""
+    return cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=a)
+
+
+def read_back(queue, arrays, buffers) -> None:
+    """Wait for the kernel and make the host arrays behind ``buffers`` current (map, unmap)."""
+    for a, b in zip(arrays, buffers):
+        mapped, _ = cl.enqueue_map_buffer(queue, b, cl.map_flags.READ, 0, a.shape, a.dtype)
+        if mapped.__array_interface__["data"][0] != a.__array_interface__["data"][0]:
+            a[...] = mapped  # the runtime kept its own copy
+        mapped.base.release(queue)
+    queue.finish()

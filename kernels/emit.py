@@ -28,7 +28,8 @@ import numpy as np
 
 from .philox import EMISSION_STREAM, uniforms
 from .sampling import around, orthonormal_basis, sincos_poly
-from .scatter import LANES, surface_offset, WORK_GROUP, device_input, device_output, device_table, read_back
+from .context import LANES, WORK_GROUP, device_input, device_output, device_table, read_back
+from .scatter import surface_offset
 
 POINT, SPOT, DIRECTIONAL, AREA, SKY = 0, 1, 2, 3, 4
 

@@ -6,7 +6,7 @@
 
 inline double luma(const double r, const double g, const double b)
 {
-    return 0.2126 * r + 0.7152 * g + 0.0722 * b;  // Rec. 709
+    return LUMA_R * r + LUMA_G * g + LUMA_B * b;  // Rec. 709, build options from kernels/colour.py
 }
 
 // flux (V, L, 4), vertex-major as kernels/gather.py makes it: RGB S and variance term Q per

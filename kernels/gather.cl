@@ -7,9 +7,8 @@
 #pragma OPENCL FP_CONTRACT OFF
 
 #define SLOTS 12          // 3 corners x (R, G, B, Q); Q = sum of b_k^2 Y^2 for the variance
-#define BARY_SCALE 65535.0
-#define DIRECT_BIT 0x80000000u
-#define PARITY_BIT 0x40000000u
+// BARY_SCALE, DIRECT_BIT, PARITY_BIT (kernels/record_layout.py) and LUMA_R/G/B (kernels/colour.py)
+// are build options (kernels/context.py)
 
 // Adds the records [begin, end) of the kinds asked for (and, with n_parity = 2, of photon parity
 // `parity` only) to acc: acc[4k + c] += b_k * energy_c, acc[4k + 3] += b_k^2 * Y^2.
@@ -27,7 +26,7 @@ inline void add_records(__global const uint *key, __global const ushort *b1,
         const double w0 = 1.0 - w1 - w2;
         const double red = (double)energy[3 * r], green = (double)energy[3 * r + 1],
                      blue = (double)energy[3 * r + 2];
-        const double y = 0.2126 * red + 0.7152 * green + 0.0722 * blue;  // Rec. 709 luminance
+        const double y = LUMA_R * red + LUMA_G * green + LUMA_B * blue;  // Rec. 709 luminance
         const double y2 = y * y;
         acc[0] += w0 * red; acc[1] += w0 * green; acc[2] += w0 * blue; acc[3] += (w0 * w0) * y2;
         acc[4] += w1 * red; acc[5] += w1 * green; acc[6] += w1 * blue; acc[7] += (w1 * w1) * y2;

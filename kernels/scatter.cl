@@ -11,8 +11,7 @@
 #define KIND_DIFFUSE 0
 #define KIND_MIRROR 1
 #define KIND_GLOSSY 2
-#define PARITY_BIT 0x40000000u
-#define DIRECT_BIT 0x80000000u
+// PARITY_BIT, DIRECT_BIT, BARY_SCALE: build options from kernels/record_layout.py (kernels/context.py)
 
 // Eight rays a work item, written on double8/long8/uint8 so that it runs in SIMD whatever the
 // compiler decides: PoCL's implicit work-group vectoriser gave up on the scalar version of this
@@ -70,8 +69,8 @@ __kernel void scatter8(
     k |= (ulong8)(depth == 0 ? DIRECT_BIT : 0u);
     k = select((ulong8)(0), k, is_diffuse);
     S8(rec_key, i, convert_uint8(k));
-    const ushort8 q1 = convert_ushort8(select((double8)(0.0), rint(b1 * 65535.0), is_diffuse));
-    const ushort8 q2 = convert_ushort8(select((double8)(0.0), rint(b2 * 65535.0), is_diffuse));
+    const ushort8 q1 = convert_ushort8(select((double8)(0.0), rint(b1 * BARY_SCALE), is_diffuse));
+    const ushort8 q2 = convert_ushort8(select((double8)(0.0), rint(b2 * BARY_SCALE), is_diffuse));
     S8(rec_bary, 2 * i, q1);
     S8(rec_bary, 2 * i + 1, q2);
     S8(rec_energy, 3 * i, convert_float8(select((double8)(0.0), bx, is_diffuse)));

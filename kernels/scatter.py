@@ -25,16 +25,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from pipeline.scene.elements import locate_in_triangles
-
+from .cells import locate_in_triangles
+from .context import LANES, WORK_GROUP, device_input, device_output, device_table, read_back
 from .philox import uniforms
+from .record_layout import BARY_SCALE, DIRECT_BIT, PARITY_BIT
 from .sampling import around
 
 KIND_CODE = {"diffuse": 0, "mirror": 1, "glossy": 2}
-WORK_GROUP = 64
-LANES = 8  # rays per work item of scatter8
-PARITY_BIT = np.uint32(1 << 30)
-DIRECT_BIT = np.uint32(1 << 31)
 
 
 @dataclass
@@ -141,7 +138,7 @@ def scatter_reference(tables: SceneTables, hits: Hits, depth: int, key: tuple[in
     key_out |= np.where(hits.photon % 2 == 1, PARITY_BIT, np.uint32(0))
     if depth == 0:
         key_out |= DIRECT_BIT
-    bary = np.stack([np.rint(b1 * 65535.0), np.rint(b2 * 65535.0)], 1).astype(np.uint16)
+    bary = np.stack([np.rint(b1 * float(BARY_SCALE)), np.rint(b2 * float(BARY_SCALE))], 1).astype(np.uint16)
     energy = beta.astype(np.float32)
     key_out[~recorded] = 0
     bary[~recorded] = 0
@@ -232,38 +229,3 @@ class ScatterCL:
         if self._pool is None or len(self._pool[0]) < m:
             self._pool = [np.empty((max(m, 1),) + shape, dtype) for dtype, shape in self._OUTPUTS]
         return [a[:m] for a in self._pool]
-
-
-def device_table(ctx, a: np.ndarray, dtype):
-    """A read-only device copy of a table (one element of zeros stands in for an empty one)."""
-    import pyopencl as cl
-
-    a = np.ascontiguousarray(a, dtype=dtype)
-    return cl.Buffer(ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
-                     hostbuf=a if a.size else np.zeros(1, dtype))
-
-
-def device_input(ctx, a: np.ndarray):
-    """A read-only device buffer over the host array (PoCL's CPU device uses host memory directly)."""
-    import pyopencl as cl
-
-    return cl.Buffer(ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=np.ascontiguousarray(a))
-
-
-def device_output(ctx, a: np.ndarray):
-    """A write-only device buffer over the host array ``a``; :func:`read_back` makes it current."""
-    import pyopencl as cl
-
-    return cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=a)
-
-
-def read_back(queue, arrays, buffers) -> None:
-    """Wait for the kernel and make the host arrays behind ``buffers`` current (map, unmap)."""
-    import pyopencl as cl
-
-    for a, b in zip(arrays, buffers):
-        mapped, _ = cl.enqueue_map_buffer(queue, b, cl.map_flags.READ, 0, a.shape, a.dtype)
-        if mapped.__array_interface__["data"][0] != a.__array_interface__["data"][0]:
-            a[...] = mapped  # the runtime kept its own copy
-        mapped.base.release(queue)
-    queue.finish()

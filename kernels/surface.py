@@ -8,9 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.scene.elements import locate_in_triangles
-
-from .scatter import LANES, WORK_GROUP, device_input, device_output, read_back
+from .cells import locate_in_triangles
+from .context import LANES, WORK_GROUP, device_input, device_output, read_back
 
 
 def lookup_reference(tri_n, tri_offset, element_irradiance, tri, u, v):

@@ -9,17 +9,14 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from kernels.record_layout import BARY_SCALE, DIRECT_BIT, ELEMENT_BITS, ELEMENT_MASK, PARITY_BIT  # noqa: F401
+
 from ..errors import LoomError
 
-ELEMENT_BITS = 30
-ELEMENT_MASK = (1 << ELEMENT_BITS) - 1  # key bits 0-29: element id
-PARITY_BIT = np.uint32(1 << 30)  # key bit 30: photon index is odd
-DIRECT_BIT = np.uint32(1 << 31)  # key bit 31: first hit from a light
-BARY_SCALE = 65535  # b1, b2 fixed point; b0 = 1 - b1 - b2
 FIELDS = (("key", np.uint32, 1), ("bary", np.uint16, 2), ("energy", np.float32, 3))
 RECORD_BYTES = 20
 assert sum(np.dtype(t).itemsize * k for _, t, k in FIELDS) == RECORD_BYTES, "record is 20 bytes"
-CATEGORIES = ("indirect_even", "indirect_odd", "direct_even", "direct_odd")  # key >> 30
+CATEGORIES = ("indirect_even", "indirect_odd", "direct_even", "direct_odd")  # key >> ELEMENT_BITS
 
 
 def pack_key(element, photon_index, direct) -> np.ndarray:
@@ -28,8 +25,8 @@ def pack_key(element, photon_index, direct) -> np.ndarray:
     if element.size and (element.min() < 0 or element.max() > ELEMENT_MASK):
         raise LoomError(f"element ids must be in [0, {ELEMENT_MASK}]")
     parity = (np.asarray(photon_index) & 1).astype(np.uint32)
-    return (element.astype(np.uint32) | parity << np.uint32(30)
-            | np.asarray(direct, dtype=bool).astype(np.uint32) << np.uint32(31))
+    return (element.astype(np.uint32) | parity << np.uint32(ELEMENT_BITS)
+            | np.asarray(direct, dtype=bool).astype(np.uint32) << np.uint32(ELEMENT_BITS + 1))
 
 
 def records_digest(rows: np.ndarray, *extra: int) -> int:
@@ -195,7 +192,7 @@ def sort_records(key: np.ndarray, bary: np.ndarray, energy: np.ndarray) -> np.nd
         # is 3x faster than argsort and gives the stable order. element << 2 | category is key
         # rotated left by 2 and b1 << 16 | b2 the little-endian pair rotated by 16 (u32 work)
         pair = np.ascontiguousarray(bary, "<u2").view("<u4").reshape(n)  # b1 | b2 << 16
-        packed = ((key << np.uint32(2)) | (key >> np.uint32(30))).astype(np.uint64)
+        packed = ((key << np.uint32(2)) | (key >> np.uint32(ELEMENT_BITS))).astype(np.uint64)
         packed <<= np.uint64(32 + low)
         packed |= ((pair << np.uint32(16)) | (pair >> np.uint32(16))).astype(np.uint64) << np.uint64(low)
         packed |= np.arange(n, dtype=np.uint64)
@@ -205,7 +202,7 @@ def sort_records(key: np.ndarray, bary: np.ndarray, energy: np.ndarray) -> np.nd
         primary = None
     else:
         element = (key & ELEMENT_MASK).astype(np.uint64)
-        primary = ((element << np.uint64(2) | (key >> np.uint32(30)).astype(np.uint64)) << np.uint64(32)
+        primary = ((element << np.uint64(2) | (key >> np.uint32(ELEMENT_BITS)).astype(np.uint64)) << np.uint64(32)
                    | bary[:, 0].astype(np.uint64) << np.uint64(16) | bary[:, 1].astype(np.uint64))
         # Any correct sort gives the same permutation when the primary keys are distinct, so the
         # faster unstable one is used; ties are broken by the energy bits (equal records: any order)
@@ -214,7 +211,7 @@ def sort_records(key: np.ndarray, bary: np.ndarray, energy: np.ndarray) -> np.nd
     if ranked.size > 1 and (ranked[1:] == ranked[:-1]).any():  # ties: break by energy bits
         if primary is None:
             element = (key & ELEMENT_MASK).astype(np.uint64)
-            primary = ((element << np.uint64(2) | (key >> np.uint32(30)).astype(np.uint64)) << np.uint64(32)
+            primary = ((element << np.uint64(2) | (key >> np.uint32(ELEMENT_BITS)).astype(np.uint64)) << np.uint64(32)
                        | bary[:, 0].astype(np.uint64) << np.uint64(16) | bary[:, 1].astype(np.uint64))
         bits = energy.view(np.uint32)
         order = np.lexsort((bits[:, 2], bits[:, 1], bits[:, 0], primary))
@@ -245,7 +242,7 @@ def prepare_records(key, bary, energy, n_elements: int, where: str) -> SortedBat
         np.take(bits[:, c], order, out=rows[2 + c])
     key = rows[0]
     element = key & np.uint32(ELEMENT_MASK)
-    category = (key >> np.uint32(30)).astype(np.intp)
+    category = (key >> np.uint32(ELEMENT_BITS)).astype(np.intp)
     counts = np.bincount(category * n_elements + element, minlength=len(CATEGORIES) * n_elements)
     counts = counts.reshape(len(CATEGORIES), n_elements).astype(np.uint64)
     offsets = np.zeros(n_elements + 1, dtype=np.int64)
