@@ -10,6 +10,7 @@ import numpy as np
 
 from .context import LANES, WORK_GROUP, device_output, read_back
 
+
 def mix64(x: np.ndarray) -> np.ndarray:
     """splitmix64 finaliser on uint64 arrays (wrapping arithmetic)."""
     x = (x ^ (x >> np.uint64(30))) * np.uint64(0xBF58476D1CE4E5B9)

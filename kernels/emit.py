@@ -26,9 +26,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .context import LANES, WORK_GROUP, device_input, device_output, device_table, read_back
 from .philox import EMISSION_STREAM, uniforms
 from .sampling import around, orthonormal_basis, sincos_poly
-from .context import LANES, WORK_GROUP, device_input, device_output, device_table, read_back
 from .scatter import surface_offset
 
 POINT, SPOT, DIRECTIONAL, AREA, SKY = 0, 1, 2, 3, 4

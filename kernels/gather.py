@@ -187,7 +187,8 @@ def _flux(d_table: cl.Buffer, prefix: bool, n_emitted, back, fwd, rows, element_
     back_t, fwd_t = (np.ascontiguousarray(a.T) for a in (back, fwd))  # (E, n_out)
     kernel("gather", "vertex_window_flux")(
         queue, (n_vertices,), None, d_table, _upload(ctx, cum_n), _upload(ctx, back_t), _upload(ctx, fwd_t),
-        _upload(ctx, rows.astype(np.int32)), _upload(ctx, voffsets), _upload(ctx, slots), np.int32(n_vertices), np.int32(n_elements), np.int32(n_parity), np.int32(len(n_emitted) + prefix),
+        _upload(ctx, rows.astype(np.int32)), _upload(ctx, voffsets), _upload(ctx, slots), np.int32(n_vertices),
+        np.int32(n_elements), np.int32(n_parity), np.int32(len(n_emitted) + prefix),
         np.int32(len(rows)), np.int32(prefix), d_out)
     cl.enqueue_copy(queue, out, d_out)
     return np.moveaxis(out, 0, 2)  # (n_out, P, V, 4), a view

@@ -9,6 +9,8 @@ import sys
 
 import click
 
+from kernels.context import DeviceError
+
 from .config import RenderConfig as _RenderConfig
 from .errors import LoomError
 
@@ -24,6 +26,9 @@ class _LoomGroup(click.Group):
             return super().invoke(ctx)
         except LoomError as err:
             click.echo(f"loom: error: {err}", err=True)
+            sys.exit(2)
+        except DeviceError as err:  # the machine, not the input or a bug: one line too
+            click.echo(f"loom: error: OpenCL: {err}", err=True)
             sys.exit(2)
 
     def main(self, *args, **kwargs):
@@ -309,17 +314,23 @@ def bench_photons(scenes, photons, workers, memory_photons) -> None:
         memory_photons=memory_photons, echo=click.echo)
 
 from .cli_aqm import aqm_command, bench_aqm  # noqa: E402
+
 main.add_command(aqm_command, "aqm")
 bench.add_command(bench_aqm, "aqm")
 
 from .benchmarks.frame import bench_frame  # noqa: E402
+
 bench.add_command(bench_frame, "frame")
 
 from .benchmarks.temporal import bench_temporal  # noqa: E402
+
 bench.add_command(bench_temporal, "temporal")
 from .benchmarks.noise import bench_noise  # noqa: E402
+
 bench.add_command(bench_noise, "noise")
 from .benchmarks.render import bench_render  # noqa: E402
+
 bench.add_command(bench_render, "render")
 from .benchmarks.error import bench_error  # noqa: E402
+
 bench.add_command(bench_error, "error")

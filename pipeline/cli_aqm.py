@@ -11,7 +11,7 @@ import time
 import click
 import numpy as np
 
-from .aqm import G_SP, AQM_SIZE, ViewingConditions, aqm, image_velocity, pixels_per_frame_to_deg_per_s
+from .aqm import AQM_SIZE, G_SP, ViewingConditions, aqm, image_velocity, pixels_per_frame_to_deg_per_s
 from .aqm.visualize import difference_picture
 from .errors import LoomError
 

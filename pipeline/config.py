@@ -14,7 +14,6 @@ from dataclasses import dataclass, fields
 
 from .errors import ConfigError
 
-
 STAGES = ("photons", "collection", "filter", "segments")
 
 

@@ -37,11 +37,22 @@ from typing import Callable, Iterator
 
 import numpy as np
 
-from .cluster import result as wait_result, run_tasks
+from .cluster import result as wait_result
+from .cluster import run_tasks
 from .config import RenderConfig, stable_digest
 from .segment_records import SegmentRecord, read_record, write_record
-from .segments import (Placement, calibrated_start, clamp_n_frame, doubling_loop, energy_error, fmax_loop, p_me,
-                       photon_targets, pilot_n_frame, place_segment)
+from .segments import (
+    Placement,
+    calibrated_start,
+    clamp_n_frame,
+    doubling_loop,
+    energy_error,
+    fmax_loop,
+    p_me,
+    photon_targets,
+    pilot_n_frame,
+    place_segment,
+)
 
 CHUNK_FRAMES = 16  # frames per reconstruction task: fixed, so the gather's bits never depend on workers
 
@@ -436,7 +447,8 @@ class SegmentRun:
             ready[chunk_of[future]] = result
             while following in ready:
                 for key, ckw in take(ready.pop(following), calls[following][1]["frames"]):
-                    composites.append(submit(composite_task, key=key, retries=TASK_RETRIES, pure=False, priority=0, **ckw))
+                    composites.append(submit(composite_task, key=key, retries=TASK_RETRIES, pure=False, priority=0,
+                                             **ckw))
                 following += 1
         self.times["temporal_s"] += time.perf_counter() - t0
         for _, r in completed(self.client, composites):

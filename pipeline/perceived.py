@@ -3,7 +3,8 @@
 The AQM predicts visible differences between two *displayed* frames (Daly 1993 takes cd/m^2), so
 the even/odd renderings I1(K), I2(K) are compared after Ward's visibility-matching tone mapping at
 the frame's adaptation (pipeline/tonemap.py): L_d = m(L_wa) L_w, clipped at the display's white
-Ld_max, whatever look (``--tonemap``) the final frames are shown with. Comparing linear radiance as if 1.0 were 100 cd/m^2 instead judges a dim room as a bright
+Ld_max, whatever look (``--tonemap``) the final frames are shown with. Comparing linear radiance as if 1.0 were
+100 cd/m^2 instead judges a dim room as a bright
 one (sensitivity rises with luminance) and never clips highlights, so it over-states the noise.
 """
 from __future__ import annotations

@@ -276,7 +276,8 @@ def _skipped(job, scene, rays: dict | None, segments_done: list) -> dict:
 
 def _remove_leftovers(out: Path, store_url: str) -> None:
     """Temporary files killed writers left (``.NAME.PID[.ID].partial``, zarr's ``zarr.UUID.partial``)
-    in the output folder and a local photon store: with every frame done, no writer of this run is alive that could still
+    in the output folder and a local photon store: with every frame done, no writer of this run is alive that
+    could still
     rename one into place (zarr never reads them either way)."""
     from .store import remove_partials
 

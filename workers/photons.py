@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from kernels.emit import AREA, EmitCL, emit_reference
-from kernels.scatter import KIND_CODE, Hits, SceneTables, ScatterCL, scatter_reference
+from kernels.scatter import KIND_CODE, Hits, ScatterCL, SceneTables, scatter_reference
 from pipeline.scene import ElementMesh, FrameState
 from pipeline.scene.shading import SurfaceShading
 

@@ -15,10 +15,24 @@ import numpy as np
 
 from ..errors import LoomError
 from .bands import decompose
-from .csf import (G_SP, luminance_bank, luminance_coordinate, retinal_velocity, space_variant_filter,
-                  velocity_bank, velocity_coordinate)
-from .display import (ViewingConditions, aqm_shape, check_image, check_luminance, display_luminance,
-                      relative_luminance, resample)
+from .csf import (
+    G_SP,
+    luminance_bank,
+    luminance_coordinate,
+    retinal_velocity,
+    space_variant_filter,
+    velocity_bank,
+    velocity_coordinate,
+)
+from .display import (
+    ViewingConditions,
+    aqm_shape,
+    check_image,
+    check_luminance,
+    display_luminance,
+    relative_luminance,
+    resample,
+)
 from .masking import mutual_masking
 from .nonlinearity import local_adaptation, nonlinear_contrast
 from .psychometric import BETA, P_THRESHOLD, d_aqm, detection_probability

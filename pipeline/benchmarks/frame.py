@@ -4,7 +4,8 @@ For each scene (the built-in ROOM and ATRIUM, or the files given), one frame fro
 the timeline is rendered at the given resolution and spp in this process, pinned to one core.
 The indirect map is a constant (the compositor's cost does not depend on its values). Raw
 embreex speed is measured in the same run on the same triangles: the frame's pixel-centre camera
-rays, cast in one ``EmbreeScene.run`` call, alternating with the compositor's renders. The compositor's rays/s counts every ray it casts
+rays, cast in one ``EmbreeScene.run`` call, alternating with the compositor's renders. The compositor's
+rays/s counts every ray it casts
 (camera, shadow, area, reflection) over the whole frame time, so the ratio is the cost of
 everything that is not Embree. Target: at least 50 % of raw.
 """

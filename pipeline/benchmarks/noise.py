@@ -138,7 +138,7 @@ def run(photons=(10_000, 20_000, 40_000, 80_000), *, fmax: int = 30, width: int 
             adaptation = mesh_adaptation(state, mesh, direct + shown, width / height)
             images = {name: pair(m.irradiance) for name, m in (("adaptive", lit), ("filter", filt), ("fixed", fixed))}
 
-            def disp(name):
+            def disp(name, images=images, adaptation=adaptation):
                 a, b = images[name]
                 return displayed_difference(a.beauty, b.beauty, adaptation, aqm_size=config.aqm_size).d_aqm
 

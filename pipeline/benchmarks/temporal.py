@@ -130,8 +130,14 @@ def _window_kernels(sums, n_emitted, back, fwd, rows, mesh, repeat: int = 3) -> 
 
 def run(trace_frames: int = 3, numpy_frames: int = 4, echo=click.echo) -> dict:
     from kernels.filter import adaptive_filter_cl, adaptive_filter_reference, neighbourhood
-    from kernels.gather import (element_sums_cl, element_sums_reference, gather_flux_cl, irradiance,
-                                window_flux_cl, window_flux_reference)
+    from kernels.gather import (
+        element_sums_cl,
+        element_sums_reference,
+        gather_flux_cl,
+        irradiance,
+        window_flux_cl,
+        window_flux_reference,
+    )
     from kernels.temporal import windows_cl, windows_reference
     from pipeline.config import RenderConfig
 

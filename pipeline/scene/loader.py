@@ -72,7 +72,8 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
             continue
         p = cam.perspective
         if not (p.yfov and 0 < p.yfov < np.pi and p.znear and p.znear > 0):
-            raise doc.error(f"yfov {p.yfov} and znear {p.znear} must be positive (yfov < pi)", f"cameras[{i}].perspective")
+            raise doc.error(f"yfov {p.yfov} and znear {p.znear} must be positive (yfov < pi)",
+                            f"cameras[{i}].perspective")
         cameras.append(CameraDef(cam.name or f"camera{i}", float(p.yfov), float(p.znear),
                                  float(p.zfar) if p.zfar else None,
                                  float(p.aspectRatio) if p.aspectRatio else None))
@@ -175,7 +176,8 @@ def _check_material(doc, m, i: int) -> None:
     pbr = m.pbrMetallicRoughness
     if pbr is not None:
         if pbr.baseColorFactor is not None and len(pbr.baseColorFactor) not in (3, 4):
-            raise doc.error(f"must be 4 numbers, got {len(pbr.baseColorFactor)}", f + ".pbrMetallicRoughness.baseColorFactor")
+            raise doc.error(f"must be 4 numbers, got {len(pbr.baseColorFactor)}",
+                            f + ".pbrMetallicRoughness.baseColorFactor")
         for name in ("metallicFactor", "roughnessFactor"):
             value = getattr(pbr, name)
             if value is not None and not 0 <= value <= 1:

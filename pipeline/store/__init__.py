@@ -82,10 +82,20 @@ Illumination maps (``illumination/``, pipeline/store/illumination.py) live in th
 Modules: ``records`` (the record, validation, total order; pure NumPy), ``photon_store`` (zarr),
 ``illumination`` (the per-frame maps).
 """
-from .photon_store import (remove_partials, BATCH_FIELDS, DONE_MAGIC, FORMAT, FORMAT_VERSION, RECORD_CHUNK,
-                           PhotonStore)
-from .records import (BARY_SCALE, CATEGORIES, DIRECT_BIT, ELEMENT_BITS, ELEMENT_MASK, PARITY_BIT,
-                      RECORD_BYTES, FrameRecords, pack_key, records_digest, sort_records)
+from .photon_store import BATCH_FIELDS, DONE_MAGIC, FORMAT, FORMAT_VERSION, RECORD_CHUNK, PhotonStore, remove_partials
+from .records import (
+                           BARY_SCALE,
+                           CATEGORIES,
+                           DIRECT_BIT,
+                           ELEMENT_BITS,
+                           ELEMENT_MASK,
+                           PARITY_BIT,
+                           RECORD_BYTES,
+                           FrameRecords,
+                           pack_key,
+                           records_digest,
+                           sort_records,
+)
 
 __all__ = ["remove_partials", "BARY_SCALE", "BATCH_FIELDS", "CATEGORIES", "DIRECT_BIT", "DONE_MAGIC", "ELEMENT_BITS",
            "ELEMENT_MASK", "FORMAT", "FORMAT_VERSION", "PARITY_BIT", "RECORD_BYTES",

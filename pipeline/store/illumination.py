@@ -26,7 +26,7 @@ import zarr
 import zarr.errors
 
 from ..errors import LoomError
-from .photon_store import FLAT_KEYS, _file_stamp, _Raw, _encode_rows, local_path, make_store, table_codec
+from .photon_store import FLAT_KEYS, _encode_rows, _file_stamp, _Raw, local_path, make_store, table_codec
 
 GROUP = "illumination"
 _SHARED: dict = {}  # (path, mode) -> (metadata stamps, IlluminationMaps): IlluminationMaps.open_shared

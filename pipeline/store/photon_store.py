@@ -4,11 +4,11 @@ from __future__ import annotations
 import json
 import logging
 import os
-from collections import OrderedDict
 import re
 import time
 import urllib.parse
 import urllib.request
+from collections import OrderedDict
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,9 +22,20 @@ from zarr.core.sync import sync
 from zarr.storage import FsspecStore, LocalStore
 
 from ..errors import LoomError
-from .records import (BARY_SCALE, CATEGORIES, ELEMENT_MASK, FIELDS, RECORD_BYTES, FrameRecords,
-                      SortedBatch, as_int, prepare_records, records_digest, unpack_records,
-                      valid_records)
+from .records import (
+    BARY_SCALE,
+    CATEGORIES,
+    ELEMENT_MASK,
+    FIELDS,
+    RECORD_BYTES,
+    FrameRecords,
+    SortedBatch,
+    as_int,
+    prepare_records,
+    records_digest,
+    unpack_records,
+    valid_records,
+)
 
 log = logging.getLogger(__name__)
 FORMAT = "photonloom.photons"
@@ -221,7 +232,7 @@ def _open_root(store, where: str, mode: str):
         return zarr.open_group(store=store, mode=mode)
     except (zarr.errors.GroupNotFoundError, FileNotFoundError):
         if _list_dir(store, ""):
-            raise LoomError("exists and is not a photon store (not a zarr group)", path=where)
+            raise LoomError("exists and is not a photon store (not a zarr group)", path=where) from None
         return None
     except zarr.errors.ContainsArrayError:
         raise LoomError("is a zarr array, not a photon store", path=where) from None

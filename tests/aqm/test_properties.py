@@ -3,11 +3,10 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from aqm_data import SIZE, grating, monte_carlo, smooth_noise, threshold_contrast
 
 from pipeline.aqm import ViewingConditions, aqm, aqm_luminance
 from pipeline.aqm.csf import daly_csf
-
-from aqm_data import SIZE, grating, monte_carlo, smooth_noise, threshold_contrast
 
 FREQUENCIES = (0.5, 1, 2, 4, 8, 16)
 

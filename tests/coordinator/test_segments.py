@@ -9,8 +9,20 @@ import numpy as np
 import pytest
 
 from pipeline.config import RenderConfig
-from pipeline.segments import (calibrated_start, clamp_n_frame, doubling_loop, end_frames, energy_error, fmax_loop, grow_fmax,
-                               next_n_frame, p_me, photon_targets, pilot_n_frame, place_segment)
+from pipeline.segments import (
+    calibrated_start,
+    clamp_n_frame,
+    doubling_loop,
+    end_frames,
+    energy_error,
+    fmax_loop,
+    grow_fmax,
+    next_n_frame,
+    p_me,
+    photon_targets,
+    pilot_n_frame,
+    place_segment,
+)
 from pipeline.temporal import collection_windows
 
 

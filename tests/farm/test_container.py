@@ -227,7 +227,8 @@ def test_dockerfile_steps_in_a_fresh_venv(tmp_path):
     env = {**env, **env_of(ins), "PATH": f"{bindir}{os.pathsep}{env.get('PATH', '')}", "VIRTUAL_ENV": str(venv)}
     env["POCL_CACHE_DIR"] = str(tmp_path / "pocl")
     env["XDG_CACHE_HOME"] = str(tmp_path / "cache")
-    where = _run([str(py), "-c", "import kernels, pipeline, workers, pathlib; k = pathlib.Path(kernels.__file__).parent;"
+    where = _run([str(py), "-c", "import kernels, pipeline, workers, pathlib; "
+                  "k = pathlib.Path(kernels.__file__).parent;"
                   "print(k); print(*sorted(p.name for p in k.glob('*.cl')))"], work, env).stdout.splitlines()
     assert Path(where[0]).is_relative_to(venv), where  # the installed package, not the checkout
     assert set(where[1].split()) == {p.name for p in (ROOT / "kernels").glob("*.cl")}  # the wheel has the kernels

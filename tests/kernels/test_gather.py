@@ -8,8 +8,15 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from kernels.gather import (element_sums_cl, element_sums_reference, frame_sums_flux_cl, gather_flux_cl, irradiance,
-                            window_flux_cl, window_flux_reference)
+from kernels.gather import (
+    element_sums_cl,
+    element_sums_reference,
+    frame_sums_flux_cl,
+    gather_flux_cl,
+    irradiance,
+    window_flux_cl,
+    window_flux_reference,
+)
 from pipeline.errors import LoomError
 from workers.reconstruct import vertex_irradiance
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from kernels.scatter import DIRECT_BIT, PARITY_BIT, Hits, SceneTables, ScatterCL, scatter_reference
+from kernels.scatter import DIRECT_BIT, PARITY_BIT, Hits, ScatterCL, SceneTables, scatter_reference
 
 
 def _tables(rng, n_tri=50, kinds=(0, 1, 2)) -> SceneTables:
@@ -79,7 +79,8 @@ def test_bounce_properties(rng):
 
 
 def test_record_constants_match_the_store():
-    from pipeline.store import DIRECT_BIT as STORE_DIRECT, PARITY_BIT as STORE_PARITY
+    from pipeline.store import DIRECT_BIT as STORE_DIRECT
+    from pipeline.store import PARITY_BIT as STORE_PARITY
 
     assert DIRECT_BIT == STORE_DIRECT and PARITY_BIT == STORE_PARITY
 

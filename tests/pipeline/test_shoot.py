@@ -1,7 +1,6 @@
 """`loom shoot`: camera-only sharing, appending batches, resume after a kill, refusals, bad input."""
 from __future__ import annotations
 
-import os
 import signal
 import subprocess
 import sys
@@ -12,7 +11,6 @@ import pytest
 from click.testing import CliRunner
 
 from pipeline.cli import main
-from pipeline.config import RenderConfig
 from pipeline.errors import LoomError
 from pipeline.scene.builtin import write_builtin
 from pipeline.shoot import shoot

@@ -8,11 +8,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.scene import ElementMesh, Scene
 from kernels.camera import camera_rays_reference
-from workers.composite import frame_key, render_frame
-
+from pipeline.scene import ElementMesh, Scene
 from tests.render.scenes import EYE, LAMP, area_scene, mirror_scene, plane_scene
+from workers.composite import frame_key, render_frame
 
 W, H, SPP = 40, 30, 4
 

@@ -22,11 +22,10 @@ from pipeline.scene.builtin.gltf_builder import GltfBuilder
 from pipeline.scene.builtin.shapes import look_at, merge, quad
 from pipeline.scene.default_lights import SUN_COLOR, SUN_ELEVATION, SUN_IRRADIANCE, default_sun
 from pipeline.scene.sky import Sky
+from tests.render.scenes import UP_FACES, quad_y
 from workers.composite import frame_key, render_frame
 from workers.photons import trace_batch
 from workers.reconstruct import vertex_irradiance
-
-from tests.render.scenes import UP_FACES, quad_y
 
 ALBEDO = np.array([0.5, 0.6, 0.7])
 ZENITH = (0.2, 0.3, 0.4)
@@ -203,7 +202,8 @@ def test_photon_furnace_with_a_uniform_sky(tmp_path):
     n, batches = 50_000, 8
     total = _triangle_irradiance(state, elements, n, batches, max_depth=16)
     direct = _triangle_irradiance(state, elements, n, batches, direct=True, max_depth=16)
-    faces = lambda e: e.reshape(batches, -1, 2, 3).sum(axis=2) / 2.0  # two equal triangles a face
+    def faces(e):  # two equal triangles a face
+        return e.reshape(batches, -1, 2, 3).sum(axis=2) / 2.0
     expected = np.pi * np.array(level)
     _within_noise(faces(total), np.broadcast_to(expected, (len(state.faces) // 2, 3)), floor=0.03)
     concave = faces(direct).mean(axis=0)[list(CONCAVE)]

@@ -5,8 +5,17 @@ import numpy as np
 import pytest
 
 from pipeline.errors import LoomError
-from pipeline.tonemap import (KEY, ToneMapping, aces_filmic, display_linear, log_average, smooth_adaptation,
-                              srgb_encode, tonemap, ward_scale)
+from pipeline.tonemap import (
+    KEY,
+    ToneMapping,
+    aces_filmic,
+    display_linear,
+    log_average,
+    smooth_adaptation,
+    srgb_encode,
+    tonemap,
+    ward_scale,
+)
 
 
 def test_ward_scale_closed_form():

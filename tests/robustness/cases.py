@@ -334,7 +334,8 @@ def scene_cases() -> list[Case]:
         Case("light type area", E, "type", glb(_set("extensions.KHR_lights_punctual.lights.0.type", "area"))),
         Case("metallicFactor 2", E, "metallicFactor", glb(lambda d, b: d["materials"][0].setdefault(
             "pbrMetallicRoughness", {}).update(metallicFactor=2.0))),
-        Case("no light at all, --light none", E, "no light", glb(lambda d, b: _no_light_emissive([0.0, 0.0, 0.0])(d, b)),
+        Case("no light at all, --light none", E, "no light",
+             glb(lambda d, b: _no_light_emissive([0.0, 0.0, 0.0])(d, b)),
              info_args=["--light", "none"], render_args=["--light", "none"]),
         Case("no light at all: the default sun and sky", OK, "",
              glb(lambda d, b: _no_light_emissive([0.0, 0.0, 0.0])(d, b))),

@@ -16,8 +16,7 @@ import pytest
 
 from pipeline.errors import LoomError
 from pipeline.scene import Scene
-from pipeline.scene.builtin import BUILTIN_SCENES, write_builtin
-from pipeline.scene.builtin import atrium, room, shapes
+from pipeline.scene.builtin import BUILTIN_SCENES, atrium, room, shapes, write_builtin
 from pipeline.scene.builtin.element_estimate import GltfData, estimate_elements, world_triangles
 from pipeline.scene.builtin.gltf_builder import GltfBuilder
 

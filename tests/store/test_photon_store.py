@@ -8,11 +8,10 @@ import time
 import numpy as np
 import pytest
 import zarr
-
 from photonstore_helpers import IDENTITY, contents, make_batch, snapshot, write_frame
+
 from pipeline.errors import LoomError
-from pipeline.store import (CATEGORIES, ELEMENT_MASK, RECORD_BYTES, FrameRecords, PhotonStore,
-                            pack_key, sort_records)
+from pipeline.store import CATEGORIES, ELEMENT_MASK, RECORD_BYTES, FrameRecords, PhotonStore, pack_key, sort_records
 
 N_ELEMENTS = 500
 

@@ -11,9 +11,8 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from photonstore_helpers import IDENTITY, contents, make_batch, write_frame, write_frame_task
 
-from photonstore_helpers import (IDENTITY, contents, make_batch, write_frame,
-                                 write_frame_task)
 from pipeline.store import PhotonStore, sort_records
 
 N_ELEMENTS = 2000

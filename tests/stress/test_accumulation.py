@@ -25,7 +25,7 @@ from pipeline.store import PhotonStore
 from pipeline.store.illumination import IlluminationMaps
 
 N = 100_000_000
-I, RHO, H, A = 5.0, 0.9, 1.0, 0.25  # intensity, mirror reflectance, tile height over the light, tile half-side
+I, RHO, H, A = 5.0, 0.9, 1.0, 0.25  # noqa: E741 (intensity, mirror reflectance, tile height, half-side)
 
 
 def _rect_solid_angle(a, h):

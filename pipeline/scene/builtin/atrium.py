@@ -142,7 +142,8 @@ def _add_moving_objects(b: GltfBuilder) -> None:
     heights = [0.1, 0.1, GALLERY_Y, GALLERY_Y, 0.1, 0.1]
     b.add_animation("lift_ride", lift, "translation", lift_keys, [[14.5, h, 5.0] for h in heights])
 
-    shade = b.add_node("skylight_shade", b.add_mesh("skylight_shade", *shapes.box((2.0, 0.05, 3.0), cell=0.5), material=grey))
+    shade = b.add_node("skylight_shade", b.add_mesh("skylight_shade", *shapes.box((2.0, 0.05, 3.0), cell=0.5),
+                                                     material=grey))
     parked, covering = (3.0, HEIGHT - 0.2, 6.5), (9.0, HEIGHT - 0.2, 6.5)
     b.add_animation("shade_steps", shade, "translation", [TIMELINE.time(f) for f in (1, 151, 226)],
                     [parked, covering, parked], interpolation="STEP")
