@@ -40,17 +40,23 @@ def _hits(rng, tables, m) -> Hits:
                 rng.random((m, 3)) * 10.0, photon.astype(np.int64))
 
 
+def _kernel_equals_reference(tables, hits, depth, key):
+    """The bounce on PoCL against its NumPy twin: integers and flags bit for bit, floats to 1e-6."""
+    cl = ScatterCL(tables)(hits, depth, key)
+    ref = scatter_reference(tables, hits, depth, key)
+    for name in ("key", "bary", "energy", "recorded", "alive"):
+        np.testing.assert_array_equal(getattr(cl, name), getattr(ref, name), err_msg=name)
+    for name in ("origins", "dirs", "beta"):
+        np.testing.assert_allclose(getattr(cl, name), getattr(ref, name), rtol=1e-6, atol=1e-6, err_msg=name)
+    return cl
+
+
 @pytest.mark.parametrize("depth", [0, 1, 7])
 @pytest.mark.parametrize("m", [1, 63, 64, 1000, 5000])
 def test_kernel_equals_reference(rng, depth, m):
     tables = _tables(rng)
     hits = _hits(rng, tables, m)
-    cl = ScatterCL(tables)(hits, depth, (123, 456))
-    ref = scatter_reference(tables, hits, depth, (123, 456))
-    for name in ("key", "bary", "energy", "recorded", "alive"):
-        np.testing.assert_array_equal(getattr(cl, name), getattr(ref, name), err_msg=name)
-    for name in ("origins", "dirs", "beta"):
-        np.testing.assert_allclose(getattr(cl, name), getattr(ref, name), rtol=1e-6, atol=1e-6, err_msg=name)
+    cl = _kernel_equals_reference(tables, hits, depth, (123, 456))
     assert (((cl.key[cl.recorded] & DIRECT_BIT) != 0) == (depth == 0)).all()
     odd = (hits.photon % 2 == 1) & cl.recorded
     assert ((cl.key[odd] & PARITY_BIT) != 0).all()
@@ -104,12 +110,7 @@ def _textured_smooth_hits(rng, tables, m) -> Hits:
 def test_kernel_equals_reference_with_textures_and_shading_normals(rng, depth, m):
     tables = _tables(rng)
     hits = _textured_smooth_hits(rng, tables, m)
-    cl = ScatterCL(tables)(hits, depth, (9, 10))
-    ref = scatter_reference(tables, hits, depth, (9, 10))
-    for name in ("key", "bary", "energy", "recorded", "alive"):
-        np.testing.assert_array_equal(getattr(cl, name), getattr(ref, name), err_msg=name)
-    for name in ("origins", "dirs", "beta"):
-        np.testing.assert_allclose(getattr(cl, name), getattr(ref, name), rtol=1e-6, atol=1e-6, err_msg=name)
+    _kernel_equals_reference(tables, hits, depth, (9, 10))
 
 
 def test_bounce_follows_the_hit_albedo_and_shading_normal(rng):
