@@ -2,9 +2,9 @@
 from __future__ import annotations
 
 import numpy as np
-import pytest
 
 from kernels.emit import AREA, DIRECTIONAL, POINT, SKY, SPOT, EmissionTables, EmitCL, emit_reference
+from tests.kernels.twin_base import KernelTwinTests
 
 
 def _tables(rng, kinds=(POINT, SPOT, DIRECTIONAL, AREA)) -> EmissionTables:
@@ -33,16 +33,25 @@ def _tables(rng, kinds=(POINT, SPOT, DIRECTIONAL, AREA)) -> EmissionTables:
         corners=corners, normals=nrm, center=rng.normal(size=3), radius=3.0, epsilon=1e-4)
 
 
-@pytest.mark.parametrize("kinds", [(POINT,), (SPOT,), (DIRECTIONAL,), (AREA,), (SKY,),
-                                   (POINT, SPOT, DIRECTIONAL, AREA, SKY)])
-@pytest.mark.parametrize("n", [1, 100, 4097])
-def test_kernel_equals_reference(rng, kinds, n):
-    tables = _tables(rng, kinds)
-    photon = rng.integers(0, 2**40, n).astype(np.int64)
-    cl = EmitCL(tables)(photon, (9, 4))
-    ref = emit_reference(tables, photon, (9, 4))
-    for a, b, name in zip(cl, ref, ("origins", "dirs", "weights", "emitter")):
-        np.testing.assert_array_equal(a, b, err_msg=name)
+class TestEmitTwin(KernelTwinTests):
+    """``emit8`` against :func:`emit_reference`: origins, directions, weights and emitters to the bit."""
+
+    ALL = (POINT, SPOT, DIRECTIONAL, AREA, SKY)
+    # (emitter kinds, photons): each kind alone, then all mixed at 0, 1, 7 (fewer than LANES) and
+    # sizes that are not a multiple of LANES x WORK_GROUP = 512
+    cases = {"point-100": ((POINT,), 100), "spot-513": ((SPOT,), 513), "directional-100": ((DIRECTIONAL,), 100),
+             "area-513": ((AREA,), 513), "sky-100": ((SKY,), 100), "mixed-0": (ALL, 0), "mixed-1": (ALL, 1),
+             "mixed-7": (ALL, 7), "mixed-4097": (ALL, 4097)}
+
+    def make_inputs(self, rng, case):
+        kinds, n = case
+        return _tables(rng, kinds), rng.integers(0, 2**40, n).astype(np.int64), (9, 4)
+
+    def device(self, tables, photon, key):
+        return EmitCL(tables)(photon, key)
+
+    def twin(self, tables, photon, key):
+        return emit_reference(tables, photon, key)
 
 
 def test_emitted_flux_is_unbiased(rng):

@@ -5,8 +5,9 @@ import numpy as np
 import pyopencl as cl
 import pytest
 
-from kernels.context import device_context
+from kernels.context import SOURCE_DIR, device_context, expanded_source
 from kernels.philox import philox4x32_10, uniforms
+from tests.kernels.twin_base import KernelTwinTests
 
 # Known-answer vectors of Random123 (kat_vectors, philox4x32_10)
 KAT = [
@@ -23,25 +24,44 @@ def test_known_answers(counter, key, expected):
     assert tuple(int(x) for x in out) == expected
 
 
-def test_opencl_equals_numpy(rng):
-    ctx, queue = device_context()
-    src = """
+def _counters(rng, n):
+    """``n`` random (n, 4) uint32 counters, the known-answer ones first."""
+    counters = rng.integers(0, 2**32, size=(n, 4), dtype=np.uint64).astype(np.uint32)
+    k = min(n, len(KAT))
+    counters[:k] = np.array([c for c, _, _ in KAT[:k]], np.uint32).reshape(k, 4)
+    return counters
+
+
+class TestPhiloxTwin(KernelTwinTests):
+    """``philox4x32_10`` of philox.cl against :func:`philox4x32_10`, to the bit."""
+
+    cases = {"0": (0, (0xDEADBEEF, 7)), "1": (1, (0, 0)), "3": (3, (0xFFFFFFFF, 0xFFFFFFFF)),
+             "4097": (4097, (0xDEADBEEF, 7))}
+    SOURCE = """
     #include "philox.cl"
     __kernel void draw(__global const uint4 *c, const uint k0, const uint k1, __global uint4 *out) {
         size_t i = get_global_id(0);
         out[i] = philox4x32_10(c[i], (uint2)(k0, k1));
     }"""
-    from kernels.context import SOURCE_DIR
 
-    prg = cl.Program(ctx, src).build(options=["-I", str(SOURCE_DIR)])
-    counters = rng.integers(0, 2**32, size=(4096, 4), dtype=np.uint64).astype(np.uint32)
-    counters[:3] = [c for c, _, _ in KAT]
-    buf = cl.Buffer(ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=counters)
-    out = np.empty_like(counters)
-    out_buf = cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY, out.nbytes)
-    cl.Kernel(prg, "draw")(queue, (len(counters),), None, buf, np.uint32(0xDEADBEEF), np.uint32(7), out_buf)
-    cl.enqueue_copy(queue, out, out_buf)
-    np.testing.assert_array_equal(out, philox4x32_10(counters, (0xDEADBEEF, 7)))
+    def make_inputs(self, rng, case):
+        n, key = case
+        return _counters(rng, n), key
+
+    def device(self, counters, key):
+        out = np.empty_like(counters)
+        if len(counters) == 0:
+            return out
+        ctx, queue = device_context()
+        prg = cl.Program(ctx, self.SOURCE).build(options=["-I", str(SOURCE_DIR)])
+        buf = cl.Buffer(ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=counters)
+        out_buf = cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY, out.nbytes)
+        cl.Kernel(prg, "draw")(queue, (len(counters),), None, buf, np.uint32(key[0]), np.uint32(key[1]), out_buf)
+        cl.enqueue_copy(queue, out, out_buf)
+        return out
+
+    def twin(self, counters, key):
+        return philox4x32_10(counters, key)
 
 
 def test_uniforms_are_uniform_and_in_range():
@@ -54,12 +74,13 @@ def test_uniforms_are_uniform_and_in_range():
     assert not np.array_equal(uniforms(np.arange(10), 3, (1, 2)), uniforms(np.arange(10), 4, (1, 2)))
 
 
-def test_eight_lane_philox_equals_numpy(rng):
-    """PHILOX8_10 (lanes.cl), what the emission and bounce kernels use, lane by lane."""
-    from kernels.context import expanded_source
+class TestEightLanePhiloxTwin(TestPhiloxTwin):
+    """PHILOX8_10 (lanes.cl), what the emission and bounce kernels use, lane by lane; a count that
+    is not a multiple of the 8 lanes is padded with zero counters."""
 
-    ctx, queue = device_context()
-    src = expanded_source("lanes") + """
+    cases = {"1": (1, (5, 0xFFFFFFFF)), "8": (8, (0, 0)), "13": (13, (5, 0xFFFFFFFF)),
+             "512": (512, (5, 0xFFFFFFFF)), "517": (517, (0xDEADBEEF, 7))}
+    SOURCE = """
     __kernel void draw8(__global const uint *c, const uint k0, const uint k1, __global uint *out) {
         const size_t g = get_global_id(0);
         uint8 c0 = vload8(0, c + 32 * g), c1 = vload8(0, c + 32 * g + 8);
@@ -68,14 +89,18 @@ def test_eight_lane_philox_equals_numpy(rng):
         vstore8(c0, 0, out + 32 * g); vstore8(c1, 0, out + 32 * g + 8);
         vstore8(c2, 0, out + 32 * g + 16); vstore8(c3, 0, out + 32 * g + 24);
     }"""
-    prg = cl.Program(ctx, src).build()
-    counters = rng.integers(0, 2**32, size=(512, 4), dtype=np.uint64).astype(np.uint32)
-    counters[:3] = [c for c, _, _ in KAT]
-    planar = np.ascontiguousarray(counters.reshape(64, 8, 4).transpose(0, 2, 1))  # (group, word, lane)
-    buf = cl.Buffer(ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=planar)
-    out = np.empty_like(planar)
-    out_buf = cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY, out.nbytes)
-    cl.Kernel(prg, "draw8")(queue, (64,), None, buf, np.uint32(5), np.uint32(0xFFFFFFFF), out_buf)
-    cl.enqueue_copy(queue, out, out_buf)
-    got = out.transpose(0, 2, 1).reshape(512, 4)
-    np.testing.assert_array_equal(got, philox4x32_10(counters, (5, 0xFFFFFFFF)))
+
+    def device(self, counters, key):
+        n = len(counters)
+        groups = -(-n // 8)
+        padded = np.zeros((groups * 8, 4), np.uint32)
+        padded[:n] = counters
+        planar = np.ascontiguousarray(padded.reshape(groups, 8, 4).transpose(0, 2, 1))  # (group, word, lane)
+        ctx, queue = device_context()
+        prg = cl.Program(ctx, expanded_source("lanes") + self.SOURCE).build()
+        buf = cl.Buffer(ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR, hostbuf=planar)
+        out = np.empty_like(planar)
+        out_buf = cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY, out.nbytes)
+        cl.Kernel(prg, "draw8")(queue, (groups,), None, buf, np.uint32(key[0]), np.uint32(key[1]), out_buf)
+        cl.enqueue_copy(queue, out, out_buf)
+        return out.transpose(0, 2, 1).reshape(-1, 4)[:n]
