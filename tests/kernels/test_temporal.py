@@ -7,6 +7,7 @@ import pytest
 
 from kernels.temporal import windows_cl, windows_reference
 from pipeline.errors import LoomError
+from tests.kernels.twin_base import KernelTwinTests
 
 MODES = ("adaptive", "fixed", "off")
 
@@ -24,33 +25,64 @@ def poisson_table(rng, frames, elements, scale=4.0):
     return rng.poisson(np.broadcast_to(lam, (frames, elements))).astype(np.uint32)
 
 
-@pytest.mark.parametrize("mode", MODES)
-def test01_random_tables_match_reference(rng, mode):
+def _random_table(rng):
+    """50 frames x 700 elements; some elements change lighting half-way, N_frame doubles at 30."""
     counts = poisson_table(rng, 50, 700)
-    counts[25:, :200] *= 3  # a lighting change half-way for some elements
+    counts[25:, :200] *= 3
     n = np.full(50, 40_000.0)
-    n[30:] = 80_000.0  # N_frame doubles (§5.2.3)
+    n[30:] = 80_000.0
     counts[30:] *= 2
-    for fmax, k in ((30, 2.0), (7, 1.0), (44, 3.0)):
-        both(counts, n, fmax=fmax, mode=mode, k_sigma=k)
-    both(counts, n, fmax=30, mode=mode, smoothing_frames=5, min_extent=4, frames=(10, 20))
+    return counts, n
+
+
+def _adversarial_table(rng, name):
+    return {
+        "all zero": lambda: np.zeros((12, 50), np.uint32),
+        "one frame": lambda: poisson_table(rng, 1, 50),
+        "near 2^31": lambda: (np.uint32(2**31 - 5) - rng.integers(0, 3, (12, 50))).astype(np.uint32),
+        "max u32": lambda: np.full((12, 50), 2**32 - 1, np.uint32),
+        "never hit": lambda: np.concatenate([poisson_table(rng, 12, 25), np.zeros((12, 25), np.uint32)], 1),
+        "no elements": lambda: np.zeros((12, 0), np.uint32),
+        "one element": lambda: poisson_table(rng, 12, 1),
+    }[name]()
+
+
+ADVERSARIAL = ("all zero", "one frame", "near 2^31", "max u32", "never hit", "no elements", "one element")
+
+
+class TestWindowsTwin(KernelTwinTests):
+    """``windows`` (temporal.cl) against :func:`windows_reference`: back and fwd to the bit."""
+
+    # (table, keyword arguments of windows_cl)
+    cases = {**{f"random-{mode}-fmax{fmax}-k{k}": ("random", dict(mode=mode, fmax=fmax, k_sigma=k))
+                for mode in MODES for fmax, k in ((30, 2.0), (7, 1.0), (44, 3.0))},
+             **{f"random-{mode}-subrange": ("random", dict(mode=mode, fmax=30, smoothing_frames=5, min_extent=4,
+                                                           frames=(10, 20))) for mode in MODES},
+             **{f"{name}-{mode}-fmax{fmax}": (name, dict(mode=mode, fmax=fmax))
+                for name in ADVERSARIAL for mode in MODES for fmax in (0, 30, 500)}}
+
+    def make_inputs(self, rng, case):
+        name, kw = case
+        if name == "random":
+            counts, n = _random_table(rng)
+        else:
+            counts = _adversarial_table(rng, name)
+            n = np.full(counts.shape[0], 1000.0)
+        return counts, n, kw
+
+    def device(self, counts, n, kw):
+        return windows_cl(counts, n, **kw)
+
+    def twin(self, counts, n, kw):
+        return windows_reference(counts, n, **kw)
 
 
 @pytest.mark.parametrize("mode", MODES)
-def test02_adversarial_tables_match_reference(rng, mode):
-    n = np.full(12, 1000.0)
-    cases = {
-        "all zero": np.zeros((12, 50), np.uint32),
-        "one frame": poisson_table(rng, 1, 50),
-        "near 2^31": (np.uint32(2**31 - 5) - rng.integers(0, 3, (12, 50))).astype(np.uint32),
-        "max u32": np.full((12, 50), 2**32 - 1, np.uint32),
-        "never hit": np.concatenate([poisson_table(rng, 12, 25), np.zeros((12, 25), np.uint32)], 1),
-        "no elements": np.zeros((12, 0), np.uint32),
-    }
-    for name, counts in cases.items():
-        nn = n[: counts.shape[0]]
+def test02_windows_stay_inside_fmax_and_the_animation(rng, mode):
+    for name in ADVERSARIAL:
+        counts = _adversarial_table(rng, name)
         for fmax in (0, 2, 30, 500):  # 500: F_max far longer than the animation
-            back, fwd = both(counts, nn, fmax=fmax, mode=mode)
+            back, fwd = windows_reference(counts, np.full(counts.shape[0], 1000.0), fmax=fmax, mode=mode)
             f = np.arange(counts.shape[0])[:, None]
             assert (back <= np.minimum(fmax // 2, f)).all(), name
             assert (fwd <= np.minimum(fmax // 2, counts.shape[0] - 1 - f)).all(), name
@@ -116,15 +148,6 @@ def test07_sigma_grows_for_frames_with_fewer_photons():
     counts_same[11:] = 132
     back2, fwd2 = both(counts_same, np.full(30, 1e4), fmax=30, smoothing_frames=1)
     assert fwd2[10, 0] == 1  # only the minimal extent
-
-
-def test08_bitwise_repeatable(rng):
-    counts = poisson_table(rng, 60, 2000)
-    n = rng.integers(5000, 50000, 60).astype(float)
-    first = windows_cl(counts, n, fmax=44)
-    for _ in range(2):
-        again = windows_cl(counts, n, fmax=44)
-        assert first[0].tobytes() == again[0].tobytes() and first[1].tobytes() == again[1].tobytes()
 
 
 def test09_refuses_bad_input():
