@@ -18,6 +18,7 @@ from kernels.gather import (
     window_flux_reference,
 )
 from pipeline.errors import LoomError
+from tests.kernels.twin_base import KernelTwinTests
 from workers.reconstruct import vertex_irradiance
 
 RTOL = 1e-6
@@ -46,30 +47,91 @@ def close(a, b):
     np.testing.assert_allclose(a, b, rtol=RTOL, atol=RTOL * max(1e-300, float(np.abs(b).max(initial=0))))
 
 
-@pytest.mark.parametrize("kind", ["indirect", "direct", "all"])
-@pytest.mark.parametrize("split", [False, True])
-def test01_element_sums_match_reference(rng, kind, split):
-    frames = [frame_records(rng, int(rng.integers(0, 4000)), 300) for _ in range(7)]
-    frames.append(frame_records(rng, 0, 300))  # a frame without records
-    frames.append(frame_records(rng, 500, 300, hit=[7]))  # every photon in one element
-    got = element_sums_cl(frames, kind=kind, split_parity=split)
-    want = element_sums_reference(frames, kind=kind, split_parity=split)
-    assert got.shape == (9, 300, 2 if split else 1, 3, 4)
-    close(got, want)
-    if split:  # the halves add up to the whole
-        close(got.sum(axis=2), element_sums_cl(frames, kind=kind)[:, :, 0])
+def _close_rule(want):
+    """(rtol, atol) of the gather's comparisons: 1e-6 relative, absolute 1e-6 of the largest value."""
+    return RTOL, RTOL * max(1e-300, float(np.abs(want).max(initial=0)))
 
 
-def test02_element_sums_adversarial(rng):
-    huge = frame_records(rng, 3000, 50, energy_scale=3e38)  # energies near float32's maximum
-    tiny = frame_records(rng, 3000, 50, energy_scale=1e-38)
+class TestElementSumsTwin(KernelTwinTests):
+    """``element_sums`` (gather.cl) against :func:`element_sums_reference` within 1e-6."""
+
+    KINDS = ("indirect", "direct", "all")
+    # (frames' records, kind, split parity)
+    cases = {**{f"mixed-{kind}-{'split' if split else 'whole'}": ("mixed", kind, split)
+                for kind in KINDS for split in (False, True)},
+             **{f"{name}-all-split": (name, "all", True)
+                for name in ("huge", "tiny", "never hit", "one record", "no records", "no elements")}}
+
+    def make_inputs(self, rng, case):
+        name, kind, split = case
+        if name == "mixed":
+            frames = [frame_records(rng, int(rng.integers(0, 4000)), 300) for _ in range(7)]
+            frames.append(frame_records(rng, 0, 300))  # a frame without records
+            frames.append(frame_records(rng, 500, 300, hit=[7]))  # every photon in one element
+        else:
+            frames = [{
+                "huge": lambda: frame_records(rng, 3000, 50, energy_scale=3e38),  # near float32's maximum
+                "tiny": lambda: frame_records(rng, 3000, 50, energy_scale=1e-38),
+                "never hit": lambda: frame_records(rng, 3000, 50, hit=np.arange(25)),  # elements 25.. never hit
+                "one record": lambda: frame_records(rng, 1, 1),
+                "no records": lambda: frame_records(rng, 0, 50),
+                "no elements": lambda: frame_records(rng, 0, 0),
+            }[name]()]
+        return frames, kind, split
+
+    def device(self, frames, kind, split):
+        return element_sums_cl(frames, kind=kind, split_parity=split)
+
+    def twin(self, frames, kind, split):
+        return element_sums_reference(frames, kind=kind, split_parity=split)
+
+    def rule(self, name, want):
+        return _close_rule(want)
+
+
+class TestFrameSumsFluxTwin(KernelTwinTests):
+    """The fast path from per-frame element sums to vertex flux (``frame_sums_prefix_step`` and
+    ``vertex_window_flux`` in gather.cl, :func:`frame_sums_flux_cl`) against
+    :func:`window_flux_reference` of the stacked sums, within 1e-6."""
+
+    # (frames, elements, vertices, output rows, split parity)
+    cases = {"one-frame": (1, 40, 30, [0], False), "nine-frames": (9, 150, 110, [3, 4, 5], False),
+             "nine-frames-split": (9, 150, 110, [0, 4, 8], True), "no-output-rows": (4, 20, 15, [], False),
+             "one-element": (3, 1, 3, [1], True), "unused-vertices": (5, 60, 400, [2], False)}
+
+    def make_inputs(self, rng, case):
+        n_rows, n_elements, n_vertices, rows, split = case
+        frames = [frame_records(rng, int(rng.integers(0, 1500)), n_elements) for _ in range(n_rows - 1)]
+        frames.append(frame_records(rng, 0, n_elements))  # a frame without records
+        per_frame = [element_sums_reference([f], kind="indirect", split_parity=split)[0] for f in frames]
+        rows = np.array(rows, np.int64)
+        back, fwd = random_windows(rng, len(rows), n_elements, rows, n_rows)
+        n = rng.integers(1_000, 9_000, n_rows).astype(float)
+        return per_frame, n, back, fwd, rows, mesh(rng, n_elements, n_vertices), n_vertices
+
+    def device(self, per_frame, *args):
+        return frame_sums_flux_cl(per_frame, *args)
+
+    def twin(self, per_frame, *args):
+        return window_flux_reference(np.stack(per_frame), *args)
+
+    def rule(self, name, want):
+        return _close_rule(want)
+
+
+def test01_parity_halves_add_up_to_the_whole(rng):
+    frames = [frame_records(rng, int(rng.integers(0, 4000)), 300) for _ in range(4)]
+    for kind in TestElementSumsTwin.KINDS:
+        halves = element_sums_cl(frames, kind=kind, split_parity=True)
+        assert halves.shape == (4, 300, 2, 3, 4)
+        close(halves.sum(axis=2), element_sums_cl(frames, kind=kind)[:, :, 0])
+
+
+def test02_elements_never_hit_sum_to_zero(rng):
     never = frame_records(rng, 3000, 50, hit=np.arange(25))  # elements 25.. never hit
-    for frames in ([huge], [tiny], [never], [frame_records(rng, 0, 0)]):
-        got = element_sums_cl(frames, kind="all", split_parity=True)
-        want = element_sums_reference(frames, kind="all", split_parity=True)
-        assert np.isfinite(got).all()
-        close(got, want)
-    assert (element_sums_cl([never], kind="all")[0, 25:] == 0).all()
+    got = element_sums_cl([never], kind="all")
+    assert (got[0, 25:] == 0).all() and (got[0, :25] != 0).any()
+    assert np.isfinite(element_sums_cl([frame_records(rng, 3000, 50, energy_scale=3e38)], kind="all")).all()
 
 
 def random_windows(rng, n_out, n_elements, rows, n_rows):
