@@ -4,7 +4,7 @@ Three steps, each an OpenCL kernel in ``gather.cl`` with a NumPy float64 twin he
 
 1. ``element_sums``: per (frame g, element e, parity p, corner k) the sums over e's records of g
    ``T_rgb = sum b_k * energy`` and ``T_Q = sum b_k^2 * Y^2`` (Y = Rec. 709 luminance of the
-   energy; Q feeds the variance estimate of the adaptive filter, dept.md §1.3). Each record is
+   energy; Q feeds the variance estimate of the adaptive filter, docs/estimators.md §1.3). Each record is
    read once in total, however many windows use its frame.
 2. ``window_flux``: for output frame f and element e with window W = [f - back, f + fwd]
    (kernels/temporal.py) the pooled flux per corner ``U = sum_{g in W} T_g / sum_{g in W} N_g``
@@ -13,7 +13,7 @@ Three steps, each an OpenCL kernel in ``gather.cl`` with a NumPy float64 twin he
    different N_frame (§5.2.3) are pooled at their photon weight. With the parity split each half
    is normalised by half the photons, so I1 and I2 (§5.2.3) both estimate the full irradiance.
 3. ``vertex_flux``: element corners -> vertices in a fixed order (a CSR vertex -> element-corner
-   map), ``S_v = sum U``; irradiance ``E_v = S_v / A_v`` (dept.md §1.2; for a one-frame window
+   map), ``S_v = sum U``; irradiance ``E_v = S_v / A_v`` (docs/estimators.md §1.2; for a one-frame window
    exactly the E_v = S_v / (N A_v) of workers/reconstruct.py).
 
 Window sums by prefix sums (chosen by measurement, ``loom bench temporal``). :func:`gather_flux_cl`
@@ -28,7 +28,7 @@ a difference of prefix sums over at most a few hundred frames loses ~1e-13 relat
 range's total.
 
 No atomics anywhere: every output is written by one work item adding in a fixed order, so
-results are bitwise repeatable (shared/notes/ecosystem.md §3).
+results are bitwise repeatable (docs/opencl.md §2).
 """
 from __future__ import annotations
 
@@ -341,7 +341,7 @@ def window_flux_reference(sums, n_emitted, back, fwd, rows, element_vertices, n_
 
 
 def irradiance(flux: np.ndarray, vertex_areas: np.ndarray) -> np.ndarray:
-    """E_v = S_v / A_v (dept.md §1.2), RGB, for vertex flux ``(..., V, 4)``; 0 where A_v = 0."""
+    """E_v = S_v / A_v (docs/estimators.md §1.2), RGB, for vertex flux ``(..., V, 4)``; 0 where A_v = 0."""
     areas = np.asarray(vertex_areas, np.float64)
     safe = np.where(areas > 0, areas, 1.0)
     return np.where((areas > 0)[..., None], flux[..., :3] / safe[..., None], 0.0)

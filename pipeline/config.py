@@ -1,7 +1,7 @@
 """Every tunable parameter of a run, with the paper symbol it implements and its default.
 
 The paper is Myszkowski, Tawara, Akamine, Seidel, *Perception-Guided Global Illumination
-Solution for Animation Rendering*, SIGGRAPH 2001 (``shared/paper``). Section numbers below refer
+Solution for Animation Rendering*, SIGGRAPH 2001. Section numbers below refer
 to it. Configs are frozen dataclasses with validation, ``to_dict``/``from_dict`` and a stable
 ``hash`` that goes into store attributes, task keys and EXR headers.
 """
@@ -51,8 +51,10 @@ class RenderConfig:
     filter_photons: float = _param(25.0, "filter", "n_eff below which a vertex is filtered, r = 1/sqrt(n), §5.2.5",
                                    0.0)
     filter_rings: int = _param(3, "filter", "h_max, in element rings over the same surface, §5.2.5", 1, 255)
-    filter_z: float = _param(2.5, "filter", "bias test: a ring differing by > z sigma stops h, dept.md §1.5", 0.0)
-    filter_angle: float = _param(30.0, "filter", "degrees between neighbour normals, dept.md §1.5", 0.0, 180.0)
+    filter_z: float = _param(2.5, "filter", "bias test: a ring differing by > z sigma stops h, docs/estimators.md §1.5",
+                             0.0)
+    filter_angle: float = _param(30.0, "filter", "degrees between neighbour normals, docs/estimators.md §1.5",
+                                 0.0, 180.0)
 
     # --- segments: the adjustment loops of §5.2 (pipeline/segments.py, pipeline/coordinator.py) -----
     fmax_initial: int = _param(15, "segments", "F_max of the first segment, §5.2.1 and §6", 0, 510)

@@ -19,10 +19,10 @@ import numpy as np
 
 # --- Step 1: initialization (§5.2.1) -----------------------------------------------------------
 def energy_error(s_y: np.ndarray, q_y: np.ndarray) -> float:
-    """The energy-based error E of an indirect illumination map (dept.md §1.4), as a fraction.
+    """The energy-based error E of an indirect illumination map (docs/estimators.md §1.4), as a fraction.
 
     E = sum_v A_v sigma_v / sum_v A_v E_v, the flux-weighted mean relative standard error of the
-    vertex values, with E_v = S_v / A_v and sigma_v = sqrt(Q_v) / A_v (dept.md §1.3: the variance
+    vertex values, with E_v = S_v / A_v and sigma_v = sqrt(Q_v) / A_v (docs/estimators.md §1.3: the variance
     of a sum of i.i.d. photon weights is estimated by the sum of their squares). The areas cancel:
     E = sum sqrt(Q_v) / sum S_v. ``s_y`` (V,) luminance flux per vertex, ``q_y`` (V,) its sum of
     squared weights. Why this estimate: it is scale-free, dominated by the bright regions a

@@ -1,4 +1,4 @@
-"""Tone mapping with eye adaptation: linear frames to 8-bit sRGB (dept.md §2).
+"""Tone mapping with eye adaptation: linear frames to 8-bit sRGB (docs/estimators.md §2).
 
 Three operators (``ToneMapping.operator``, ``loom render --tonemap``), all driven by the same
 smoothed adaptation luminance L_a and shifted by ``exposure`` EV (a factor 2^EV):
@@ -29,11 +29,11 @@ viewer sees" (§5); histogram methods are image-dependent and flicker.
 
 Adaptation: L_wa is the log-average luminance of the frame's mesh-based lighting (direct estimate
 plus indirect map, §4) over the vertices the camera sees, computed per frame before compositing.
-Smoothing: a per-frame adaptation flickers (dept.md §4.6), so the adaptation level follows an
+Smoothing: a per-frame adaptation flickers (docs/estimators.md §2.2), so the adaptation level follows an
 exponential filter in time, L_a(t) = L_a(t-1) + (L_wa(t) - L_a(t-1)) (1 - exp(-dt / tau))
 (Pattanaik et al., SIGGRAPH 2000), run in log luminance (perceived brightness is roughly
 logarithmic, so a step up and a step down adapt alike) over the frames of one render.
-Units: one radiometric radiance unit is ``nits_per_unit`` cd/m^2 (1 by default, DESIGN.md units).
+Units: one radiometric radiance unit is ``nits_per_unit`` cd/m^2 (1 by default, docs/conventions.md §1).
 """
 from __future__ import annotations
 

@@ -1,7 +1,7 @@
 """Radial band decomposition without orientation channels (cortex transform, Watson 1987; Daly 1993).
 
 §6 of the paper drops the orientation channels of Daly's 31-channel cortex transform; what is left is
-five radial "dom" bands and a base band (notes/aqm.md §3), in cycles per pixel: band k (k = 1..5) lies
+five radial "dom" bands and a base band (docs/aqm.md §3), in cycles per pixel: band k (k = 1..5) lies
 between mesa(rho; 2^-k) and mesa(rho; 2^-(k-1)), the base band below 1/32 cy/px.
 
 Daly's dom filters d_k sum to 1. With probability summation of exponent beta over bands (psychometric.py)
@@ -18,7 +18,7 @@ import numpy as np
 
 N_BANDS = 6  # 5 dom bands + base (Daly 1993 without orientation, §6 of the paper)
 # Masking slope per band, highest frequency first: 1.0 for the high bands, 0.8 for the two lowest dom
-# bands, 0.7 for the base (Daly's patent as quoted in HDR-VDP 1.x, notes/aqm.md §4).
+# bands, 0.7 for the base (Daly's patent as quoted in HDR-VDP 1.x, docs/aqm.md §4).
 MASKING_SLOPE = (1.0, 1.0, 1.0, 0.8, 0.8, 0.7)
 
 

@@ -3,7 +3,7 @@
 The AQM works on the luminance a viewer sees on a stated display (Daly 1993 takes cd/m^2 as input),
 so a rendering's linear Rec.709 value 1.0 is mapped to the display's peak white and values above it
 are clipped, as a monitor does. Spatial frequencies need pixels per degree, derived here once from
-the display width, its horizontal resolution and the viewing distance (notes/aqm.md §6).
+the display width, its horizontal resolution and the viewing distance (docs/aqm.md §6).
 """
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ class ViewingConditions:
 
     Defaults: a 24-inch 16:9 LCD (0.531 m wide, 1920x1080 pixels) watched from 0.6 m, which gives
     37.9 pixels per degree at the display's native resolution; peak white 100 cd/m^2 (the usual
-    reference white of an sRGB/Rec.709 monitor, notes/aqm.md §1 [decision]) and a black level of
+    reference white of an sRGB/Rec.709 monitor, docs/aqm.md §1 [decision]) and a black level of
     0.1 cd/m^2 (a 1000:1 panel). A frame is assumed shown at one image pixel per display pixel.
     """
 
@@ -48,7 +48,7 @@ class ViewingConditions:
 
     @property
     def ppd(self) -> float:
-        """Pixels per degree at the centre of the screen (exact form of notes/aqm.md §6)."""
+        """Pixels per degree at the centre of the screen (exact form of docs/aqm.md §6)."""
         pixel = self.display_width_m / self.resolution[0]
         return 1.0 / math.degrees(2.0 * math.atan(pixel / (2.0 * self.viewing_distance_m)))
 

@@ -1,4 +1,4 @@
-"""Visual masking with mutual masking (Daly 1993; constants as in HDR-VDP 1.x, notes/aqm.md §4).
+"""Visual masking with mutual masking (Daly 1993; constants as in HDR-VDP 1.x, docs/aqm.md §4).
 
 A band signal m (in threshold units: 1 = just detectable) raises the detection threshold of a
 difference in the same band by

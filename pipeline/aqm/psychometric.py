@@ -1,4 +1,4 @@
-"""Psychometric function and probability summation over bands (Daly 1993, notes/aqm.md §5).
+"""Psychometric function and probability summation over bands (Daly 1993, docs/aqm.md §5).
 
 P_k = 1 - exp(-|dC_k / Te_k|^beta), beta = 3.5 (Daly's patent, HDR-VDP 1.x default); over the bands
 P = 1 - prod_k (1 - P_k) = 1 - exp(-sum_k |dC_k / Te_k|^beta).

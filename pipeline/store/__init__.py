@@ -1,9 +1,9 @@
 """The photon store: every photon hit of a run, on zarr v3, written once per (frame, batch).
 
 Photons are the only state of a run that costs tracing; everything downstream (temporal windows,
-illumination maps, frames) is recomputed from them and the config (DESIGN.md, "The photon store").
+illumination maps, frames) is recomputed from them and the config (docs/conventions.md §5).
 
-Record (dept.md §1.1), exactly ``RECORD_BYTES`` = 20 bytes uncompressed, stored struct-of-arrays::
+Record (docs/estimators.md §1.1), exactly ``RECORD_BYTES`` = 20 bytes uncompressed, stored struct-of-arrays::
 
     key     u32     4 B  bits 0-29 element id, bit 30 photon-index parity (1 = odd), bit 31 direct
     bary    2 x u16 4 B  b1, b2 fixed point /65535 (b0 = 1 - b1 - b2)
