@@ -38,9 +38,8 @@ import pyopencl as cl
 
 from pipeline.errors import LoomError
 
+from .colour import LUMA
 from .context import device_context, kernel, scratch
-
-LUMA = (0.2126, 0.7152, 0.0722)  # Rec. 709, as kernels/gather.py
 
 
 @dataclass(frozen=True)

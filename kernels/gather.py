@@ -37,11 +37,11 @@ import pyopencl as cl
 
 from pipeline.errors import LoomError
 
+from .colour import LUMA
 from .context import device_context, kernel, scratch
+from .record_layout import BARY_SCALE, DIRECT_BIT, PARITY_BIT
 
 KINDS = {"indirect": 1, "direct": 2, "all": 3}
-LUMA = (0.2126, 0.7152, 0.0722)  # Rec. 709
-BARY_SCALE = 65535.0
 SLOTS = 12  # 3 corners x (R, G, B, Q)
 DENSE_RECORDS_PER_ELEMENT = 2.0  # above this, gather_flux_cl sums frame by frame (no concatenation)
 
@@ -125,14 +125,14 @@ def element_sums_reference(frames, *, kind: str = "indirect", split_parity: bool
     key, b1, b2, energy, offsets, n_frames, n_elements = _concat_frames(frames)
     n_parity = 2 if split_parity else 1
     segment = np.repeat(np.arange(n_frames * n_elements), np.diff(offsets))
-    direct = (key >> 31).astype(bool)
+    direct = (key & DIRECT_BIT) != 0
     keep = (direct & bool(KINDS[kind] & 2)) | (~direct & bool(KINDS[kind] & 1))
-    parity = ((key >> 30) & 1).astype(np.int64) if split_parity else np.zeros(len(key), np.int64)
+    parity = ((key & PARITY_BIT) != 0).astype(np.int64) if split_parity else np.zeros(len(key), np.int64)
     w1 = b1.astype(np.float64) / BARY_SCALE
     w2 = b2.astype(np.float64) / BARY_SCALE
     w = np.stack([1.0 - w1 - w2, w1, w2], axis=1)  # (n, 3)
     e64 = energy.astype(np.float64)
-    y = e64 @ np.array(LUMA)
+    y = e64 @ np.asarray(LUMA)
     values = np.concatenate([w[:, :, None] * e64[:, None, :], (w * w * (y * y)[:, None])[:, :, None]],
                             axis=2)  # (n, 3 corners, 4)
     bins = (segment * n_parity + parity)[keep]
