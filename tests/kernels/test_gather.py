@@ -1,6 +1,7 @@
-"""Gather (§4, §5.2.4): element sums, window sums and vertex flux on PoCL equal their NumPy twins
-within 1e-6 relative, a one-frame window is workers/reconstruct.py's vertex_irradiance, and
-repeated runs are bitwise identical."""
+"""Gather (§4, §5.2.4): element sums, window sums and vertex flux on PoCL (element_sums_cl,
+frame_sums_flux_cl: the path pipeline/temporal.py runs) equal their NumPy twins within 1e-6
+relative, a one-frame window is workers/reconstruct.py's vertex_irradiance, and repeated runs are
+bitwise identical."""
 from __future__ import annotations
 
 from types import SimpleNamespace
@@ -12,12 +13,9 @@ from kernels.gather import (
     element_sums_cl,
     element_sums_reference,
     frame_sums_flux_cl,
-    gather_flux_cl,
     irradiance,
-    window_flux_cl,
     window_flux_reference,
 )
-from pipeline.errors import LoomError
 from workers.reconstruct import vertex_irradiance
 
 RTOL = 1e-6
@@ -40,6 +38,11 @@ def frame_records(rng, n_records, n_elements, *, hit=None, energy_scale=1.0):
 def mesh(rng, n_elements, n_vertices):
     ev = np.stack([rng.choice(n_vertices, 3, replace=False) for _ in range(n_elements)]).astype(np.int32)
     return ev
+
+
+def window_flux_cl(sums, *args):
+    """frame_sums_flux_cl over the frames of a (J, E, P, 3, 4) element sums table."""
+    return frame_sums_flux_cl(list(sums), *args)
 
 
 def close(a, b):
@@ -78,9 +81,8 @@ def random_windows(rng, n_out, n_elements, rows, n_rows):
     return back, fwd
 
 
-@pytest.mark.parametrize("method", ["prefix", "direct"])
 @pytest.mark.parametrize("split", [False, True])
-def test03_window_flux_matches_reference(rng, method, split):
+def test03_window_flux_matches_reference(rng, split):
     n_rows, n_elements, n_vertices = 40, 400, 260
     frames = [frame_records(rng, int(rng.integers(0, 3000)), n_elements) for _ in range(n_rows)]
     sums = element_sums_cl(frames, split_parity=split)
@@ -88,7 +90,7 @@ def test03_window_flux_matches_reference(rng, method, split):
     rows = np.array([0, 1, 17, 20, 38, 39])
     back, fwd = random_windows(rng, len(rows), n_elements, rows, n_rows)
     ev = mesh(rng, n_elements, n_vertices)
-    got = window_flux_cl(sums, n, back, fwd, rows, ev, n_vertices, method=method)
+    got = window_flux_cl(sums, n, back, fwd, rows, ev, n_vertices)
     want = window_flux_reference(sums, n, back, fwd, rows, ev, n_vertices)
     assert got.shape == (len(rows), 2 if split else 1, n_vertices, 4)
     close(got, want)
@@ -158,47 +160,18 @@ def test08_refuses_windows_outside_the_table(rng):
     sums = element_sums_cl(frames)
     ev = mesh(rng, 10, 8)
     two = np.full((1, 10), 2, np.uint8)
-    with pytest.raises(LoomError, match="outside"):
+    with pytest.raises(ValueError, match="outside"):
         window_flux_cl(sums, np.ones(3), two, two, [1], ev, 8)
-    with pytest.raises(LoomError, match="prefix or direct"):
-        window_flux_cl(sums, np.ones(3), two * 0, two * 0, [1], ev, 8, method="sorted")
-
-
-@pytest.mark.parametrize("split", [False, True])
-def test09_fused_gather_equals_the_steps(rng, split):
-    n_rows, n_elements, n_vertices = 12, 300, 200
-    frames = [frame_records(rng, int(rng.integers(0, 3000)), n_elements) for _ in range(n_rows)]
-    n = rng.integers(10_000, 80_000, n_rows).astype(float)
-    rows = np.arange(n_rows)
-    back, fwd = random_windows(rng, n_rows, n_elements, rows, n_rows)
-    ev = mesh(rng, n_elements, n_vertices)
-    fused = gather_flux_cl(frames, n, back, fwd, rows, ev, n_vertices, kind="all", split_parity=split)
-    steps = window_flux_cl(element_sums_cl(frames, kind="all", split_parity=split), n, back, fwd, rows, ev,
-                           n_vertices)
-    assert fused.tobytes() == steps.tobytes()
-    close(fused, window_flux_reference(element_sums_reference(frames, kind="all", split_parity=split), n,
-                                       back, fwd, rows, ev, n_vertices))
-
-
-@pytest.mark.parametrize("split", [False, True])
-def test_gather_paths_give_the_same_bits(rng, split):
-    """Concatenated frames in one launch and one launch a frame fill the same prefix table."""
-    n_elements, n_vertices = 120, 90
-    frames = [frame_records(rng, int(rng.integers(0, 900)), n_elements) for _ in range(6)]
-    frames.append(frame_records(rng, 0, n_elements))
-    ev = mesh(rng, n_elements, n_vertices)
-    back = rng.integers(0, 4, (3, n_elements)).astype(np.uint8)
-    fwd = rng.integers(0, 3, (3, n_elements)).astype(np.uint8)
-    args = (frames, np.full(7, 1000.0), back, fwd, [3, 4, 3], ev, n_vertices)
-    one = gather_flux_cl(*args, kind="all", split_parity=split, step_per_frame=False)
-    each = gather_flux_cl(*args, kind="all", split_parity=split, step_per_frame=True)
-    assert one.tobytes() == each.tobytes()
+    with pytest.raises(ValueError, match="outside"):
+        window_flux_reference(sums, np.ones(3), two, two, [1], ev, 8)
+    with pytest.raises(ValueError, match="kind"):
+        element_sums_cl(frames, kind="sometimes")
 
 
 @pytest.mark.parametrize("split", [False, True])
 def test_gather_from_frame_sums_gives_the_same_bits(rng, split):
-    """Sums made one frame at a time (and kept, pipeline/temporal.py) fill the same prefix table as
-    the records summed in the gather, and agree with the NumPy twin."""
+    """Sums made one frame at a time (and kept, pipeline/temporal.py) are the bits of the frames
+    summed in one call, give the same flux, and agree with the NumPy twin."""
     n_elements, n_vertices = 150, 110
     frames = [frame_records(rng, int(rng.integers(0, 1500)), n_elements) for _ in range(8)]
     frames.append(frame_records(rng, 0, n_elements))
@@ -208,8 +181,9 @@ def test_gather_from_frame_sums_gives_the_same_bits(rng, split):
     n = rng.integers(1_000, 9_000, len(frames)).astype(float)
     per_frame = [element_sums_cl([f], kind="indirect", split_parity=split)[0] for f in frames]
     got = frame_sums_flux_cl(per_frame, n, back, fwd, rows, ev, n_vertices)
-    assert got.tobytes() == gather_flux_cl(frames, n, back, fwd, rows, ev, n_vertices, kind="indirect",
-                                           split_parity=split).tobytes()
+    together = element_sums_cl(frames, kind="indirect", split_parity=split)
+    assert np.stack(per_frame).tobytes() == together.tobytes()
+    assert got.tobytes() == window_flux_cl(together, n, back, fwd, rows, ev, n_vertices).tobytes()
     close(got, window_flux_reference(np.stack(per_frame), n, back, fwd, rows, ev, n_vertices))
-    with pytest.raises(LoomError):
+    with pytest.raises(ValueError, match="frame sums"):
         frame_sums_flux_cl(per_frame[:2] + [per_frame[2][:10]], n[:3], back[:, :], fwd, [1, 1, 1], ev, n_vertices)
