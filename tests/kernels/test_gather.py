@@ -40,7 +40,7 @@ def mesh(rng, n_elements, n_vertices):
     return ev
 
 
-def window_flux_cl(sums, *args):
+def stacked_flux_cl(sums, *args):
     """frame_sums_flux_cl over the frames of a (J, E, P, 3, 4) element sums table."""
     return frame_sums_flux_cl(list(sums), *args)
 
@@ -90,7 +90,7 @@ def test03_window_flux_matches_reference(rng, split):
     rows = np.array([0, 1, 17, 20, 38, 39])
     back, fwd = random_windows(rng, len(rows), n_elements, rows, n_rows)
     ev = mesh(rng, n_elements, n_vertices)
-    got = window_flux_cl(sums, n, back, fwd, rows, ev, n_vertices)
+    got = stacked_flux_cl(sums, n, back, fwd, rows, ev, n_vertices)
     want = window_flux_reference(sums, n, back, fwd, rows, ev, n_vertices)
     assert got.shape == (len(rows), 2 if split else 1, n_vertices, 4)
     close(got, want)
@@ -105,7 +105,7 @@ def test04_one_frame_window_is_vertex_irradiance(rng):
     sums = element_sums_cl(frames, kind="indirect")
     n = np.array([40_000.0, 41_000.0, 39_000.0])
     zero = np.zeros((1, n_elements), np.uint8)
-    flux = window_flux_cl(sums, n, zero, zero, [1], ev, n_vertices)
+    flux = stacked_flux_cl(sums, n, zero, zero, [1], ev, n_vertices)
     got = irradiance(flux[0, 0], areas)
     r = frames[1]
     ind = ~r.direct
@@ -122,7 +122,7 @@ def test05_window_pools_photons_of_all_its_frames(rng):
     n = np.array([10_000.0, 20_000.0, 40_000.0])
     sums = element_sums_cl(frames, kind="all")
     one = np.ones((1, n_elements), np.uint8)
-    got = irradiance(window_flux_cl(sums, n, one, one, [1], ev, n_vertices)[0, 0], areas)
+    got = irradiance(stacked_flux_cl(sums, n, one, one, [1], ev, n_vertices)[0, 0], areas)
     cat = lambda name: np.concatenate([getattr(r, name) for r in frames])  # noqa: E731
     want = vertex_irradiance(cat("element"), cat("b1"), cat("b2"), cat("energy"), ev, areas, n.sum())
     close(got, want)
@@ -134,8 +134,8 @@ def test06_parity_halves_estimate_the_whole(rng):
     ev = mesh(rng, n_elements, n_vertices)
     n = np.full(5, 30_000.0)
     back = np.full((1, n_elements), 2, np.uint8)
-    halves = window_flux_cl(element_sums_cl(frames, split_parity=True), n, back, back, [2], ev, n_vertices)
-    whole = window_flux_cl(element_sums_cl(frames), n, back, back, [2], ev, n_vertices)
+    halves = stacked_flux_cl(element_sums_cl(frames, split_parity=True), n, back, back, [2], ev, n_vertices)
+    whole = stacked_flux_cl(element_sums_cl(frames), n, back, back, [2], ev, n_vertices)
     # Each half is normalised by half the photons: their mean is the full map
     close(halves[0, :, :, :3].mean(axis=0), whole[0, 0, :, :3])
 
@@ -148,11 +148,11 @@ def test07_bitwise_repeatable(rng):
     rows = np.arange(2, 8)
     back, fwd = random_windows(rng, len(rows), n_elements, rows, 10)
     first_sums = element_sums_cl(frames, split_parity=True)
-    first = window_flux_cl(first_sums, n, back, fwd, rows, ev, n_vertices)
+    first = stacked_flux_cl(first_sums, n, back, fwd, rows, ev, n_vertices)
     for _ in range(2):
         sums = element_sums_cl(frames, split_parity=True)
         assert sums.tobytes() == first_sums.tobytes()
-        assert window_flux_cl(sums, n, back, fwd, rows, ev, n_vertices).tobytes() == first.tobytes()
+        assert stacked_flux_cl(sums, n, back, fwd, rows, ev, n_vertices).tobytes() == first.tobytes()
 
 
 def test08_refuses_windows_outside_the_table(rng):
@@ -161,7 +161,7 @@ def test08_refuses_windows_outside_the_table(rng):
     ev = mesh(rng, 10, 8)
     two = np.full((1, 10), 2, np.uint8)
     with pytest.raises(ValueError, match="outside"):
-        window_flux_cl(sums, np.ones(3), two, two, [1], ev, 8)
+        stacked_flux_cl(sums, np.ones(3), two, two, [1], ev, 8)
     with pytest.raises(ValueError, match="outside"):
         window_flux_reference(sums, np.ones(3), two, two, [1], ev, 8)
     with pytest.raises(ValueError, match="kind"):
@@ -183,7 +183,7 @@ def test_gather_from_frame_sums_gives_the_same_bits(rng, split):
     got = frame_sums_flux_cl(per_frame, n, back, fwd, rows, ev, n_vertices)
     together = element_sums_cl(frames, kind="indirect", split_parity=split)
     assert np.stack(per_frame).tobytes() == together.tobytes()
-    assert got.tobytes() == window_flux_cl(together, n, back, fwd, rows, ev, n_vertices).tobytes()
+    assert got.tobytes() == stacked_flux_cl(together, n, back, fwd, rows, ev, n_vertices).tobytes()
     close(got, window_flux_reference(np.stack(per_frame), n, back, fwd, rows, ev, n_vertices))
     with pytest.raises(ValueError, match="frame sums"):
         frame_sums_flux_cl(per_frame[:2] + [per_frame[2][:10]], n[:3], back[:, :], fwd, [1, 1, 1], ev, n_vertices)
