@@ -36,11 +36,8 @@ from dataclasses import dataclass
 import numpy as np
 import pyopencl as cl
 
-from pipeline.errors import LoomError
-
+from .colour import LUMA
 from .context import device_context, kernel, scratch
-
-LUMA = (0.2126, 0.7152, 0.0722)  # Rec. 709, as kernels/gather.py
 
 
 @dataclass(frozen=True)
@@ -82,7 +79,7 @@ def neighbourhood(element_vertices, vertex_positions, vertex_instance, *, max_ri
     Positions may be rest-pose (instance-local): instances move rigidly, which keeps the rings.
     """
     if not 1 <= max_rings <= 255:
-        raise LoomError(f"filter rings must be in [1, 255], got {max_rings}")
+        raise ValueError(f"max_rings must be in [1, 255], got {max_rings}")
     ev = np.asarray(element_vertices, np.int64).reshape(-1, 3)
     n_vertices = len(vertex_positions)
     inst = np.asarray(vertex_instance, np.int64)
@@ -133,9 +130,9 @@ def _check(flux, areas, hood: Neighbourhood, photons: float):
     areas = np.ascontiguousarray(areas, np.float64)
     if flux.ndim < 2 or flux.shape[-2:] != (hood.n_vertices, 4) or areas.shape not in (
             (hood.n_vertices,), flux.shape[:-1]):
-        raise LoomError(f"flux must be (..., V, 4) and areas (V,) or (..., V) with V = {hood.n_vertices}")
+        raise ValueError(f"flux must be (..., V, 4) and areas (V,) or (..., V) with V = {hood.n_vertices}")
     if not photons > 0:
-        raise LoomError(f"filter_photons must be positive, got {photons}", field="filter_photons")
+        raise ValueError(f"photons (the n_eff threshold) must be positive, got {photons}")
     # Vertex-major (V, L, 4): free for the gather's output, a copy otherwise
     flux = np.ascontiguousarray(np.moveaxis(flux, -2, 0).reshape(hood.n_vertices, -1, 4))
     areas = areas.reshape(-1, hood.n_vertices)

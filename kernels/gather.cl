@@ -55,24 +55,6 @@ __kernel void element_sums(__global const uint *key, __global const ushort *b1,
     for (int c = 0; c < SLOTS; ++c) o[c] = acc[c];
 }
 
-// In-place prefix sums over frames of an element-major table (E, n_rows + 1, width): rows 1..n_rows
-// of every element become row[j] = row[j-1] + row[j] (row 0 all zero); one work item per
-// (element, column), rows in order.
-__kernel void prefix_frames(__global double *table, const int n_elements, const int n_rows,
-                            const int width)
-{
-    const long gid = get_global_id(0);
-    if (gid >= (long)n_elements * width) return;
-    const long e = gid / width;
-    const long c = gid - e * width;
-    __global double *t = table + e * (n_rows + 1) * width + c;
-    double run = 0.0;
-    for (int j = 1; j <= n_rows; ++j) {
-        run += t[j * width];
-        t[j * width] = run;
-    }
-}
-
 // Row 0 of element e's part of the element-major prefix table (E, n_frames + 1, n_parity x SLOTS)
 // for work item gid = e * n_parity + p, with p's columns: rows follow at a stride of `width`.
 inline __global double *prefix_rows(__global double *table, const long gid, const int n_frames,
@@ -83,69 +65,10 @@ inline __global double *prefix_rows(__global double *table, const long gid, cons
     return table + *e * (n_frames + 1) * *width + *parity * SLOTS;
 }
 
-// Sums of element e and parity p (work item e * n_parity + p) over frames 0..J-1 of the
-// records, accumulated over frames as they are made: table row j+1 = row j + sums of frame j,
-// row 0 = 0. Bitwise the same as element_sums followed by prefix_frames, without the table's
-// round trip through memory in between. Segments are (frame, element): offsets (J * E + 1).
-// The table is element-major, (E, J + 1, n_parity, 12): an element's rows are contiguous, so
-// this kernel writes and vertex_window_flux reads memory in order.
-__kernel void sums_prefix(__global const uint *key, __global const ushort *b1,
-                          __global const ushort *b2, __global const float *energy,
-                          __global const uint *offsets, const int n_frames, const int n_elements,
-                          const uint kinds, const int n_parity, __global double *table)
-{
-    const long gid = get_global_id(0);
-    if (gid >= (long)n_elements * n_parity) return;
-    long e, width;
-    uint parity;
-    __global double *t = prefix_rows(table, gid, n_frames, n_parity, &e, &parity, &width);
-    double run[SLOTS];
-    for (int c = 0; c < SLOTS; ++c) {
-        run[c] = 0.0;
-        t[c] = 0.0;
-    }
-    for (int j = 0; j < n_frames; ++j) {
-        const long s = (long)j * n_elements + e;
-        double acc[SLOTS];
-        for (int c = 0; c < SLOTS; ++c) acc[c] = 0.0;
-        add_records(key, b1, b2, energy, (long)offsets[s], (long)offsets[s + 1], kinds, n_parity, parity,
-                    acc);
-        for (int c = 0; c < SLOTS; ++c) run[c] += acc[c];
-        __global double *o = t + (j + 1) * width;
-        for (int c = 0; c < SLOTS; ++c) o[c] = run[c];
-    }
-}
-
-// The same table one frame at a time (one launch a frame), reading that frame's records where they
-// lie, so dense frames need no concatenation on the host: row j + 1 = row j + the sums of frame
-// j's records (records [offsets[e], offsets[e+1]) of element e); row 0 is zeroed with frame 0.
-// Bitwise equal to sums_prefix: the same terms added in the same order.
-__kernel void sums_prefix_step(__global const uint *key, __global const ushort *b1,
-                               __global const ushort *b2, __global const float *energy,
-                               __global const long *offsets, const int j, const int n_frames,
-                               const int n_elements, const uint kinds, const int n_parity,
-                               __global double *table)
-{
-    const long gid = get_global_id(0);
-    if (gid >= (long)n_elements * n_parity) return;
-    long e, width;
-    uint parity;
-    __global double *t = prefix_rows(table, gid, n_frames, n_parity, &e, &parity, &width);
-    if (j == 0) {
-        for (int c = 0; c < SLOTS; ++c) t[c] = 0.0;
-    }
-    double acc[SLOTS];
-    for (int c = 0; c < SLOTS; ++c) acc[c] = 0.0;
-    add_records(key, b1, b2, energy, offsets[e], offsets[e + 1], kinds, n_parity, parity, acc);
-    __global const double *prev = t + (long)j * width;
-    __global double *o = t + (long)(j + 1) * width;
-    for (int c = 0; c < SLOTS; ++c) o[c] = prev[c] + acc[c];
-}
-
-// The same table from per-frame element sums already made (element_sums of frame j, laid out
-// (E, n_parity, 12)), one launch a frame: row j + 1 = row j + sums, row 0 zeroed with frame 0.
-// Bitwise equal to sums_prefix and sums_prefix_step: element_sums adds a frame's records into
-// zeros in the same order as they do, and the rows add those sums in the same order.
+// The element-major prefix table (E, J + 1, n_parity, 12) over frames 0..J-1 from per-frame
+// element sums already made (element_sums of frame j, laid out (E, n_parity, 12)), one launch a
+// frame: row j + 1 = row j + sums of frame j, row 0 zeroed with frame 0. An element's rows are
+// contiguous, so this kernel writes and vertex_window_flux reads memory in order.
 __kernel void frame_sums_prefix_step(__global const double *sums, const int j, const int n_frames,
                                      const int n_elements, const int n_parity, __global double *table)
 {
@@ -167,17 +90,15 @@ __kernel void frame_sums_prefix_step(__global const double *sums, const int j, c
 // read while in cache): vertex v adds, over the element corners in slots[voffsets[v] ..
 // voffsets[v+1]) (element * 3 + corner, ascending), the corner's window sum over its element's
 // window [f - back, f + fwd] divided by the photons emitted in the window, U = sum / sum_g N_g
-// (Q: / (sum_g N_g)^2), with N_g halved per parity. Output frame i is row rows[i] of the
-// element-major table (E, n_table_rows, n_parity, 12). prefix != 0: prefix sums (row 0 = 0,
-// row j+1 = sum of frames 0..j) and a window sum is the difference of two rows; prefix == 0:
-// per-frame sums (row j = frame j) added in frame order.
+// (Q: / (sum_g N_g)^2), with N_g halved per parity. Output frame i is frame rows[i] of the
+// element-major prefix table (E, n_table_rows, n_parity, 12) of frame_sums_prefix_step (row 0 = 0,
+// row j+1 = sum of frames 0..j): a window sum is the difference of two rows.
 __kernel void vertex_window_flux(__global const double *table, __global const double *cum_n,
                                  __global const uchar *back, __global const uchar *fwd, // (E, n_out)
                                  __global const int *rows, __global const long *voffsets,
                                  __global const int *slots, const int n_vertices,
                                  const int n_elements, const int n_parity, const int n_table_rows,
-                                 const int n_out, const int prefix,
-                                 __global double *out)  // (V, n_out, n_parity, 4)
+                                 const int n_out, __global double *out)  // (V, n_out, n_parity, 4)
 {
     const int v = get_global_id(0);
     if (v >= n_vertices) return;
@@ -195,14 +116,7 @@ __kernel void vertex_window_flux(__global const double *table, __global const do
                 const double inv_n = (double)n_parity / (cum_n[hi] - cum_n[lo]);  // 1 / photons
                 __global const double *te = table + (long)e * n_table_rows * width + p * SLOTS + 4 * k;
                 double t[4];
-                for (int c = 0; c < 4; ++c) {
-                    if (prefix) {
-                        t[c] = te[hi * width + c] - te[lo * width + c];
-                    } else {
-                        t[c] = 0.0;
-                        for (int g = lo; g < hi; ++g) t[c] += te[g * width + c];
-                    }
-                }
+                for (int c = 0; c < 4; ++c) t[c] = te[hi * width + c] - te[lo * width + c];
                 a0 += t[0] * inv_n; a1 += t[1] * inv_n; a2 += t[2] * inv_n;
                 a3 += t[3] * (inv_n * inv_n);
             }

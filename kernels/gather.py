@@ -6,26 +6,25 @@ Three steps, each an OpenCL kernel in ``gather.cl`` with a NumPy float64 twin he
    ``T_rgb = sum b_k * energy`` and ``T_Q = sum b_k^2 * Y^2`` (Y = Rec. 709 luminance of the
    energy; Q feeds the variance estimate of the adaptive filter, docs/estimators.md §1.3). Each record is
    read once in total, however many windows use its frame.
-2. ``window_flux``: for output frame f and element e with window W = [f - back, f + fwd]
+2. window sums: for output frame f and element e with window W = [f - back, f + fwd]
    (kernels/temporal.py) the pooled flux per corner ``U = sum_{g in W} T_g / sum_{g in W} N_g``
    (``U_Q = sum T_Q / (sum N_g)^2``). Every photon of the window counts once against all photons
    emitted in the window's frames: photons are normalised by the frames collected, and frames with
    different N_frame (§5.2.3) are pooled at their photon weight. With the parity split each half
    is normalised by half the photons, so I1 and I2 (§5.2.3) both estimate the full irradiance.
-3. ``vertex_flux``: element corners -> vertices in a fixed order (a CSR vertex -> element-corner
+3. vertex flux: element corners -> vertices in a fixed order (a CSR vertex -> element-corner
    map), ``S_v = sum U``; irradiance ``E_v = S_v / A_v`` (docs/estimators.md §1.2; for a one-frame window
    exactly the E_v = S_v / (N A_v) of workers/reconstruct.py).
 
-Window sums by prefix sums (chosen by measurement, ``loom bench temporal``). :func:`gather_flux_cl`
-sums a chunk's records straight into an element-major prefix table on the device (row j+1 = row
-j + frame j's sums; an element's rows are contiguous), so a window sum is the difference of two
-rows whatever the window's length, and each record is read once per chunk. On the ATRIUM-size
-case (43,000 elements, F_max = 44, mean window 42 frames) the vertex step took 1.1 ms/frame with
-prefix sums against 5.7 ms/frame adding the window's rows (``method="direct"``), and moving the
-sums through host memory between the steps (:func:`element_sums_cl` then :func:`window_flux_cl`)
-cost 22 ms/frame against 3.1 ms/frame for the fused gather. Cancellation is harmless in float64:
-a difference of prefix sums over at most a few hundred frames loses ~1e-13 relative to the
-range's total.
+The device path is the one pipeline/temporal.py runs: :func:`element_sums_cl` once per frame (kept
+per worker), then :func:`frame_sums_flux_cl` fills an element-major prefix table over the frames on
+the device (row j+1 = row j + frame j's sums; an element's rows are contiguous, one launch a
+frame) and does steps 2 and 3 in one launch: a window sum is the difference of two rows whatever
+the window's length. Prefix sums were chosen by measurement (on the ATRIUM-size case, 43,000
+elements, F_max = 44, mean window 42 frames, the vertex step took 1.1 ms/frame against 5.7 ms/frame
+adding the window's rows). Cancellation is harmless in float64: a difference of prefix sums over at
+most a few hundred frames loses ~1e-13 relative to the range's total. NumPy twins:
+:func:`element_sums_reference` and :func:`window_flux_reference`.
 
 No atomics anywhere: every output is written by one work item adding in a fixed order, so
 results are bitwise repeatable (docs/opencl.md §2).
@@ -35,22 +34,19 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from pipeline.errors import LoomError
-
+from .colour import LUMA
 from .context import device_context, kernel, scratch
+from .record_layout import BARY_SCALE, DIRECT_BIT, PARITY_BIT
 
 KINDS = {"indirect": 1, "direct": 2, "all": 3}
-LUMA = (0.2126, 0.7152, 0.0722)  # Rec. 709
-BARY_SCALE = 65535.0
 SLOTS = 12  # 3 corners x (R, G, B, Q)
-DENSE_RECORDS_PER_ELEMENT = 2.0  # above this, gather_flux_cl sums frame by frame (no concatenation)
 
 
 def _concat_frames(frames):
     """Concatenate per-frame element-sorted records into one segment list (frame-major)."""
     frames = list(frames)
     if not frames:
-        raise LoomError("no frames of records to gather")
+        raise ValueError("no frames of records to gather")
     n_elements = len(frames[0].offsets) - 1
     key = np.concatenate([np.asarray(r.key, np.uint32) for r in frames])
     b1 = np.concatenate([np.asarray(r.b1, np.uint16) for r in frames])
@@ -60,11 +56,11 @@ def _concat_frames(frames):
     for r in frames:
         off = np.asarray(r.offsets, np.int64)
         if len(off) != n_elements + 1 or off[0] != 0 or off[-1] != len(r.key):
-            raise LoomError("records' offsets do not match their element count")
+            raise ValueError("records' offsets do not match their element count")
         parts.append(off[1:] + base)
         base += int(off[-1])
     if base >= 2**32:
-        raise LoomError(f"{base:,} records in one call; gather at most 2^32 - 1 at a time")
+        raise ValueError(f"{base:,} records in one call; gather at most 2^32 - 1 at a time")
     return key, b1, b2, energy, np.concatenate(parts).astype(np.uint32), len(frames), n_elements
 
 
@@ -86,7 +82,7 @@ def _sums_into(d_out: cl.Buffer, out_base: int, frames, kind: str, n_parity: int
     """Run ``element_sums`` for ``frames`` into ``d_out`` from element ``out_base`` on; returns
     (frames, elements)."""
     if kind not in KINDS:
-        raise LoomError(f"kind must be one of {', '.join(KINDS)}, got {kind!r}")
+        raise ValueError(f"kind must be one of {', '.join(KINDS)}, got {kind!r}")
     key, b1, b2, energy, offsets, n_frames, n_elements = _concat_frames(frames)
     n_segments = n_frames * n_elements
     if n_segments:
@@ -125,14 +121,14 @@ def element_sums_reference(frames, *, kind: str = "indirect", split_parity: bool
     key, b1, b2, energy, offsets, n_frames, n_elements = _concat_frames(frames)
     n_parity = 2 if split_parity else 1
     segment = np.repeat(np.arange(n_frames * n_elements), np.diff(offsets))
-    direct = (key >> 31).astype(bool)
+    direct = (key & DIRECT_BIT) != 0
     keep = (direct & bool(KINDS[kind] & 2)) | (~direct & bool(KINDS[kind] & 1))
-    parity = ((key >> 30) & 1).astype(np.int64) if split_parity else np.zeros(len(key), np.int64)
+    parity = ((key & PARITY_BIT) != 0).astype(np.int64) if split_parity else np.zeros(len(key), np.int64)
     w1 = b1.astype(np.float64) / BARY_SCALE
     w2 = b2.astype(np.float64) / BARY_SCALE
     w = np.stack([1.0 - w1 - w2, w1, w2], axis=1)  # (n, 3)
     e64 = energy.astype(np.float64)
-    y = e64 @ np.array(LUMA)
+    y = e64 @ np.asarray(LUMA)
     values = np.concatenate([w[:, :, None] * e64[:, None, :], (w * w * (y * y)[:, None])[:, :, None]],
                             axis=2)  # (n, 3 corners, 4)
     bins = (segment * n_parity + parity)[keep]
@@ -158,24 +154,23 @@ def _check_window_args(n_rows: int, n_elements: int, n_emitted, back, fwd, rows)
     fwd = np.ascontiguousarray(fwd, np.uint8)
     rows = np.asarray(rows, np.int64).reshape(-1)
     if n_emitted.shape[0] != n_rows or back.shape != (len(rows), n_elements) or fwd.shape != back.shape:
-        raise LoomError("sums, n_emitted, back/fwd and rows disagree in shape")
+        raise ValueError("sums, n_emitted, back/fwd and rows disagree in shape")
     if len(rows) and ((rows[:, None] - back < 0).any() or (rows[:, None] + fwd >= n_rows).any()):
-        raise LoomError("a window reaches outside the frames of the sums table")
+        raise ValueError("a window reaches outside the frames of the sums table")
     return n_emitted, back, fwd, rows
 
 
 def _check_windows(sums, n_emitted, back, fwd, rows):
     sums = np.ascontiguousarray(sums, np.float64)
     if sums.ndim != 5 or sums.shape[3:] != (3, 4):
-        raise LoomError(f"sums must be (frames, elements, parity, 3, 4), got {sums.shape}")
+        raise ValueError(f"sums must be (frames, elements, parity, 3, 4), got {sums.shape}")
     return (sums, *_check_window_args(sums.shape[0], sums.shape[1], n_emitted, back, fwd, rows))
 
 
-def _flux(d_table: cl.Buffer, prefix: bool, n_emitted, back, fwd, rows, element_vertices,
-          n_vertices: int, n_elements: int, n_parity: int) -> np.ndarray:
-    """Steps 2 and 3 from an element-major device sums table (E, rows, P, 12) in prefix
-    (len(n_emitted) + 1 rows) or per-frame (len(n_emitted) rows) layout, all output frames in
-    one launch."""
+def _flux(d_table: cl.Buffer, n_emitted, back, fwd, rows, element_vertices, n_vertices: int, n_elements: int,
+          n_parity: int) -> np.ndarray:
+    """Steps 2 and 3 from an element-major device prefix table (E, len(n_emitted) + 1, P, 12),
+    all output frames in one launch."""
     ctx, queue = device_context()
     # Vertex-major on the device: the frames of one vertex are neighbouring work items and writes
     if len(rows) == 0 or n_elements == 0 or n_vertices == 0:
@@ -188,117 +183,38 @@ def _flux(d_table: cl.Buffer, prefix: bool, n_emitted, back, fwd, rows, element_
     kernel("gather", "vertex_window_flux")(
         queue, (n_vertices,), None, d_table, _upload(ctx, cum_n), _upload(ctx, back_t), _upload(ctx, fwd_t),
         _upload(ctx, rows.astype(np.int32)), _upload(ctx, voffsets), _upload(ctx, slots), np.int32(n_vertices),
-        np.int32(n_elements), np.int32(n_parity), np.int32(len(n_emitted) + prefix),
-        np.int32(len(rows)), np.int32(prefix), d_out)
+        np.int32(n_elements), np.int32(n_parity), np.int32(len(n_emitted) + 1), np.int32(len(rows)), d_out)
     cl.enqueue_copy(queue, out, d_out)
     return np.moveaxis(out, 0, 2)  # (n_out, P, V, 4), a view
 
 
-def window_flux_cl(sums, n_emitted, back, fwd, rows, element_vertices, n_vertices: int,
-                   *, method: str = "prefix") -> np.ndarray:
-    """Steps 2 and 3 on PoCL: per output frame the vertex flux (R, G, B, Q).
+def frame_sums_flux_cl(frame_sums, n_emitted, back, fwd, rows, element_vertices, n_vertices: int) -> np.ndarray:
+    """Steps 2-3 on PoCL from per-frame element sums made earlier: what lets pipeline/temporal.py sum
+    a frame's records once per worker, however many chunks' windows reach it. The prefix table is
+    filled one launch a frame from the arrays where they lie (no host stacking or transposition),
+    then window sums and vertices in one launch.
 
     Parameters
     ----------
-    sums : (J, E, P, 3, 4) element sums of J consecutive frames (:func:`element_sums_cl`).
+    frame_sums : J arrays (E, P, 3, 4), each :func:`element_sums_cl` of one of J consecutive frames.
     n_emitted : (J,) photons emitted in each of those frames.
     back, fwd : (n_out, E) windows of the output frames (kernels/temporal.py).
-    rows : (n_out,) row of each output frame in ``sums``.
+    rows : (n_out,) row of each output frame among the J frames.
     element_vertices : (E, 3) vertex ids; ``n_vertices`` V.
-    method : "prefix" (difference of prefix sums) or "direct" (window rows added in order).
 
     Returns
     -------
     (n_out, P, V, 4) float64: RGB ``S_v`` (energy / photons emitted) and the variance term
-    ``sum b^2 Y^2 / N^2``. Irradiance is ``S_v / A_v`` (:func:`irradiance`).
+    ``sum b^2 Y^2 / N^2``. Irradiance is ``S_v / A_v`` (:func:`irradiance`). NumPy twin:
+    :func:`window_flux_reference` of the stacked sums.
     """
-    sums, n_emitted, back, fwd, rows = _check_windows(sums, n_emitted, back, fwd, rows)
-    if method not in ("prefix", "direct"):
-        raise LoomError(f"method must be prefix or direct, got {method!r}")
-    n_rows, n_elements, n_parity = sums.shape[:3]
-    ctx, queue = device_context()
-    width = n_parity * SLOTS
-    prefix = method == "prefix"
-    table = np.zeros((n_elements, n_rows + prefix, width))  # element-major
-    table[:, prefix:] = sums.reshape(n_rows, n_elements, width).transpose(1, 0, 2)
-    d_table = _upload(ctx, table)
-    if prefix and table.size:
-        kernel("gather", "prefix_frames")(queue, (n_elements * width,), None, d_table, np.int32(n_elements),
-                                          np.int32(n_rows), np.int32(width))
-    return _flux(d_table, prefix, n_emitted, back, fwd, rows, element_vertices, n_vertices, n_elements, n_parity)
-
-
-def gather_flux_cl(frames, n_emitted, back, fwd, rows, element_vertices, n_vertices: int, *,
-                   kind: str = "indirect", split_parity: bool = False,
-                   step_per_frame: bool | None = None) -> np.ndarray:
-    """Steps 1-3 on PoCL without leaving the device: the records of J consecutive frames
-    (``frames``, as for :func:`element_sums_cl`) are summed straight into a prefix-sum table,
-    then windows and vertices as :func:`window_flux_cl` (same arguments and result).
-
-    Two ways to fill the table give the same bits (``step_per_frame``; by default chosen by
-    density, measured with ``loom bench temporal``): frames with fewer than
-    :data:`DENSE_RECORDS_PER_ELEMENT` records per element are concatenated and summed in one launch
-    that walks each element's rows in order (ATRIUM at 20,000 photons: 3 ms/frame against 4.5 ms
-    frame by frame); denser frames are summed one launch a frame over their own arrays, because
-    concatenating them costs more than the kernel (1,000,000-record frames: 160 M records/s
-    against 50 M/s)."""
-    frames = list(frames)
-    n_parity = 2 if split_parity else 1
-    n_rows = len(frames)
-    n_elements = len(frames[0].offsets) - 1 if frames else 0
-    n_emitted, back, fwd, rows = _check_window_args(n_rows, n_elements, n_emitted, back, fwd, rows)
-    width = n_elements * n_parity * SLOTS
-    if width == 0:
-        return np.zeros((len(rows), n_parity, n_vertices, 4))
-    if kind not in KINDS:
-        raise LoomError(f"kind must be one of {', '.join(KINDS)}, got {kind!r}")
-    ctx, queue = device_context()
-    d_table = scratch("gather.table", 8 * (n_rows + 1) * width)
-    n_records = sum(len(r.key) for r in frames)
-    held = []  # records are read in place: keep their buffers until the kernels have finished
-    if step_per_frame is None:
-        step_per_frame = n_records >= DENSE_RECORDS_PER_ELEMENT * n_rows * n_elements
-    if step_per_frame:
-        # Dense frames: one launch a frame over its own records, no host concatenation
-        step = kernel("gather", "sums_prefix_step")
-        for j, r in enumerate(frames):
-            offsets = np.asarray(r.offsets, np.int64)
-            if len(offsets) != n_elements + 1 or offsets[0] != 0 or offsets[-1] != len(r.key):
-                raise LoomError("records' offsets do not match their element count")
-            records = [_in_place(ctx, np.asarray(a, dt)) for a, dt in (
-                (r.key, np.uint32), (r.b1, np.uint16), (r.b2, np.uint16), (r.energy, np.float32),
-                (offsets, np.int64))]
-            step(queue, (n_elements * n_parity,), None, *records, np.int32(j), np.int32(n_rows),
-                 np.int32(n_elements), np.uint32(KINDS[kind]), np.int32(n_parity), d_table)
-            held.append(records)
-    else:
-        # Sparse frames: concatenate and walk each element's rows in one launch (cache-friendly)
-        key, b1, b2, energy, offsets, _, _ = _concat_frames(frames)
-        held = [_in_place(ctx, a) for a in (key, b1, b2, energy, offsets)]
-        kernel("gather", "sums_prefix")(
-            queue, (n_elements * n_parity,), None, *held, np.int32(n_rows), np.int32(n_elements),
-            np.uint32(KINDS[kind]), np.int32(n_parity), d_table)
-    queue.finish()
-    del held
-    return _flux(d_table, True, n_emitted, back, fwd, rows, element_vertices, n_vertices, n_elements,
-                 n_parity)
-
-
-def frame_sums_flux_cl(frame_sums, n_emitted, back, fwd, rows, element_vertices, n_vertices: int) -> np.ndarray:
-    """Steps 2-3 on PoCL from per-frame element sums made earlier (``frame_sums``: J arrays
-    (E, P, 3, 4), each :func:`element_sums_cl` of one frame): the prefix table is filled one
-    launch a frame from the arrays where they lie (no host stacking or transposition), then
-    windows and vertices as :func:`window_flux_cl`. Bitwise equal to :func:`gather_flux_cl` on
-    those frames' records (tested): what lets pipeline/temporal.py sum a frame's records once per
-    worker, however many chunks' windows reach it. NumPy twin: :func:`window_flux_reference` of
-    the stacked sums."""
     frame_sums = [np.ascontiguousarray(a, np.float64) for a in frame_sums]
     n_rows = len(frame_sums)
     if not n_rows:
-        raise LoomError("no frames of sums to gather")
+        raise ValueError("no frames of sums to gather")
     n_elements, n_parity = frame_sums[0].shape[:2]
     if any(a.shape != (n_elements, n_parity, 3, 4) for a in frame_sums):
-        raise LoomError(f"frame sums must all be (elements, parity, 3, 4), got {frame_sums[0].shape} and others")
+        raise ValueError(f"frame sums must all be (elements, parity, 3, 4), got {frame_sums[0].shape} and others")
     n_emitted, back, fwd, rows = _check_window_args(n_rows, n_elements, n_emitted, back, fwd, rows)
     width = n_elements * n_parity * SLOTS
     if width == 0:
@@ -313,12 +229,12 @@ def frame_sums_flux_cl(frame_sums, n_emitted, back, fwd, rows, element_vertices,
              np.int32(n_elements), np.int32(n_parity), d_table)
     queue.finish()
     del held
-    return _flux(d_table, True, n_emitted, back, fwd, rows, element_vertices, n_vertices, n_elements, n_parity)
+    return _flux(d_table, n_emitted, back, fwd, rows, element_vertices, n_vertices, n_elements, n_parity)
 
 
 def window_flux_reference(sums, n_emitted, back, fwd, rows, element_vertices, n_vertices: int) -> np.ndarray:
-    """NumPy twin of :func:`window_flux_cl`: window rows added directly, corners scattered
-    with ``np.bincount``."""
+    """NumPy twin of :func:`frame_sums_flux_cl` (``sums`` (J, E, P, 3, 4): its ``frame_sums``
+    stacked): window rows added directly, corners scattered with ``np.bincount``."""
     sums, n_emitted, back, fwd, rows = _check_windows(sums, n_emitted, back, fwd, rows)
     n_rows, n_elements, n_parity = sums.shape[:3]
     ev = np.asarray(element_vertices, np.int64).reshape(n_elements, 3)

@@ -37,8 +37,6 @@ from __future__ import annotations
 import numpy as np
 import pyopencl as cl
 
-from pipeline.errors import LoomError
-
 from .context import device_context, kernel
 
 MODES = ("adaptive", "fixed", "off")
@@ -48,22 +46,22 @@ MAX_HALF_FMAX = 255  # back and fwd are stored as uint8
 def _check(counts, n_emitted, fmax, mode, smoothing_frames, min_extent, frames):
     counts = np.ascontiguousarray(counts, dtype=np.uint32)
     if counts.ndim != 2:
-        raise LoomError(f"counts must be (frames, elements), got shape {counts.shape}")
+        raise ValueError(f"counts must be (frames, elements), got shape {counts.shape}")
     n_frames = counts.shape[0]
     n_emitted = np.ascontiguousarray(n_emitted, dtype=np.float64).reshape(-1)
     if n_emitted.shape[0] != n_frames:
-        raise LoomError(f"n_emitted has {n_emitted.shape[0]} frames, counts {n_frames}")
+        raise ValueError(f"n_emitted has {n_emitted.shape[0]} frames, counts {n_frames}")
     if n_frames and not (n_emitted > 0).all():
-        raise LoomError("every frame of the count table needs photons (N_frame > 0)")
+        raise ValueError("every frame of the count table needs photons (N_frame > 0)")
     if mode not in MODES:
-        raise LoomError(f"temporal mode must be one of {', '.join(MODES)}, got {mode!r}", field="--temporal")
+        raise ValueError(f"temporal mode must be one of {', '.join(MODES)}, got {mode!r}")
     if not 0 <= int(fmax) <= 2 * MAX_HALF_FMAX:
-        raise LoomError(f"F_max must be in [0, {2 * MAX_HALF_FMAX}], got {fmax}", field="--fmax")
+        raise ValueError(f"F_max must be in [0, {2 * MAX_HALF_FMAX}], got {fmax}")
     if smoothing_frames < 1 or smoothing_frames % 2 == 0 or min_extent < 1:
-        raise LoomError("smoothing_frames must be odd and >= 1, min_extent >= 1")
+        raise ValueError("smoothing_frames must be odd and >= 1, min_extent >= 1")
     f0, f1 = (0, n_frames) if frames is None else (int(frames[0]), int(frames[1]))
     if not 0 <= f0 <= f1 <= n_frames:
-        raise LoomError(f"frames [{f0}, {f1}) outside the table's {n_frames} frames")
+        raise ValueError(f"frames [{f0}, {f1}) outside the table's {n_frames} frames")
     return counts, n_emitted, f0, f1
 
 

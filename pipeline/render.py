@@ -27,6 +27,7 @@ from .cluster import connect
 from .config import RenderConfig, stable_digest
 from .errors import LoomError
 from .images import frame_paths, write_video
+from .paths import check_writable_dir
 from .scene import Scene
 from .shoot import check_store_location, plan
 from .tonemap import LOOK_FIELDS, ToneMapping
@@ -69,13 +70,7 @@ def parse_resolution(text: str) -> tuple[int, int]:
 
 def check_out_dir(out: Path) -> None:
     """Refuse an output location that is a file or cannot be written, before any work."""
-    if out.exists() and not out.is_dir():
-        raise LoomError("exists and is not a directory", path=str(out), field="--out")
-    parent = out
-    while not parent.exists() and parent != parent.parent:
-        parent = parent.parent
-    if not parent.is_dir() or not os.access(parent, os.W_OK):
-        raise LoomError(f"is not writable ({parent} does not allow writing)", path=str(out), field="--out")
+    check_writable_dir(out, field="--out")
 
 
 def prepare_job(scene_path, *, frames: str | None, out_dir, settings: RenderSettings = RenderSettings(),

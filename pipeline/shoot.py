@@ -8,14 +8,13 @@ needs nothing. Every task is skipped when its batch is already done, so a rerun 
 """
 from __future__ import annotations
 
-import os
 import time
 from dataclasses import dataclass
-from pathlib import Path
 
 from .cluster import connect, run_tasks
 from .config import RenderConfig
 from .errors import LoomError
+from .paths import check_writable_dir
 from .scene import ElementMesh, Scene
 from .store import PhotonStore, remove_partials
 
@@ -38,14 +37,7 @@ def check_store_location(url: str) -> None:
     """Refuse a store location we cannot write before anything is traced or written."""
     if "://" in url and not url.startswith("file://"):
         return  # remote stores are checked by zarr when created
-    path = Path(url[len("file://"):] if url.startswith("file://") else url)
-    if path.exists() and not path.is_dir():
-        raise LoomError("exists and is not a directory", path=str(path), field="--store")
-    parent = path if path.exists() else path.parent
-    while not parent.exists() and parent != parent.parent:
-        parent = parent.parent
-    if not os.access(parent, os.W_OK):
-        raise LoomError(f"is not writable ({parent} does not allow writing)", path=str(path), field="--store")
+    check_writable_dir(url[len("file://"):] if url.startswith("file://") else url, field="--store")
 
 
 def plan(scene: Scene, frames_spec: str | None, n_photons: int, config: RenderConfig) -> ShootPlan:

@@ -31,7 +31,7 @@ import numpy as np
 
 from kernels.filter import adaptive_filter_cl, neighbourhood
 from kernels.gather import element_sums_cl, frame_sums_flux_cl, irradiance
-from kernels.temporal import MODES, windows_cl
+from kernels.temporal import MAX_HALF_FMAX, MODES, windows_cl
 
 from .config import RenderConfig
 from .errors import LoomError
@@ -61,6 +61,18 @@ def window_reach(fmax: int, mode: str, config: RenderConfig) -> int:
     return (0 if mode == "off" else int(fmax) // 2) + int(config.smoothing_frames) // 2
 
 
+def check_window_options(mode: str, fmax) -> None:
+    """``--temporal`` and ``--fmax`` as kernels/temporal.py takes them, or a one-line LoomError."""
+    if mode not in MODES:
+        raise LoomError(f"must be one of {', '.join(MODES)}, got {mode!r}", field="--temporal")
+    try:
+        ok = 0 <= int(fmax) <= 2 * MAX_HALF_FMAX
+    except (TypeError, ValueError):
+        ok = False
+    if not ok:
+        raise LoomError(f"F_max must be in [0, {2 * MAX_HALF_FMAX}], got {fmax!r}", field="--fmax")
+
+
 def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames, *, mode: str, fmax: int,
                        config: RenderConfig, counts_from: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """(len(frames), E) back and fwd windows of the requested frame indices, per run of frames
@@ -69,7 +81,11 @@ def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames, *, mod
     ``counts`` holds the count-table rows ``counts_from ..`` (default the whole table); only the
     rows within :func:`window_reach` of the requested frames are read, and the windows are the
     same bits as from the whole table: every rate and walk inside the reach sees the same rows
-    and the same run ends (``n_emitted`` is of every frame)."""
+    and the same run ends (``n_emitted`` is of every frame).
+
+    A mode or F_max the user gave outside what the kernel takes is a LoomError naming the option
+    (kernels/temporal.py raises ValueError for a broken contract)."""
+    check_window_options(mode, fmax)
     frames = np.asarray(frames, np.int64)
     n_emitted = np.asarray(n_emitted, np.float64)
     back = np.zeros((len(frames), counts.shape[1]), np.uint8)
@@ -126,9 +142,9 @@ def illumination_maps(store, elements, scene, frames=None, *, mode: str = "adapt
     from workers.reconstruct import frame_geometry
 
     clock = _Clock(times)
-    if mode not in MODES:
-        raise LoomError(f"must be one of {', '.join(MODES)}, got {mode!r}", field="--temporal")
-    fmax = config.fmax_initial if fmax is None else int(fmax)
+    fmax = config.fmax_initial if fmax is None else fmax
+    check_window_options(mode, fmax)
+    fmax = int(fmax)
     frames = np.arange(store.n_frames) if frames is None else np.unique(np.asarray(frames, np.int64))
     if len(frames) and (frames.min() < 0 or frames.max() >= store.n_frames):
         raise LoomError(f"frame indices must be in [0, {store.n_frames})")

@@ -41,9 +41,10 @@ from dataclasses import asdict, dataclass
 
 import numpy as np
 
+from kernels.colour import LUMA
+
 from .errors import ConfigError
 
-REC709_Y = np.array([0.2126, 0.7152, 0.0722])  # luminance of linear Rec.709 RGB (ITU-R BT.709)
 DELTA = 1e-4  # cd/m^2 floor inside the log-average (Ward 1994; avoids log 0)
 OPERATORS = ("filmic", "exposure", "ward")
 KEY = 0.18  # middle grey the adaptation luminance is exposed to (Reinhard et al. 2002)
@@ -78,7 +79,7 @@ class ToneMapping:
 
 def luminance(rgb: np.ndarray) -> np.ndarray:
     """Rec.709 luminance of linear RGB (..., 3)."""
-    return np.asarray(rgb, dtype=np.float64) @ REC709_Y
+    return np.asarray(rgb, dtype=np.float64) @ np.asarray(LUMA)
 
 
 def log_average(lum: np.ndarray, weights: np.ndarray | None = None) -> float:

@@ -12,10 +12,9 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..errors import LoomError
+from kernels.colour import LUMA  # Rec. 709 / sRGB luminance weights (ITU-R BT.709-6)
 
-# Rec. 709 / sRGB luminance weights (ITU-R BT.709-6, Table 3, item 3.3).
-REC709_Y = (0.2126, 0.7152, 0.0722)
+from ..errors import LoomError
 
 
 @dataclass(frozen=True)
@@ -88,7 +87,7 @@ def relative_luminance(rgb: np.ndarray) -> np.ndarray:
         return rgb
     if rgb.shape[2] == 1:
         return rgb[..., 0]
-    r, g, b = REC709_Y
+    r, g, b = LUMA
     return r * rgb[..., 0] + g * rgb[..., 1] + b * rgb[..., 2]
 
 

@@ -11,7 +11,9 @@ from __future__ import annotations
 
 import numpy as np
 
-LUMA = np.array([0.2126, 0.7152, 0.0722])  # Rec.709, as pipeline/tonemap.py
+from kernels import colour
+
+LUMA = np.asarray(colour.LUMA)  # Rec. 709 (kernels/colour.py)
 LAG_LEVEL = 0.9  # a method has caught up with a change once 90 % of it shows (a rise time)
 
 

@@ -32,9 +32,10 @@ from pathlib import Path
 import click
 import numpy as np
 
+from kernels import colour
 from pipeline.render import parse_resolution
 
-LUMA = np.array([0.2126, 0.7152, 0.0722])
+LUMA = np.asarray(colour.LUMA)  # Rec. 709 (kernels/colour.py)
 K = 68  # ROOM's segment centre K2 (§6, Table 1)
 
 

@@ -26,7 +26,9 @@ GLB_MAGIC = 0x46546C67  # "glTF"
 CHUNK_JSON = 0x4E4F534A
 CHUNK_BIN = 0x004E4942
 
-_COMPONENT_DTYPES = {
+# The one table of glTF component types and accessor widths (spec §3.6.2.2, §5.1): the reader here,
+# the writer of the built-in scenes (builtin/gltf_builder.py) and builtin/element_estimate.py use it.
+COMPONENT_DTYPES = {
     5120: np.int8,
     5121: np.uint8,
     5122: np.int16,
@@ -34,7 +36,7 @@ _COMPONENT_DTYPES = {
     5125: np.uint32,
     5126: np.float32,
 }
-_TYPE_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
+TYPE_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 
 # What a scene file may claim (README "Input limits and hostile input"). A buffer may not exceed a
 # GLB's own uint32 length; an accessor without a bufferView is zeros that no byte backs, so its
@@ -80,8 +82,8 @@ class GltfDocument:
         acc = g.accessors[index]
         if acc.sparse is not None:
             raise self.error("sparse accessors are not supported", where)
-        dtype = _COMPONENT_DTYPES.get(acc.componentType) if _is_int(acc.componentType) else None
-        width = _TYPE_WIDTH.get(acc.type) if isinstance(acc.type, str) else None
+        dtype = COMPONENT_DTYPES.get(acc.componentType) if _is_int(acc.componentType) else None
+        width = TYPE_WIDTH.get(acc.type) if isinstance(acc.type, str) else None
         if dtype is None or width is None:
             raise self.error(f"unknown componentType {acc.componentType} or type {acc.type!r}", where)
         if types is not None and acc.type not in types:

@@ -363,7 +363,7 @@ class PhotonStore:
         """Open an existing store, refusing one made with another scene, config or seed."""
         where = os.fspath(url)
         if mode not in ("r", "r+"):
-            raise LoomError(f"mode must be 'r' or 'r+', not {mode!r}", path=where)
+            raise ValueError(f"mode must be 'r' or 'r+', not {mode!r}")  # a caller's bug, not the user's
         try:
             store = make_store(url, read_only=(mode == "r"))
             root = _open_root(store, where, mode)
@@ -752,8 +752,8 @@ class PhotonStore:
         running counts at its last batch in use.
         """
         if kind not in ("direct", "indirect", "all") or parity not in (None, 0, 1):
-            raise LoomError(f"counts(kind={kind!r}, parity={parity!r}): kind must be direct, "
-                            "indirect or all and parity None, 0 or 1", path=self.url)
+            raise ValueError(f"counts(kind={kind!r}, parity={parity!r}): kind must be direct, "
+                             "indirect or all and parity None, 0 or 1")  # a caller's bug
         cats = [c for c in range(len(CATEGORIES))
                 if (kind == "all" or (c >> 1) == (kind == "direct"))
                 and (parity is None or (c & 1) == parity)]

@@ -23,7 +23,7 @@ def pack_key(element, photon_index, direct) -> np.ndarray:
     """u32 keys from element ids, photon indices (only their parity is kept) and direct flags."""
     element = np.asarray(element)
     if element.size and (element.min() < 0 or element.max() > ELEMENT_MASK):
-        raise LoomError(f"element ids must be in [0, {ELEMENT_MASK}]")
+        raise ValueError(f"element ids must be in [0, {ELEMENT_MASK}]")  # a caller's bug, not the user's
     parity = (np.asarray(photon_index) & 1).astype(np.uint32)
     return (element.astype(np.uint32) | parity << np.uint32(ELEMENT_BITS)
             | np.asarray(direct, dtype=bool).astype(np.uint32) << np.uint32(ELEMENT_BITS + 1))

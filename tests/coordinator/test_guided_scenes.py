@@ -11,6 +11,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from kernels.colour import LUMA
 from pipeline.config import RenderConfig
 from pipeline.perceived import displayed_difference
 from pipeline.render import RenderSettings, render
@@ -57,7 +58,7 @@ class Frames:
         floor = displayed_difference(self.beauty(frame, halves[0]), self.beauty(frame, halves[1]), adaptation).d_aqm
         test = self.beauty(frame, irradiance)
         d = displayed_difference(test, ref, adaptation).d_aqm
-        y = lambda img: img @ np.array([0.2126, 0.7152, 0.0722])  # noqa: E731
+        y = lambda img: img @ np.asarray(LUMA)  # noqa: E731
         rel = float(np.sqrt(np.mean((y(test) - y(ref)) ** 2)) / np.mean(y(ref)))
         return {"d_aqm": d, "floor_halves": floor, "rel_rms": rel}
 

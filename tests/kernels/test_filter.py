@@ -6,7 +6,6 @@ import numpy as np
 import pytest
 
 from kernels.filter import adaptive_filter_cl, adaptive_filter_reference, neighbourhood
-from pipeline.errors import LoomError
 from tests.kernels.twin_base import KernelTwinTests
 
 
@@ -182,9 +181,9 @@ def test06_refuses_bad_input(rng):
     hood = neighbourhood(ev, pos, inst)
     areas = hat_areas(pos, ev)
     flux = noisy_flux(rng, np.ones(len(pos)), areas, 50.0)
-    with pytest.raises(LoomError, match="flux must be"):
+    with pytest.raises(ValueError, match="flux must be"):
         adaptive_filter_cl(flux[:, :5], areas, hood)
-    with pytest.raises(LoomError, match="filter_photons"):
+    with pytest.raises(ValueError, match="photons"):
         adaptive_filter_cl(flux, areas, hood, photons=0)
 
 

@@ -1,6 +1,7 @@
-"""Gather (§4, §5.2.4): element sums, window sums and vertex flux on PoCL equal their NumPy twins
-within 1e-6 relative, a one-frame window is workers/reconstruct.py's vertex_irradiance, and
-repeated runs are bitwise identical."""
+"""Gather (§4, §5.2.4): element sums, window sums and vertex flux on PoCL (element_sums_cl,
+frame_sums_flux_cl: the path pipeline/temporal.py runs) equal their NumPy twins within 1e-6
+relative, a one-frame window is workers/reconstruct.py's vertex_irradiance, and repeated runs are
+bitwise identical."""
 from __future__ import annotations
 
 from types import SimpleNamespace
@@ -12,12 +13,9 @@ from kernels.gather import (
     element_sums_cl,
     element_sums_reference,
     frame_sums_flux_cl,
-    gather_flux_cl,
     irradiance,
-    window_flux_cl,
     window_flux_reference,
 )
-from pipeline.errors import LoomError
 from tests.kernels.twin_base import KernelTwinTests
 from workers.reconstruct import vertex_irradiance
 
@@ -41,6 +39,11 @@ def frame_records(rng, n_records, n_elements, *, hit=None, energy_scale=1.0):
 def mesh(rng, n_elements, n_vertices):
     ev = np.stack([rng.choice(n_vertices, 3, replace=False) for _ in range(n_elements)]).astype(np.int32)
     return ev
+
+
+def stacked_flux_cl(sums, *args):
+    """frame_sums_flux_cl over the frames of a (J, E, P, 3, 4) element sums table."""
+    return frame_sums_flux_cl(list(sums), *args)
 
 
 def close(a, b):
@@ -140,9 +143,8 @@ def random_windows(rng, n_out, n_elements, rows, n_rows):
     return back, fwd
 
 
-@pytest.mark.parametrize("method", ["prefix", "direct"])
 @pytest.mark.parametrize("split", [False, True])
-def test03_window_flux_matches_reference(rng, method, split):
+def test03_window_flux_matches_reference(rng, split):
     n_rows, n_elements, n_vertices = 40, 400, 260
     frames = [frame_records(rng, int(rng.integers(0, 3000)), n_elements) for _ in range(n_rows)]
     sums = element_sums_cl(frames, split_parity=split)
@@ -150,7 +152,7 @@ def test03_window_flux_matches_reference(rng, method, split):
     rows = np.array([0, 1, 17, 20, 38, 39])
     back, fwd = random_windows(rng, len(rows), n_elements, rows, n_rows)
     ev = mesh(rng, n_elements, n_vertices)
-    got = window_flux_cl(sums, n, back, fwd, rows, ev, n_vertices, method=method)
+    got = stacked_flux_cl(sums, n, back, fwd, rows, ev, n_vertices)
     want = window_flux_reference(sums, n, back, fwd, rows, ev, n_vertices)
     assert got.shape == (len(rows), 2 if split else 1, n_vertices, 4)
     close(got, want)
@@ -165,7 +167,7 @@ def test04_one_frame_window_is_vertex_irradiance(rng):
     sums = element_sums_cl(frames, kind="indirect")
     n = np.array([40_000.0, 41_000.0, 39_000.0])
     zero = np.zeros((1, n_elements), np.uint8)
-    flux = window_flux_cl(sums, n, zero, zero, [1], ev, n_vertices)
+    flux = stacked_flux_cl(sums, n, zero, zero, [1], ev, n_vertices)
     got = irradiance(flux[0, 0], areas)
     r = frames[1]
     ind = ~r.direct
@@ -182,7 +184,7 @@ def test05_window_pools_photons_of_all_its_frames(rng):
     n = np.array([10_000.0, 20_000.0, 40_000.0])
     sums = element_sums_cl(frames, kind="all")
     one = np.ones((1, n_elements), np.uint8)
-    got = irradiance(window_flux_cl(sums, n, one, one, [1], ev, n_vertices)[0, 0], areas)
+    got = irradiance(stacked_flux_cl(sums, n, one, one, [1], ev, n_vertices)[0, 0], areas)
     cat = lambda name: np.concatenate([getattr(r, name) for r in frames])  # noqa: E731
     want = vertex_irradiance(cat("element"), cat("b1"), cat("b2"), cat("energy"), ev, areas, n.sum())
     close(got, want)
@@ -194,8 +196,8 @@ def test06_parity_halves_estimate_the_whole(rng):
     ev = mesh(rng, n_elements, n_vertices)
     n = np.full(5, 30_000.0)
     back = np.full((1, n_elements), 2, np.uint8)
-    halves = window_flux_cl(element_sums_cl(frames, split_parity=True), n, back, back, [2], ev, n_vertices)
-    whole = window_flux_cl(element_sums_cl(frames), n, back, back, [2], ev, n_vertices)
+    halves = stacked_flux_cl(element_sums_cl(frames, split_parity=True), n, back, back, [2], ev, n_vertices)
+    whole = stacked_flux_cl(element_sums_cl(frames), n, back, back, [2], ev, n_vertices)
     # Each half is normalised by half the photons: their mean is the full map
     close(halves[0, :, :, :3].mean(axis=0), whole[0, 0, :, :3])
 
@@ -208,11 +210,11 @@ def test07_bitwise_repeatable(rng):
     rows = np.arange(2, 8)
     back, fwd = random_windows(rng, len(rows), n_elements, rows, 10)
     first_sums = element_sums_cl(frames, split_parity=True)
-    first = window_flux_cl(first_sums, n, back, fwd, rows, ev, n_vertices)
+    first = stacked_flux_cl(first_sums, n, back, fwd, rows, ev, n_vertices)
     for _ in range(2):
         sums = element_sums_cl(frames, split_parity=True)
         assert sums.tobytes() == first_sums.tobytes()
-        assert window_flux_cl(sums, n, back, fwd, rows, ev, n_vertices).tobytes() == first.tobytes()
+        assert stacked_flux_cl(sums, n, back, fwd, rows, ev, n_vertices).tobytes() == first.tobytes()
 
 
 def test08_refuses_windows_outside_the_table(rng):
@@ -220,47 +222,18 @@ def test08_refuses_windows_outside_the_table(rng):
     sums = element_sums_cl(frames)
     ev = mesh(rng, 10, 8)
     two = np.full((1, 10), 2, np.uint8)
-    with pytest.raises(LoomError, match="outside"):
-        window_flux_cl(sums, np.ones(3), two, two, [1], ev, 8)
-    with pytest.raises(LoomError, match="prefix or direct"):
-        window_flux_cl(sums, np.ones(3), two * 0, two * 0, [1], ev, 8, method="sorted")
-
-
-@pytest.mark.parametrize("split", [False, True])
-def test09_fused_gather_equals_the_steps(rng, split):
-    n_rows, n_elements, n_vertices = 12, 300, 200
-    frames = [frame_records(rng, int(rng.integers(0, 3000)), n_elements) for _ in range(n_rows)]
-    n = rng.integers(10_000, 80_000, n_rows).astype(float)
-    rows = np.arange(n_rows)
-    back, fwd = random_windows(rng, n_rows, n_elements, rows, n_rows)
-    ev = mesh(rng, n_elements, n_vertices)
-    fused = gather_flux_cl(frames, n, back, fwd, rows, ev, n_vertices, kind="all", split_parity=split)
-    steps = window_flux_cl(element_sums_cl(frames, kind="all", split_parity=split), n, back, fwd, rows, ev,
-                           n_vertices)
-    assert fused.tobytes() == steps.tobytes()
-    close(fused, window_flux_reference(element_sums_reference(frames, kind="all", split_parity=split), n,
-                                       back, fwd, rows, ev, n_vertices))
-
-
-@pytest.mark.parametrize("split", [False, True])
-def test_gather_paths_give_the_same_bits(rng, split):
-    """Concatenated frames in one launch and one launch a frame fill the same prefix table."""
-    n_elements, n_vertices = 120, 90
-    frames = [frame_records(rng, int(rng.integers(0, 900)), n_elements) for _ in range(6)]
-    frames.append(frame_records(rng, 0, n_elements))
-    ev = mesh(rng, n_elements, n_vertices)
-    back = rng.integers(0, 4, (3, n_elements)).astype(np.uint8)
-    fwd = rng.integers(0, 3, (3, n_elements)).astype(np.uint8)
-    args = (frames, np.full(7, 1000.0), back, fwd, [3, 4, 3], ev, n_vertices)
-    one = gather_flux_cl(*args, kind="all", split_parity=split, step_per_frame=False)
-    each = gather_flux_cl(*args, kind="all", split_parity=split, step_per_frame=True)
-    assert one.tobytes() == each.tobytes()
+    with pytest.raises(ValueError, match="outside"):
+        stacked_flux_cl(sums, np.ones(3), two, two, [1], ev, 8)
+    with pytest.raises(ValueError, match="outside"):
+        window_flux_reference(sums, np.ones(3), two, two, [1], ev, 8)
+    with pytest.raises(ValueError, match="kind"):
+        element_sums_cl(frames, kind="sometimes")
 
 
 @pytest.mark.parametrize("split", [False, True])
 def test_gather_from_frame_sums_gives_the_same_bits(rng, split):
-    """Sums made one frame at a time (and kept, pipeline/temporal.py) fill the same prefix table as
-    the records summed in the gather, and agree with the NumPy twin."""
+    """Sums made one frame at a time (and kept, pipeline/temporal.py) are the bits of the frames
+    summed in one call, give the same flux, and agree with the NumPy twin."""
     n_elements, n_vertices = 150, 110
     frames = [frame_records(rng, int(rng.integers(0, 1500)), n_elements) for _ in range(8)]
     frames.append(frame_records(rng, 0, n_elements))
@@ -270,8 +243,9 @@ def test_gather_from_frame_sums_gives_the_same_bits(rng, split):
     n = rng.integers(1_000, 9_000, len(frames)).astype(float)
     per_frame = [element_sums_cl([f], kind="indirect", split_parity=split)[0] for f in frames]
     got = frame_sums_flux_cl(per_frame, n, back, fwd, rows, ev, n_vertices)
-    assert got.tobytes() == gather_flux_cl(frames, n, back, fwd, rows, ev, n_vertices, kind="indirect",
-                                           split_parity=split).tobytes()
+    together = element_sums_cl(frames, kind="indirect", split_parity=split)
+    assert np.stack(per_frame).tobytes() == together.tobytes()
+    assert got.tobytes() == stacked_flux_cl(together, n, back, fwd, rows, ev, n_vertices).tobytes()
     close(got, window_flux_reference(np.stack(per_frame), n, back, fwd, rows, ev, n_vertices))
-    with pytest.raises(LoomError):
+    with pytest.raises(ValueError, match="frame sums"):
         frame_sums_flux_cl(per_frame[:2] + [per_frame[2][:10]], n[:3], back[:, :], fwd, [1, 1, 1], ev, n_vertices)

@@ -17,6 +17,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from kernels import colour
 from pipeline.config import RenderConfig
 from pipeline.scene import ElementMesh, Scene
 from pipeline.scene.builtin import write_builtin
@@ -28,7 +29,7 @@ from workers.reconstruct import vertex_irradiance
 K2 = 68  # frame number of the central frame of the middle segment
 FMAX = 30
 N_FRAME = 40_000
-LUMA = np.array([0.2126, 0.7152, 0.0722])
+LUMA = np.asarray(colour.LUMA)
 STATIC_WALLS = ("wall_left", "wall_right", "wall_back", "wall_front", "ceiling")
 
 

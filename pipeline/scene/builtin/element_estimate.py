@@ -17,12 +17,7 @@ import pygltflib
 
 from pipeline.scene.builtin.gltf_builder import GltfBuilder
 from pipeline.scene.builtin.shapes import quaternion_matrix
-
-_DTYPES = {
-    pygltflib.BYTE: np.int8, pygltflib.UNSIGNED_BYTE: np.uint8, pygltflib.SHORT: np.int16,
-    pygltflib.UNSIGNED_SHORT: np.uint16, pygltflib.UNSIGNED_INT: np.uint32, pygltflib.FLOAT: np.float32,
-}
-_WIDTHS = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT4": 16}
+from pipeline.scene.gltf import COMPONENT_DTYPES, TYPE_WIDTH
 
 
 class GltfData:
@@ -49,8 +44,8 @@ class GltfData:
     def accessor(self, index: int) -> np.ndarray:
         """The accessor's elements as a (count, width) array (byteStride honoured, no sparse)."""
         acc = self.gltf.accessors[index]
-        dtype = np.dtype(_DTYPES[acc.componentType])
-        width = _WIDTHS[acc.type]
+        dtype = np.dtype(COMPONENT_DTYPES[acc.componentType])
+        width = TYPE_WIDTH[acc.type]
         view = self.gltf.bufferViews[acc.bufferView]
         data = self.buffers[view.buffer]
         start = (view.byteOffset or 0) + (acc.byteOffset or 0)

@@ -41,6 +41,8 @@ from pygltflib import (
     Scene,
 )
 
+from pipeline.scene.gltf import COMPONENT_DTYPES, TYPE_WIDTH
+
 LIGHTS_EXTENSION = "KHR_lights_punctual"
 EMISSIVE_STRENGTH_EXTENSION = "KHR_materials_emissive_strength"
 TEXTURE_TRANSFORM_EXTENSION = "KHR_texture_transform"
@@ -49,15 +51,9 @@ TRIANGLES = 4
 ARRAY_BUFFER = 34962
 ELEMENT_ARRAY_BUFFER = 34963
 
-_COMPONENT_TYPES = {
-    np.dtype(np.int8): pygltflib.BYTE,
-    np.dtype(np.uint8): pygltflib.UNSIGNED_BYTE,
-    np.dtype(np.int16): pygltflib.SHORT,
-    np.dtype(np.uint16): pygltflib.UNSIGNED_SHORT,
-    np.dtype(np.uint32): pygltflib.UNSIGNED_INT,
-    np.dtype(np.float32): pygltflib.FLOAT,
-}
-_ACCESSOR_TYPES = {1: pygltflib.SCALAR, 2: pygltflib.VEC2, 3: pygltflib.VEC3, 4: pygltflib.VEC4, 16: pygltflib.MAT4}
+_COMPONENT_TYPES = {np.dtype(dtype): code for code, dtype in COMPONENT_DTYPES.items()}
+# Widths written: SCALAR, VEC2..4 and MAT4 (MAT2 and MAT3 are never written; MAT2 shares VEC4's width)
+_ACCESSOR_TYPES = {TYPE_WIDTH[t]: t for t in ("SCALAR", "VEC2", "VEC3", "VEC4", "MAT4")}
 _PATH_WIDTH = {"translation": 3, "rotation": 4, "scale": 3}
 _INTERPOLATIONS = ("LINEAR", "STEP", "CUBICSPLINE")
 
