@@ -9,11 +9,14 @@ from __future__ import annotations
 import os
 import time
 from contextlib import contextmanager
-from typing import Callable, Iterable, Iterator
+from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator
 
 from tqdm import tqdm
 
 from .errors import LoomError
+
+if TYPE_CHECKING:
+    from distributed import Client, Future
 
 # Environment for worker processes: one thread per library, so processes x 1 thread fill the machine.
 WORKER_ENV = {
@@ -37,7 +40,7 @@ WORKERLESS_TIMEOUT_S = 60.0
 _POLL_S = 2.0
 
 
-def check_workers(workers) -> int | None:
+def check_workers(workers: int | None) -> int | None:
     """``--workers``: None (one per core) or an integer in [1, 4 x cores]; 0 and negatives are errors."""
     if workers is None:
         return None
@@ -50,7 +53,7 @@ def check_workers(workers) -> int | None:
 
 @contextmanager
 def connect(scheduler: str = "local", workers: int | None = None, *, performance_report: str | None = None,
-            echo=None) -> Iterator[object | None]:
+            echo: Callable[[str], None] | None = None) -> Iterator[object | None]:
     """Yield a ``distributed.Client`` (or None for ``synchronous``) for the duration of a run.
 
     ``local`` starts a LocalCluster of worker processes sized to the machine (``workers`` or one
@@ -115,7 +118,7 @@ def _reporting(client, performance_report: str | None, echo):
         yield
 
 
-def run_tasks(client, func: Callable, calls: Iterable[tuple[str, dict]], *, desc: str,
+def run_tasks(client: Client | None, func: Callable, calls: Iterable[tuple[str, dict]], *, desc: str,
               progress: bool = True) -> dict[str, object]:
     """Run ``func(**kwargs)`` for every ``(key, kwargs)`` and return ``{key: result}``.
 
@@ -143,7 +146,8 @@ def run_tasks(client, func: Callable, calls: Iterable[tuple[str, dict]], *, desc
         bar.close()
 
 
-def completed(client, futures, workerless_timeout: float = WORKERLESS_TIMEOUT_S) -> Iterator[tuple[object, object]]:
+def completed(client: Client, futures: Iterable[Future],
+              workerless_timeout: float = WORKERLESS_TIMEOUT_S) -> Iterator[tuple[object, object]]:
     """``(future, result)`` as futures finish, like ``distributed.as_completed(with_results=True)``,
     but bounded: a LoomError once tasks have waited ``workerless_timeout`` seconds with no worker in
     the cluster (all died, or none ever started), instead of waiting forever."""
@@ -171,6 +175,6 @@ def completed(client, futures, workerless_timeout: float = WORKERLESS_TIMEOUT_S)
                             "cluster has none (its workers died or never started)", field="--scheduler")
 
 
-def result(client, future):
+def result(client: Client, future: Future) -> Any:
     """The result of one future, waited for as :func:`completed` waits."""
     return next(completed(client, [future]))[1]

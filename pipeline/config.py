@@ -11,6 +11,8 @@ import dataclasses
 import hashlib
 import json
 from dataclasses import dataclass, fields
+from pathlib import Path
+from typing import Any
 
 from .errors import ConfigError
 
@@ -114,7 +116,7 @@ class RenderConfig:
             raise ConfigError(f"unknown parameter(s) {', '.join(unknown)}", field="config")
         return cls(**data)
 
-    def replace(self, **changes) -> "RenderConfig":
+    def replace(self, **changes: Any) -> "RenderConfig":
         return dataclasses.replace(self, **changes)
 
     @property
@@ -135,7 +137,7 @@ def stable_digest(data: dict) -> str:
     return hashlib.sha256(blob).hexdigest()[:16]
 
 
-def load_config(path) -> dict:
+def load_config(path: str | Path) -> dict:
     """The RenderConfig fields of a JSON file (an object); one-line errors name the file."""
     import math
 

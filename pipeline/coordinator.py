@@ -33,7 +33,7 @@ import time
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import Callable, Iterator
+from typing import TYPE_CHECKING, Callable, Iterable, Iterator
 
 import numpy as np
 
@@ -53,6 +53,9 @@ from .segments import (
     pilot_n_frame,
     place_segment,
 )
+
+if TYPE_CHECKING:
+    from distributed import Client
 
 CHUNK_FRAMES = 16  # frames per reconstruction task: fixed, so the gather's bits never depend on workers
 
@@ -135,7 +138,7 @@ def progress(message: str) -> None:
 class SegmentRun:
     """One segment task's view of the run: scene, element mesh, store, config, records."""
 
-    def __init__(self, job: Job, client):
+    def __init__(self, job: Job, client: Client | None):
         from workers.scene_cache import load_elements, load_scene
 
         from .store import PhotonStore
@@ -152,7 +155,7 @@ class SegmentRun:
         self._index = None  # the segment being decided, for progress lines
         self._windows_at_k: dict = {}  # Fig. 5 at K of the segment being decided (its last d_AQM step)
 
-    def add_times(self, result: dict, keys) -> None:
+    def add_times(self, result: dict, keys: Iterable[str]) -> None:
         """Sum a task's own timings (seconds of work, whichever worker did it) into this segment's."""
         for k in keys:
             if k in result:
@@ -485,7 +488,7 @@ def smoothed_adaptation(job: Job, frames_info: dict[int, dict], upto: int) -> di
     return dict(zip(frames, values.tolist()))
 
 
-def composite_frames(job: Job, client, frames: list[int], frames_info: dict[int, dict], *,
+def composite_frames(job: Job, client: Client | None, frames: list[int], frames_info: dict[int, dict], *,
                      force: frozenset = frozenset()) -> dict[int, dict]:
     """Composite every frame of ``frames`` whose files do not carry its current frame hash (and
     those in ``force``); returns the composite task's result (rays per kind, timings) of every frame
@@ -588,7 +591,7 @@ def segment_done(job: Job, index: int) -> SegmentRecord | None:
     return rec
 
 
-def coordinate(job: Job, client, *, on_segment: Callable[[SegmentRecord, dict], None] | None = None,
+def coordinate(job: Job, client: Client | None, *, on_segment: Callable[[SegmentRecord, dict], None] | None = None,
                on_progress: Callable[[str], None] | None = None) -> list:
     """Run the segments in order (client side); ``on_segment(record, result)`` after each, with
     the segment task's result (frames written with their rays, batches traced; empty when the
@@ -647,7 +650,7 @@ def _drop_records_after(job: Job, last_index: int) -> None:
             path.unlink(missing_ok=True)
 
 
-def reprocess(job: Job, client, index: int) -> tuple[SegmentRecord, dict]:
+def reprocess(job: Job, client: Client | None, index: int) -> tuple[SegmentRecord, dict]:
     """Redo segment ``index`` (its frame range kept) and exactly the frames that depend on it: its
     own, the neighbours' whose windows reach into it, and any later frame whose smoothed exposure
     changed; every other frame's files stay untouched."""

@@ -108,7 +108,7 @@ def _plan(out_dir) -> dict:
         raise LoomError(f"not a photonloom plan ({err})", path=str(path)) from None
 
 
-def load_job(out_dir) -> Job:
+def load_job(out_dir: str | Path) -> Job:
     path = Path(out_dir) / PLAN
     try:
         return Job(**{k: tuple(v) if k == "selection" else v for k, v in json.loads(path.read_text())["job"].items()})
@@ -119,7 +119,7 @@ def load_job(out_dir) -> Job:
 
 
 # --- the steps -----------------------------------------------------------------------------------
-def step(name: str, out_dir, *args: int) -> str:
+def step(name: str, out_dir: str | Path, *args: int) -> str:
     """Run one farm step; returns what it did (one line). Writes the step's stamp last."""
     job = load_job(out_dir)
     run = {"decide": _decide, "reconstruct": _reconstruct, "frames": _frames, "done": _done,

@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import os
 from pathlib import Path
+from typing import Iterable
 
 import numpy as np
 import OpenImageIO as oiio
@@ -25,7 +26,7 @@ SRGB = "srgb_rec709_scene"
 META_PREFIX = "photonloom:"
 
 
-def frame_paths(out_dir, frame: int) -> tuple[Path, Path]:
+def frame_paths(out_dir: str | Path, frame: int) -> tuple[Path, Path]:
     """The EXR and PNG of a frame (4-digit zero padding, ``####`` in farm notation)."""
     out = Path(out_dir)
     return out / f"beauty.{frame:04d}.exr", out / f"beauty.{frame:04d}.png"
@@ -48,7 +49,7 @@ def _write(path: Path, fmt: str, spec: oiio.ImageSpec, pixels: np.ndarray) -> No
     os.replace(tmp, path)
 
 
-def write_exr(path, beauty, alpha, layers: dict, metadata: dict) -> None:
+def write_exr(path: str | Path, beauty: np.ndarray, alpha: np.ndarray, layers: dict, metadata: dict) -> None:
     """Write the multichannel float32 EXR atomically (channels :data:`EXR_CHANNELS`).
 
     float32, not half: the maps and shading are float32, and half overflows to +Inf above 65504 and
@@ -67,7 +68,7 @@ def write_exr(path, beauty, alpha, layers: dict, metadata: dict) -> None:
     _write(Path(path), "openexr", spec, np.ascontiguousarray(pixels, np.float32))
 
 
-def write_png(path, rgb8: np.ndarray) -> None:
+def write_png(path: str | Path, rgb8: np.ndarray) -> None:
     """Write an 8-bit sRGB PNG atomically."""
     h, w = rgb8.shape[:2]
     spec = oiio.ImageSpec(w, h, 3, "uint8")
@@ -76,7 +77,7 @@ def write_png(path, rgb8: np.ndarray) -> None:
     _write(Path(path), "png", spec, np.ascontiguousarray(rgb8, np.uint8))
 
 
-def read_exr(path) -> tuple[dict, dict]:
+def read_exr(path: str | Path) -> tuple[dict, dict]:
     """({channel name: (H, W) float32}, {metadata key without prefix: value}) of an EXR."""
     buf = oiio.ImageBuf(str(path))
     if buf.has_error:
@@ -91,7 +92,7 @@ def read_exr(path) -> tuple[dict, dict]:
     return channels, meta
 
 
-def exr_metadata(path) -> dict:
+def exr_metadata(path: str | Path) -> dict:
     """The ``photonloom:*`` metadata of an EXR (header only), {} if it cannot be read."""
     inp = oiio.ImageInput.open(str(path))
     if inp is None:
@@ -103,7 +104,7 @@ def exr_metadata(path) -> dict:
         inp.close()
 
 
-def frame_is_valid(exr, png, width: int, height: int, frame_hash: str) -> bool:
+def frame_is_valid(exr: str | Path, png: str | Path, width: int, height: int, frame_hash: str) -> bool:
     """Whether a frame is done: both files exist, decode, have the expected size and channels,
     and the EXR carries ``frame_hash`` (pipeline/coordinator.frame_hash: the same settings, map
     and exposure)."""
@@ -122,7 +123,7 @@ def frame_is_valid(exr, png, width: int, height: int, frame_hash: str) -> bool:
             and first.shape == (height, width) and meta.get("frame_hash") == frame_hash)
 
 
-def read_png(path) -> np.ndarray:
+def read_png(path: str | Path) -> np.ndarray:
     buf = oiio.ImageBuf(str(path))
     pixels = buf.get_pixels(oiio.UINT8)
     if buf.has_error or pixels is None:
@@ -130,7 +131,7 @@ def read_png(path) -> np.ndarray:
     return pixels
 
 
-def write_video(pngs, path, fps: float) -> int:
+def write_video(pngs: Iterable[str | Path], path: str | Path, fps: float) -> int:
     """Assemble the PNGs into an H.264 MP4 atomically, one at a time; returns the frame count."""
     import imageio_ffmpeg
 

@@ -9,10 +9,15 @@ one (sensitivity rises with luminance) and never clips highlights, so it over-st
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from .aqm import AQMResult, ViewingConditions, aqm
 from .tonemap import ToneMapping, ward_scale
+
+if TYPE_CHECKING:
+    from .scene import Scene
 
 
 def display_values(rgb: np.ndarray, adaptation: float, params: ToneMapping = ToneMapping()) -> np.ndarray:
@@ -28,7 +33,8 @@ def viewing_for(params: ToneMapping) -> ViewingConditions:
 
 
 def displayed_difference(rgb_a: np.ndarray, rgb_b: np.ndarray, adaptation: float, *,
-                         params: ToneMapping = ToneMapping(), aqm_size: int = 256, flow=None) -> AQMResult:
+                         params: ToneMapping = ToneMapping(), aqm_size: int = 256,
+                         flow: np.ndarray | None = None) -> AQMResult:
     """d_AQM and M_AQM of two linear renderings of one frame as the viewer sees them; ``flow`` the
     image velocity of camera motion in deg/s (:func:`camera_flow`), None for a still camera."""
     view = viewing_for(params)
@@ -36,7 +42,8 @@ def displayed_difference(rgb_a: np.ndarray, rgb_b: np.ndarray, adaptation: float
                viewing=view, aqm_size=aqm_size, names=("I1", "I2"), flow=flow)
 
 
-def camera_flow(scene, frame: int, width: int, height: int, params: ToneMapping = ToneMapping()) -> np.ndarray | None:
+def camera_flow(scene: Scene, frame: int, width: int, height: int,
+                params: ToneMapping = ToneMapping()) -> np.ndarray | None:
     """Image velocity (H, W, 2) in deg/s that the camera's own motion gives frame ``frame`` (§6: pixel
     flow by 3-D warping of the neighbouring frames' cameras; moving objects are assumed tracked by
     the eye), from a depth image of pixel-centre rays cast with Embree. None when the camera does

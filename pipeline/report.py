@@ -64,7 +64,7 @@ figcaption { font-size: 12px; color: #555; } img.plot { max-width: 100%; }
 """)
 
 
-def write_report(out_dir) -> Path:
+def write_report(out_dir: str | Path) -> Path:
     """Write ``OUT/report.html`` atomically from the render's files; returns its path."""
     out = Path(out_dir)
     path = out / "report.json"

@@ -10,7 +10,7 @@ from pathlib import Path
 from .segment_records import SegmentRecord
 
 
-def plot_segments(records: list[SegmentRecord], path, *, d_thr: float | None = None,
+def plot_segments(records: list[SegmentRecord], path: str | Path, *, d_thr: float | None = None,
                   p_thr: float | None = None) -> Path:
     """Write the figure atomically and return its path."""
     import matplotlib

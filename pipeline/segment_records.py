@@ -72,17 +72,17 @@ class SegmentRecord:
         return cls(**data)
 
 
-def record_path(out_dir, index: int) -> Path:
+def record_path(out_dir: str | Path, index: int) -> Path:
     return Path(out_dir) / DIRECTORY / f"segment-{index:03d}.json"
 
 
-def record_index(path) -> int | None:
+def record_index(path: str | Path) -> int | None:
     """The segment index of a file of the records folder (record, picture, farm chunk), or None."""
     m = re.match(r"segment-(\d+)[.]", Path(path).name)
     return int(m[1]) if m else None
 
 
-def write_record(out_dir, record: SegmentRecord) -> None:
+def write_record(out_dir: str | Path, record: SegmentRecord) -> None:
     path = record_path(out_dir, record.index)
     path.parent.mkdir(parents=True, exist_ok=True)
     tmp = path.with_name(f".{path.name}.{os.getpid()}.partial")
@@ -90,7 +90,7 @@ def write_record(out_dir, record: SegmentRecord) -> None:
     os.replace(tmp, path)
 
 
-def read_record(out_dir, index: int) -> SegmentRecord | None:
+def read_record(out_dir: str | Path, index: int) -> SegmentRecord | None:
     """The record of segment ``index``, or None if there is none; a broken file is an error."""
     path = record_path(out_dir, index)
     if not path.is_file():
@@ -101,7 +101,7 @@ def read_record(out_dir, index: int) -> SegmentRecord | None:
         raise LoomError(f"not a segment record ({err})", path=str(path)) from None
 
 
-def read_records(out_dir) -> list[SegmentRecord]:
+def read_records(out_dir: str | Path) -> list[SegmentRecord]:
     """Every record under ``OUT/segments`` in segment order."""
     folder = Path(out_dir) / DIRECTORY
     if not folder.is_dir():

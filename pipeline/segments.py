@@ -13,6 +13,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
+from typing import Callable, Iterable
 
 import numpy as np
 
@@ -115,7 +116,8 @@ def next_n_frame(n_frame: int, d_aqm: float, d_thr: float, n_max: int) -> int | 
     return min(2 * n_frame, n_max)
 
 
-def doubling_loop(n_frame: int, measure, *, d_thr: float, n_max: int) -> tuple[int, list[dict], bool]:
+def doubling_loop(n_frame: int, measure: Callable[[int], float], *, d_thr: float,
+                  n_max: int) -> tuple[int, list[dict], bool]:
     """Step 3's loop: ``measure(n)`` gives d_AQM (percent) at N_frame = n (the caller traces what
     n needs); N_frame doubles until d_AQM <= d_thr (a fraction) or the cap. Returns the final
     N_frame, the steps [{n_frame, d_aqm}] and whether the cap stopped it above d_thr."""
@@ -129,8 +131,8 @@ def doubling_loop(n_frame: int, measure, *, d_thr: float, n_max: int) -> tuple[i
         n_frame = doubled
 
 
-def fmax_loop(start: int, fmax: int, last: int, measure, *, p_thr: float, step: int, cap: int,
-              grow: bool = True) -> tuple[Placement, list[dict]]:
+def fmax_loop(start: int, fmax: int, last: int, measure: Callable[[Placement], tuple[float, float]], *,
+              p_thr: float, step: int, cap: int, grow: bool = True) -> tuple[Placement, list[dict]]:
     """Step 2's loop: ``measure(placement)`` gives (p_me back, p_me fwd) at its K (the caller
     traces the placement's frames); F_max grows by :func:`grow_fmax` until it stops, the cap, or
     the segment reaches the animation's end. Returns the placement and the steps."""
@@ -186,7 +188,7 @@ def end_frames(first: int, last: int, fmax: int) -> set[int]:
 
 
 def photon_targets(placement: Placement, n_frame: int, *, first: int, last: int, end_factor: float,
-                   frames=None) -> dict[int, int]:
+                   frames: Iterable[int] | None = None) -> dict[int, int]:
     """Photons each frame of a segment traces: N_frame, and ``end_factor`` x N_frame for frames
     within F_max/2 of the animation's first or last frame (§5.2: "for the very first and last
     animation segments the lack of those extra frames is compensated by tracing more photons").

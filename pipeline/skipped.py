@@ -14,13 +14,15 @@ Pure: it reads the scene's flags, the store's sharing table and the counts the r
 """
 from __future__ import annotations
 
+from typing import Sequence
+
 SHARED = "photons"
 REFLECTION = "reflection rays"
 AREA = "area-light sampling"
 DONE = "frame"
 
 
-def skipped_work(frames, *, sources: dict[int, int], has_specular: bool, has_area_lights: bool,
+def skipped_work(frames: Sequence[int], *, sources: dict[int, int], has_specular: bool, has_area_lights: bool,
                  rays: dict[int, dict] | None, segments_done: list[dict]) -> dict:
     """The skipped work of a render of ``frames``: ``sources`` maps each frame to the frame whose
     photons it uses, ``rays`` the ray counts per kind of the frames written by this run (frames

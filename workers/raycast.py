@@ -55,7 +55,8 @@ class RayCaster:
         # Commit the BVH now (embreex commits lazily on the first query).
         self._scene.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32))
 
-    def intersect(self, origins: np.ndarray, directions: np.ndarray):
+    def intersect(self, origins: np.ndarray,
+                  directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Closest hits as embreex returns them: (int32 triangle or -1, float32 u, v, distance);
         Embree's u, v weight the triangle's corners 1 and 2."""
         out = self._scene.run(np.ascontiguousarray(origins, np.float32),

@@ -15,14 +15,22 @@ one-frame window: keep its signature and arithmetic (float64, np.bincount) as th
 from __future__ import annotations
 
 from collections import OrderedDict
+from typing import TYPE_CHECKING
 
 import numpy as np
+import numpy.typing as npt
 
 from pipeline.scene.shading import mean_base_color, mean_emission
 from pipeline.store import BARY_SCALE
 
+if TYPE_CHECKING:
+    from pipeline.scene import ElementMesh, FrameState, Scene
+    from pipeline.store import FrameRecords
 
-def vertex_irradiance(element, b1, b2, energy, elements_mesh, vertex_areas, n_emitted) -> np.ndarray:
+
+def vertex_irradiance(element: npt.ArrayLike, b1: npt.ArrayLike, b2: npt.ArrayLike, energy: npt.ArrayLike,
+                      elements_mesh: ElementMesh | npt.ArrayLike, vertex_areas: npt.ArrayLike,
+                      n_emitted: int) -> np.ndarray:
     """(V, 3) float64 vertex irradiance E_v = S_v / (N A_v), S_v = sum_j b_k(j) energy_j (docs/estimators.md §1.2).
 
     ``element`` (n,) element ids; ``b1``, ``b2`` (n,) barycentrics of the element's vertices 1 and 2,
@@ -53,7 +61,8 @@ def vertex_irradiance(element, b1, b2, energy, elements_mesh, vertex_areas, n_em
     return out
 
 
-def records_irradiance(records, select: np.ndarray, elements_mesh, vertex_areas) -> np.ndarray:
+def records_irradiance(records: FrameRecords, select: np.ndarray, elements_mesh: ElementMesh | npt.ArrayLike,
+                       vertex_areas: npt.ArrayLike) -> np.ndarray:
     """:func:`vertex_irradiance` of the records of a FrameRecords where ``select`` (bool (n,)),
     with the same arithmetic and bits (tested): :func:`records_vertex_flux` then
     :func:`flux_to_irradiance`."""
@@ -63,7 +72,8 @@ def records_irradiance(records, select: np.ndarray, elements_mesh, vertex_areas)
     return flux_to_irradiance(s, records.photons_emitted, areas)
 
 
-def records_vertex_flux(records, select: np.ndarray, element_vertices, n_vertices: int) -> np.ndarray:
+def records_vertex_flux(records: FrameRecords, select: np.ndarray, element_vertices: npt.ArrayLike,
+                        n_vertices: int) -> np.ndarray:
     """(V, 3) float64 S_v = sum_j b_k(j) energy_j over the selected records, as
     :func:`vertex_irradiance` sums them: integer indices instead of boolean masks and the corner
     weights times every channel in one product instead of np.tile (2x faster)."""
@@ -87,7 +97,7 @@ def records_vertex_flux(records, select: np.ndarray, element_vertices, n_vertice
     return s
 
 
-def flux_to_irradiance(s: np.ndarray, n_emitted: int, vertex_areas) -> np.ndarray:
+def flux_to_irradiance(s: np.ndarray, n_emitted: int, vertex_areas: npt.ArrayLike) -> np.ndarray:
     """E_v = S_v / (N A_v) (docs/estimators.md §1.2); 0 where A_v = 0 or N = 0."""
     denom = float(n_emitted) * np.asarray(vertex_areas, dtype=np.float64)
     out = np.zeros_like(s)
@@ -109,7 +119,7 @@ class FrameGeometry:
     (E,), vertex hat areas (V,) and element centres (E, 3), each computed once however many steps
     use them (the gather's irradiance, the direct estimate, the adaptation luminance)."""
 
-    def __init__(self, scene, elements, frame: int):
+    def __init__(self, scene: Scene, elements: ElementMesh, frame: int):
         self.scene, self.elements, self.frame = scene, elements, int(frame)
         self.state = scene.pose_frame(self.frame)
         self.areas = elements.areas(self.state)
@@ -129,7 +139,7 @@ _GEOMETRY: OrderedDict = OrderedDict()  # (id(scene), id(elements), frame) -> Fr
 GEOMETRY_FRAMES = 48  # a reconstruction chunk's frames and then some
 
 
-def frame_geometry(scene, elements, frame: int) -> FrameGeometry:
+def frame_geometry(scene: Scene, elements: ElementMesh, frame: int) -> FrameGeometry:
     """:class:`FrameGeometry` of a frame number, kept per process for the last GEOMETRY_FRAMES
     frames (an entry holds its scene and mesh, so their ids cannot be reused while it lives)."""
     key = (id(scene), id(elements), int(frame))
@@ -166,7 +176,7 @@ def _material_tables(state, elements):
     return tables
 
 
-def mesh_adaptation(state, elements, irradiance: np.ndarray, aspect: float,
+def mesh_adaptation(state: FrameState, elements: ElementMesh, irradiance: np.ndarray, aspect: float,
                     geometry: FrameGeometry | None = None) -> float:
     """Adaptation luminance of a frame from its mesh-based lighting (§4), in radiance units.
 
@@ -203,7 +213,8 @@ def mesh_adaptation(state, elements, irradiance: np.ndarray, aspect: float,
     return log_average(tri_radiance[tri[seen]], weight)
 
 
-def vertex_moments(element, b1, b2, energy, element_vertices, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
+def vertex_moments(element: npt.ArrayLike, b1: npt.ArrayLike, b2: npt.ArrayLike, energy: npt.ArrayLike,
+                   element_vertices: npt.ArrayLike, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
     """(V,) luminance flux S_v = sum_j b_k(j) Y_j and its squared-weight sum Q_v = sum_j b_k(j)^2 Y_j^2
     (docs/estimators.md §1.3): the moments the pilot's energy-based error reads (pipeline/segments.energy_error)."""
     from pipeline.tonemap import luminance

@@ -4,6 +4,8 @@ Public API: :func:`aqm` (linear RGB pair -> :class:`AQMResult` with M_AQM and d_
 :func:`aqm_luminance` (same for cd/m^2 input), :class:`ViewingConditions`, and
 :func:`image_velocity` (per-pixel image velocity from camera motion by 3-D warping).
 """
+from __future__ import annotations
+
 from .csf import G_SP
 from .display import ViewingConditions
 from .flow import image_velocity, pixels_per_frame_to_deg_per_s

@@ -17,6 +17,7 @@ from __future__ import annotations
 from functools import lru_cache
 
 import numpy as np
+import numpy.typing as npt
 
 # --- Daly 1993, static CSF (docs/aqm.md §2a) ---------------------------------------------------
 DALY_P = 250.0  # absolute peak scale
@@ -43,7 +44,8 @@ def _daly_s1(rho, lum, i2):
     return size * a_l * DALY_EPS * rho * np.exp(-x) * np.sqrt(1.0 + 0.06 * np.exp(x))
 
 
-def daly_csf(rho, lum, *, i2: float, distance_m: float, theta=0.0, eccentricity: float = 0.0):
+def daly_csf(rho: npt.ArrayLike, lum: float, *, i2: float, distance_m: float, theta: npt.ArrayLike = 0.0,
+             eccentricity: float = 0.0) -> np.ndarray:
     """Daly's (1993) static CSF S(rho, theta, l, i^2, d, e); rho in cy/deg, l in cd/m^2, i^2 in deg^2.
 
     S = P min[S1(rho / (r_a r_e r_theta)), S1(rho)]; S(0) = 0 (the DC is not a contrast).
@@ -57,7 +59,7 @@ def daly_csf(rho, lum, *, i2: float, distance_m: float, theta=0.0, eccentricity:
     return np.where(rho > 0, np.nan_to_num(s), 0.0)
 
 
-def kelly_daly_csf(rho, velocity):
+def kelly_daly_csf(rho: npt.ArrayLike, velocity: npt.ArrayLike) -> np.ndarray:
     """Kelly's (1979) spatiovelocity CSF with Daly's (1998) constants; rho cy/deg, velocity deg/s (>0)."""
     rho = np.asarray(rho, dtype=np.float64)
     cv = KD_C2 * np.asarray(velocity, dtype=np.float64)
@@ -66,13 +68,13 @@ def kelly_daly_csf(rho, velocity):
     return KD_C0 * k * cv * (2.0 * np.pi * KD_C1 * rho) ** 2 * np.exp(-4.0 * np.pi * KD_C1 * rho / rho_max)
 
 
-def velocity_factor(rho, velocity):
+def velocity_factor(rho: npt.ArrayLike, velocity: npt.ArrayLike) -> np.ndarray:
     """V(rho, v_R) = min(1, S_KD(rho, v_R) / S_KD(rho, drift)): loss of sensitivity with retinal velocity."""
     rho = np.maximum(np.asarray(rho, dtype=np.float64), 1e-6)  # the ratio has a finite limit at rho -> 0
     return np.minimum(1.0, kelly_daly_csf(rho, velocity) / kelly_daly_csf(rho, V_DRIFT))
 
 
-def retinal_velocity(image_velocity, pursuit_gain: float = G_SP):
+def retinal_velocity(image_velocity: npt.ArrayLike, pursuit_gain: float = G_SP) -> np.ndarray:
     """Retinal speed v_R (deg/s) of image regions moving at ``image_velocity`` deg/s (Daly 1998).
 
     The eye pursues at v_E = min(g v_I + v_drift, v_max) and v_R = |v_I - v_E|, clamped to

@@ -14,6 +14,7 @@ pixels that see nothing (sky), which are warped as directions.
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 from ..errors import LoomError
 
@@ -68,7 +69,8 @@ def project(points: np.ndarray, shape: tuple[int, int], yfov: float) -> np.ndarr
     return out
 
 
-def warp_displacement(depth, world_to_camera, other_world_to_camera, yfov: float) -> np.ndarray:
+def warp_displacement(depth: npt.ArrayLike, world_to_camera: npt.ArrayLike, other_world_to_camera: npt.ArrayLike,
+                      yfov: float) -> np.ndarray:
     """Displacement (H, W, 2) in pixels of each pixel when seen by the other camera; NaN if behind it."""
     d = _check_depth(depth)
     cam = _check_camera(world_to_camera, "world_to_camera")
@@ -79,8 +81,8 @@ def warp_displacement(depth, world_to_camera, other_world_to_camera, yfov: float
     return project(moved, d.shape, yfov) - project(pts, d.shape, yfov)
 
 
-def image_velocity(depth, world_to_camera, *, yfov: float, fps: float, ppd: float,
-                   previous=None, following=None) -> np.ndarray:
+def image_velocity(depth: npt.ArrayLike, world_to_camera: npt.ArrayLike, *, yfov: float, fps: float, ppd: float,
+                   previous: npt.ArrayLike | None = None, following: npt.ArrayLike | None = None) -> np.ndarray:
     """Image velocity (H, W, 2) in deg/s (x right, y down) of frame f from its neighbours' cameras.
 
     ``previous``/``following`` are the world-to-camera matrices of frames f-1 and f+1; with both the

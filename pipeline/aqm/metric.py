@@ -12,6 +12,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from ..errors import LoomError
 from .bands import decompose
@@ -60,9 +61,9 @@ class AQMResult:
         return self.map > self.threshold
 
 
-def aqm(image_a, image_b, *, flow=None, viewing: ViewingConditions = ViewingConditions(),
-        pursuit_gain: float = G_SP, aqm_size: int = AQM_SIZE, names: tuple[str, str] = ("A", "B"),
-        flow_name: str = "flow") -> AQMResult:
+def aqm(image_a: npt.ArrayLike, image_b: npt.ArrayLike, *, flow: npt.ArrayLike | None = None,
+        viewing: ViewingConditions = ViewingConditions(), pursuit_gain: float = G_SP, aqm_size: int = AQM_SIZE,
+        names: tuple[str, str] = ("A", "B"), flow_name: str = "flow") -> AQMResult:
     """Predict visible differences between two linear-RGB renderings of one frame.
 
     ``image_a``/``image_b``: (H, W, 3|4) linear Rec.709 RGB (or (H, W) relative luminance); 1.0 is the
@@ -80,9 +81,9 @@ def aqm(image_a, image_b, *, flow=None, viewing: ViewingConditions = ViewingCond
                          aqm_size=aqm_size, names=names, flow_name=flow_name)
 
 
-def aqm_luminance(lum_a, lum_b, *, flow=None, viewing: ViewingConditions = ViewingConditions(),
-                  pursuit_gain: float = G_SP, aqm_size: int = AQM_SIZE, names: tuple[str, str] = ("A", "B"),
-                  flow_name: str = "flow") -> AQMResult:
+def aqm_luminance(lum_a: npt.ArrayLike, lum_b: npt.ArrayLike, *, flow: npt.ArrayLike | None = None,
+                  viewing: ViewingConditions = ViewingConditions(), pursuit_gain: float = G_SP,
+                  aqm_size: int = AQM_SIZE, names: tuple[str, str] = ("A", "B"), flow_name: str = "flow") -> AQMResult:
     """:func:`aqm` for inputs already in display luminance, cd/m^2 (H, W); viewing gives only the geometry."""
     lum_a = check_image(lum_a, names[0])
     lum_b = check_image(lum_b, names[1])

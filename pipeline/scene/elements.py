@@ -48,7 +48,7 @@ MAX_SPLIT = 128
 MAX_COORDINATE = 1e18
 
 
-def lattice_index(a, b, n):
+def lattice_index(a: int, b: int, n: int) -> int:
     """Index of lattice point (a, b) among the (n+1)(n+2)/2 points of a triangle."""
     return a * (n + 1) - a * (a - 1) // 2 + b
 
@@ -171,7 +171,7 @@ class ElementMesh:
 
     # --- queries ----------------------------------------------------------------------------------
 
-    def locate(self, triangle: np.ndarray, u: np.ndarray, v: np.ndarray):
+    def locate(self, triangle: np.ndarray, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
         """Map hits on source triangles (Embree's barycentrics u, v) to (element, b1, b2).
 
         ``b1``, ``b2`` are the barycentric weights of the element's vertices 1 and 2

@@ -17,8 +17,12 @@ Mapping (docs/conventions.md §2; written in the README too):
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
+
+if TYPE_CHECKING:
+    import pygltflib
 
 MIRROR_ROUGHNESS = 0.2
 GLOSSY_ROUGHNESS = 0.6
@@ -58,7 +62,7 @@ def classify(metallic: float, roughness: float) -> str:
     return "diffuse"
 
 
-def material_from_gltf(mat, index: int) -> Material:
+def material_from_gltf(mat: pygltflib.Material, index: int) -> Material:
     """Build a :class:`Material` from a pygltflib material."""
     pbr = mat.pbrMetallicRoughness
     base = list(pbr.baseColorFactor) if pbr and pbr.baseColorFactor is not None else [1.0, 1.0, 1.0, 1.0]

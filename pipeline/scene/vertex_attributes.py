@@ -8,10 +8,14 @@ Spec: glTF 2.0 §3.7.2.1 (attribute types and normalized integer colours and tex
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .gltf import GltfDocument
+
+if TYPE_CHECKING:
+    import pygltflib
 
 TEXCOORD_SETS = (0, 1)
 
@@ -29,7 +33,8 @@ class VertexAttributes:
         return self.normals is None and not self.texcoords and self.color is None
 
 
-def read_vertex_attributes(doc: GltfDocument, attributes, n_vertices: int, field: str) -> VertexAttributes:
+def read_vertex_attributes(doc: GltfDocument, attributes: pygltflib.Attributes, n_vertices: int,
+                           field: str) -> VertexAttributes:
     """NORMAL, TEXCOORD_0/1 and COLOR_0 of a primitive's ``attributes`` (pygltflib), checked."""
 
     def read(name: str, widths: tuple[int, ...]) -> np.ndarray | None:
