@@ -540,7 +540,7 @@ class PhotonStore:
         reach = np.flatnonzero(running >= n_photons)
         return int(reach[0]) + 1 if len(reach) else (0 if n_photons <= 0 else None)
 
-    def batch_info(self, frame_index: int, batch: int) -> dict | None:
+    def batch_info(self, frame_index: int, batch: int) -> dict[str, int] | None:
         """The done marker of a batch as a dict of BATCH_FIELDS, or None if not done."""
         f = self.source_frame(frame_index)
         b = as_int(batch, "batch", self.url, 0, self.max_batches)

@@ -167,7 +167,8 @@ def as_int(value: object, name: str, where: str, lo: int, hi: int | None = None)
     return value
 
 
-def as_array(value: npt.ArrayLike, name: str, shape_tail: tuple, dtype: npt.DTypeLike, where: str) -> np.ndarray:
+def as_array(value: npt.ArrayLike, name: str, shape_tail: tuple[int, ...], dtype: npt.DTypeLike,
+             where: str) -> np.ndarray:
     """Check shape and convert to ``dtype`` without wrapping, rounding or NaN."""
     arr = np.asarray(value)
     if arr.ndim != 1 + len(shape_tail) or arr.shape[1:] != shape_tail:
