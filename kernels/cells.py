@@ -7,19 +7,21 @@ bounce (kernels/scatter.py) and surface lookup (kernels/surface.py) locate hits 
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 
-def up_index(a, b, n):
+def up_index(a: int | np.ndarray, b: int | np.ndarray, n: int | np.ndarray) -> int | np.ndarray:
     """Cell-local index of up cell (a, b) in a triangle split n x n."""
     return a * n - a * (a - 1) // 2 + b
 
 
-def down_index(a, b, n):
+def down_index(a: int | np.ndarray, b: int | np.ndarray, n: int | np.ndarray) -> int | np.ndarray:
     """Cell-local index of down cell (a, b)."""
     return n * (n + 1) // 2 + a * (n - 1) - a * (a - 1) // 2 + b
 
 
-def locate_in_triangles(triangle_n, triangle_offset, triangle, u, v):
+def locate_in_triangles(triangle_n: npt.ArrayLike, triangle_offset: npt.ArrayLike, triangle: npt.ArrayLike,
+                        u: npt.ArrayLike, v: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(element, b1, b2) of hits at Embree barycentrics (u, v) on source triangles split n x n
     (pipeline/scene/elements.py describes the layout): the cell containing (u n, v n), up or down,
     and the hit's barycentrics of the cell's vertices 1 and 2, clipped to the cell. The OpenCL

@@ -14,10 +14,12 @@ from __future__ import annotations
 import os
 import re
 import warnings
+from collections.abc import Sequence
 from functools import lru_cache
 from pathlib import Path
 
 import numpy as np
+import numpy.typing as npt
 import pyopencl as cl
 
 from . import colour, record_layout
@@ -102,24 +104,24 @@ def scratch(name: str, nbytes: int) -> cl.Buffer:
     return buf
 
 
-def device_table(ctx, a: np.ndarray, dtype):
+def device_table(ctx: cl.Context, a: np.ndarray, dtype: npt.DTypeLike) -> cl.Buffer:
     """A read-only device copy of a table (one element of zeros stands in for an empty one)."""
     a = np.ascontiguousarray(a, dtype=dtype)
     return cl.Buffer(ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.COPY_HOST_PTR,
                      hostbuf=a if a.size else np.zeros(1, dtype))
 
 
-def device_input(ctx, a: np.ndarray):
+def device_input(ctx: cl.Context, a: np.ndarray) -> cl.Buffer:
     """A read-only device buffer over the host array (PoCL's CPU device uses host memory directly)."""
     return cl.Buffer(ctx, cl.mem_flags.READ_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=np.ascontiguousarray(a))
 
 
-def device_output(ctx, a: np.ndarray):
+def device_output(ctx: cl.Context, a: np.ndarray) -> cl.Buffer:
     """A write-only device buffer over the host array ``a``; :func:`read_back` makes it current."""
     return cl.Buffer(ctx, cl.mem_flags.WRITE_ONLY | cl.mem_flags.USE_HOST_PTR, hostbuf=a)
 
 
-def read_back(queue, arrays, buffers) -> None:
+def read_back(queue: cl.CommandQueue, arrays: Sequence[np.ndarray], buffers: Sequence[cl.Buffer]) -> None:
     """Wait for the kernel and make the host arrays behind ``buffers`` current (map, unmap)."""
     # Every map is enqueued without waiting and the queue is finished once: a blocking map per
     # array costs one round trip to PoCL's worker thread each (~25 us), which dominated the small

@@ -53,7 +53,8 @@ class EmissionTables:
     epsilon: float  # relative offset of area-light origins off their surface (scatter.py::surface_offset)
 
 
-def emit_reference(t: EmissionTables, photon: np.ndarray, key: tuple[int, int]):
+def emit_reference(t: EmissionTables, photon: np.ndarray,
+                   key: tuple[int, int]) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """NumPy twin of ``emit.cl``: origins (n,3) f32, directions (n,3) f32, weights (n,3) f64, emitter."""
     n = len(photon)
     w = uniforms(photon, EMISSION_STREAM, key)

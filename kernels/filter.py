@@ -34,6 +34,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 import pyopencl as cl
 
 from .colour import LUMA
@@ -72,8 +73,8 @@ def _unique(x: np.ndarray) -> np.ndarray:
     return x[np.concatenate([[True], x[1:] != x[:-1]])] if x.size else x
 
 
-def neighbourhood(element_vertices, vertex_positions, vertex_instance, *, max_rings: int = 3,
-                  max_angle: float = 30.0) -> Neighbourhood:
+def neighbourhood(element_vertices: npt.ArrayLike, vertex_positions: np.ndarray, vertex_instance: npt.ArrayLike, *,
+                  max_rings: int = 3, max_angle: float = 30.0) -> Neighbourhood:
     """Rings 1..``max_rings`` of every vertex over its own surface (see the module docstring).
 
     Positions may be rest-pose (instance-local): instances move rigidly, which keeps the rings.
@@ -156,7 +157,8 @@ def _device_hood(ctx, hood: Neighbourhood) -> tuple[cl.Buffer, cl.Buffer]:
     return cached[1], cached[2]
 
 
-def adaptive_filter_cl(flux, areas, hood: Neighbourhood, *, photons: float = 25.0, z: float = 2.5):
+def adaptive_filter_cl(flux: npt.ArrayLike, areas: npt.ArrayLike, hood: Neighbourhood, *, photons: float = 25.0,
+                       z: float = 2.5) -> tuple[np.ndarray, np.ndarray]:
     """Filtered irradiance on PoCL.
 
     Parameters
@@ -200,7 +202,8 @@ def _luma(r, g, b):
     return LUMA[0] * r + LUMA[1] * g + LUMA[2] * b
 
 
-def adaptive_filter_reference(flux, areas, hood: Neighbourhood, *, photons: float = 25.0, z: float = 2.5):
+def adaptive_filter_reference(flux: npt.ArrayLike, areas: npt.ArrayLike, hood: Neighbourhood, *, photons: float = 25.0,
+                              z: float = 2.5) -> tuple[np.ndarray, np.ndarray]:
     """NumPy twin of :func:`adaptive_filter_cl` (vectorised over vertices, rings in order)."""
     flux, areas_rows, tau2, lead = _check(flux, areas, hood, photons)
     flux = np.moveaxis(flux, 0, 1)  # (L, V, 4)

@@ -31,12 +31,34 @@ results are bitwise repeatable (docs/opencl.md §2).
 """
 from __future__ import annotations
 
+from collections.abc import Iterable
+from typing import TYPE_CHECKING
+
 import numpy as np
+import numpy.typing as npt
 import pyopencl as cl
 
 from .colour import LUMA
 from .context import device_context, kernel, scratch
 from .record_layout import BARY_SCALE, DIRECT_BIT, PARITY_BIT
+
+if TYPE_CHECKING:
+    from typing import Protocol
+
+    class _SortedRecords(Protocol):
+        """What the gather reads of one frame's records (the store's FrameRecords has it): sorted by
+        element, element e's records ``[offsets[e], offsets[e + 1])``."""
+
+        @property
+        def key(self) -> np.ndarray: ...
+        @property
+        def b1(self) -> np.ndarray: ...
+        @property
+        def b2(self) -> np.ndarray: ...
+        @property
+        def energy(self) -> np.ndarray: ...
+        @property
+        def offsets(self) -> np.ndarray: ...
 
 KINDS = {"indirect": 1, "direct": 2, "all": 3}
 SLOTS = 12  # 3 corners x (R, G, B, Q)
@@ -95,7 +117,8 @@ def _sums_into(d_out: cl.Buffer, out_base: int, frames, kind: str, n_parity: int
     return n_frames, n_elements
 
 
-def element_sums_cl(frames, *, kind: str = "indirect", split_parity: bool = False) -> np.ndarray:
+def element_sums_cl(frames: Iterable[_SortedRecords], *, kind: str = "indirect",
+                    split_parity: bool = False) -> np.ndarray:
     """Step 1 on PoCL for a list of frames' records (objects with ``key``, ``b1``, ``b2``,
     ``energy``, ``offsets`` sorted by element, like the store's FrameRecords).
 
@@ -116,7 +139,8 @@ def element_sums_cl(frames, *, kind: str = "indirect", split_parity: bool = Fals
     return out
 
 
-def element_sums_reference(frames, *, kind: str = "indirect", split_parity: bool = False) -> np.ndarray:
+def element_sums_reference(frames: Iterable[_SortedRecords], *, kind: str = "indirect",
+                           split_parity: bool = False) -> np.ndarray:
     """NumPy twin of :func:`element_sums_cl`."""
     key, b1, b2, energy, offsets, n_frames, n_elements = _concat_frames(frames)
     n_parity = 2 if split_parity else 1
@@ -188,7 +212,9 @@ def _flux(d_table: cl.Buffer, n_emitted, back, fwd, rows, element_vertices, n_ve
     return np.moveaxis(out, 0, 2)  # (n_out, P, V, 4), a view
 
 
-def frame_sums_flux_cl(frame_sums, n_emitted, back, fwd, rows, element_vertices, n_vertices: int) -> np.ndarray:
+def frame_sums_flux_cl(frame_sums: Iterable[npt.ArrayLike], n_emitted: npt.ArrayLike, back: npt.ArrayLike,
+                       fwd: npt.ArrayLike, rows: npt.ArrayLike, element_vertices: npt.ArrayLike,
+                       n_vertices: int) -> np.ndarray:
     """Steps 2-3 on PoCL from per-frame element sums made earlier: what lets pipeline/temporal.py sum
     a frame's records once per worker, however many chunks' windows reach it. The prefix table is
     filled one launch a frame from the arrays where they lie (no host stacking or transposition),
@@ -232,7 +258,8 @@ def frame_sums_flux_cl(frame_sums, n_emitted, back, fwd, rows, element_vertices,
     return _flux(d_table, n_emitted, back, fwd, rows, element_vertices, n_vertices, n_elements, n_parity)
 
 
-def window_flux_reference(sums, n_emitted, back, fwd, rows, element_vertices, n_vertices: int) -> np.ndarray:
+def window_flux_reference(sums: npt.ArrayLike, n_emitted: npt.ArrayLike, back: npt.ArrayLike, fwd: npt.ArrayLike,
+                          rows: npt.ArrayLike, element_vertices: npt.ArrayLike, n_vertices: int) -> np.ndarray:
     """NumPy twin of :func:`frame_sums_flux_cl` (``sums`` (J, E, P, 3, 4): its ``frame_sums``
     stacked): window rows added directly, corners scattered with ``np.bincount``."""
     sums, n_emitted, back, fwd, rows = _check_windows(sums, n_emitted, back, fwd, rows)

@@ -7,12 +7,14 @@ irradiance; the compositor (workers/composite.py) uses them for every camera and
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 
 from .cells import locate_in_triangles
 from .context import LANES, WORK_GROUP, device_input, device_output, read_back
 
 
-def lookup_reference(tri_n, tri_offset, element_irradiance, tri, u, v):
+def lookup_reference(tri_n: npt.ArrayLike, tri_offset: npt.ArrayLike, element_irradiance: np.ndarray | None,
+                     tri: npt.ArrayLike, u: npt.ArrayLike, v: npt.ArrayLike) -> tuple[np.ndarray, np.ndarray | None]:
     """(element (n,) int64, irradiance (n, 3) float32 or None) for hits (tri, u, v)."""
     element, b1, b2 = locate_in_triangles(tri_n, tri_offset, tri, u, v)
     if element_irradiance is None:

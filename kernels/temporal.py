@@ -35,6 +35,7 @@ of operations and no fused multiply-add, so their windows are identical.
 from __future__ import annotations
 
 import numpy as np
+import numpy.typing as npt
 import pyopencl as cl
 
 from .context import device_context, kernel
@@ -85,8 +86,9 @@ def _extents(fmax: int, mode: str, min_extent: int) -> tuple[int, int, int, bool
     return half_fmax, half_lo, min_extent - 1 - half_lo, mode == "adaptive"
 
 
-def windows_cl(counts, n_emitted, *, fmax: int, mode: str = "adaptive", k_sigma: float = 2.0,
-               smoothing_frames: int = 3, min_extent: int = 3, frames=None):
+def windows_cl(counts: npt.ArrayLike, n_emitted: npt.ArrayLike, *, fmax: int, mode: str = "adaptive",
+               k_sigma: float = 2.0, smoothing_frames: int = 3, min_extent: int = 3,
+               frames: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Windows of frames ``[f0, f1)`` (default all) on PoCL.
 
     Parameters
@@ -143,8 +145,9 @@ def smoothed_rates_reference(counts: np.ndarray, n_emitted: np.ndarray, smoothin
     return rate
 
 
-def windows_reference(counts, n_emitted, *, fmax: int, mode: str = "adaptive", k_sigma: float = 2.0,
-                      smoothing_frames: int = 3, min_extent: int = 3, frames=None):
+def windows_reference(counts: npt.ArrayLike, n_emitted: npt.ArrayLike, *, fmax: int, mode: str = "adaptive",
+                      k_sigma: float = 2.0, smoothing_frames: int = 3, min_extent: int = 3,
+                      frames: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """NumPy twin of :func:`windows_cl` (same arguments and results)."""
     counts, n_emitted, f0, f1 = _check(counts, n_emitted, fmax, mode, smoothing_frames, min_extent, frames)
     n_frames, n_elements = counts.shape

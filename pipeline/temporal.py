@@ -25,9 +25,10 @@ frames in the overlap of two chunks that run on one worker are read and summed o
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Iterator
+from typing import TYPE_CHECKING, Iterator
 
 import numpy as np
+import numpy.typing as npt
 
 from kernels.filter import adaptive_filter_cl, neighbourhood
 from kernels.gather import element_sums_cl, frame_sums_flux_cl, irradiance
@@ -35,6 +36,10 @@ from kernels.temporal import MAX_HALF_FMAX, MODES, windows_cl
 
 from .config import RenderConfig
 from .errors import LoomError
+
+if TYPE_CHECKING:
+    from .scene import ElementMesh, Scene
+    from .store import PhotonStore
 
 
 @dataclass(frozen=True)
@@ -61,7 +66,7 @@ def window_reach(fmax: int, mode: str, config: RenderConfig) -> int:
     return (0 if mode == "off" else int(fmax) // 2) + int(config.smoothing_frames) // 2
 
 
-def check_window_options(mode: str, fmax) -> None:
+def check_window_options(mode: str, fmax: object) -> None:
     """``--temporal`` and ``--fmax`` as kernels/temporal.py takes them, or a one-line LoomError."""
     if mode not in MODES:
         raise LoomError(f"must be one of {', '.join(MODES)}, got {mode!r}", field="--temporal")
@@ -73,7 +78,7 @@ def check_window_options(mode: str, fmax) -> None:
         raise LoomError(f"F_max must be in [0, {2 * MAX_HALF_FMAX}], got {fmax!r}", field="--fmax")
 
 
-def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames, *, mode: str, fmax: int,
+def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames: npt.ArrayLike, *, mode: str, fmax: int,
                        config: RenderConfig, counts_from: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """(len(frames), E) back and fwd windows of the requested frame indices, per run of frames
     with photons (a requested frame without photons is an error).
@@ -111,11 +116,12 @@ def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames, *, mod
     return back, fwd
 
 
-def illumination_maps(store, elements, scene, frames=None, *, mode: str = "adaptive", fmax: int | None = None,
+def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, frames: npt.ArrayLike | None = None,
+                      *, mode: str = "adaptive", fmax: int | None = None,
                       config: RenderConfig = RenderConfig(), kind: str = "indirect", count_kind: str = "all",
                       split_parity: bool = False, spatial_filter: bool = False,
-                      batches=None, chunk: int = 96, with_direct: bool = False,
-                      times: dict | None = None) -> Iterator[FrameIllumination]:
+                      batches: npt.ArrayLike | None = None, chunk: int = 96, with_direct: bool = False,
+                      times: dict[str, float] | None = None) -> Iterator[FrameIllumination]:
     """Yield the illumination of every requested frame, in frame order.
 
     Parameters
@@ -269,8 +275,8 @@ class FrameSums:
         self.max_bytes, self.bytes = int(max_bytes), 0
         self._entries: OrderedDict = OrderedDict()
 
-    def get(self, store, frame_index: int, n_batches: int | None, kind: str, n_parity: int, elements, *,
-            direct: bool = False, times: dict | None = None) -> SummedFrame:
+    def get(self, store: PhotonStore, frame_index: int, n_batches: int | None, kind: str, n_parity: int,
+            elements: ElementMesh, *, direct: bool = False, times: dict[str, float] | None = None) -> SummedFrame:
         """The sums of ``frame_index``'s first ``n_batches`` batches (None: every done batch);
         with ``direct`` also its direct photons' vertex flux."""
         src = store.source_frame(frame_index)

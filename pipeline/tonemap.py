@@ -40,6 +40,7 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from kernels.colour import LUMA
 
@@ -73,7 +74,7 @@ class ToneMapping:
         if not self.tau >= 0:
             raise ConfigError(f"invalid value {self.tau!r}: must be >= 0", field="tau")
 
-    def to_dict(self) -> dict:
+    def to_dict(self) -> dict[str, float | str]:
         return asdict(self)
 
 
@@ -98,7 +99,7 @@ def ward_scale(adaptation: float, display_max: float = 100.0) -> float:
     return (num / den) ** 2.5
 
 
-def smooth_adaptation(values, times, tau: float) -> np.ndarray:
+def smooth_adaptation(values: npt.ArrayLike, times: npt.ArrayLike, tau: float) -> np.ndarray:
     """Exponential temporal filter of adaptation luminances in log space (module docstring).
 
     ``values`` per frame in render order, ``times`` in seconds; the first frame starts adapted.

@@ -11,6 +11,7 @@ import math
 from dataclasses import dataclass, replace
 
 import numpy as np
+import numpy.typing as npt
 
 from kernels.colour import LUMA  # Rec. 709 / sRGB luminance weights (ITU-R BT.709-6)
 
@@ -52,7 +53,7 @@ class ViewingConditions:
         return 1.0 / math.degrees(2.0 * math.atan(pixel / (2.0 * self.viewing_distance_m)))
 
     @classmethod
-    def for_ppd(cls, ppd: float, **fields) -> "ViewingConditions":
+    def for_ppd(cls, ppd: float, **fields: float | tuple[int, int]) -> ViewingConditions:
         """Conditions with the viewing distance chosen so the display has ``ppd`` pixels per degree."""
         base = cls(**fields)
         pixel = base.display_width_m / base.resolution[0]
@@ -64,7 +65,7 @@ def _finite(x) -> bool:
     return isinstance(x, (int, float)) and math.isfinite(x)
 
 
-def check_image(image, name: str) -> np.ndarray:
+def check_image(image: npt.ArrayLike, name: str) -> np.ndarray:
     """Validate an input image (H, W) or (H, W, C>=3) and return it as float64; LoomError otherwise."""
     arr = np.asarray(image)
     if arr.ndim not in (2, 3) or (arr.ndim == 3 and arr.shape[2] not in (1, 3, 4)) or min(arr.shape[:2]) < 8:

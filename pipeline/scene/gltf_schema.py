@@ -65,7 +65,7 @@ SCHEMA = {
 }
 
 
-def check_structure(tree, path: str) -> None:
+def check_structure(tree: object, path: str) -> None:
     """Raise a one-line SceneError at the first property of ``tree`` (parsed JSON) of the wrong shape."""
     if not isinstance(tree, dict):
         raise SceneError(f"the top level must be a JSON object, got {_kind(tree)}", path=path, field="json")

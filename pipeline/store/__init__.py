@@ -82,6 +82,8 @@ Illumination maps (``illumination/``, pipeline/store/illumination.py) live in th
 Modules: ``records`` (the record, validation, total order; pure NumPy), ``photon_store`` (zarr),
 ``illumination`` (the per-frame maps).
 """
+from __future__ import annotations
+
 from .photon_store import BATCH_FIELDS, DONE_MAGIC, FORMAT, FORMAT_VERSION, RECORD_CHUNK, PhotonStore, remove_partials
 from .records import (
                            BARY_SCALE,

@@ -51,7 +51,7 @@ class IlluminationMaps:
         self._own = all(_as_created(self._group, name) for name in (*MAPS, "adaptation"))
 
     @classmethod
-    def create(cls, url, *, n_frames: int, n_vertices: int) -> IlluminationMaps:
+    def create(cls, url: str | os.PathLike[str], *, n_frames: int, n_vertices: int) -> IlluminationMaps:
         """Make (or reuse, when the shapes fit) the arrays in the photon store at ``url``."""
         where = os.fspath(url)
         root = _root(where, "r+")
@@ -71,7 +71,7 @@ class IlluminationMaps:
         return cls(group, where)
 
     @classmethod
-    def open(cls, url, mode: str = "r") -> IlluminationMaps:
+    def open(cls, url: str | os.PathLike[str], mode: str = "r") -> IlluminationMaps:
         where = os.fspath(url)
         root = _root(where, mode)
         if GROUP not in root:
@@ -79,7 +79,7 @@ class IlluminationMaps:
         return cls(root[GROUP], where)
 
     @classmethod
-    def open_shared(cls, url, mode: str = "r") -> IlluminationMaps:
+    def open_shared(cls, url: str | os.PathLike[str], mode: str = "r") -> IlluminationMaps:
         """:meth:`open`, reusing this process's instance while the arrays' metadata files are
         the same (LocalStore only; :meth:`create` with other shapes writes new ones)."""
         path = local_path(url)

@@ -9,11 +9,13 @@ import time
 import urllib.parse
 import urllib.request
 from collections import OrderedDict
+from collections.abc import Iterable
 from dataclasses import dataclass
 from pathlib import Path
 
 import numcodecs.blosc
 import numpy as np
+import numpy.typing as npt
 import zarr
 import zarr.errors
 from zarr.codecs import BloscCodec
@@ -185,7 +187,7 @@ class _Prepared:
     row: np.ndarray  # u64 (5,) in BATCH_FIELDS order
 
 
-def make_store(url, read_only: bool):
+def make_store(url: str | os.PathLike[str], read_only: bool) -> LocalStore | FsspecStore:
     """LocalStore for paths and file:// URLs (atomic renames), FsspecStore for other URLs."""
     text = os.fspath(url)
     if "://" not in text:
@@ -196,7 +198,7 @@ def make_store(url, read_only: bool):
     return FsspecStore.from_url(text, read_only=read_only)
 
 
-def local_path(url):
+def local_path(url: str | os.PathLike[str]) -> Path | None:
     """The directory of a LocalStore URL (a path or file://), None for other stores."""
     text = os.fspath(url)
     if "://" not in text:
@@ -291,8 +293,8 @@ class PhotonStore:
 
     # --- making and opening ---------------------------------------------------------------
     @classmethod
-    def create(cls, url, *, n_frames: int, n_elements: int, frame_numbers, scene_hash: str,
-               config_hash: str, seed: int, max_batches: int = 16) -> PhotonStore:
+    def create(cls, url: str | os.PathLike[str], *, n_frames: int, n_elements: int, frame_numbers: Iterable[int],
+               scene_hash: str, config_hash: str, seed: int, max_batches: int = 16) -> PhotonStore:
         """Make the group and every fixed-size array; on an existing identical store, open it.
 
         Only the coordinator calls this. A store made with other identity attributes is refused.
@@ -358,7 +360,7 @@ class PhotonStore:
         root.require_group("frames")
 
     @classmethod
-    def open(cls, url, *, scene_hash: str | None = None, config_hash: str | None = None,
+    def open(cls, url: str | os.PathLike[str], *, scene_hash: str | None = None, config_hash: str | None = None,
              seed: int | None = None, mode: str = "r") -> PhotonStore:
         """Open an existing store, refusing one made with another scene, config or seed."""
         where = os.fspath(url)
@@ -378,7 +380,7 @@ class PhotonStore:
         return cls(root, where, mode)
 
     @classmethod
-    def open_shared(cls, url, mode: str = "r") -> PhotonStore:
+    def open_shared(cls, url: str | os.PathLike[str], mode: str = "r") -> PhotonStore:
         """:meth:`open`, but reusing this process's instance for ``(url, mode)`` while the store's
         root metadata is the same file (LocalStore only; a new store at the URL is a new file):
         tasks of one worker then share its caches and skip reopening (3 ms a task)."""
@@ -497,7 +499,7 @@ class PhotonStore:
             raise LoomError(f"frame {f}: {n_batches} batches asked, {len(done)} done", path=self.url)
         return int(self._meta(f, done[:n_batches])[:, 2].sum())
 
-    def emitted(self, batches=None) -> np.ndarray:
+    def emitted(self, batches: npt.ArrayLike | None = None) -> np.ndarray:
         """int64 (n_frames,): photons emitted per frame by its first ``batches[f]`` done batches
         (of its source frame, if shared), or by all its done batches (None): one
         :meth:`photons_in` per frame, vectorised."""
@@ -518,7 +520,7 @@ class PhotonStore:
             out[mine] = running[use[mine]]
         return out
 
-    def shared_batches(self, batches) -> np.ndarray:
+    def shared_batches(self, batches: npt.ArrayLike) -> np.ndarray:
         """int64 (n_frames,): ``batches`` with each frame given the count of the first frame using
         the same source frame, which is what :meth:`counts` uses for all of them; so a subset of
         frames gets the counts it would get within the whole table."""
@@ -538,7 +540,7 @@ class PhotonStore:
         reach = np.flatnonzero(running >= n_photons)
         return int(reach[0]) + 1 if len(reach) else (0 if n_photons <= 0 else None)
 
-    def batch_info(self, frame_index: int, batch: int) -> dict | None:
+    def batch_info(self, frame_index: int, batch: int) -> dict[str, int] | None:
         """The done marker of a batch as a dict of BATCH_FIELDS, or None if not done."""
         f = self.source_frame(frame_index)
         b = as_int(batch, "batch", self.url, 0, self.max_batches)
@@ -550,8 +552,8 @@ class PhotonStore:
         if self.mode != "r+":
             raise LoomError("photon store is open read-only (mode='r')", path=self.url)
 
-    def write_batch(self, frame_index: int, batch: int, *, key, bary, energy,
-                    photons_emitted: int, photon_start: int) -> bool:
+    def write_batch(self, frame_index: int, batch: int, *, key: npt.ArrayLike, bary: npt.ArrayLike,
+                    energy: npt.ArrayLike, photons_emitted: int, photon_start: int) -> bool:
         """Sort and write one batch, done marker last. Returns False if it was already done.
 
         Rerunning a batch rewrites identical bytes; a done batch is only compared by digest and
@@ -675,7 +677,7 @@ class PhotonStore:
         self._source_cache = None
 
     # --- reading --------------------------------------------------------------------------
-    def read_frame(self, frame_index: int, *, batches=None) -> FrameRecords:
+    def read_frame(self, frame_index: int, *, batches: Iterable[int] | None = None) -> FrameRecords:
         """All records of a frame's done batches (or of ``batches``), sorted by element."""
         f = self._frame(frame_index)
         g = int(self._sources()[f])
@@ -743,7 +745,8 @@ class PhotonStore:
         block = parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)
         return block[:, :n]
 
-    def counts(self, kind: str = "all", frames=None, parity: int | None = None, batches=None) -> np.ndarray:
+    def counts(self, kind: str = "all", frames: Iterable[int] | None = None, parity: int | None = None,
+               batches: npt.ArrayLike | None = None) -> np.ndarray:
         """u32 (len(frames), n_elements) hit counts over done batches, without reading records.
 
         ``kind`` is "direct", "indirect" or "all"; ``parity`` 0/1 keeps even/odd photons only.

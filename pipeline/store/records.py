@@ -5,9 +5,11 @@ Pure NumPy, no zarr: what a batch of records must satisfy before the store write
 from __future__ import annotations
 
 import hashlib
+from collections.abc import Iterable
 from dataclasses import dataclass
 
 import numpy as np
+import numpy.typing as npt
 
 from kernels.record_layout import BARY_SCALE, DIRECT_BIT, ELEMENT_BITS, ELEMENT_MASK, PARITY_BIT  # noqa: F401
 
@@ -19,7 +21,7 @@ assert sum(np.dtype(t).itemsize * k for _, t, k in FIELDS) == RECORD_BYTES, "rec
 CATEGORIES = ("indirect_even", "indirect_odd", "direct_even", "direct_odd")  # key >> ELEMENT_BITS
 
 
-def pack_key(element, photon_index, direct) -> np.ndarray:
+def pack_key(element: npt.ArrayLike, photon_index: npt.ArrayLike, direct: npt.ArrayLike) -> np.ndarray:
     """u32 keys from element ids, photon indices (only their parity is kept) and direct flags."""
     element = np.asarray(element)
     if element.size and (element.min() < 0 or element.max() > ELEMENT_MASK):
@@ -61,7 +63,8 @@ class FrameRecords:
         return int(self.key.shape[0])
 
     @classmethod
-    def merge(cls, frame_index: int, source_frame: int, batches, parts, n_elements: int,
+    def merge(cls, frame_index: int, source_frame: int, batches: Iterable[int],
+              parts: Iterable[tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]], n_elements: int,
               photons_emitted: int, dropped: int = 0) -> FrameRecords:
         """Merge element-sorted batches ``parts`` [(key, bary, energy, offsets)] in batch order:
         element-major, and within an element batch 0's records first (what a stable sort by
@@ -142,7 +145,7 @@ def valid_records(rows: np.ndarray, n_elements: int) -> tuple[np.ndarray, int]:
     return np.ascontiguousarray(rows[:, ok]), int(rows.shape[1] - np.count_nonzero(ok))
 
 
-def unpack_records(rows: np.ndarray, n_elements: int):
+def unpack_records(rows: np.ndarray, n_elements: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
     """(key, bary, energy, offsets) of a (5, n) block written by :func:`pack_records`."""
     key = np.ascontiguousarray(rows[0])
     # Row 1 is b1 | b2 << 16 in little-endian u32: as u16 pairs it is (b1, b2) already
@@ -153,7 +156,7 @@ def unpack_records(rows: np.ndarray, n_elements: int):
     return key, bary, energy, offsets
 
 
-def as_int(value, name: str, where: str, lo: int, hi: int | None = None) -> int:
+def as_int(value: object, name: str, where: str, lo: int, hi: int | None = None) -> int:
     """``value`` as an int in [lo, hi), or a one-line LoomError."""
     if isinstance(value, bool) or not isinstance(value, (int, np.integer)):
         raise LoomError(f"{name} must be an integer, got {value!r}", path=where)
@@ -164,7 +167,8 @@ def as_int(value, name: str, where: str, lo: int, hi: int | None = None) -> int:
     return value
 
 
-def as_array(value, name: str, shape_tail: tuple, dtype, where: str) -> np.ndarray:
+def as_array(value: npt.ArrayLike, name: str, shape_tail: tuple[int, ...], dtype: npt.DTypeLike,
+             where: str) -> np.ndarray:
     """Check shape and convert to ``dtype`` without wrapping, rounding or NaN."""
     arr = np.asarray(value)
     if arr.ndim != 1 + len(shape_tail) or arr.shape[1:] != shape_tail:
@@ -218,7 +222,8 @@ def sort_records(key: np.ndarray, bary: np.ndarray, energy: np.ndarray) -> np.nd
     return order
 
 
-def prepare_records(key, bary, energy, n_elements: int, where: str) -> SortedBatch:
+def prepare_records(key: npt.ArrayLike, bary: npt.ArrayLike, energy: npt.ArrayLike, n_elements: int,
+                    where: str) -> SortedBatch:
     """Validate one batch's arrays, sort them and count hits per element and category."""
     key = as_array(key, "key", (), np.uint32, where)
     bary = as_array(bary, "bary", (2,), np.uint16, where)
