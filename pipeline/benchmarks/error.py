@@ -159,7 +159,7 @@ class Evaluation:
 
     def __init__(self, client, scene, elements, plan: Plan, refs: np.ndarray, highlight):
         from pipeline.tonemap import log_average, luminance
-        from workers.composite import render_frame
+        from workers.camera_paths import render_frame
         from workers.raycast import caster_for
 
         self.client, self.plan, self.refs = client, plan, refs

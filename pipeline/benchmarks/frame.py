@@ -36,7 +36,7 @@ def _raw_caster(state, width: int, height: int):
     o = np.ascontiguousarray(np.broadcast_to(origin, d.shape), np.float32)
     d = np.ascontiguousarray(d, np.float32)
     scene.run(o[:1], d[:1])  # commit the BVH
-    from workers.composite import CHUNK_RAYS
+    from workers.camera_paths import CHUNK_RAYS
 
     def cast():  # in the compositor's batch size, which Embree runs faster than one huge batch
         for lo in range(0, len(d), CHUNK_RAYS):
@@ -51,7 +51,7 @@ def bench_scene(path, *, width: int, height: int, spp: int, repeat: int) -> dict
     the figures are medians, the ratio the median of the paired ratios.
     """
     from pipeline.scene import ElementMesh, Scene
-    from workers.composite import render_frame
+    from workers.camera_paths import render_frame
     from workers.raycast import caster_for
 
     scene = Scene.load(path)
