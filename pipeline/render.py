@@ -34,7 +34,6 @@ from .tonemap import LOOK_FIELDS, ToneMapping
 
 log = logging.getLogger(__name__)
 MAX_SIDE = 16384
-RAY_KINDS = ("camera", "shadow", "area", "reflection")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -225,6 +224,7 @@ def finish(job, records, *, rays: dict, batches: int, t_start: float, frame_time
         from .segment_plot import plot_segments
         plot_segments(records, out / "segments" / "segments.png", d_thr=config.d_thr, p_thr=config.p_thr)
     video = out / "preview.mp4"
+    from workers.camera_paths import RAY_KINDS
     from workers.scene_cache import load_scene
     scene = load_scene(job.scene_path, job.scene_hash, job.camera)
     fps = scene.timeline.fps

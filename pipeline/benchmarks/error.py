@@ -159,7 +159,7 @@ class Evaluation:
 
     def __init__(self, client, scene, elements, plan: Plan, refs: np.ndarray, highlight):
         from pipeline.tonemap import log_average, luminance
-        from workers.composite import render_frame
+        from workers.camera_paths import render_frame
         from workers.raycast import caster_for
 
         self.client, self.plan, self.refs = client, plan, refs
@@ -440,55 +440,3 @@ def _label(r: dict) -> str:
     if r["method"] == "per-frame":
         return f"per-frame {r['n_photons']:,}"
     return f"{r['method']} {r['n_photons']:,}, F_max {r['fmax']}"
-
-
-@click.command("error")
-@click.argument("scene", default="room")
-@click.option("--quick", is_flag=True, help="Small budgets and frame range (under 3 minutes for room).")
-@click.option("--frames", default=None, help="FIRST-LAST (default: the plan's, e.g. 46-90 for room).")
-@click.option("--budgets", default=None, help="N_frame values, comma-separated (default: the plan's).")
-@click.option("--fmax", type=int, default=None, help="F_max of the fixed and adaptive windows.")
-@click.option("--d-thr", "d_thr", default=None, help="d_thr values of the guided runs, comma-separated.")
-@click.option("--resolution", default="320x240", show_default=True)
-@click.option("--spp", type=int, default=2, show_default=True)
-@click.option("--reference-factor", type=int, default=50, show_default=True,
-              help="Reference photons a frame as a multiple of the largest budget (at least 50).")
-@click.option("--aqm-every", type=int, default=None, help="d_AQM on every n-th frame (and the change's).")
-@click.option("--workers", type=int, default=2, show_default=True)
-@click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
-              help="Folder of error.json, error.png and error.svg (default: bench-error-SCENE).")
-def bench_error(scene, quick, frames, budgets, fmax, d_thr, resolution, spp, reference_factor, aqm_every, workers,
-                out_dir):
-    """Run time against error vs a converged per-frame reference: per-frame, fixed and adaptive windows at
-    several budgets, the guided coordinator at several d_thr (default: ROOM)."""
-    from pipeline.errors import LoomError
-    from pipeline.render import parse_resolution
-
-    name = Path(scene).stem if Path(scene).suffix else scene
-    plans = QUICK if quick else FULL
-    plan = plans.get(name, plans["cornell"])  # other scenes: CORNELL's budgets, frames from --frames
-    if name not in plans and not frames:
-        raise LoomError("give the frames to render (FIRST-LAST) for a scene without a plan", field="--frames")
-    changes: dict = {"reference_factor": reference_factor}
-    changes["width"], changes["height"] = parse_resolution(resolution)
-    changes["spp"] = spp
-    try:
-        if frames:
-            a, b = frames.split("-")
-            changes["frames"] = (int(a), int(b))
-        if budgets:
-            changes["budgets"] = tuple(int(n) for n in budgets.split(","))
-        if d_thr:
-            changes["d_thr"] = tuple(float(d) for d in d_thr.split(","))
-    except ValueError as err:
-        raise LoomError(f"cannot read the list: {err}", field="--frames/--budgets/--d-thr") from None
-    if fmax is not None:
-        changes["fmax"] = fmax
-    if aqm_every is not None:
-        if aqm_every < 1:
-            raise LoomError(f"must be >= 1, got {aqm_every}", field="--aqm-every")
-        changes["aqm_every"] = aqm_every
-    if any(n <= 0 for n in changes.get("budgets", plan.budgets)):
-        raise LoomError("budgets must be positive photon counts", field="--budgets")
-    plan = Plan(**{**plan.__dict__, **changes})
-    run(scene, plan, Path(out_dir or f"bench-error-{name}"), workers=workers)

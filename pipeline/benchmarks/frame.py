@@ -36,7 +36,7 @@ def _raw_caster(state, width: int, height: int):
     o = np.ascontiguousarray(np.broadcast_to(origin, d.shape), np.float32)
     d = np.ascontiguousarray(d, np.float32)
     scene.run(o[:1], d[:1])  # commit the BVH
-    from workers.composite import CHUNK_RAYS
+    from workers.camera_paths import CHUNK_RAYS
 
     def cast():  # in the compositor's batch size, which Embree runs faster than one huge batch
         for lo in range(0, len(d), CHUNK_RAYS):
@@ -51,7 +51,7 @@ def bench_scene(path, *, width: int, height: int, spp: int, repeat: int) -> dict
     the figures are medians, the ratio the median of the paired ratios.
     """
     from pipeline.scene import ElementMesh, Scene
-    from workers.composite import render_frame
+    from workers.camera_paths import render_frame
     from workers.raycast import caster_for
 
     scene = Scene.load(path)
@@ -80,18 +80,12 @@ def bench_scene(path, *, width: int, height: int, spp: int, repeat: int) -> dict
             "ratio": ratio}
 
 
-@click.command("frame")
-@click.argument("scenes", nargs=-1)
-@click.option("--resolution", default="640x480", show_default=True)
-@click.option("--spp", type=int, default=1, show_default=True)
-@click.option("--repeat", type=int, default=5, show_default=True, help="Timed renders per scene (median).")
-def bench_frame(scenes, resolution, spp, repeat):
-    """Milliseconds per frame and rays/s vs raw embreex (default scenes: ROOM and ATRIUM)."""
-    from pipeline.render import RenderSettings, parse_resolution
+def run(scenes, *, width: int, height: int, spp: int, repeat: int, echo=click.echo) -> list[dict]:
+    """Benchmark ``scenes`` (built-in names or files; default ROOM and ATRIUM) on one core, echoing a
+    line per scene; returns their figures."""
     from pipeline.scene.builtin import BUILTIN_SCENES, write_builtin
 
-    width, height = parse_resolution(resolution)
-    RenderSettings(width=width, height=height, spp=spp)  # validates spp
+    results = []
     pinned = hasattr(os, "sched_setaffinity")
     if pinned:  # one core for both measurements, like one Dask worker
         cores = os.sched_getaffinity(0)
@@ -101,13 +95,15 @@ def bench_frame(scenes, resolution, spp, repeat):
             # Scene files, or names of built-in scenes (as `loom bench photons` takes them)
             paths = [write_builtin(n, Path(tmp) / f"{n}.glb") if n in BUILTIN_SCENES else n
                      for n in (list(scenes) or ["room", "atrium"])]
-            click.echo(f"compositor at {width}x{height}, {spp} spp, one core, median of {repeat}")
+            echo(f"compositor at {width}x{height}, {spp} spp, one core, median of {repeat}")
             for path in paths:
                 r = bench_scene(path, width=width, height=height, spp=spp, repeat=repeat)
+                results.append(r)
                 kinds = ", ".join(f"{k} {v:,}" for k, v in r["rays"].items())
-                click.echo(f"{r['scene']:>8} frame {r['frame']}: {r['ms']:7.1f} ms/frame  "
-                           f"{r['rays_per_s'] / 1e6:5.2f} Mrays/s vs raw embreex "
-                           f"{r['raw_rays_per_s'] / 1e6:5.2f} Mrays/s ({100 * r['ratio']:.0f} %)  [{kinds}]")
+                echo(f"{r['scene']:>8} frame {r['frame']}: {r['ms']:7.1f} ms/frame  "
+                     f"{r['rays_per_s'] / 1e6:5.2f} Mrays/s vs raw embreex "
+                     f"{r['raw_rays_per_s'] / 1e6:5.2f} Mrays/s ({100 * r['ratio']:.0f} %)  [{kinds}]")
     finally:
         if pinned:
             os.sched_setaffinity(0, cores)
+    return results

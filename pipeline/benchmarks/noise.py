@@ -33,7 +33,6 @@ import click
 import numpy as np
 
 from kernels import colour
-from pipeline.render import parse_resolution
 
 LUMA = np.asarray(colour.LUMA)  # Rec. 709 (kernels/colour.py)
 K = 68  # ROOM's segment centre K2 (§6, Table 1)
@@ -83,7 +82,7 @@ def run(photons=(10_000, 20_000, 40_000, 80_000), *, fmax: int = 30, width: int 
     from pipeline.store import PhotonStore
     from pipeline.temporal import illumination_maps
     from pipeline.tonemap import ToneMapping, ward_scale
-    from workers.composite import render_frame
+    from workers.camera_paths import render_frame
     from workers.raycast import caster_for
     from workers.reconstruct import mesh_adaptation, vertex_irradiance
 
@@ -189,27 +188,3 @@ def run(photons=(10_000, 20_000, 40_000, 80_000), *, fmax: int = 30, width: int 
     finally:
         if tmp is not None:
             tmp.cleanup()
-
-
-@click.command("noise")
-@click.option("--photons", default="10000,20000,40000,80000", show_default=True,
-              help="N_frame values, comma-separated (shot incrementally into one store).")
-@click.option("--fmax", type=int, default=30, show_default=True, help="F_max, frames of the segment around K = 68.")
-@click.option("--resolution", default="320x240", show_default=True, help="Frame size of I1, I2.")
-@click.option("--spp", type=int, default=2, show_default=True)
-@click.option("--element-scale", type=float, default=1.0, show_default=True,
-              help="Element size as a multiple of the scene's own (0.4 m for ROOM).")
-@click.option("--filter-photons", type=float, default=None,
-              help="filter_photons of the filtered column (default: RenderConfig's).")
-@click.option("--calibrate/--no-calibrate", default=True, show_default=True,
-              help="Also find the per-vertex noise amplitude the AQM puts at d_thr.")
-@click.option("--scheduler", default="synchronous", show_default=True, help="synchronous, local or an address.")
-@click.option("--workers", type=int, default=None, help="Workers of a local scheduler.")
-@click.option("--store", default=None, help="Directory to keep the scene and photons in (default: a temporary one).")
-def bench_noise(photons, fmax, resolution, spp, element_scale, filter_photons, calibrate, scheduler, workers, store):
-    """d_AQM of the even/odd renderings I1(K), I2(K) of ROOM frame 68 against N_frame: linear vs
-    displayed input, spatial filter, window statistics, and the AQM's noise threshold."""
-    width, height = parse_resolution(resolution)
-    run(tuple(int(p) for p in photons.split(",") if p.strip()), fmax=fmax, width=width, height=height, spp=spp,
-        element_scale=element_scale, filter_photons=filter_photons, calibrate=calibrate, scheduler=scheduler,
-        workers=workers, store=store)

@@ -89,23 +89,12 @@ def _print_table(echo, title: str, run: dict) -> None:
         echo(f"  {row:<22}{wall[row] / n:>10.4f}{100 * wall[row] / total if total else 0:>8.1f}%{core[row] / n:>14.4f}")
 
 
-@click.command("render")
-@click.argument("scene", default="room")
-@click.option("--frames", default=None, help="Frame range (default: all of the scene's frames).")
-@click.option("--resolution", default="320x240", show_default=True)
-@click.option("--spp", type=int, default=2, show_default=True)
-@click.option("--workers", type=int, default=2, show_default=True, help="Workers of the guided and the scaled run.")
-@click.option("--photons", "n_photons", type=int, default=40_000, show_default=True, help="Fixed N_frame.")
-@click.option("--fmax", type=int, default=30, show_default=True, help="Fixed F_max.")
-@click.option("--skip-guided", is_flag=True, help="Only the fixed runs (Table 2 b and scaling).")
-@click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None, help="Also write the figures here.")
-def bench_render(scene, frames, resolution, spp, workers, n_photons, fmax, skip_guided, json_path):
-    """Table 2 per frame (guided and fixed N_frame/F_max) and 1 vs N worker scaling (default: ROOM)."""
-    from pipeline.render import parse_resolution
+def run(scene: str = "room", *, frames=None, width: int = 320, height: int = 240, spp: int = 2, workers: int = 2,
+        n_photons: int = 40_000, fmax: int = 30, skip_guided: bool = False, json_path=None, echo=click.echo) -> dict:
+    """The three renders of ``scene`` (a built-in name or a file), their tables and the scaling; returns
+    the figures (also written to ``json_path`` if given)."""
     from pipeline.scene.builtin import BUILTIN_SCENES, write_builtin
 
-    width, height = parse_resolution(resolution)
-    echo = click.echo
     results: dict = {}
     with tempfile.TemporaryDirectory(prefix="loom-bench-render-") as tmp:
         tmp = Path(tmp)
@@ -130,3 +119,4 @@ def bench_render(scene, frames, resolution, spp, workers, n_photons, fmax, skip_
     results["scaling"] = {"workers": workers, "ratio": ratio, "ratio_segments": ratio_segments}
     if json_path:
         Path(json_path).write_text(json.dumps(results, indent=1, default=str))
+    return results

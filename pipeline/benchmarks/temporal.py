@@ -206,15 +206,3 @@ def run(trace_frames: int = 3, numpy_frames: int = 4, n_frames: int = N_FRAMES, 
          f"{result['records_per_s_gather_1M'] / 1e6:.0f} M/s through the whole gather (target >= 100 M/s)")
     echo("NumPy twins ms/frame: " + ", ".join(f"{k} {v:.1f}" for k, v in twins.items()))
     return result
-
-
-@click.command("temporal")
-@click.option("--trace-frames", type=int, default=3, show_default=True,
-              help="Real ATRIUM frames shot to measure tracing time per frame.")
-@click.option("--numpy-frames", type=int, default=4, show_default=True, help="Frames for the NumPy twins.")
-@click.option("--frames", "n_frames", type=click.IntRange(1), default=N_FRAMES, show_default=True,
-              help="Synthetic frames gathered (a few for a quick check).")
-def bench_temporal(trace_frames: int, numpy_frames: int, n_frames: int) -> None:
-    """Temporal windows, gather and filter on PoCL, ATRIUM-size (about 45,000 elements, 300 frames,
-    20,000 photons per frame, F_max = 44), against the photon tracing time per frame."""
-    run(trace_frames, numpy_frames, n_frames)

@@ -24,7 +24,7 @@ from .vertex_attributes import read_vertex_attributes
 
 log = logging.getLogger(__name__)
 # What the loader chose for a file that lacks it (default camera, default lights): the CLI shows
-# this logger's INFO lines (pipeline/cli.py); Dask workers, which load the scene again, do not.
+# this logger's INFO lines (pipeline/cli/__init__.py); Dask workers, which load the scene again, do not.
 notices_log = logging.getLogger("pipeline.scene.notices")
 _noticed: set[tuple[str, str]] = set()  # one notice per file and process
 LIGHT_CHOICES = ("auto", "none")  # --light: a default sun and sky for a file without light, or refuse it

@@ -6,7 +6,7 @@
   normal's hemisphere, so which side a surface is seen from (sidedness) and where secondary rays
   start (offsets, workers/raycast.py) still come from the geometric normal; primitives without
   ``NORMAL`` are flat shaded, as glTF 2.0 §3.7.2.1 asks. Lambert cosines, mirror and lobe directions
-  use the shading normal (kernels/scatter.py, workers/composite.py).
+  use the shading normal (kernels/scatter.py, workers/camera_paths.py).
 * **Base colour**: ``baseColorFactor`` RGB x the ``baseColorTexture`` (pipeline/scene/textures.py) at
   the hit's interpolated ``TEXCOORD_n`` x the interpolated ``COLOR_0`` (glTF 2.0 §3.9.2). The photon
   tracer takes its Russian-roulette albedo from here, so colour bleeding follows the texture; the
@@ -130,7 +130,7 @@ class SurfaceShading:
             return geo
         g = geo[rows]
         c = np.take(self.corner_normals, t[rows], axis=0).astype(np.float64)
-        n = _interpolate(c, np.take(u, rows), np.take(v, rows))
+        n = interpolate(c, np.take(u, rows), np.take(v, rows))
         length = np.sqrt(np.einsum("ij,ij->i", n, n))
         ok = length > 1e-6
         n = np.where(ok[:, None], n / np.where(ok, length, 1.0)[:, None], g)
@@ -143,7 +143,7 @@ class SurfaceShading:
         m = self.tri_mat[t] if len(self.tri_mat) else np.zeros(len(t), np.int64)
         rho = np.take(self.factor, m, axis=0)
         if self.color is not None:
-            rho = rho * _interpolate(np.take(self.color, t, axis=0).astype(np.float64), u, v)
+            rho = rho * interpolate(np.take(self.color, t, axis=0).astype(np.float64), u, v)
         return self._textured(self.textures, rho, t, m, u, v)
 
     @property
@@ -185,7 +185,7 @@ class SurfaceShading:
             if corners is None:
                 uv = np.zeros((len(rows), 2))
             else:
-                uv = _interpolate(np.take(corners, t[rows], axis=0).astype(np.float64),
+                uv = interpolate(np.take(corners, t[rows], axis=0).astype(np.float64),
                                   np.take(u, rows), np.take(v, rows))
             value[rows] *= sample(tex, uv)
         return value
@@ -206,8 +206,18 @@ def mean_base_color(material) -> np.ndarray:
     return factor if tex is None else factor * tex.mean
 
 
-def _interpolate(corners: np.ndarray, u, v) -> np.ndarray:
-    """Barycentric blend of (n, 3, k) corner values with Embree's (u, v) (corners 1 and 2)."""
+def interpolate(corners: np.ndarray, u, v) -> np.ndarray:
+    """Barycentric blend of (n, 3, k) corner values with Embree's (u, v) (corners 1 and 2), float64:
+    shading normals, vertex colours and texture coordinates (here), the photon tracer's and the
+    compositor's alike. Positions use :func:`triangle_points`."""
     u = np.asarray(u, np.float64)[:, None]
     v = np.asarray(v, np.float64)[:, None]
     return (1.0 - u - v) * corners[:, 0] + u * corners[:, 1] + v * corners[:, 2]
+
+
+def triangle_points(corners: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """Points of (n, 3, 3) triangles at barycentrics (u, v) (corners 1 and 2), in the corners' dtype
+    (float32 in the compositor), as corner 0 plus the two edges: the compositor's hit points and its
+    area-light samples. Not :func:`interpolate`'s float64 weighted sum: the rounding differs, and the
+    ray offsets (workers/raycast.py) and the frames' bits are those of this form."""
+    return corners[:, 0] + u[:, None] * (corners[:, 1] - corners[:, 0]) + v[:, None] * (corners[:, 2] - corners[:, 0])

@@ -21,7 +21,7 @@ from pipeline.shoot import shoot
 from pipeline.store import PhotonStore
 from pipeline.store.illumination import IlluminationMaps
 from pipeline.temporal import illumination_maps
-from workers.composite import render_frame
+from workers.camera_paths import render_frame
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(3600)]  # minutes of rendering, not a hang
 SETTINGS = RenderSettings(width=320, height=240, spp=2)

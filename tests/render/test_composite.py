@@ -11,7 +11,8 @@ import pytest
 from kernels.camera import camera_rays_reference
 from pipeline.scene import ElementMesh, Scene
 from tests.render.scenes import EYE, LAMP, area_scene, mirror_scene, plane_scene
-from workers.composite import frame_key, render_frame
+from workers.camera_paths import render_frame
+from workers.random_numbers import frame_key
 
 W, H, SPP = 40, 30, 4
 

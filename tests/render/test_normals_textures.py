@@ -20,8 +20,9 @@ from pipeline.scene.summary import surface_lines
 from pipeline.scene.textures import srgb_to_linear
 from pipeline.store import DIRECT_BIT, ELEMENT_MASK
 from tests.render.scenes import UP_FACES
-from workers.composite import frame_key, render_frame
+from workers.camera_paths import render_frame
 from workers.photons import trace_batch
+from workers.random_numbers import frame_key
 from workers.raycast import caster_for
 
 SUN = np.array([-0.4, -0.5, -1.0]) / np.linalg.norm([-0.4, -0.5, -1.0])  # direction the light travels

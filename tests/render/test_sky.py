@@ -23,8 +23,9 @@ from pipeline.scene.builtin.shapes import look_at, merge, quad
 from pipeline.scene.default_lights import SUN_COLOR, SUN_ELEVATION, SUN_IRRADIANCE, default_sun
 from pipeline.scene.sky import Sky
 from tests.render.scenes import UP_FACES, quad_y
-from workers.composite import frame_key, render_frame
+from workers.camera_paths import render_frame
 from workers.photons import trace_batch
+from workers.random_numbers import frame_key
 from workers.reconstruct import vertex_irradiance
 
 ALBEDO = np.array([0.5, 0.6, 0.7])

@@ -17,8 +17,8 @@ import pytest
 from pipeline.errors import LoomError
 from pipeline.scene import Scene
 from pipeline.scene.builtin import BUILTIN_SCENES, atrium, room, shapes, write_builtin
-from pipeline.scene.builtin.element_estimate import GltfData, estimate_elements, world_triangles
 from pipeline.scene.builtin.gltf_builder import GltfBuilder
+from tests.scene.element_estimate import GltfData, estimate_elements, world_triangles
 
 # name: (triangles, (min, max) elements at the scene's element_size, frames)
 EXPECTED = {

@@ -1,97 +1,22 @@
-"""The ``loom`` command: thin click wrappers over the pipeline; no algorithms live here.
+"""``loom shoot``, ``loom render`` and what a render leaves to look at: ``loom segments``, ``loom report``.
 
-Every :class:`~pipeline.errors.LoomError` becomes one line on stderr and exit status 2.
+The job options (what a render makes) are shared with ``loom plan`` (farm.py).
 """
 from __future__ import annotations
 
 import logging
-import sys
 
 import click
 
-from kernels.context import DeviceError
+from pipeline.config import RenderConfig as _RenderConfig
 
-from .config import RenderConfig as _RenderConfig
-from .errors import LoomError
+from .scene import CAMERA_HELP, LIGHT_HELP
 
 _PHOTON_DEPTH = _RenderConfig().photon_depth
 _PHOTON_DEPTH_HELP = "Safety cap on photon hits (Russian roulette ends paths; pipeline/config.py)."
 
 
-class _LoomGroup(click.Group):
-    """Turns user-input errors, ours and click's usage errors alike, into one line and exit 2."""
-
-    def invoke(self, ctx):
-        try:
-            return super().invoke(ctx)
-        except LoomError as err:
-            click.echo(f"loom: error: {err}", err=True)
-            sys.exit(2)
-        except DeviceError as err:  # the machine, not the input or a bug: one line too
-            click.echo(f"loom: error: OpenCL: {err}", err=True)
-            sys.exit(2)
-
-    def main(self, *args, **kwargs):
-        if kwargs.get("standalone_mode", True) is False:
-            return super().main(*args, **kwargs)
-        try:
-            return super().main(*args, standalone_mode=False, **kwargs)
-        except click.UsageError as err:
-            if isinstance(err, getattr(click.exceptions, "NoArgsIsHelpError", ())) and err.ctx is not None:
-                click.echo(err.ctx.get_help())  # a bare `loom` or `loom bench` asks for help
-                sys.exit(0)
-            where = f"{err.ctx.command_path}: " if err.ctx is not None else ""
-            click.echo(f"loom: error: {where}{err.format_message()} (see --help)", err=True)
-            sys.exit(err.exit_code)
-        except click.ClickException as err:
-            click.echo(f"loom: error: {err.format_message()}", err=True)
-            sys.exit(err.exit_code)
-        except click.exceptions.Abort:
-            click.echo("loom: aborted", err=True)
-            sys.exit(1)
-
-
-@click.group(cls=_LoomGroup)
-@click.version_option(package_name="photonloom")
-def main() -> None:
-    """photonloom: perception-guided global illumination for animations."""
-    logging.basicConfig(level=logging.WARNING, format="loom: %(levelname)s: %(message)s")
-    logging.getLogger("pipeline.scene.notices").setLevel(logging.INFO)  # default camera and lights chosen
-
-
-@main.command("scene")
-@click.argument("name")
-@click.option("-o", "--output", required=True, help="The .glb (or .gltf) to write; folders are made.")
-def scene_command(name: str, output: str) -> None:
-    """Write the built-in scene NAME (room, atrium, cornell, static) as a glTF file."""
-    from .scene.builtin import write_builtin
-
-    path = write_builtin(name, output)
-    click.echo(f"wrote {path}")
-
-
-_CAMERA_HELP = ("Camera or camera-node name, or auto: frame the whole animation (pipeline/scene/default_camera.py). "
-                "Default: the first camera, auto when the file has none.")
-_LIGHT_HELP = ("auto: a file without any light is lit by a default sun and sky (pipeline/scene/default_lights.py); "
-               "none: refuse it.")
-
-
-@main.command("info")
-@click.argument("scene_file", type=click.Path(dir_okay=False))
-@click.option("--camera", default=None, help=_CAMERA_HELP)
-@click.option("--element-size", type=float, default=None, help="Element edge bound (default: the scene's).")
-@click.option("--light", type=click.Choice(["auto", "none"]), default="auto", show_default=True, help=_LIGHT_HELP)
-def info_command(scene_file: str, camera: str | None, element_size: float | None, light: str) -> None:
-    """Summarise SCENE_FILE: timeline, geometry, elements, lights, materials, cameras, needs."""
-    from .scene import Scene
-    from .scene.summary import describe
-
-    scene = Scene.load(scene_file, camera=camera, light=light)
-    for line in describe(scene, element_size):
-        click.echo(line)
-
-
-def _scheduler_options(f):
+def scheduler_options(f):
     f = click.option("--workers", type=int, default=None,
                      help="Worker processes for --scheduler local (default: one per core).")(f)
     f = click.option("--scheduler", default="local", show_default=True,
@@ -100,7 +25,7 @@ def _scheduler_options(f):
     return f
 
 
-@main.command("shoot")
+@click.command("shoot")
 @click.argument("scene_file", type=click.Path(dir_okay=False))
 @click.option("--frames", default=None, help="Farm range: 1-100, 1-100x2, 1,5,10-20 (default: all).")
 @click.option("--photons", type=int, default=40_000, show_default=True, help="Photons per frame (N_frame).")
@@ -109,13 +34,13 @@ def _scheduler_options(f):
 @click.option("--element-size", type=float, default=None, help="Element edge bound (default: the scene's).")
 @click.option("--photon-depth", type=int, default=_PHOTON_DEPTH, show_default=True, help=_PHOTON_DEPTH_HELP)
 @click.option("--quiet", is_flag=True, help="No progress bar.")
-@click.option("--light", type=click.Choice(["auto", "none"]), default="auto", show_default=True, help=_LIGHT_HELP)
-@_scheduler_options
+@click.option("--light", type=click.Choice(["auto", "none"]), default="auto", show_default=True, help=LIGHT_HELP)
+@scheduler_options
 def shoot_command(scene_file, frames, photons, store_url, seed, element_size, photon_depth, quiet,
                   light, scheduler, workers) -> None:
     """Trace photons for every frame of SCENE_FILE into a photon store (resumable)."""
-    from .config import RenderConfig
-    from .shoot import shoot
+    from pipeline.config import RenderConfig
+    from pipeline.shoot import shoot
 
     config = RenderConfig(seed=seed, element_size=element_size, photon_depth=photon_depth)
     summary = shoot(scene_file, frames=frames, n_photons=photons, store_url=store_url, config=config,
@@ -139,7 +64,7 @@ def _photons(_ctx, _param, value):
     return n
 
 
-def _job_options(f):
+def job_options(f):
     """The options that say what a render makes (shared by ``loom render`` and ``loom plan``)."""
     options = [
         click.argument("scene_file", type=click.Path(dir_okay=False)),
@@ -157,7 +82,7 @@ def _job_options(f):
                      show_default=True, help="Temporal photon collection with --photons N: Condition (1) windows "
                      "(§5.1), always +-F_max/2 (§6), or each frame's own photons."),
         click.option("--store", "store_url", default=None, help="Photon store (default: OUT/photons.zarr)."),
-        click.option("--camera", default=None, help=_CAMERA_HELP),
+        click.option("--camera", default=None, help=CAMERA_HELP),
         click.option("--seed", type=int, default=0, show_default=True),
         click.option("--reflection-depth", type=int, default=4, show_default=True,
                      help="Mirror/glossy reflections followed per camera path."),
@@ -167,7 +92,7 @@ def _job_options(f):
         click.option("--config", "config_file", type=click.Path(dir_okay=False), default=None,
                      help="JSON object of RenderConfig fields (pipeline/config.py); the options above override it."),
         click.option("--light", type=click.Choice(["auto", "none"]), default="auto", show_default=True,
-                     help=_LIGHT_HELP),
+                     help=LIGHT_HELP),
         click.option("--tonemap", type=click.Choice(["filmic", "exposure", "ward"]), default="filmic",
                      show_default=True, help="How frames are shown: a filmic curve or a linear exposure keyed to the "
                      "eye's adaptation, or Ward's visibility-matching operator (pipeline/tonemap.py)."),
@@ -179,13 +104,13 @@ def _job_options(f):
     return f
 
 
-def _job_arguments(scene_file, frames, out_dir, resolution, spp, photons, fmax, temporal, store_url, camera, seed,
+def job_arguments(scene_file, frames, out_dir, resolution, spp, photons, fmax, temporal, store_url, camera, seed,
                    reflection_depth, photon_depth, d_thr, config_file, light="auto", tonemap="filmic",
                    exposure=0.0) -> dict:
     """The keyword arguments of pipeline.render.prepare_job / render from the job options."""
-    from .config import RenderConfig, load_config
-    from .render import RenderSettings, parse_resolution
-    from .tonemap import ToneMapping
+    from pipeline.config import RenderConfig, load_config
+    from pipeline.render import RenderSettings, parse_resolution
+    from pipeline.tonemap import ToneMapping
 
     width, height = parse_resolution(resolution)
     fields = load_config(config_file) if config_file else {}
@@ -197,22 +122,22 @@ def _job_arguments(scene_file, frames, out_dir, resolution, spp, photons, fmax, 
                                         tonemap=ToneMapping(operator=tonemap, exposure=exposure)))
 
 
-@main.command("render")
-@_job_options
+@click.command("render")
+@job_options
 @click.option("--segment", type=int, default=None,
               help="Redo one segment (index from `loom segments OUT`) and only the frames that depend on it.")
 @click.option("--quiet", is_flag=True, help="No progress lines.")
 @click.option("--verbose", is_flag=True, help="Log more of what the stages do.")
 @click.option("--performance-report", type=click.Path(dir_okay=False), default=None,
               help="Write Dask's performance report of the run to this HTML file.")
-@_scheduler_options
+@scheduler_options
 def render_command(segment, quiet, verbose, performance_report, scheduler, workers, **job) -> None:
     """Render frames of SCENE_FILE: photons, segments, illumination maps, EXR/PNG frames, preview.mp4."""
-    from .render import render
+    from pipeline.render import render
 
     if verbose:
         logging.getLogger("pipeline").setLevel(logging.INFO)
-    args = _job_arguments(**job)
+    args = job_arguments(**job)
     report = render(args.pop("scene_path"), **args, scheduler=scheduler, workers=workers, progress=not quiet,
                     segment=segment, echo=None if quiet else click.echo, performance_report=performance_report)
     t, out_dir = report["times_s"], job["out_dir"]
@@ -226,42 +151,7 @@ def render_command(segment, quiet, verbose, performance_report, scheduler, worke
     click.echo(f"report: {out_dir}/report.html")
 
 
-@main.command("plan")
-@_job_options
-@click.option("--loom", "loom_command", default=None,
-              help="The loom command the recipes run (default: this one; a farm may wrap it, e.g. 'srun loom').")
-@click.option("--decide-workers", type=int, default=1, show_default=True,
-              help="Worker processes a decide recipe traces its photons on (1: in its own process).")
-def plan_command(loom_command, decide_workers, **job) -> None:
-    """Write OUT/Makefile: a make-driven farm render (make -C OUT -j N) of what `loom render` would make."""
-    from .farm import bounds, write_plan
-    from .render import prepare_job
-
-    args = _job_arguments(**job)
-    made = prepare_job(args.pop("scene_path"), **args)
-    path = write_plan(made, loom_command, decide_workers)
-    segments, chunks = bounds(made)
-    click.echo(f"wrote {path}: up to {segments} segment(s) x {chunks} chunk(s) of frames; "
-               f"run: make -C {job['out_dir']} -j N")
-
-
-@main.command("farm", hidden=True)
-@click.argument("step", type=click.Choice(["decide", "reconstruct", "frames", "done", "finish"]))
-@click.argument("out_dir", type=click.Path(file_okay=False))
-@click.argument("numbers", type=int, nargs=-1)
-def farm_command(step: str, out_dir: str, numbers: tuple[int, ...]) -> None:
-    """One target of a `loom plan` Makefile (pipeline/farm.py)."""
-    from .farm import step as run_step
-
-    logging.getLogger("pipeline.scene.notices").setLevel(logging.WARNING)  # `loom plan` showed them once
-
-    want = {"decide": 1, "reconstruct": 2, "frames": 2, "done": 1, "finish": 0}[step]
-    if len(numbers) != want or any(n < 0 for n in numbers):
-        raise LoomError(f"{step} takes {want} index(es) >= 0, got {list(numbers)}", field="farm")
-    click.echo(run_step(step, out_dir, *numbers))
-
-
-@main.command("segments")
+@click.command("segments")
 @click.argument("out_dir", type=click.Path(file_okay=False))
 @click.option("--json", "as_json", is_flag=True, help="The records as JSON.")
 @click.option("--plot", "plot_file", type=click.Path(dir_okay=False), default=None,
@@ -270,11 +160,11 @@ def segments_command(out_dir: str, as_json: bool, plot_file: str | None) -> None
     """The segments of a render: the paper's Table 1 (K_i, N_frame, F_max) with d_AQM, p_me, times."""
     import json
 
-    from .segment_records import read_records, table
+    from pipeline.segment_records import read_records, table
 
     records = read_records(out_dir)
     if plot_file:
-        from .segment_plot import plot_segments
+        from pipeline.segment_plot import plot_segments
 
         click.echo(f"wrote {plot_segments(records, plot_file)}", err=as_json)
     if as_json:
@@ -284,53 +174,10 @@ def segments_command(out_dir: str, as_json: bool, plot_file: str | None) -> None
         click.echo(line)
 
 
-@main.command("report")
+@click.command("report")
 @click.argument("out_dir", type=click.Path(file_okay=False))
 def report_command(out_dir: str) -> None:
     """Write OUT/report.html: segments, costs, windows, AQM maps, frames, video, skips, settings (one file)."""
-    from .report import write_report
+    from pipeline.report import write_report
 
     click.echo(f"wrote {write_report(out_dir)}")
-
-
-@main.group()
-def bench() -> None:
-    """Benchmarks (speed is measured here, never in tests)."""
-
-
-@bench.command("photons")
-@click.argument("scenes", nargs=-1)
-@click.option("--photons", type=int, default=200_000, show_default=True, help="Photons per worker.")
-@click.option("--workers", type=int, default=None, help="Worker processes (default: one per core).")
-@click.option("--memory-photons", type=int, default=1_000_000, show_default=True,
-              help="Photons of the frame whose peak memory is measured.")
-def bench_photons(scenes, photons, workers, memory_photons) -> None:
-    """Photon tracing throughput vs raw Embree (default scenes: room atrium)."""
-    import os
-
-    from .benchmarks.photons import run
-
-    run(list(scenes) or ["room", "atrium"], photons=photons, workers=workers or os.cpu_count() or 1,
-        memory_photons=memory_photons, echo=click.echo)
-
-from .cli_aqm import aqm_command, bench_aqm  # noqa: E402
-
-main.add_command(aqm_command, "aqm")
-bench.add_command(bench_aqm, "aqm")
-
-from .benchmarks.frame import bench_frame  # noqa: E402
-
-bench.add_command(bench_frame, "frame")
-
-from .benchmarks.temporal import bench_temporal  # noqa: E402
-
-bench.add_command(bench_temporal, "temporal")
-from .benchmarks.noise import bench_noise  # noqa: E402
-
-bench.add_command(bench_noise, "noise")
-from .benchmarks.render import bench_render  # noqa: E402
-
-bench.add_command(bench_render, "render")
-from .benchmarks.error import bench_error  # noqa: E402
-
-bench.add_command(bench_error, "error")

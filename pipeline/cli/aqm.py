@@ -1,19 +1,16 @@
-"""``loom aqm`` (compare two frames with the Animation Quality Metric) and ``loom bench aqm``.
+"""``loom aqm``: compare two frames with the Animation Quality Metric.
 
-Thin wrappers: file I/O and options here, the metric in :mod:`pipeline.aqm`.
+A thin wrapper: file I/O and options here, the metric in :mod:`pipeline.aqm` (its benchmark, ``loom
+bench aqm``, in pipeline/benchmarks/aqm.py).
 """
 from __future__ import annotations
-
-import os
-import statistics
-import time
 
 import click
 import numpy as np
 
-from .aqm import AQM_SIZE, G_SP, ViewingConditions, aqm, image_velocity, pixels_per_frame_to_deg_per_s
-from .aqm.visualize import difference_picture
-from .errors import LoomError
+from pipeline.aqm import AQM_SIZE, G_SP, ViewingConditions, aqm, pixels_per_frame_to_deg_per_s
+from pipeline.aqm.visualize import difference_picture
+from pipeline.errors import LoomError
 
 _DEFAULT = ViewingConditions()
 
@@ -125,53 +122,3 @@ def aqm_command(image_a, image_b, flow_path, flow_units, fps, pursuit_gain, disp
                f"AQM at {w}x{h}, {result.ppd:.2f} px/deg")
     if map_path is not None:
         write_png(map_path, difference_picture(a, result.visible))
-
-
-def _bench_pair(size: int, seed: int = 0):
-    """A 256x256 frame pair with Monte Carlo-like noise and the camera-pan flow of a receding floor."""
-    rng = np.random.default_rng(seed)
-    yy, xx = np.mgrid[0:size, 0:size] / size
-    base = 0.2 + 0.6 * xx * (0.5 + 0.5 * yy) + 0.1 * np.sin(2 * np.pi * 4 * yy)
-    a = base * rng.gamma(400, 1 / 400, size=(size, size))
-    b = base * rng.gamma(400, 1 / 400, size=(size, size))
-    depth = 2.0 + 8.0 * (1.0 - yy)
-    cam = np.eye(4)
-    moved = np.eye(4)
-    moved[0, 3] = -0.05  # camera moves 5 cm to the right per frame
-    flow = image_velocity(depth, cam, following=moved, previous=np.linalg.inv(moved), yfov=np.radians(40),
-                          fps=25.0, ppd=ViewingConditions().ppd)
-    return np.repeat(a[..., None], 3, axis=2), np.repeat(b[..., None], 3, axis=2), flow
-
-
-@click.command("aqm")
-@click.option("--repeat", type=click.IntRange(1, 1000), default=10, show_default=True,
-              help="Timed runs per variant (after one cold run).")
-def bench_aqm(repeat):
-    """Seconds per 256x256 frame pair of the AQM, without and with pixel flow (NumPy, one core)."""
-    pinned = hasattr(os, "sched_setaffinity")
-    if pinned:  # measure on one core, as the issue asks
-        cores = os.sched_getaffinity(0)
-        os.sched_setaffinity(0, {min(cores)})
-    try:
-        _run_bench(repeat)
-    finally:
-        if pinned:
-            os.sched_setaffinity(0, cores)
-
-
-def _run_bench(repeat: int) -> None:
-    a, b, flow = _bench_pair(AQM_SIZE)
-    speed = np.hypot(flow[..., 0], flow[..., 1])
-    click.echo(f"pair: {AQM_SIZE}x{AQM_SIZE}, Monte Carlo-like noise (400 samples), "
-               f"flow {speed.min():.1f}..{speed.max():.1f} deg/s")
-    for label, kwargs in (("no flow", {}), ("with flow", {"flow": flow})):
-        start = time.perf_counter()
-        d = aqm(a, b, **kwargs).d_aqm
-        cold = time.perf_counter() - start
-        times = []
-        for _ in range(repeat):
-            start = time.perf_counter()
-            aqm(a, b, **kwargs)
-            times.append(time.perf_counter() - start)
-        click.echo(f"aqm numpy {AQM_SIZE}x{AQM_SIZE} {label}: {statistics.median(times):.4f} s/pair median of "
-                   f"{repeat} (min {min(times):.4f}, cold {cold:.4f}); d_AQM = {d:.2f} %")

@@ -1,0 +1,166 @@
+"""``loom bench ...``: the benchmarks' options; what they measure lives in pipeline/benchmarks/."""
+from __future__ import annotations
+
+import click
+
+
+@click.group("bench")
+def bench() -> None:
+    """Benchmarks (speed is measured here, never in tests)."""
+
+
+@bench.command("photons")
+@click.argument("scenes", nargs=-1)
+@click.option("--photons", type=int, default=200_000, show_default=True, help="Photons per worker.")
+@click.option("--workers", type=int, default=None, help="Worker processes (default: one per core).")
+@click.option("--memory-photons", type=int, default=1_000_000, show_default=True,
+              help="Photons of the frame whose peak memory is measured.")
+def bench_photons(scenes, photons, workers, memory_photons) -> None:
+    """Photon tracing throughput vs raw Embree (default scenes: room atrium)."""
+    import os
+
+    from pipeline.benchmarks.photons import run
+
+    run(list(scenes) or ["room", "atrium"], photons=photons, workers=workers or os.cpu_count() or 1,
+        memory_photons=memory_photons, echo=click.echo)
+
+
+@bench.command("aqm")
+@click.option("--repeat", type=click.IntRange(1, 1000), default=10, show_default=True,
+              help="Timed runs per variant (after one cold run).")
+def bench_aqm(repeat):
+    """Seconds per 256x256 frame pair of the AQM, without and with pixel flow (NumPy, one core)."""
+    from pipeline.benchmarks.aqm import run
+
+    run(repeat, echo=click.echo)
+
+
+@bench.command("frame")
+@click.argument("scenes", nargs=-1)
+@click.option("--resolution", default="640x480", show_default=True)
+@click.option("--spp", type=int, default=1, show_default=True)
+@click.option("--repeat", type=int, default=5, show_default=True, help="Timed renders per scene (median).")
+def bench_frame(scenes, resolution, spp, repeat):
+    """Milliseconds per frame and rays/s vs raw embreex (default scenes: ROOM and ATRIUM)."""
+    from pipeline.benchmarks.frame import run
+    from pipeline.render import RenderSettings, parse_resolution
+
+    width, height = parse_resolution(resolution)
+    RenderSettings(width=width, height=height, spp=spp)  # validates spp
+    run(scenes, width=width, height=height, spp=spp, repeat=repeat, echo=click.echo)
+
+
+@bench.command("temporal")
+@click.option("--trace-frames", type=int, default=3, show_default=True,
+              help="Real ATRIUM frames shot to measure tracing time per frame.")
+@click.option("--numpy-frames", type=int, default=4, show_default=True, help="Frames for the NumPy twins.")
+@click.option("--frames", "n_frames", type=click.IntRange(1), default=None,
+              help="Synthetic frames gathered (default: the benchmark's 300; a few for a quick check).")
+def bench_temporal(trace_frames: int, numpy_frames: int, n_frames: int) -> None:
+    """Temporal windows, gather and filter on PoCL, ATRIUM-size (about 45,000 elements, 300 frames,
+    20,000 photons per frame, F_max = 44), against the photon tracing time per frame."""
+    from pipeline.benchmarks.temporal import run
+
+    run(trace_frames, numpy_frames, **({} if n_frames is None else {"n_frames": n_frames}))
+
+
+@bench.command("noise")
+@click.option("--photons", default="10000,20000,40000,80000", show_default=True,
+              help="N_frame values, comma-separated (shot incrementally into one store).")
+@click.option("--fmax", type=int, default=30, show_default=True, help="F_max, frames of the segment around K = 68.")
+@click.option("--resolution", default="320x240", show_default=True, help="Frame size of I1, I2.")
+@click.option("--spp", type=int, default=2, show_default=True)
+@click.option("--element-scale", type=float, default=1.0, show_default=True,
+              help="Element size as a multiple of the scene's own (0.4 m for ROOM).")
+@click.option("--filter-photons", type=float, default=None,
+              help="filter_photons of the filtered column (default: RenderConfig's).")
+@click.option("--calibrate/--no-calibrate", default=True, show_default=True,
+              help="Also find the per-vertex noise amplitude the AQM puts at d_thr.")
+@click.option("--scheduler", default="synchronous", show_default=True, help="synchronous, local or an address.")
+@click.option("--workers", type=int, default=None, help="Workers of a local scheduler.")
+@click.option("--store", default=None, help="Directory to keep the scene and photons in (default: a temporary one).")
+def bench_noise(photons, fmax, resolution, spp, element_scale, filter_photons, calibrate, scheduler, workers, store):
+    """d_AQM of the even/odd renderings I1(K), I2(K) of ROOM frame 68 against N_frame: linear vs
+    displayed input, spatial filter, window statistics, and the AQM's noise threshold."""
+    from pipeline.benchmarks.noise import run
+    from pipeline.render import parse_resolution
+
+    width, height = parse_resolution(resolution)
+    run(tuple(int(p) for p in photons.split(",") if p.strip()), fmax=fmax, width=width, height=height, spp=spp,
+        element_scale=element_scale, filter_photons=filter_photons, calibrate=calibrate, scheduler=scheduler,
+        workers=workers, store=store)
+
+
+@bench.command("render")
+@click.argument("scene", default="room")
+@click.option("--frames", default=None, help="Frame range (default: all of the scene's frames).")
+@click.option("--resolution", default="320x240", show_default=True)
+@click.option("--spp", type=int, default=2, show_default=True)
+@click.option("--workers", type=int, default=2, show_default=True, help="Workers of the guided and the scaled run.")
+@click.option("--photons", "n_photons", type=int, default=40_000, show_default=True, help="Fixed N_frame.")
+@click.option("--fmax", type=int, default=30, show_default=True, help="Fixed F_max.")
+@click.option("--skip-guided", is_flag=True, help="Only the fixed runs (Table 2 b and scaling).")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None, help="Also write the figures here.")
+def bench_render(scene, frames, resolution, spp, workers, n_photons, fmax, skip_guided, json_path):
+    """Table 2 per frame (guided and fixed N_frame/F_max) and 1 vs N worker scaling (default: ROOM)."""
+    from pipeline.benchmarks.render import run
+    from pipeline.render import parse_resolution
+
+    width, height = parse_resolution(resolution)
+    run(scene, frames=frames, width=width, height=height, spp=spp, workers=workers, n_photons=n_photons, fmax=fmax,
+        skip_guided=skip_guided, json_path=json_path, echo=click.echo)
+
+
+@bench.command("error")
+@click.argument("scene", default="room")
+@click.option("--quick", is_flag=True, help="Small budgets and frame range (under 3 minutes for room).")
+@click.option("--frames", default=None, help="FIRST-LAST (default: the plan's, e.g. 46-90 for room).")
+@click.option("--budgets", default=None, help="N_frame values, comma-separated (default: the plan's).")
+@click.option("--fmax", type=int, default=None, help="F_max of the fixed and adaptive windows.")
+@click.option("--d-thr", "d_thr", default=None, help="d_thr values of the guided runs, comma-separated.")
+@click.option("--resolution", default="320x240", show_default=True)
+@click.option("--spp", type=int, default=2, show_default=True)
+@click.option("--reference-factor", type=int, default=50, show_default=True,
+              help="Reference photons a frame as a multiple of the largest budget (at least 50).")
+@click.option("--aqm-every", type=int, default=None, help="d_AQM on every n-th frame (and the change's).")
+@click.option("--workers", type=int, default=2, show_default=True)
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
+              help="Folder of error.json, error.png and error.svg (default: bench-error-SCENE).")
+def bench_error(scene, quick, frames, budgets, fmax, d_thr, resolution, spp, reference_factor, aqm_every, workers,
+                out_dir):
+    """Run time against error vs a converged per-frame reference: per-frame, fixed and adaptive windows at
+    several budgets, the guided coordinator at several d_thr (default: ROOM)."""
+    from pathlib import Path
+
+    from pipeline.benchmarks.error import FULL, QUICK, Plan, run
+    from pipeline.errors import LoomError
+    from pipeline.render import parse_resolution
+
+    name = Path(scene).stem if Path(scene).suffix else scene
+    plans = QUICK if quick else FULL
+    plan = plans.get(name, plans["cornell"])  # other scenes: CORNELL's budgets, frames from --frames
+    if name not in plans and not frames:
+        raise LoomError("give the frames to render (FIRST-LAST) for a scene without a plan", field="--frames")
+    changes: dict = {"reference_factor": reference_factor}
+    changes["width"], changes["height"] = parse_resolution(resolution)
+    changes["spp"] = spp
+    try:
+        if frames:
+            a, b = frames.split("-")
+            changes["frames"] = (int(a), int(b))
+        if budgets:
+            changes["budgets"] = tuple(int(n) for n in budgets.split(","))
+        if d_thr:
+            changes["d_thr"] = tuple(float(d) for d in d_thr.split(","))
+    except ValueError as err:
+        raise LoomError(f"cannot read the list: {err}", field="--frames/--budgets/--d-thr") from None
+    if fmax is not None:
+        changes["fmax"] = fmax
+    if aqm_every is not None:
+        if aqm_every < 1:
+            raise LoomError(f"must be >= 1, got {aqm_every}", field="--aqm-every")
+        changes["aqm_every"] = aqm_every
+    if any(n <= 0 for n in changes.get("budgets", plan.budgets)):
+        raise LoomError("budgets must be positive photon counts", field="--budgets")
+    plan = Plan(**{**plan.__dict__, **changes})
+    run(scene, plan, Path(out_dir or f"bench-error-{name}"), workers=workers)

@@ -1,0 +1,35 @@
+"""``loom scene`` (write a built-in scene) and ``loom info`` (summarise a scene file)."""
+from __future__ import annotations
+
+import click
+
+CAMERA_HELP = ("Camera or camera-node name, or auto: frame the whole animation (pipeline/scene/default_camera.py). "
+               "Default: the first camera, auto when the file has none.")
+LIGHT_HELP = ("auto: a file without any light is lit by a default sun and sky (pipeline/scene/default_lights.py); "
+              "none: refuse it.")
+
+
+@click.command("scene")
+@click.argument("name")
+@click.option("-o", "--output", required=True, help="The .glb (or .gltf) to write; folders are made.")
+def scene_command(name: str, output: str) -> None:
+    """Write the built-in scene NAME (room, atrium, cornell, static) as a glTF file."""
+    from pipeline.scene.builtin import write_builtin
+
+    path = write_builtin(name, output)
+    click.echo(f"wrote {path}")
+
+
+@click.command("info")
+@click.argument("scene_file", type=click.Path(dir_okay=False))
+@click.option("--camera", default=None, help=CAMERA_HELP)
+@click.option("--element-size", type=float, default=None, help="Element edge bound (default: the scene's).")
+@click.option("--light", type=click.Choice(["auto", "none"]), default="auto", show_default=True, help=LIGHT_HELP)
+def info_command(scene_file: str, camera: str | None, element_size: float | None, light: str) -> None:
+    """Summarise SCENE_FILE: timeline, geometry, elements, lights, materials, cameras, needs."""
+    from pipeline.scene import Scene
+    from pipeline.scene.summary import describe
+
+    scene = Scene.load(scene_file, camera=camera, light=light)
+    for line in describe(scene, element_size):
+        click.echo(line)

@@ -1,0 +1,192 @@
+"""The compositor's path loop: a frame as the mean of its pixels' camera paths.
+
+``spp`` jittered camera rays per pixel, traced in wavefronts of :data:`CHUNK_RAYS` samples; at each
+depth the hits are shaded (emitters seen from the front, diffuse direct light with
+workers/punctual_lights.py and workers/area_lights.py plus the map, glossy highlights) and mirror
+and glossy hits continue, up to ``max_depth`` reflections. workers/composite.py sums it up.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from kernels.camera import camera_rays_cl
+from kernels.sampling import around
+from pipeline.scene import ElementMesh, FrameState
+
+from .area_lights import area_light, sky_light
+from .camera_hits import CameraHits
+from .punctual_lights import punctual_light
+from .random_numbers import DIMS_PER_DEPTH, frame_key, uniform
+from .raycast import RayCaster, caster_for
+from .shading_tables import ShadingTables
+
+CHUNK_RAYS = 1 << 14  # camera samples per wavefront: a working set two workers keep in the shared L3
+RAY_KINDS = ("camera", "shadow", "area", "reflection")  # rays counted per kind (FrameImage.rays)
+
+
+@dataclass
+class FrameImage:
+    """Linear layers (H, W, 3) float32, coverage (H, W) and the rays cast per kind."""
+
+    beauty: np.ndarray
+    direct: np.ndarray
+    indirect: np.ndarray
+    albedo: np.ndarray
+    alpha: np.ndarray
+    rays: dict = field(default_factory=dict)
+
+
+def render_frame(state: FrameState, elements: ElementMesh | None, irradiance, *, width: int,
+                 height: int, spp: int, seed: int, frame: int, max_depth: int = 4,
+                 area_samples: int = 2, caster: RayCaster | None = None,
+                 chunk_rays: int = CHUNK_RAYS) -> FrameImage:
+    """Render one frame; ``irradiance`` (V, 3) is the indirect map (None: no indirect light).
+
+    ``chunk_rays`` camera samples are traced together (memory bound); pixels do not depend on it."""
+    caster = caster or caster_for(state)
+    sh = ShadingTables(state, elements, irradiance, caster, area_samples)
+    key = frame_key(seed, frame)
+    n_pixels = width * height
+    layers = np.zeros((3, n_pixels, 3), np.float32)  # direct, indirect, albedo: contiguous planes
+    alpha = np.zeros(n_pixels, np.float32)
+    rays = dict.fromkeys(RAY_KINDS, 0)
+    chunk_pixels = max(1, chunk_rays // spp)
+    samples = None if spp == 1 else np.empty((3, chunk_pixels * spp, 3), np.float32)
+    for lo in range(0, n_pixels, chunk_pixels):
+        hi = min(n_pixels, lo + chunk_pixels)
+        counter = np.arange(lo * spp, hi * spp, dtype=np.int64)
+        if spp == 1:  # samples are pixels: trace straight into the layers
+            alpha[lo:hi] = trace_samples(state, sh, key, counter, spp, width, height, max_depth,
+                                         rays, layers[:, lo:hi])
+        else:  # mean over each pixel's samples (consecutive counters), in a fixed order
+            out = samples[:, :len(counter)]
+            out.fill(0)
+            cover = trace_samples(state, sh, key, counter, spp, width, height, max_depth, rays, out)
+            layers[:, lo:hi] = out.reshape(3, hi - lo, spp, 3).mean(axis=2)
+            alpha[lo:hi] = cover.reshape(hi - lo, spp).mean(axis=1)
+    shape = (height, width, 3)
+    direct, indirect, albedo = (layers[i].reshape(shape) for i in range(3))
+    return FrameImage(direct + indirect, direct, indirect, albedo, alpha.reshape(shape[:2]), rays)
+
+
+def trace_samples(state, sh: ShadingTables, key, counter, spp, width, height, max_depth, rays, out):
+    """Add direct, indirect and albedo of the camera samples ``counter`` into ``out`` (3, n, 3),
+    zero on entry; returns their coverage (n,)."""
+    n = len(counter)
+    cover = np.zeros(n, np.float32)
+    cam = state.camera  # jittered camera rays (random dimensions 0 and 1), kernels/camera.cl
+    dirs = camera_rays_cl(key, int(counter[0]), n, spp, width, height, cam.definition.yfov, cam.to_world[:3, :3])
+    origins = np.broadcast_to(cam.position.astype(np.float32), dirs.shape)
+    path = None  # sample index of every live ray; None while it is 0..n-1
+    throughput = None  # None while it is all ones (camera rays)
+    for depth in range(max_depth + 1):
+        tri, u, v, t = sh.caster.intersect(origins, dirs)  # float32 as Embree gives them
+        rays["camera" if depth == 0 else "reflection"] += len(tri)
+        hit = tri >= 0
+        if not hit.all():
+            if sh.sky is not None:  # rays that leave the scene see the sky
+                miss = np.flatnonzero(~hit)
+                glow = sh.sky.radiance(dirs[miss])
+                if throughput is not None:
+                    glow = (glow * throughput[miss]).astype(np.float32)
+                out[0, miss if path is None else path[miss]] += glow
+            path = np.flatnonzero(hit) if path is None else path[hit]
+            tri, u, v, t, dirs, origins = tri[hit], u[hit], v[hit], t[hit], dirs[hit], origins[hit]
+            throughput = None if throughput is None else throughput[hit]
+        if not len(tri):
+            break
+        hits = CameraHits(sh, tri, u, v, origins, dirs, t)
+        kind = sh.kind[tri]
+        if sh.surface.varies:  # textures or vertex colours: the base colour at every hit
+            rho = sh.surface.base_color(tri, u, v).astype(np.float32)
+        else:
+            rho = np.take(sh.albedo, tri, axis=0)  # np.take: rows of a table, much faster than fancy indexing
+        # This depth's layers: ``out`` itself while rays and samples correspond one to one,
+        # else scattered into it once
+        direct_out = path is None and throughput is None
+        acc = out if direct_out else np.zeros((3, len(tri), 3), np.float32)
+        if depth == 0:
+            acc[2] = rho
+            _put(cover, path, 1.0)
+
+        # Emitters seen from their front face
+        if sh.any_emissive:
+            lit = np.flatnonzero(sh.emissive[tri] & (hits.cos_in() < 0))
+            if len(lit):
+                acc[0, lit] += (sh.surface.emission(tri[lit], u[lit], v[lit]).astype(np.float32)
+                                if sh.surface.emission_varies else np.take(sh.emission, tri[lit], axis=0))
+
+        # Diffuse: direct light with shadow rays, indirect from the map; the path ends. Shaded
+        # over all hits (cheaper than gathering the diffuse ones when they are most of them):
+        # other hits get no shadow rays and a zero diffuse albedo.
+        diffuse = kind == 0
+        if diffuse.any():
+            active = None if diffuse.all() else diffuse
+            e_direct = punctual_light(sh, hits, None, None, rays, active)
+            if sh.area_samples:
+                c = counter if path is None else counter[path]
+                e_direct += area_light(sh, key, c, depth, hits, rays, active)
+            if sh.sky_samples:
+                c = counter if path is None else counter[path]
+                e_direct += sky_light(sh, key, c, depth, hits, rays, active)
+            scale = (rho if active is None else rho * diffuse[:, None]) * np.float32(1.0 / np.pi)
+            acc[0] += scale * e_direct
+            if sh.element_irradiance is not None:
+                acc[1] += scale * hits.indirect
+            if active is None:
+                if not direct_out:
+                    _put_layers(out, path, acc if throughput is None else acc * throughput[None])
+                break
+
+        # Glossy: exact highlights of punctual lights
+        glossy = np.flatnonzero(kind == 2)
+        if len(glossy):
+            mirror_g = hits.reflect(glossy)
+            lobe = (mirror_g, sh.exponent[tri[glossy]])
+            acc[0, glossy] += rho[glossy] * punctual_light(sh, hits, glossy, lobe, rays, None)
+
+        if not direct_out:
+            _put_layers(out, path, acc if throughput is None else acc * throughput[None])
+
+        # Mirror and glossy reflection continue the path
+        spec = np.flatnonzero(kind != 0)
+        if depth == max_depth or not len(spec):
+            break
+        refl = hits.reflect(spec)
+        weight = rho[spec]
+        g = np.flatnonzero(kind[spec] == 2)
+        if len(g):
+            e = sh.exponent[tri[spec[g]]].astype(np.float64)
+            c = counter[spec[g] if path is None else path[spec[g]]]
+            base = 2 + depth * DIMS_PER_DEPTH
+            cos_a = uniform(key, c, base) ** (1.0 / (e + 1.0))  # pdf (e+1)/(2 pi) cos^e
+            lobe_dir = around(refl[g].astype(np.float64), cos_a, 2.0 * np.pi * uniform(key, c, base + 1))
+            cos_o = np.einsum("ij,ij->i", lobe_dir, hits.shading(spec[g]))
+            # normalised Phong BRDF rho (e+2)/(2 pi) cos^e times cos_o over the pdf
+            weight[g] *= (np.maximum(cos_o, 0.0) * (e + 2.0) / (e + 1.0))[:, None]
+            refl[g] = lobe_dir
+        # leaving below the geometric surface (shading normals) ends the path, as in the tracer
+        keep = (weight.max(axis=1) > 0) & (np.einsum("ij,ij->i", refl, hits.facing(spec)) > 0)
+        spec, refl, weight = spec[keep], refl[keep], weight[keep]
+        throughput = weight if throughput is None else throughput[spec] * weight
+        origins = sh.caster.offset_origins(hits.points(spec), tri[spec], refl).astype(np.float32)
+        dirs, path = refl, (spec if path is None else path[spec])
+    return cover
+
+
+def _put_layers(target: np.ndarray, idx, value) -> None:
+    """target[:, idx] += value for layers (3, n, 3); idx None means all samples in order."""
+    if idx is None:
+        target += value
+    else:
+        target[:, idx] += value
+
+
+def _put(target: np.ndarray, idx, value) -> None:
+    """target[idx] = value; idx None means all rows in order."""
+    if idx is None:
+        target[...] = value
+    else:
+        target[idx] = value
