@@ -1,0 +1,107 @@
+"""House rules a newcomer can rely on (issue 14), checked on the source itself so they stay true:
+kernels sit below the pipeline, each fact has one owner, public functions carry type hints and
+the README's layout names every module (citations: tests/docs/test_citations.py)."""
+from __future__ import annotations
+
+import ast
+import re
+from pathlib import Path
+
+import pytest
+
+ROOT = Path(__file__).resolve().parents[2]
+PACKAGES = ("pipeline", "kernels", "workers")
+# Decorators that make a function a click command: click types its parameters itself.
+CLICK_DECORATORS = {"command", "group", "option", "argument", "pass_context", "pass_obj"}
+
+
+def _sources(*roots: str, suffixes: tuple[str, ...] = (".py",)) -> list[Path]:
+    return sorted(p for r in roots for p in (ROOT / r).rglob("*")
+                  if p.suffix in suffixes and "__pycache__" not in p.parts)
+
+
+def _rel(path: Path) -> str:
+    return path.relative_to(ROOT).as_posix()
+
+
+def test_kernels_import_nothing_from_the_pipeline_or_the_workers():
+    """kernels/ is the bottom layer: it may not import pipeline/ or workers/."""
+    found = []
+    for path in _sources("kernels"):
+        for node in ast.walk(ast.parse(path.read_text())):
+            names = [a.name for a in node.names] if isinstance(node, ast.Import) else \
+                [node.module or ""] if isinstance(node, ast.ImportFrom) and node.level == 0 else []
+            found += [f"{_rel(path)}:{node.lineno} {n}" for n in names if n.split(".")[0] in ("pipeline", "workers")]
+    assert not found, found
+
+
+def _decorator_name(node: ast.expr) -> str:
+    node = node.func if isinstance(node, ast.Call) else node
+    return node.attr if isinstance(node, ast.Attribute) else getattr(node, "id", "")
+
+
+def _public_functions(tree: ast.Module):
+    """(name, node) of module-level functions and methods of public classes not starting with _."""
+    def visit(node, prefix):
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)) and not child.name.startswith("_"):
+                yield prefix + child.name, child
+            elif isinstance(child, ast.ClassDef) and not child.name.startswith("_"):
+                yield from visit(child, prefix + child.name + ".")
+    yield from visit(tree, "")
+
+
+def test_public_functions_have_type_hints():
+    """Every parameter and the return of every public function is annotated (click commands aside)."""
+    missing = []
+    for path in _sources(*PACKAGES):
+        for name, fn in _public_functions(ast.parse(path.read_text())):
+            if {_decorator_name(d) for d in fn.decorator_list} & CLICK_DECORATORS:
+                continue
+            a = fn.args
+            params = [p for p in a.posonlyargs + a.args + a.kwonlyargs if p.arg not in ("self", "cls")]
+            params += [p for p in (a.vararg, a.kwarg) if p is not None]
+            gaps = [p.arg for p in params if p.annotation is None] + (["return"] if fn.returns is None else [])
+            if gaps:
+                missing.append(f"{_rel(path)}:{fn.lineno} {name}: {', '.join(gaps)}")
+    assert not missing, "\n".join(missing)
+
+
+# Each fact, the pattern that defines it, and its one owner.
+FACTS = {
+    "Rec. 709 luma weights": (r"0\.2126", "kernels/colour.py"),
+    "record key bits": (r"^\s*PARITY_BIT\s*=|^\s*DIRECT_BIT\s*=|#define\s+PARITY_BIT", "kernels/record_layout.py"),
+    "barycentric scale": (r"^\s*BARY_SCALE\s*=|#define\s+BARY_SCALE", "kernels/record_layout.py"),
+    "ray kinds": (r"^\s*RAY_KINDS\s*=", None),
+    "glTF component types": (r"5126\s*:", None),
+}
+
+
+@pytest.mark.parametrize("fact", sorted(FACTS))
+def test_each_fact_has_one_owner(fact):
+    pattern, owner = FACTS[fact]
+    regex = re.compile(pattern)
+    places = sorted({_rel(p) for p in _sources(*PACKAGES, "tests", suffixes=(".py", ".cl"))
+                     if p != Path(__file__).resolve() and any(regex.search(ln) for ln in p.read_text().splitlines())})
+    assert len(places) == 1, f"{fact} defined in {places}"
+    assert owner is None or places == [owner], f"{fact} defined in {places}, expected {owner}"
+
+
+def _layout_block() -> str:
+    text = (ROOT / "README.md").read_text()
+    section = text.split("## Layout", 1)[1]
+    return section.split("```", 2)[1]
+
+
+def test_readme_layout_names_every_module_and_nothing_that_is_gone():
+    block = _layout_block()
+    named = set(re.findall(r"[\w./-]+\.(?:py|cl)\b", block))
+    modules = [p for p in _sources(*PACKAGES, suffixes=(".py", ".cl")) if p.name not in ("__init__.py", "__main__.py")]
+    unnamed = [_rel(p) for p in modules if p.name not in {Path(n).name for n in named} and _rel(p) not in named]
+    assert not unnamed, f"README layout does not name: {unnamed}"
+    paths = [n for n in re.findall(r"[\w.-]+(?:/[\w.-]*)+", block) if n.split("/")[0] in PACKAGES + ("docs", "tests")]
+    gone = [n for n in paths if not (ROOT / n).exists()]
+    assert not gone, f"README layout names paths that do not exist: {gone}"
+    basenames = {Path(n).name for n in named if "/" not in n}
+    known = {p.name for p in modules}
+    assert basenames <= known, f"README layout names modules that do not exist: {sorted(basenames - known)}"
