@@ -22,6 +22,7 @@ import re
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 from .cluster import connect
 from .config import RenderConfig, stable_digest
@@ -31,6 +32,12 @@ from .paths import check_writable_dir
 from .scene import Scene
 from .shoot import check_store_location, plan
 from .tonemap import LOOK_FIELDS, ToneMapping
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
+
+    from .coordinator import Job
+    from .segment_records import SegmentRecord
 
 log = logging.getLogger(__name__)
 MAX_SIDE = 16384
@@ -72,10 +79,11 @@ def check_out_dir(out: Path) -> None:
     check_writable_dir(out, field="--out")
 
 
-def prepare_job(scene_path, *, frames: str | None, out_dir, settings: RenderSettings = RenderSettings(),
-                n_photons: int | None = None, store_url: str | None = None, camera: str | None = None,
+def prepare_job(scene_path: str | Path, *, frames: str | None, out_dir: str | Path,
+                settings: RenderSettings = RenderSettings(), n_photons: int | None = None,
+                store_url: str | None = None, camera: str | None = None,
                 config: RenderConfig = RenderConfig(), temporal: str = "adaptive", fmax: int | None = None,
-                light: str = "auto"):
+                light: str = "auto") -> Job:
     """Check every input (one-line LoomErrors, before anything is written), then create the output
     folder, the photon store and its illumination arrays (only the client creates arrays: zarr 3
     has no locks) and return the coordinator's Job (pipeline/coordinator.py)."""
@@ -152,11 +160,12 @@ def _create_outputs(out: Path, store_url: str, p) -> None:
         raise LoomError(f"cannot create the output: {err.strerror or err}", path=str(out), field="--out") from None
 
 
-def render(scene_path, *, frames: str | None, out_dir, settings: RenderSettings = RenderSettings(),
-           n_photons: int | None = None, store_url: str | None = None, camera: str | None = None,
+def render(scene_path: str | Path, *, frames: str | None, out_dir: str | Path,
+           settings: RenderSettings = RenderSettings(), n_photons: int | None = None,
+           store_url: str | None = None, camera: str | None = None,
            config: RenderConfig = RenderConfig(), scheduler: str = "local", workers: int | None = None,
            progress: bool = True, temporal: str = "adaptive", fmax: int | None = None,
-           segment: int | None = None, echo=None, performance_report: str | None = None,
+           segment: int | None = None, echo: Callable[[str], None] | None = None, performance_report: str | None = None,
            light: str = "auto") -> dict:
     """Render ``frames`` of a scene into ``out_dir``; returns the report (also ``report.json``).
 
@@ -212,8 +221,8 @@ def render(scene_path, *, frames: str | None, out_dir, settings: RenderSettings 
     return report
 
 
-def finish(job, records, *, rays: dict, batches: int, t_start: float, frame_times: dict | None = None,
-           segments_done: list | None = None, ran_here: bool = True) -> dict:
+def finish(job: Job, records: list[SegmentRecord], *, rays: dict, batches: int, t_start: float,
+           frame_times: dict | None = None, segments_done: list | None = None, ran_here: bool = True) -> dict:
     """The segment figure, ``preview.mp4``, ``report.json`` and ``report.html`` (pipeline/report.py)
     of a rendered job. ``ran_here`` False: the frames were written by other processes (a farm's
     recipes), whose ray counts and timings this one does not know."""

@@ -19,7 +19,8 @@ if TYPE_CHECKING:
     from .shading_tables import ShadingTables
 
 
-def area_light(sh: ShadingTables, key, counter, depth, hits: CameraHits, rays, active) -> np.ndarray:
+def area_light(sh: ShadingTables, key: int, counter: np.ndarray, depth: int, hits: CameraHits,
+               rays: dict[str, int], active: np.ndarray | None) -> np.ndarray:
     """Irradiance from emissive triangles at every hit: ``area_samples`` samples each, triangle
     chosen by power, point uniform on it (pbrt-v4 SampleUniformTriangle); E = L cos cos' / (d^2 pdf)."""
     p, facing, shade, tri = hits.points(), hits.facing(), hits.shading(), hits.tri
@@ -61,7 +62,8 @@ def area_light(sh: ShadingTables, key, counter, depth, hits: CameraHits, rays, a
     return total / np.float32(sh.area_samples)
 
 
-def sky_light(sh: ShadingTables, key, counter, depth, hits: CameraHits, rays, active) -> np.ndarray:
+def sky_light(sh: ShadingTables, key: int, counter: np.ndarray, depth: int, hits: CameraHits,
+              rays: dict[str, int], active: np.ndarray | None) -> np.ndarray:
     """Irradiance from the sky at the hits (``active`` ones; None: all): ``sky_samples``
     cosine-weighted directions about the shading normal (pdf cos / pi), E = pi x mean of L(dir)
     over the unoccluded ones, so an open horizontal plane gets pi L exactly (no noise); directions

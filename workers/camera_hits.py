@@ -17,7 +17,8 @@ class CameraHits:
     """One depth's ray hits. Points and normals are computed only for the rows a step asks for
     (None: all rows, cached), so hits no light reaches cost no geometry."""
 
-    def __init__(self, sh: ShadingTables, tri, u, v, origins, dirs, t):
+    def __init__(self, sh: ShadingTables, tri: np.ndarray, u: np.ndarray, v: np.ndarray, origins: np.ndarray,
+                 dirs: np.ndarray, t: np.ndarray) -> None:
         self.tri, self.origins, self.dirs = tri, origins, dirs
         self.u, self.v = u, v
         self._surface = sh.surface
@@ -36,7 +37,7 @@ class CameraHits:
             self._cache[name] = make(None)
         return self._cache[name]
 
-    def points(self, rows=None) -> np.ndarray:
+    def points(self, rows: np.ndarray | None = None) -> np.ndarray:
         """Hit points from the triangle's corners and Embree's barycentrics, not origin + t dir:
         their error follows the hit triangle's own scale, which the ray offsets assume
         (workers/raycast.py), however far the ray came."""
@@ -47,22 +48,22 @@ class CameraHits:
     def _points(self, tri, u, v) -> np.ndarray:
         return triangle_points(np.take(self._corners, tri, axis=0), u, v)
 
-    def normal(self, rows=None) -> np.ndarray:
+    def normal(self, rows: np.ndarray | None = None) -> np.ndarray:
         return np.take(self._normals, self.tri if rows is None else self.tri[rows], axis=0)
 
-    def cos_in(self, rows=None) -> np.ndarray:
+    def cos_in(self, rows: np.ndarray | None = None) -> np.ndarray:
         """normal . ray direction (negative on the front face)."""
         if rows is None:
             return self._full("cos_in", lambda _: np.einsum("ij,ij->i", self.normal(), self.dirs))
         return np.einsum("ij,ij->i", self.normal(rows), np.take(self.dirs, rows, axis=0))
 
-    def facing(self, rows=None) -> np.ndarray:
+    def facing(self, rows: np.ndarray | None = None) -> np.ndarray:
         """Unit normals turned towards the viewer (surfaces reflect on both faces)."""
         if rows is None:
             return self._full("facing", lambda _: self._facing(self.normal(), self.cos_in()))
         return self._facing(self.normal(rows), self.cos_in(rows))
 
-    def shading(self, rows=None) -> np.ndarray:
+    def shading(self, rows: np.ndarray | None = None) -> np.ndarray:
         """Shading normals turned towards the viewer, in the hemisphere :meth:`facing` gives."""
         if not self._surface.smooth:
             return self.facing(rows)
@@ -75,7 +76,7 @@ class CameraHits:
         n = self._surface.normal(tri, u, v).astype(np.float32)
         return n * np.where(self.cos_in(rows) < 0, np.float32(1), np.float32(-1))[:, None]
 
-    def reflect(self, rows) -> np.ndarray:
+    def reflect(self, rows: np.ndarray) -> np.ndarray:
         """Mirror directions of the rays ``rows`` about their shading normals."""
         n = self.shading(rows)
         d = np.take(self.dirs, rows, axis=0)

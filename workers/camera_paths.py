@@ -38,7 +38,7 @@ class FrameImage:
     rays: dict = field(default_factory=dict)
 
 
-def render_frame(state: FrameState, elements: ElementMesh | None, irradiance, *, width: int,
+def render_frame(state: FrameState, elements: ElementMesh | None, irradiance: np.ndarray | None, *, width: int,
                  height: int, spp: int, seed: int, frame: int, max_depth: int = 4,
                  area_samples: int = 2, caster: RayCaster | None = None,
                  chunk_rays: int = CHUNK_RAYS) -> FrameImage:
@@ -71,7 +71,8 @@ def render_frame(state: FrameState, elements: ElementMesh | None, irradiance, *,
     return FrameImage(direct + indirect, direct, indirect, albedo, alpha.reshape(shape[:2]), rays)
 
 
-def trace_samples(state, sh: ShadingTables, key, counter, spp, width, height, max_depth, rays, out):
+def trace_samples(state: FrameState, sh: ShadingTables, key: int, counter: np.ndarray, spp: int, width: int,
+                  height: int, max_depth: int, rays: dict[str, int], out: np.ndarray) -> np.ndarray:
     """Add direct, indirect and albedo of the camera samples ``counter`` into ``out`` (3, n, 3),
     zero on entry; returns their coverage (n,)."""
     n = len(counter)

@@ -9,6 +9,8 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 if TYPE_CHECKING:
+    from pipeline.scene.lights import Light
+
     from .camera_hits import CameraHits
     from .shading_tables import ShadingTables
 
@@ -22,7 +24,7 @@ def bounding_spheres(corners: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     return centre, radius
 
 
-def light_reach(light, centre: np.ndarray, radius: np.ndarray) -> np.ndarray | None:
+def light_reach(light: Light, centre: np.ndarray, radius: np.ndarray) -> np.ndarray | None:
     """(n,) bool: cells (bounding spheres) a spot's cone or a light's range may touch, so hits
     elsewhere skip that light at once; None when the light may reach everything."""
     if light.kind == "directional" or (light.kind == "point" and light.definition.range is None):
@@ -40,7 +42,9 @@ def light_reach(light, centre: np.ndarray, radius: np.ndarray) -> np.ndarray | N
     return reach
 
 
-def punctual_light(sh: ShadingTables, hits: CameraHits, rows, lobe, rays, active) -> np.ndarray:
+def punctual_light(sh: ShadingTables, hits: CameraHits, rows: np.ndarray | None,
+                   lobe: tuple[np.ndarray, np.ndarray] | None, rays: dict[str, int],
+                   active: np.ndarray | None) -> np.ndarray:
     """Irradiance (lobe None) or glossy radiance over rho (lobe = (mirror dirs, exponents)) at
     the hits ``rows`` (None: all) from every point, spot and directional light, with shadow rays.
     Hits a light cannot reach (its cone or range misses their triangle, back side, outside the

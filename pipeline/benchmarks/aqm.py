@@ -4,11 +4,15 @@ from __future__ import annotations
 import os
 import statistics
 import time
+from typing import TYPE_CHECKING
 
 import click
 import numpy as np
 
 from pipeline.aqm import AQM_SIZE, ViewingConditions, aqm, image_velocity
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
 
 
 def _bench_pair(size: int, seed: int = 0):
@@ -27,7 +31,7 @@ def _bench_pair(size: int, seed: int = 0):
     return np.repeat(a[..., None], 3, axis=2), np.repeat(b[..., None], 3, axis=2), flow
 
 
-def run(repeat: int = 10, echo=click.echo) -> None:
+def run(repeat: int = 10, echo: Callable[[str], None] = click.echo) -> None:
     """Time the AQM on one core (pinned where the OS allows): one cold run, then ``repeat`` timed runs."""
     pinned = hasattr(os, "sched_setaffinity")
     if pinned:  # measure on one core, as the issue asks
@@ -40,7 +44,7 @@ def run(repeat: int = 10, echo=click.echo) -> None:
             os.sched_setaffinity(0, cores)
 
 
-def _run_bench(repeat: int, echo) -> None:
+def _run_bench(repeat: int, echo: Callable[[str], None]) -> None:
     a, b, flow = _bench_pair(AQM_SIZE)
     speed = np.hypot(flow[..., 0], flow[..., 1])
     echo(f"pair: {AQM_SIZE}x{AQM_SIZE}, Monte Carlo-like noise (400 samples), "

@@ -38,11 +38,20 @@ import tempfile
 import time
 from dataclasses import dataclass
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 import numpy as np
 
 from . import error_measures as em
+
+if TYPE_CHECKING:
+    from collections.abc import Callable, Sequence
+
+    from distributed import Client
+
+    from pipeline.config import RenderConfig
+    from pipeline.scene import ElementMesh, FrameState, Scene
 
 # Built-in scene -> (light node, offset of its STEP jump in metres): the abrupt lighting change
 EVENTS = {"room": ("corner_spot", (-2.0, 0.0, 1.5)), "cornell": ("ceiling_lamp", (-0.3, 0.0, 0.0))}
@@ -125,12 +134,12 @@ def displayed_d_aqm(test: np.ndarray, ref: np.ndarray, adaptation: float) -> flo
     return float(displayed_difference(test, ref, adaptation).d_aqm)
 
 
-def _cpu_seconds(client) -> float:
+def _cpu_seconds(client: Client) -> float:
     return time.process_time() + sum(client.run(time.process_time).values())
 
 
-def run_method(client, scene_path: Path, out: Path, plan: Plan, *, method: str, n_photons: int | None,
-               config, fmax: int | None, temporal: str) -> dict:
+def run_method(client: Client, scene_path: Path, out: Path, plan: Plan, *, method: str, n_photons: int | None,
+               config: RenderConfig, fmax: int | None, temporal: str) -> dict:
     """One timed ``loom render`` of the plan's frames; its indirect maps and what it cost."""
     from pipeline.render import RenderSettings, render
     from pipeline.store import PhotonStore
@@ -157,7 +166,8 @@ def run_method(client, scene_path: Path, out: Path, plan: Plan, *, method: str, 
 class Evaluation:
     """The reference's frames, and every measure of a run's maps against them."""
 
-    def __init__(self, client, scene, elements, plan: Plan, refs: np.ndarray, highlight):
+    def __init__(self, client: Client, scene: Scene, elements: ElementMesh, plan: Plan, refs: np.ndarray,
+                 highlight: Sequence[np.ndarray]) -> None:
         from pipeline.tonemap import log_average, luminance
         from workers.camera_paths import render_frame
         from workers.raycast import caster_for
@@ -219,7 +229,8 @@ class Evaluation:
                               "d_aqm": dict(zip((self.frames[i] for i in self.aqm_frames), d_aqm))}}
 
 
-def highlight_regions(scene, elements, states, refs, areas) -> tuple[list[np.ndarray], str]:
+def highlight_regions(scene: Scene, elements: ElementMesh, states: Sequence[FrameState], refs: np.ndarray,
+                      areas: np.ndarray) -> tuple[list[np.ndarray], str]:
     """Per frame the Fig. 3 highlight's vertices, and how they were chosen."""
     names = [inst.name.split("/")[0] for inst in scene.instances]
     if "aircraft_body" in names and "floor" in names:
@@ -310,7 +321,7 @@ def _ratio(d: dict) -> str:
     return f"{d['ratio']:.3f}{'*' if d['extrapolated'] else ''}"
 
 
-def _table(echo, result: dict) -> None:
+def _table(echo: Callable[[str], None], result: dict) -> None:
     floor = result["reference"]["floor"]
     echo("")
     echo("| run | wall s | CPU s | photons | rel L2 | RMSE | mean rel | d_AQM % | flicker | image flicker "
@@ -345,7 +356,8 @@ def _table(echo, result: dict) -> None:
     echo("(* per-frame figure extrapolated beyond its runs along the power law of the two nearest)")
 
 
-def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, echo=click.echo) -> dict:
+def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2,
+        echo: Callable[[str], None] = click.echo) -> dict:
     """Render, measure, print the tables, write ``error.json`` and ``error.png``/``.svg`` in ``out_dir``."""
     from pipeline.cluster import connect
     from pipeline.config import RenderConfig

@@ -9,9 +9,14 @@ change is read off the step response along the change (see :func:`step_response`
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
 
 from kernels import colour
+
+if TYPE_CHECKING:
+    import numpy.typing as npt
 
 LUMA = np.asarray(colour.LUMA)  # Rec. 709 (kernels/colour.py)
 LAG_LEVEL = 0.9  # a method has caught up with a change once 90 % of it shows (a rise time)
@@ -91,7 +96,7 @@ def largest_change(refs: np.ndarray, areas: np.ndarray) -> tuple[int, float]:
     return t + 1, float(steps[t])
 
 
-def loglog(xs, ys, x: float) -> tuple[float, bool]:
+def loglog(xs: npt.ArrayLike, ys: npt.ArrayLike, x: float) -> tuple[float, bool]:
     """y(x) on the piecewise power law through the points (xs, ys), and whether x lies outside
     them (extrapolated from the nearest segment). Error against time falls as a power of the
     time spent (N^-1/2 for photon noise), so straight lines in log-log are the natural model."""
@@ -106,7 +111,7 @@ def loglog(xs, ys, x: float) -> tuple[float, bool]:
     return float(np.exp(ys[i] + slope * (lx - xs[i]))), not xs[0] <= lx <= xs[-1]
 
 
-def cost_model(photons, times, slope: float | None = None) -> tuple[float, float]:
+def cost_model(photons: npt.ArrayLike, times: npt.ArrayLike, slope: float | None = None) -> tuple[float, float]:
     """(a, b) of time = a + b x photons, least squares over a method's runs. Measured times of small
     runs are mostly fixed costs and jitter on a loaded machine; the photons are exact, so a method's
     error is read against its photons and its photons against time through this line. Where the
@@ -123,7 +128,8 @@ def cost_model(photons, times, slope: float | None = None) -> tuple[float, float
     return float(a), float(b)
 
 
-def equal_time(photons, times, errors, t: float, slope: float | None = None) -> tuple[float | None, bool]:
+def equal_time(photons: npt.ArrayLike, times: npt.ArrayLike, errors: npt.ArrayLike, t: float,
+               slope: float | None = None) -> tuple[float | None, bool]:
     """A method's error at time ``t`` (None: not even a fixed cost fits in ``t``) and whether it is
     extrapolated: the photons ``t`` buys on its cost line (:func:`cost_model`), their error by :func:`loglog`."""
     a, b = cost_model(photons, times, slope)
@@ -133,7 +139,8 @@ def equal_time(photons, times, errors, t: float, slope: float | None = None) -> 
     return loglog(photons, errors, n)
 
 
-def equal_error(photons, times, errors, e: float, slope: float | None = None) -> tuple[float, bool]:
+def equal_error(photons: npt.ArrayLike, times: npt.ArrayLike, errors: npt.ArrayLike, e: float,
+                slope: float | None = None) -> tuple[float, bool]:
     """The time a method needs for error ``e``: the photons giving ``e`` (:func:`loglog`) on its cost line."""
     a, b = cost_model(photons, times, slope)
     n, extrapolated = loglog(errors, photons, e)

@@ -16,12 +16,18 @@ import statistics
 import tempfile
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 import numpy as np
 
+if TYPE_CHECKING:
+    from collections.abc import Callable, Iterable
 
-def _raw_caster(state, width: int, height: int):
+    from pipeline.scene import FrameState
+
+
+def _raw_caster(state: FrameState, width: int, height: int) -> Callable[[], None]:
     """A function casting the frame's pixel-centre camera rays through embreex alone, once."""
     from embreex import mesh_construction, rtcore_scene
 
@@ -38,13 +44,13 @@ def _raw_caster(state, width: int, height: int):
     scene.run(o[:1], d[:1])  # commit the BVH
     from workers.camera_paths import CHUNK_RAYS
 
-    def cast():  # in the compositor's batch size, which Embree runs faster than one huge batch
+    def cast() -> None:  # in the compositor's batch size, which Embree runs faster than one huge batch
         for lo in range(0, len(d), CHUNK_RAYS):
             scene.run(o[lo:lo + CHUNK_RAYS], d[lo:lo + CHUNK_RAYS], output=1)
     return cast
 
 
-def bench_scene(path, *, width: int, height: int, spp: int, repeat: int) -> dict:
+def bench_scene(path: str | Path, *, width: int, height: int, spp: int, repeat: int) -> dict:
     """Figures for one scene: ms/frame, rays per kind, compositor and raw rays/s.
 
     Compositor and raw casts alternate, ``repeat`` times each, so both see the same machine load;
@@ -80,7 +86,8 @@ def bench_scene(path, *, width: int, height: int, spp: int, repeat: int) -> dict
             "ratio": ratio}
 
 
-def run(scenes, *, width: int, height: int, spp: int, repeat: int, echo=click.echo) -> list[dict]:
+def run(scenes: Iterable[str], *, width: int, height: int, spp: int, repeat: int,
+        echo: Callable[[str], None] = click.echo) -> list[dict]:
     """Benchmark ``scenes`` (built-in names or files; default ROOM and ATRIUM) on one core, echoing a
     line per scene; returns their figures."""
     from pipeline.scene.builtin import BUILTIN_SCENES, write_builtin

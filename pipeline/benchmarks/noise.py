@@ -28,11 +28,15 @@ from __future__ import annotations
 import tempfile
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
 import numpy as np
 
 from kernels import colour
+
+if TYPE_CHECKING:
+    from collections.abc import Callable, Iterable, Sequence
 
 LUMA = np.asarray(colour.LUMA)  # Rec. 709 (kernels/colour.py)
 K = 68  # ROOM's segment centre K2 (§6, Table 1)
@@ -48,8 +52,8 @@ def split_noise(irradiance: np.ndarray, areas: np.ndarray) -> float:
     return float(np.sum(areas[ok] * sigma[ok]) / np.sum(areas[ok] * mean[ok]))
 
 
-def noise_for_threshold(base, noise_images, adaptation: float, target: float, *, aqm_size: int,
-                        hi: float = 0.2, steps: int = 14) -> float:
+def noise_for_threshold(base: np.ndarray, noise_images: Sequence[np.ndarray], adaptation: float, target: float, *,
+                        aqm_size: int, hi: float = 0.2, steps: int = 14) -> float:
     """Amplitude s of per-vertex noise with displayed d_AQM(base + s n1, base + s n2) = target (%).
 
     ``noise_images`` are the indirect layers rendered with the map E_ref x g (g ~ N(0, 1) per
@@ -57,7 +61,7 @@ def noise_for_threshold(base, noise_images, adaptation: float, target: float, *,
     to base + s x layer. Bisection; d_AQM grows with s."""
     from pipeline.perceived import displayed_difference
 
-    def d(s):
+    def d(s: float) -> float:
         a, b = (np.maximum(base + s * n, 0.0) for n in noise_images)
         return displayed_difference(a, b, adaptation, aqm_size=aqm_size).d_aqm
 
@@ -68,10 +72,10 @@ def noise_for_threshold(base, noise_images, adaptation: float, target: float, *,
     return 0.5 * (lo + hi)
 
 
-def run(photons=(10_000, 20_000, 40_000, 80_000), *, fmax: int = 30, width: int = 320, height: int = 240,
-        spp: int = 2, element_scale: float = 1.0, filter_photons: float | None = None, calibrate: bool = True,
-        scheduler: str = "synchronous", workers: int | None = None, store: str | None = None,
-        echo=click.echo) -> dict:
+def run(photons: Iterable[int] = (10_000, 20_000, 40_000, 80_000), *, fmax: int = 30, width: int = 320,
+        height: int = 240, spp: int = 2, element_scale: float = 1.0, filter_photons: float | None = None,
+        calibrate: bool = True, scheduler: str = "synchronous", workers: int | None = None, store: str | None = None,
+        echo: Callable[[str], None] = click.echo) -> dict:
     from pipeline.aqm import aqm
     from pipeline.config import RenderConfig
     from pipeline.errors import LoomError

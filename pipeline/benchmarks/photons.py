@@ -16,10 +16,14 @@ import time
 from concurrent.futures import ProcessPoolExecutor
 from multiprocessing import get_context
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from ..cluster import WORKER_ENV
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
 
 
 def _load(scene_path: str):
@@ -86,7 +90,8 @@ def _memory_worker(scene_path: str, frame: int, n_photons: int, store_url: str) 
             "peak_rss_mb": resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024}
 
 
-def run(scene_names: list[str], *, photons: int, workers: int, memory_photons: int, echo) -> list[dict]:
+def run(scene_names: list[str], *, photons: int, workers: int, memory_photons: int,
+        echo: Callable[[str], None]) -> list[dict]:
     from pipeline.scene.builtin import BUILTIN_SCENES, write_builtin
 
     os.environ.update(WORKER_ENV)  # inherited by the spawned workers: one thread each

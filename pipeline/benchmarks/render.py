@@ -27,14 +27,20 @@ import json
 import tempfile
 import time
 from pathlib import Path
+from typing import TYPE_CHECKING
 
 import click
+
+if TYPE_CHECKING:
+    from collections.abc import Callable, Iterable
+
+    from pipeline.segment_records import SegmentRecord
 
 ROWS = ("photon tracing", "AQM", "temporal processing", "I/O", "total indirect", "ray tracing")
 IO_KEYS = ("task_reconstruct_read_s", "task_reconstruct_map_write_s")
 
 
-def stage_table(records) -> dict:
+def stage_table(records: Iterable[SegmentRecord]) -> dict:
     """Table 2 in seconds (wall) and core-seconds from a run's segment records."""
     t: dict[str, float] = {}
     for r in records:
@@ -59,7 +65,8 @@ def stage_table(records) -> dict:
     return {"wall": wall, "core": core, "times": t}
 
 
-def run_render(scene: Path, out: Path, *, frames, width, height, spp, workers, n_photons, fmax) -> dict:
+def run_render(scene: Path, out: Path, *, frames: str | None, width: int, height: int, spp: int, workers: int,
+               n_photons: int | None, fmax: int | None) -> dict:
     from pipeline.render import RenderSettings, render
     from pipeline.segment_records import read_records
 
@@ -76,7 +83,7 @@ def run_render(scene: Path, out: Path, *, frames, width, height, spp, workers, n
             "segments": report["segments"], "table": table, "report_times": report["times_s"]}
 
 
-def _print_table(echo, title: str, run: dict) -> None:
+def _print_table(echo: Callable[[str], None], title: str, run: dict) -> None:
     n = max(run["frames"], 1)
     wall, core = run["table"]["wall"], run["table"]["core"]
     total = wall["total indirect"] + wall["ray tracing"]
@@ -89,8 +96,9 @@ def _print_table(echo, title: str, run: dict) -> None:
         echo(f"  {row:<22}{wall[row] / n:>10.4f}{100 * wall[row] / total if total else 0:>8.1f}%{core[row] / n:>14.4f}")
 
 
-def run(scene: str = "room", *, frames=None, width: int = 320, height: int = 240, spp: int = 2, workers: int = 2,
-        n_photons: int = 40_000, fmax: int = 30, skip_guided: bool = False, json_path=None, echo=click.echo) -> dict:
+def run(scene: str = "room", *, frames: str | None = None, width: int = 320, height: int = 240, spp: int = 2,
+        workers: int = 2, n_photons: int = 40_000, fmax: int = 30, skip_guided: bool = False,
+        json_path: str | Path | None = None, echo: Callable[[str], None] = click.echo) -> dict:
     """The three renders of ``scene`` (a built-in name or a file), their tables and the scaling; returns
     the figures (also written to ``json_path`` if given)."""
     from pipeline.scene.builtin import BUILTIN_SCENES, write_builtin

@@ -19,9 +19,13 @@ import tempfile
 import time
 from pathlib import Path
 from types import SimpleNamespace
+from typing import TYPE_CHECKING
 
 import click
 import numpy as np
+
+if TYPE_CHECKING:
+    from collections.abc import Callable
 
 N_FRAMES = 300
 N_PHOTONS = 20_000
@@ -67,7 +71,7 @@ class SyntheticPhotons:
         lam[self.spot] *= 1.0 + 4.0 * np.maximum(phase, 0.0) ** 4  # a bright spot passing by
         return rng.poisson(lam).astype(np.uint32)
 
-    def records(self, g: int):
+    def records(self, g: int) -> SimpleNamespace:
         counts = self.counts(g)
         rng = np.random.default_rng((self.seed, g, 1))
         element = np.repeat(np.arange(len(counts), dtype=np.uint32), counts)
@@ -102,7 +106,8 @@ def _gather_chunk(cache: dict, photons: "SyntheticPhotons", lo: int, hi: int, n_
     return flux, n_summed
 
 
-def run(trace_frames: int = 3, numpy_frames: int = 4, n_frames: int = N_FRAMES, echo=click.echo) -> dict:
+def run(trace_frames: int = 3, numpy_frames: int = 4, n_frames: int = N_FRAMES,
+        echo: Callable[[str], None] = click.echo) -> dict:
     from kernels.filter import adaptive_filter_cl, adaptive_filter_reference, neighbourhood
     from kernels.gather import element_sums_cl, element_sums_reference, irradiance, window_flux_reference
     from kernels.temporal import windows_cl, windows_reference

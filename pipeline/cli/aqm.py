@@ -5,6 +5,8 @@ bench aqm``, in pipeline/benchmarks/aqm.py).
 """
 from __future__ import annotations
 
+from typing import Any, Callable, TypeVar
+
 import click
 import numpy as np
 
@@ -13,6 +15,8 @@ from pipeline.aqm.visualize import difference_picture
 from pipeline.errors import LoomError
 
 _DEFAULT = ViewingConditions()
+# What a click decorator takes and gives back: a function or a command
+_F = TypeVar("_F", bound=Callable[..., Any])
 
 
 def read_image(path: str, *, channels: str = "image") -> np.ndarray:
@@ -63,7 +67,7 @@ def _resolution(_ctx, _param, value: str) -> tuple[int, int]:
     return w, h
 
 
-def viewing_options(f):
+def viewing_options(f: _F) -> _F:
     """The ViewingConditions options of ``loom aqm``."""
     options = [
         click.option("--display-width", type=float, default=_DEFAULT.display_width_m, show_default=True,

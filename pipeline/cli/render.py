@@ -5,6 +5,7 @@ The job options (what a render makes) are shared with ``loom plan`` (farm.py).
 from __future__ import annotations
 
 import logging
+from typing import Any, Callable, TypeVar
 
 import click
 
@@ -14,9 +15,11 @@ from .scene import CAMERA_HELP, LIGHT_HELP
 
 _PHOTON_DEPTH = _RenderConfig().photon_depth
 _PHOTON_DEPTH_HELP = "Safety cap on photon hits (Russian roulette ends paths; pipeline/config.py)."
+# What a click decorator takes and gives back: a function or a command
+_F = TypeVar("_F", bound=Callable[..., Any])
 
 
-def scheduler_options(f):
+def scheduler_options(f: _F) -> _F:
     f = click.option("--workers", type=int, default=None,
                      help="Worker processes for --scheduler local (default: one per core).")(f)
     f = click.option("--scheduler", default="local", show_default=True,
@@ -64,7 +67,7 @@ def _photons(_ctx, _param, value):
     return n
 
 
-def job_options(f):
+def job_options(f: _F) -> _F:
     """The options that say what a render makes (shared by ``loom render`` and ``loom plan``)."""
     options = [
         click.argument("scene_file", type=click.Path(dir_okay=False)),
@@ -104,9 +107,10 @@ def job_options(f):
     return f
 
 
-def job_arguments(scene_file, frames, out_dir, resolution, spp, photons, fmax, temporal, store_url, camera, seed,
-                   reflection_depth, photon_depth, d_thr, config_file, light="auto", tonemap="filmic",
-                   exposure=0.0) -> dict:
+def job_arguments(scene_file: str, frames: str | None, out_dir: str, resolution: str, spp: int, photons: int | None,
+                  fmax: int | None, temporal: str, store_url: str | None, camera: str | None, seed: int,
+                  reflection_depth: int, photon_depth: int, d_thr: float | None, config_file: str | None,
+                  light: str = "auto", tonemap: str = "filmic", exposure: float = 0.0) -> dict:
     """The keyword arguments of pipeline.render.prepare_job / render from the job options."""
     from pipeline.config import RenderConfig, load_config
     from pipeline.render import RenderSettings, parse_resolution

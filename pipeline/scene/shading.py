@@ -19,10 +19,19 @@ Embree's hit barycentrics (u, v) weight a triangle's corners 1 and 2 (workers/ra
 from __future__ import annotations
 
 from dataclasses import dataclass
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .textures import sample
+
+if TYPE_CHECKING:
+    from collections.abc import Sequence
+
+    import numpy.typing as npt
+
+    from .materials import Material
+    from .scene import MeshInstance
 
 MEAN_POINTS = 256  # points per emissive triangle for its mean textured radiance
 
@@ -39,7 +48,7 @@ class CornerAttributes:
         return not self.texcoords and self.color is None
 
 
-def corner_attributes(instances) -> CornerAttributes | None:
+def corner_attributes(instances: Sequence[MeshInstance]) -> CornerAttributes | None:
     """TEXCOORD sets and COLOR_0 of every triangle corner, None when no instance has any."""
     attrs = [inst.attributes for inst in instances]
     sets = sorted({s for a in attrs if a is not None for s in a.texcoords})
@@ -61,7 +70,7 @@ def corner_attributes(instances) -> CornerAttributes | None:
     return CornerAttributes(texcoords, color)
 
 
-def world_corner_normals(instances, matrices: np.ndarray) -> np.ndarray | None:
+def world_corner_normals(instances: Sequence[MeshInstance], matrices: np.ndarray) -> np.ndarray | None:
     """(F, 3, 3) float32 world-space unit vertex normals at every triangle corner, zero where an
     instance has no NORMAL (flat there); None when no instance has normals. A normal transforms by
     the inverse transpose of the linear part of its node's matrix."""
@@ -191,14 +200,14 @@ class SurfaceShading:
         return value
 
 
-def mean_emission(material) -> np.ndarray:
+def mean_emission(material: Material) -> np.ndarray:
     """(3,) a material's emitted radiance averaged over its emissive texture."""
     emission = np.asarray(material.emission, np.float64)
     tex = getattr(material, "emissive_texture", None)
     return emission if tex is None else emission * tex.mean
 
 
-def mean_base_color(material) -> np.ndarray:
+def mean_base_color(material: Material) -> np.ndarray:
     """(3,) a material's base colour averaged over its texture (factor x texel mean): what a
     mesh-level estimate such as the adaptation luminance (workers/reconstruct.py) can use."""
     factor = np.asarray(material.albedo, np.float64)
@@ -206,7 +215,7 @@ def mean_base_color(material) -> np.ndarray:
     return factor if tex is None else factor * tex.mean
 
 
-def interpolate(corners: np.ndarray, u, v) -> np.ndarray:
+def interpolate(corners: np.ndarray, u: npt.ArrayLike, v: npt.ArrayLike) -> np.ndarray:
     """Barycentric blend of (n, 3, k) corner values with Embree's (u, v) (corners 1 and 2), float64:
     shading normals, vertex colours and texture coordinates (here), the photon tracer's and the
     compositor's alike. Positions use :func:`triangle_points`."""
