@@ -25,6 +25,12 @@ WORKER_ENV = {
     "MKL_NUM_THREADS": "1",
     "POCL_MAX_PTHREAD_COUNT": "1",
     "POCL_CPU_MAX_CU_COUNT": "1",
+    # PoCL's single-threaded "basic" device first (kernels/context.py takes the first CPU device),
+    # its threaded one as the fallback where a PoCL build lacks it: a one-thread worker gains
+    # nothing from a thread pool, and handing every command to a pool thread and waiting for it
+    # made photon tracing ~20 % slower (ROOM, 30 frames of 40,000 photons, best of 3, alternated:
+    # 79.4 / 72.9 ms a frame threaded against 62.3 / 57.8 basic). Same compiler, same bits.
+    "POCL_DEVICES": "basic pthread",
     # glibc hands freed memory back after every photon batch, so the next batch page-faults ~7 MB
     # of fresh memory (1,860 faults a write); keeping up to 128 MiB cuts a store write from 14 to
     # 10 ms (measured with `loom bench render`)
