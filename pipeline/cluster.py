@@ -46,6 +46,15 @@ WORKERLESS_TIMEOUT_S = 60.0
 _POLL_S = 2.0
 
 
+def _restore_environ(saved: dict[str, str | None]) -> None:
+    """Put the variables of ``saved`` back as they were (removing those that were unset)."""
+    for key, value in saved.items():
+        if value is None:
+            os.environ.pop(key, None)
+        else:
+            os.environ[key] = value
+
+
 def check_workers(workers: int | None) -> int | None:
     """``--workers``: None (one per core) or an integer in [1, 4 x cores]; 0 and negatives are errors."""
     if workers is None:
@@ -82,19 +91,27 @@ def connect(scheduler: str = "local", workers: int | None = None, *, performance
 
     if scheduler == "local":
         n = workers if workers is not None else os.cpu_count() or 1
-        with dask.config.set({"distributed.nanny.pre-spawn-environ": WORKER_ENV,
-                              "distributed.worker.daemon": False}):
-            # The scheduler serves HTTP (metrics) even without a dashboard, on 8787 unless told
-            # otherwise, and warns when another cluster holds it: any free port instead.
-            cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
-                                   dashboard_address=":0", silence_logs=logging.WARNING)
-            client = Client(cluster)
+        # A nanny sets its pre-spawn variables in its own process's environment and leaves them
+        # there; a LocalCluster's nannies live in this process, so without the restore the caller's
+        # own OpenCL would find one thread and the basic device after the run.
+        saved = {k: os.environ.get(k) for k in (*WORKER_ENV, "PYTHONHASHSEED")}
         try:
-            with _reporting(client, performance_report, echo):
-                yield client
+            with dask.config.set({"distributed.nanny.pre-spawn-environ": WORKER_ENV,
+                                  "distributed.worker.daemon": False}):
+                # The scheduler serves HTTP (metrics) even without a dashboard, on 8787 unless told
+                # otherwise, and warns when another cluster holds it: any free port instead.
+                cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",
+                                       dashboard_address=":0", silence_logs=logging.WARNING)
+                client = Client(cluster)
+            _restore_environ(saved)
+            try:
+                with _reporting(client, performance_report, echo):
+                    yield client
+            finally:
+                client.close()
+                cluster.close()
         finally:
-            client.close()
-            cluster.close()
+            _restore_environ(saved)
         return
     if "://" not in scheduler:
         raise LoomError(f"{scheduler!r} is not local, synchronous or a scheduler address like "
