@@ -27,6 +27,17 @@ import numpy as np
 import pytest
 
 
+def _paired(a: dict, b: dict):
+    """(name, a[name], b[name]) for the outputs both sides have as arrays; both must have the same
+    names and agree on which are None."""
+    assert a.keys() == b.keys(), f"outputs {sorted(a)} against {sorted(b)}"
+    for name, x in a.items():
+        y = b[name]
+        assert (x is None) == (y is None), f"{name}: one side is None"
+        if x is not None:
+            yield name, x, y
+
+
 class KernelTwinTests:
     """Generic kernel-versus-twin tests; subclass per kernel (see the module docstring)."""
 
@@ -97,23 +108,13 @@ class KernelTwinTests:
         args = self.make_inputs(rng, self.cases[case_name])
         first = self.outputs(self.device(*args))
         again = self.outputs(self.device(*args))
-        assert first.keys() == again.keys()
-        for name, a in first.items():
-            b = again[name]
-            if a is None or b is None:
-                assert a is None and b is None, name
-            else:
-                assert a.shape == b.shape and a.tobytes() == b.tobytes(), f"{name} differs between two runs"
+        for name, a, b in _paired(first, again):
+            assert a.shape == b.shape and a.tobytes() == b.tobytes(), f"{name} differs between two runs"
 
     def test_outputs_have_the_twins_shapes_and_dtypes(self, rng, case_name):
         _, got, want = self._run(rng, case_name)
-        assert got.keys() == want.keys()
-        for name, w in want.items():
-            g = got[name]
-            if w is None or g is None:
-                assert g is None and w is None, name
-            else:
-                assert (g.shape, g.dtype) == (w.shape, w.dtype), name
+        for name, g, w in _paired(got, want):
+            assert (g.shape, g.dtype) == (w.shape, w.dtype), name
 
     def test_cases_exercise_the_kernel(self, rng):
         """Some case gives a non-empty output that is not constant (all-zero cases prove nothing)."""
