@@ -35,13 +35,13 @@ inline void add_records(__global const uint *key, __global const ushort *b1,
 }
 
 // Sums of segment s (a (frame, element) pair; records [offsets[s], offsets[s+1]), element-sorted)
-// for parity p (work item (s, p)): out[out_base + (s * n_parity + p) * 12 + 4k + c] = sum over the
+// for parity p (work item (s, p)): out[(s * n_parity + p) * 12 + 4k + c] = sum over the
 // records of b_k * energy_c, and (c = 3) Q = sum b_k^2 * Y^2 (docs/estimators.md §1.2-1.3). With n_parity = 1
 // every record counts. `kinds`: bit 0 takes indirect records, bit 1 direct ones.
 __kernel void element_sums(__global const uint *key, __global const ushort *b1,
                            __global const ushort *b2, __global const float *energy,
                            __global const uint *offsets, const long n_segments,
-                           const uint kinds, const int n_parity, const long out_base,
+                           const uint kinds, const int n_parity,
                            __global double *out)
 {
     const long gid = get_global_id(0);
@@ -51,7 +51,7 @@ __kernel void element_sums(__global const uint *key, __global const ushort *b1,
     double acc[SLOTS];
     for (int c = 0; c < SLOTS; ++c) acc[c] = 0.0;
     add_records(key, b1, b2, energy, (long)offsets[s], (long)offsets[s + 1], kinds, n_parity, parity, acc);
-    __global double *o = out + out_base + gid * SLOTS;
+    __global double *o = out + gid * SLOTS;
     for (int c = 0; c < SLOTS; ++c) o[c] = acc[c];
 }
 

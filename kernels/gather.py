@@ -100,23 +100,6 @@ def _in_place(ctx, a: np.ndarray) -> cl.Buffer:
     return cl.Buffer(ctx, mf.READ_ONLY | mf.USE_HOST_PTR, hostbuf=a)
 
 
-def _sums_into(d_out: cl.Buffer, out_base: int, frames, kind: str, n_parity: int) -> tuple[int, int]:
-    """Run ``element_sums`` for ``frames`` into ``d_out`` from element ``out_base`` on; returns
-    (frames, elements)."""
-    if kind not in KINDS:
-        raise ValueError(f"kind must be one of {', '.join(KINDS)}, got {kind!r}")
-    key, b1, b2, energy, offsets, n_frames, n_elements = _concat_frames(frames)
-    n_segments = n_frames * n_elements
-    if n_segments:
-        ctx, queue = device_context()
-        records = [_in_place(ctx, a) for a in (key, b1, b2, energy, offsets)]
-        kernel("gather", "element_sums")(
-            queue, (n_segments * n_parity,), None, *records, np.int64(n_segments), np.uint32(KINDS[kind]),
-            np.int32(n_parity), np.int64(out_base), d_out)
-        queue.finish()  # the buffers read the host arrays in place: keep them until the kernel is done
-    return n_frames, n_elements
-
-
 def element_sums_cl(frames: Iterable[_SortedRecords], *, kind: str = "indirect",
                     split_parity: bool = False) -> np.ndarray:
     """Step 1 on PoCL for a list of frames' records (objects with ``key``, ``b1``, ``b2``,
@@ -125,17 +108,20 @@ def element_sums_cl(frames: Iterable[_SortedRecords], *, kind: str = "indirect",
     Returns (J, E, P, 3, 4) float64: per frame, element, parity (P = 2 with ``split_parity``,
     even then odd photons; else 1), corner k and (R, G, B, Q).
     """
-    frames = list(frames)
+    if kind not in KINDS:
+        raise ValueError(f"kind must be one of {', '.join(KINDS)}, got {kind!r}")
     n_parity = 2 if split_parity else 1
-    n_elements = len(frames[0].offsets) - 1 if frames else 0
-    out = np.zeros((len(frames), n_elements, n_parity, 3, 4))
+    key, b1, b2, energy, offsets, n_frames, n_elements = _concat_frames(frames)  # validates
+    out = np.zeros((n_frames, n_elements, n_parity, 3, 4))
     if out.size == 0:
-        _concat_frames(frames)  # validates
         return out
     ctx, queue = device_context()
     d_out = cl.Buffer(ctx, cl.mem_flags.READ_WRITE, size=out.nbytes)
-    _sums_into(d_out, 0, frames, kind, n_parity)
-    cl.enqueue_copy(queue, out, d_out)
+    records = [_in_place(ctx, a) for a in (key, b1, b2, energy, offsets)]
+    n_segments = n_frames * n_elements
+    kernel("gather", "element_sums")(queue, (n_segments * n_parity,), None, *records, np.int64(n_segments),
+                                     np.uint32(KINDS[kind]), np.int32(n_parity), d_out)
+    cl.enqueue_copy(queue, out, d_out)  # blocking: the buffers read the host arrays in place until here
     return out
 
 

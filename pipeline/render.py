@@ -31,6 +31,7 @@ from .images import frame_paths, write_video
 from .paths import check_writable_dir
 from .scene import Scene
 from .shoot import check_store_location, plan
+from .temporal import check_window_options
 from .tonemap import LOOK_FIELDS, ToneMapping
 
 if TYPE_CHECKING:
@@ -96,11 +97,8 @@ def prepare_job(scene_path: str | Path, *, frames: str | None, out_dir: str | Pa
     store_url = store_url or str(out / "photons.zarr")
     check_store_location(store_url)
     cam_name = scene.camera_name  # a node's, or "auto" (pipeline/scene/default_camera.py)
-    if temporal not in ("adaptive", "fixed", "off"):
-        raise LoomError(f"must be adaptive, fixed or off, got {temporal!r}", field="--temporal")
     fmax = config.fmax_initial if fmax is None else fmax
-    if not 0 <= fmax <= 510:
-        raise LoomError(f"must be in [0, 510] frames, got {fmax}", field="--fmax")
+    check_window_options(temporal, fmax)
     guided = n_photons is None
     if guided:
         if fmax > config.fmax_cap:
@@ -280,9 +278,8 @@ def _skipped(job, scene, rays: dict | None, segments_done: list) -> dict:
 
 def _remove_leftovers(out: Path, store_url: str) -> None:
     """Temporary files killed writers left (``.NAME.PID[.ID].partial``, zarr's ``zarr.UUID.partial``)
-    in the output folder and a local photon store: with every frame done, no writer of this run is alive that
-    could still
-    rename one into place (zarr never reads them either way)."""
+    in the output folder and a local photon store: with every frame done, no writer of this run is
+    alive that could still rename one into place (zarr never reads them either way)."""
     from .store import remove_partials
 
     for tmp in [*out.glob(".*.partial*"), *out.glob("segments/.*.partial*"), *out.glob(".farm/.*.partial*")]:

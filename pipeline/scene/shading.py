@@ -195,7 +195,7 @@ class SurfaceShading:
                 uv = np.zeros((len(rows), 2))
             else:
                 uv = interpolate(np.take(corners, t[rows], axis=0).astype(np.float64),
-                                  np.take(u, rows), np.take(v, rows))
+                                 np.take(u, rows), np.take(v, rows))
             value[rows] *= sample(tex, uv)
         return value
 

@@ -8,7 +8,7 @@ each kernel's test module subclasses it (the subclass's name must start with ``T
   lanes (``LANES`` = 8 rays a work item, ``WORK_GROUP`` = 64 items, kernels/context.py);
 * :meth:`make_inputs`: the positional arguments of one case, built from the seeded ``rng`` fixture;
 * :meth:`device` and :meth:`twin`: the OpenCL path and its NumPy reference, called with those
-  arguments;
+  arguments (these three are abstract: a subclass without one cannot run);
 * the comparison rule: ``rtol`` and ``atol`` (both 0, the default, means bit-identical), per output
   through :meth:`rule` where outputs differ (integers exact, floats to a tolerance);
 * :meth:`outputs` when a result is not an array, a tuple of arrays or a dataclass of arrays.
@@ -21,6 +21,7 @@ constant), and the rule must reject a twin output perturbed beyond its tolerance
 from __future__ import annotations
 
 import dataclasses
+from abc import ABC, abstractmethod
 from typing import Any, ClassVar
 
 import numpy as np
@@ -38,7 +39,7 @@ def _paired(a: dict, b: dict):
             yield name, x, y
 
 
-class KernelTwinTests:
+class KernelTwinTests(ABC):
     """Generic kernel-versus-twin tests; subclass per kernel (see the module docstring)."""
 
     cases: ClassVar[dict[str, Any]] = {}
@@ -47,17 +48,17 @@ class KernelTwinTests:
 
     # --- hooks ---------------------------------------------------------------------------------
 
+    @abstractmethod
     def make_inputs(self, rng: np.random.Generator, case: Any) -> tuple:
         """The positional arguments of :meth:`device` and :meth:`twin` for one case."""
-        raise NotImplementedError
 
+    @abstractmethod
     def device(self, *args):
         """The OpenCL path."""
-        raise NotImplementedError
 
+    @abstractmethod
     def twin(self, *args):
         """The NumPy reference."""
-        raise NotImplementedError
 
     def rule(self, name: str, want: np.ndarray) -> tuple[float, float]:
         """(rtol, atol) for output ``name`` whose twin value is ``want``; (0, 0) is bit-identical."""
