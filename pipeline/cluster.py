@@ -31,6 +31,10 @@ WORKER_ENV = {
     # made photon tracing ~20 % slower (ROOM, 30 frames of 40,000 photons, best of 3, alternated:
     # 79.4 / 72.9 ms a frame threaded against 62.3 / 57.8 basic). Same compiler, same bits.
     "POCL_DEVICES": "basic pthread",
+    # OpenImageIO's own pool (default: one thread per core) compresses EXR scanlines in parallel:
+    # a lone worker then borrowed the idle core (1.6 cores for an EXR write), and two workers
+    # oversubscribed the machine (frame writes 54 -> 86 ms each); one thread per worker instead
+    "OPENIMAGEIO_OPTIONS": "threads=1,exr_threads=1",
     # glibc hands freed memory back after every photon batch, so the next batch page-faults ~7 MB
     # of fresh memory (1,860 faults a write); keeping up to 128 MiB cuts a store write from 14 to
     # 10 ms (measured with `loom bench render`)

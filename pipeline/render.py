@@ -219,6 +219,13 @@ def render(scene_path: str | Path, *, frames: str | None, out_dir: str | Path,
     return report
 
 
+def _timed(func: Callable, *args) -> float:
+    """Seconds ``func(*args)`` took."""
+    t0 = time.perf_counter()
+    func(*args)
+    return time.perf_counter() - t0
+
+
 def finish(job: Job, records: list[SegmentRecord], *, rays: dict, batches: int, t_start: float,
            frame_times: dict | None = None, segments_done: list | None = None, ran_here: bool = True) -> dict:
     """The segment figure, ``preview.mp4``, ``report.json`` and ``report.html`` (pipeline/report.py)
@@ -226,7 +233,6 @@ def finish(job: Job, records: list[SegmentRecord], *, rays: dict, batches: int, 
     recipes), whose ray counts and timings this one does not know."""
     out = Path(job.out_dir)
     config = RenderConfig.from_dict(job.config)
-    t0 = time.perf_counter()
     if job.n_photons is None:
         from .segment_plot import plot_segments
         plot_segments(records, out / "segments" / "segments.png", d_thr=config.d_thr, p_thr=config.p_thr)
@@ -234,12 +240,6 @@ def finish(job: Job, records: list[SegmentRecord], *, rays: dict, batches: int, 
     from workers.camera_paths import RAY_KINDS
     from workers.scene_cache import load_scene
     scene = load_scene(job.scene_path, job.scene_hash, job.camera)
-    fps = scene.timeline.fps
-    write_video([frame_paths(out, f)[1] for f in job.selection], video, fps)
-    video_s = time.perf_counter() - t0
-    times = {k: round(sum(r.times_s.get(k, 0.0) for r in records), 3)
-             for k in ("shoot_s", "aqm_s", "temporal_s", "reconstruct_s", "composite_s", "decide_s")}
-    times.update(video_s=round(video_s, 3), total_s=round(time.perf_counter() - t_start, 3))
     report = {
         "scene": job.scene_path, "camera": job.camera_name, "frames": list(job.selection),
         "rendered": sorted(rays), "skipped": sorted(set(job.selection) - set(rays)),
@@ -248,7 +248,7 @@ def finish(job: Job, records: list[SegmentRecord], *, rays: dict, batches: int, 
         "segments": [{"index": r.index, "frames": [r.start, r.end], "k": r.k, "fmax": r.fmax,
                       "n_frame": r.n_frame, "d_aqm": r.d_aqm, "capped": r.capped} for r in records],
         "store": job.store_url, "video": str(video), "render_hash": job.render_hash,
-        "photon_batches_traced": batches, "times_s": times,
+        "photon_batches_traced": batches, "times_s": {},
         "rays": {k: sum(r[k] for r in rays.values()) for k in RAY_KINDS},
         "rays_per_frame": {str(f): rays[f] for f in sorted(rays)},
         "frame_times_s": {str(f): frame_times[f] for f in sorted(frame_times or {})},
@@ -256,11 +256,26 @@ def finish(job: Job, records: list[SegmentRecord], *, rays: dict, batches: int, 
         "settings": {"job": {k: v for k, v in job.to_dict().items() if k not in ("config", "selection")},
                      "config": job.config},
     }
+    # The video (an ffmpeg process) encodes while this process draws the report's figures: both
+    # are the render's last serial steps (README "Table 2")
+    from concurrent.futures import ThreadPoolExecutor
+
+    from .report import page_parts, write_report
+    with ThreadPoolExecutor(1) as pool:
+        encoding = pool.submit(_timed, write_video, [frame_paths(out, f)[1] for f in job.selection], video,
+                               scene.timeline.fps)
+        try:
+            parts = page_parts(out, report, records)
+        finally:
+            video_s = encoding.result()
+    times = {k: round(sum(r.times_s.get(k, 0.0) for r in records), 3)
+             for k in ("shoot_s", "aqm_s", "temporal_s", "reconstruct_s", "composite_s", "decide_s")}
+    times.update(video_s=round(video_s, 3), total_s=round(time.perf_counter() - t_start, 3))
+    report["times_s"] = times
     tmp = out / f".report.json.{os.getpid()}.partial"
     tmp.write_text(json.dumps(report, indent=1))
     os.replace(tmp, out / "report.json")
-    from .report import write_report
-    write_report(out)
+    write_report(out, parts)
     _remove_leftovers(out, job.store_url)
     return report
 

@@ -64,8 +64,9 @@ figcaption { font-size: 12px; color: #555; } img.plot { max-width: 100%; }
 """)
 
 
-def write_report(out_dir: str | Path) -> Path:
-    """Write ``OUT/report.html`` atomically from the render's files; returns its path."""
+def write_report(out_dir: str | Path, parts: dict[str, str] | None = None) -> Path:
+    """Write ``OUT/report.html`` atomically from the render's files; returns its path. ``parts``:
+    :func:`page_parts` made beforehand (``loom render`` makes them while the video encodes)."""
     out = Path(out_dir)
     path = out / "report.json"
     if not path.is_file():
@@ -75,7 +76,7 @@ def write_report(out_dir: str | Path) -> Path:
     except ValueError as err:
         raise LoomError(f"not a render report ({err})", path=str(path)) from None
     records = read_records(out)
-    page = render_page(out, report, records)
+    page = render_page(out, report, records, parts)
     target = out / "report.html"
     tmp = out / f".report.html.{os.getpid()}.partial"
     tmp.write_text(page, encoding="utf-8")
@@ -83,17 +84,22 @@ def write_report(out_dir: str | Path) -> Path:
     return target
 
 
-def render_page(out: Path, report: dict, records: list[SegmentRecord]) -> str:
-    """The HTML text of the report (no I/O beyond reading the render's pictures and video)."""
-    frames = report.get("frames", [])
+def page_parts(out: Path, report: dict, records: list[SegmentRecord]) -> dict[str, str]:
+    """The page's tables and figures (matplotlib, maps, filmstrip): everything but the summary,
+    the video, what was skipped and the settings, so none of it waits for the video or the run's
+    final times."""
     config = report.get("settings", {}).get("config", {})
+    return dict(segments=_segments(records, config), costs=_costs(report, records), windows=_windows(records),
+                aqm=_aqm_maps(out, records), filmstrip=_filmstrip(out, report.get("frames", [])))
+
+
+def render_page(out: Path, report: dict, records: list[SegmentRecord], parts: dict[str, str] | None = None) -> str:
+    """The HTML text of the report (no I/O beyond reading the render's pictures and video)."""
     title = html.escape(Path(report.get("scene", "?")).name)
     subtitle = html.escape(f"{out.resolve()} · written {time.strftime('%Y-%m-%d %H:%M:%S')}")
-    return PAGE.substitute(
-        title=title, subtitle=subtitle, summary=_summary(report, records), segments=_segments(records, config),
-        costs=_costs(report, records), windows=_windows(records), aqm=_aqm_maps(out, records),
-        filmstrip=_filmstrip(out, frames), video=_video(out, report), skipped=_skipped(report),
-        settings=_settings(report))
+    parts = page_parts(out, report, records) if parts is None else parts
+    return PAGE.substitute(title=title, subtitle=subtitle, summary=_summary(report, records),
+                           video=_video(out, report), skipped=_skipped(report), settings=_settings(report), **parts)
 
 
 # --- pieces ---------------------------------------------------------------------------------

@@ -19,11 +19,14 @@ the tasks' summed time per frame (what one core would spend).
 
 Scaling: the wall time of the whole fixed render (``render()``, cluster start-up included) on 1
 worker against ``--workers``, and the same without the cluster start-up and video (the
-segments' wall time).
+segments' wall time). On a shared machine identical runs vary by 10-20 %, and the load drifts
+between the two runs of a pair, so ``--repeat N`` alternates N pairs and reports every pair's
+ratio and their median; the tables are those of the median pair.
 """
 from __future__ import annotations
 
 import json
+import statistics
 import tempfile
 import time
 from pathlib import Path
@@ -97,7 +100,7 @@ def _print_table(echo: Callable[[str], None], title: str, run: dict) -> None:
 
 
 def run(scene: str = "room", *, frames: str | None = None, width: int = 320, height: int = 240, spp: int = 2,
-        workers: int = 2, n_photons: int = 40_000, fmax: int = 30, skip_guided: bool = False,
+        workers: int = 2, n_photons: int = 40_000, fmax: int = 30, skip_guided: bool = False, repeat: int = 1,
         json_path: str | Path | None = None, echo: Callable[[str], None] = click.echo) -> dict:
     """The three renders of ``scene`` (a built-in name or a file), their tables and the scaling; returns
     the figures (also written to ``json_path`` if given)."""
@@ -112,19 +115,30 @@ def run(scene: str = "room", *, frames: str | None = None, width: int = 320, hei
         if not skip_guided:
             results["guided"] = run_render(path, tmp / "guided", workers=workers, n_photons=None, fmax=None, **common)
             _print_table(echo, f"(a) guided (--photons auto), {workers} workers", results["guided"])
-        results["fixed_1"] = run_render(path, tmp / "fixed1", workers=1, n_photons=n_photons, fmax=fmax, **common)
-        results[f"fixed_{workers}"] = run_render(path, tmp / f"fixed{workers}", workers=workers,
-                                                 n_photons=n_photons, fmax=fmax, **common)
+        pairs = []
+        for i in range(repeat):
+            one = run_render(path, tmp / f"fixed1-{i}", workers=1, n_photons=n_photons, fmax=fmax, **common)
+            many = run_render(path, tmp / f"fixed{workers}-{i}", workers=workers, n_photons=n_photons, fmax=fmax,
+                              **common)
+            pairs.append((one["wall_s"] / many["wall_s"], one["segments_wall_s"] / many["segments_wall_s"], one, many))
+            if repeat > 1:
+                echo(f"  pair {i + 1}/{repeat}: 1 worker {one['wall_s']:.1f} s, {workers} workers "
+                     f"{many['wall_s']:.1f} s: {pairs[-1][0]:.2f}x (segments only {pairs[-1][1]:.2f}x)")
+    ratio = statistics.median(p[0] for p in pairs)
+    ratio_segments = statistics.median(p[1] for p in pairs)
+    median_pair = min(pairs, key=lambda p: abs(p[0] - ratio))
+    results["fixed_1"], results[f"fixed_{workers}"] = median_pair[2], median_pair[3]
     fixed = results[f"fixed_{workers}"]
     _print_table(echo, f"(b) fixed N_frame {n_photons:,}, F_max {fmax}, {workers} workers", fixed)
     _print_table(echo, f"    fixed N_frame {n_photons:,}, F_max {fmax}, 1 worker", results["fixed_1"])
     one = results["fixed_1"]
-    ratio = one["wall_s"] / fixed["wall_s"]
-    ratio_segments = one["segments_wall_s"] / fixed["segments_wall_s"]
-    echo(f"\nscaling, whole render (fixed): 1 worker {one['wall_s']:.1f} s, {workers} workers {fixed['wall_s']:.1f} s: "
-         f"{ratio:.2f}x (segments only: {one['segments_wall_s']:.1f} s vs {fixed['segments_wall_s']:.1f} s, "
-         f"{ratio_segments:.2f}x)")
-    results["scaling"] = {"workers": workers, "ratio": ratio, "ratio_segments": ratio_segments}
+    of = f"median of {repeat} alternated pairs" if repeat > 1 else "one pair"
+    echo(f"\nscaling, whole render (fixed, {of}): 1 worker {one['wall_s']:.1f} s, {workers} workers "
+         f"{fixed['wall_s']:.1f} s: {ratio:.2f}x (segments only: {ratio_segments:.2f}x)")
+    if repeat > 1:
+        echo("  pairs: " + ", ".join(f"{p[0]:.2f}x" for p in pairs))
+    results["scaling"] = {"workers": workers, "ratio": ratio, "ratio_segments": ratio_segments,
+                          "pairs": [[p[0], p[1]] for p in pairs]}
     if json_path:
         Path(json_path).write_text(json.dumps(results, indent=1, default=str))
     return results

@@ -100,15 +100,17 @@ def bench_noise(photons, fmax, resolution, spp, element_scale, filter_photons, c
 @click.option("--photons", "n_photons", type=int, default=40_000, show_default=True, help="Fixed N_frame.")
 @click.option("--fmax", type=int, default=30, show_default=True, help="Fixed F_max.")
 @click.option("--skip-guided", is_flag=True, help="Only the fixed runs (Table 2 b and scaling).")
+@click.option("--repeat", type=click.IntRange(1, 20), default=1, show_default=True,
+              help="Pairs of fixed runs (1 worker, then --workers), alternated; the scaling is their median.")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None, help="Also write the figures here.")
-def bench_render(scene, frames, resolution, spp, workers, n_photons, fmax, skip_guided, json_path):
+def bench_render(scene, frames, resolution, spp, workers, n_photons, fmax, skip_guided, repeat, json_path):
     """Table 2 per frame (guided and fixed N_frame/F_max) and 1 vs N worker scaling (default: ROOM)."""
     from pipeline.benchmarks.render import run
     from pipeline.render import parse_resolution
 
     width, height = parse_resolution(resolution)
     run(scene, frames=frames, width=width, height=height, spp=spp, workers=workers, n_photons=n_photons, fmax=fmax,
-        skip_guided=skip_guided, json_path=json_path, echo=click.echo)
+        skip_guided=skip_guided, repeat=repeat, json_path=json_path, echo=click.echo)
 
 
 @bench.command("error")
