@@ -38,16 +38,31 @@ inline bool condition1(const double mu, const double n_f, const double rate_g, c
     return d * d <= k2 * var;
 }
 
+// How unlike frame f frame g is for element e, from single-frame counts: (r_g - r_f)^2 N_g with
+// r = c / N, a squared z-score of r_g up to factors every candidate g shares.
+inline double unlike(__global const uint *counts, __global const double *n_emitted, const int n_elements,
+                     const int e, const int f, const int g)
+{
+    const double r_f = (double)counts[(long)f * n_elements + e] / n_emitted[f];
+    const double d = (double)counts[(long)g * n_elements + e] / n_emitted[g] - r_f;
+    return d * d * n_emitted[g];
+}
+
 // Window [f - back, f + fwd] of every (frame f in [f0, f0 + n_out), element e).
 // adaptive != 0: walk backward and forward independently while Condition (1) holds, at most
-// F_max/2 frames each way and to the animation's ends; then at least min_extent frames centred
-// on f (clipped likewise). adaptive == 0: always +-F_max/2 (§6, Fig. 3b).
+// F_max/2 frames each way and to the animation's ends; then at least min_extent = half_lo +
+// half_hi + 1 frames. similar != 0: the frames missing from it are taken on the side(s) whose
+// frames are least unlike f (ties: the most centred placement), so a frame beside an abrupt
+// change pools the frames on its own side of it; similar == 0, or no placement inside the
+// limits: half_lo back and half_hi forward (clipped likewise). adaptive == 0: always +-F_max/2
+// (§6, Fig. 3b).
 __kernel void windows(__global const double *rate,      // (F, E) from smooth_rates
+                      __global const uint *counts,      // (F, E) single-frame counts (adaptive only)
                       __global const double *n_emitted, // (F,)
                       __global const double *q,         // (F,) mean 1/N over smoothing frames
                       const int n_frames, const int n_elements, const int f0, const int n_out,
                       const int half_fmax, const int half_lo, const int half_hi,
-                      const double k2, const int adaptive,
+                      const double k2, const int adaptive, const int similar,
                       __global uchar *back, __global uchar *fwd) // (n_out, E)
 {
     const long gid = get_global_id(0);
@@ -69,8 +84,32 @@ __kernel void windows(__global const double *rate,      // (F, E) from smooth_ra
         while (w < max_fwd
                && condition1(mu, n_f, rate[(long)(f + w + 1) * n_elements + e], q[f + w + 1], k2))
             ++w;
-        b = max(b, min(half_lo, max_back));
-        w = max(w, min(half_hi, max_fwd));
+        const int need = half_lo + half_hi - b - w;
+        int best_b = -1;
+        if (similar && need > 0) {
+            double best = 0.0;
+            int best_skew = 0;
+            for (int extra = 0; extra <= need; ++extra) {
+                const int nb = b + extra, nw = w + need - extra;
+                if (nb > max_back || nw > max_fwd) continue;
+                double cost = 0.0;
+                for (int j = b + 1; j <= nb; ++j) cost += unlike(counts, n_emitted, n_elements, e, f, f - j);
+                for (int j = w + 1; j <= nw; ++j) cost += unlike(counts, n_emitted, n_elements, e, f, f + j);
+                const int skew = abs(nb - nw);
+                if (best_b < 0 || cost < best || (cost == best && skew < best_skew)) {
+                    best_b = nb;
+                    best = cost;
+                    best_skew = skew;
+                }
+            }
+        }
+        if (best_b >= 0) {
+            w += need - (best_b - b);
+            b = best_b;
+        } else {
+            b = max(b, min(half_lo, max_back));
+            w = max(w, min(half_hi, max_fwd));
+        }
     }
     back[gid] = (uchar)b;
     fwd[gid] = (uchar)w;

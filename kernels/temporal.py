@@ -13,9 +13,17 @@ Condition (1), as implemented (paper symbols; ``s`` = ``smoothing_frames``, defa
     keep g while  mu - k sigma <= x(g) <= mu + k sigma,  evaluated as (x - mu)^2 <= k^2 sigma^2
 
 Walks run backward and forward from f independently and stop at the first failing frame, at
-F_max/2 frames and at the animation's ends. Afterwards at least ``min_extent`` frames centred on
-f are taken (``(min_extent-1)//2`` back, the rest forward; each clipped to F_max/2 and the ends):
-the paper's minimal extent of 3 frames, justified by temporal masking (§5.1).
+F_max/2 frames and at the animation's ends. Afterwards at least ``min_extent`` frames are taken:
+the paper's minimal extent of 3 frames, justified by temporal masking (§5.1). The paper does not
+say where the extra frames lie. ``similar=True`` (the default, ``RenderConfig.min_extent_similar``)
+takes them on the side(s) whose single-frame rates are least unlike f's, sum over the added g of
+(c_g/N_g - c_f/N_f)^2 N_g (ties: the most centred placement), within F_max/2 and the ends. Why:
+beside an abrupt change (a light switched at frame J) the 3-frame means put a third of the change
+into mu at J-1 and J, so both walks stop at once there, and a centred extent pooled frame J into
+J-1 and J-1 into J: a third of the wrong lighting for two frames, and a flicker the error benchmark
+(pipeline/benchmarks/error.py) measured as half of the guided run's. With the placement, J-1 takes
+[J-3, J-1] and J takes [J, J+2]. ``similar=False``, or where no placement fits the limits:
+``(min_extent-1)//2`` back and the rest forward, each clipped to F_max/2 and the ends.
 
 Different N_frame in neighbouring frames (N doubles per segment in §5.2.3). Counts are compared on
 frame f's photon budget: a count c_j is scaled by N_f / N_j (done as N_f * (c_j / N_j)). Under
@@ -87,7 +95,7 @@ def _extents(fmax: int, mode: str, min_extent: int) -> tuple[int, int, int, bool
 
 
 def windows_cl(counts: npt.ArrayLike, n_emitted: npt.ArrayLike, *, fmax: int, mode: str = "adaptive",
-               k_sigma: float = 2.0, smoothing_frames: int = 3, min_extent: int = 3,
+               k_sigma: float = 2.0, smoothing_frames: int = 3, min_extent: int = 3, similar: bool = True,
                frames: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Windows of frames ``[f0, f1)`` (default all) on PoCL.
 
@@ -96,6 +104,7 @@ def windows_cl(counts: npt.ArrayLike, n_emitted: npt.ArrayLike, *, fmax: int, mo
     counts : (F, E) uint32 hit counts per frame and element (the store's count table).
     n_emitted : (F,) photons emitted per frame, N_frame.
     fmax : F_max, the segment length; each direction is limited to F_max // 2 frames.
+    similar : where the minimal extent's extra frames go (module docstring).
     frames : optional (f0, f1) range of output frames (indices into the table).
 
     Returns
@@ -115,17 +124,17 @@ def windows_cl(counts: npt.ArrayLike, n_emitted: npt.ArrayLike, *, fmax: int, mo
     d_n = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=n_emitted)
     d_q = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=inverse_budget(n_emitted, smoothing_frames))
     d_rate = cl.Buffer(ctx, mf.READ_WRITE, size=8 * counts.size)
+    d_counts = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=counts if adaptive else np.zeros(1, np.uint32))
     if adaptive:
-        d_counts = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=counts)
         kernel("temporal", "smooth_rates")(
             queue, (counts.size,), None, d_counts, d_n, np.int32(n_frames), np.int32(n_elements),
             np.int32(smoothing_frames // 2), d_rate)
     d_back = cl.Buffer(ctx, mf.WRITE_ONLY, size=back.nbytes)
     d_fwd = cl.Buffer(ctx, mf.WRITE_ONLY, size=fwd.nbytes)
     kernel("temporal", "windows")(
-        queue, (back.size,), None, d_rate, d_n, d_q, np.int32(n_frames), np.int32(n_elements),
+        queue, (back.size,), None, d_rate, d_counts, d_n, d_q, np.int32(n_frames), np.int32(n_elements),
         np.int32(f0), np.int32(n_out), np.int32(half_fmax), np.int32(half_lo), np.int32(half_hi),
-        np.float64(float(k_sigma) * float(k_sigma)), np.int32(adaptive), d_back, d_fwd)
+        np.float64(float(k_sigma) * float(k_sigma)), np.int32(adaptive), np.int32(bool(similar)), d_back, d_fwd)
     cl.enqueue_copy(queue, back, d_back)
     cl.enqueue_copy(queue, fwd, d_fwd)
     return back, fwd
@@ -146,7 +155,7 @@ def smoothed_rates_reference(counts: np.ndarray, n_emitted: np.ndarray, smoothin
 
 
 def windows_reference(counts: npt.ArrayLike, n_emitted: npt.ArrayLike, *, fmax: int, mode: str = "adaptive",
-                      k_sigma: float = 2.0, smoothing_frames: int = 3, min_extent: int = 3,
+                      k_sigma: float = 2.0, smoothing_frames: int = 3, min_extent: int = 3, similar: bool = True,
                       frames: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """NumPy twin of :func:`windows_cl` (same arguments and results)."""
     counts, n_emitted, f0, f1 = _check(counts, n_emitted, fmax, mode, smoothing_frames, min_extent, frames)
@@ -165,7 +174,8 @@ def windows_reference(counts: npt.ArrayLike, n_emitted: npt.ArrayLike, *, fmax: 
             continue
         n_f = n_emitted[f]
         mu = n_f * rate[f]
-        for out, step, limit, least in ((back, -1, max_back, half_lo), (fwd, 1, max_fwd, half_hi)):
+        walked = []
+        for step, limit in ((-1, max_back), (1, max_fwd)):
             extent = np.zeros(n_elements, np.int64)
             alive = np.ones(n_elements, bool)
             for d in range(1, limit + 1):
@@ -175,5 +185,43 @@ def windows_reference(counts: npt.ArrayLike, n_emitted: npt.ArrayLike, *, fmax: 
                 ok = d * d <= k2 * var  # mu - k sigma <= x <= mu + k sigma
                 alive &= ok
                 extent += alive
-            out[i] = np.maximum(extent, min(least, limit))
+            walked.append(extent)
+        b, w = walked
+        placed = _place_similar(counts, n_emitted, f, b, w, half_lo + half_hi, max_back, max_fwd) if similar \
+            else np.full(n_elements, -1)
+        back[i] = np.where(placed >= 0, placed, np.maximum(b, min(half_lo, max_back)))
+        fwd[i] = np.where(placed >= 0, half_lo + half_hi - placed, np.maximum(w, min(half_hi, max_fwd)))
     return back, fwd
+
+
+def _unlike(counts: np.ndarray, n_emitted: np.ndarray, e: int, f: int, g: int) -> float:
+    """(r_g - r_f)^2 N_g of element e, r = c / N: how unlike frame f frame g is (temporal.cl ``unlike``)."""
+    r_f = float(counts[f, e]) / n_emitted[f]
+    d = float(counts[g, e]) / n_emitted[g] - r_f
+    return d * d * n_emitted[g]
+
+
+def _place_similar(counts: np.ndarray, n_emitted: np.ndarray, f: int, b: np.ndarray, w: np.ndarray, extra: int,
+                   max_back: int, max_fwd: int) -> np.ndarray:
+    """Per element, the back extent of the minimal-extent placement least unlike frame f (module
+    docstring), or -1 where the walks already cover ``extra`` frames or nothing fits; scalar loops
+    in the kernel's order, so the sums round alike."""
+    out = np.full(len(b), -1, np.int64)
+    for e in np.flatnonzero(b + w < extra):
+        b_e, w_e = int(b[e]), int(w[e])
+        need = extra - b_e - w_e
+        best_b, best, best_skew = -1, 0.0, 0
+        for more in range(need + 1):
+            nb, nw = b_e + more, w_e + need - more
+            if nb > max_back or nw > max_fwd:
+                continue
+            cost = 0.0
+            for j in range(b_e + 1, nb + 1):
+                cost += _unlike(counts, n_emitted, e, f, f - j)
+            for j in range(w_e + 1, nw + 1):
+                cost += _unlike(counts, n_emitted, e, f, f + j)
+            skew = abs(nb - nw)
+            if best_b < 0 or cost < best or (cost == best and skew < best_skew):
+                best_b, best, best_skew = nb, cost, skew
+        out[e] = best_b
+    return out

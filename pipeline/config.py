@@ -47,6 +47,8 @@ class RenderConfig:
     k_sigma: float = _param(2.0, "collection", "k in mu - k sigma <= x <= mu + k sigma, §5.1 Eq. (1)", 0.0)
     smoothing_frames: int = _param(3, "collection", "frames averaged for mu and x, §5.1", 1, 255, odd=True)
     min_extent: int = _param(3, "collection", "minimal temporal extent in frames, §5.1", 1, 255)
+    min_extent_similar: bool = _param(True, "collection", "the minimal extent's extra frames on the side(s) least "
+                                      "unlike the frame, not centred (kernels/temporal.py; §5.1 leaves it open)")
 
     # --- filter: adaptive object-space filter (§5.2.5, Volevich et al. 2000), kernels/filter.py -----
     spatial_filter: bool = _param(True, "filter", "Step 5 of §5.2: filter where too few photons were collected")
