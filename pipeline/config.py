@@ -49,6 +49,8 @@ class RenderConfig:
     min_extent: int = _param(3, "collection", "minimal temporal extent in frames, §5.1", 1, 255)
     min_extent_similar: bool = _param(True, "collection", "the minimal extent's extra frames on the side(s) least "
                                       "unlike the frame, not centred (kernels/temporal.py; §5.1 leaves it open)")
+    symmetric_windows: bool = _param(False, "collection", "cut both walks to the shorter one: no bias from a linear "
+                                     "drift, more noise (off: the paper's asymmetric windows, §5.1)")
 
     # --- filter: adaptive object-space filter (§5.2.5, Volevich et al. 2000), kernels/filter.py -----
     spatial_filter: bool = _param(True, "filter", "Step 5 of §5.2: filter where too few photons were collected")

@@ -111,7 +111,7 @@ def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames: npt.Ar
         b, w = windows_cl(counts[a - counts_from:z - counts_from], n_emitted[a:z], fmax=fmax, mode=mode,
                           k_sigma=config.k_sigma, smoothing_frames=config.smoothing_frames,
                           min_extent=config.min_extent, similar=config.min_extent_similar,
-                          frames=(lo - a, hi - a))
+                          symmetric=config.symmetric_windows, frames=(lo - a, hi - a))
         back[inside] = b[frames[inside] - lo]
         fwd[inside] = w[frames[inside] - lo]
     return back, fwd
