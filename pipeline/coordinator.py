@@ -244,8 +244,10 @@ class SegmentRun:
         use = self.batches(targets)
         counts = self.store.counts(kind="all", batches=use)
         emitted = np.array([self.store.photons_in(f, int(use[f])) for f in range(self.store.n_frames)], np.float64)
+        # p_me counts how far Condition (1)'s walks reach each way, so not the symmetric cut of
+        # the collection (which would make the two shares one)
         back, fwd = collection_windows(counts, emitted, [place.k - 1], mode="adaptive", fmax=place.fmax,
-                                       config=self.config)
+                                       config=self.config.replace(symmetric_windows=False))
         hit = counts[place.start - 1:place.end].sum(axis=0) > 0
         pb, pf = p_me(back[0], fwd[0], place.fmax, hit)
         progress(f"segment {self._index}: F_max {place.fmax}, K {place.k}: p_me {pb:.2f} back, {pf:.2f} forward")
