@@ -150,7 +150,8 @@ def write_video(pngs: Iterable[str | Path], path: str | Path, fps: float) -> int
     if not pngs:
         return 0
     tmp = _partial(path)
-    cmd = [imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-nostdin", "-loglevel", "error",
+    # -xerror: a PNG ffmpeg cannot decode stops it (it would drop the frame and exit 0)
+    cmd = [imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-nostdin", "-loglevel", "error", "-xerror",
            "-f", "image2pipe", "-framerate", f"{fps:g}", "-c:v", "png", "-i", "-",
            "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", "-c:v", "libx264", "-preset", "ultrafast", "-crf", "18",
            "-pix_fmt", "yuv420p", "-movflags", "+faststart", "-f", "mp4", str(tmp)]
