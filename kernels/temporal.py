@@ -15,15 +15,19 @@ Condition (1), as implemented (paper symbols; ``s`` = ``smoothing_frames``, defa
 Walks run backward and forward from f independently and stop at the first failing frame, at
 F_max/2 frames and at the animation's ends. Afterwards at least ``min_extent`` frames are taken:
 the paper's minimal extent of 3 frames, justified by temporal masking (§5.1). The paper does not
-say where the extra frames lie. ``similar=True`` (the default, ``RenderConfig.min_extent_similar``)
-takes them on the side(s) whose single-frame rates are least unlike f's, sum over the added g of
-(c_g/N_g - c_f/N_f)^2 N_g (ties: the most centred placement), within F_max/2 and the ends. Why:
-beside an abrupt change (a light switched at frame J) the 3-frame means put a third of the change
-into mu at J-1 and J, so both walks stop at once there, and a centred extent pooled frame J into
-J-1 and J-1 into J: a third of the wrong lighting for two frames, and a flicker the error benchmark
+say where the extra frames lie. ``similar=True`` (the default, ``RenderConfig.min_extent_similar``):
+where the walks cover fewer than ``min_extent`` frames, the missing ones are placed on the side(s)
+least unlike f, by the summed z^2 of the added frames, z^2(g) = (r_g - r_f)^2 N_f N_g / (c_f + c_g)
+(r = c/N, the Poisson z-score of a common rate), but only if that beats the most centred placement
+by more than k^2, so noise alone keeps the centred one (choosing by similarity to f's own noisy
+count would pull the estimate towards that noise: at ROOM's K_1 an ungated choice cost 0.0006 of
+bias); where the walks already cover ``min_extent`` frames they stay as walked. Why: beside an
+abrupt change (a light switched at frame J) the 3-frame means put a third of the change into mu at
+J-1 and J, so both walks stop at once there, and a centred extent pooled frame J into J-1 and J-1
+into J: a third of the wrong lighting for two frames, and a flicker the error benchmark
 (pipeline/benchmarks/error.py) measured as half of the guided run's. With the placement, J-1 takes
-[J-3, J-1] and J takes [J, J+2]. ``similar=False``, or where no placement fits the limits:
-``(min_extent-1)//2`` back and the rest forward, each clipped to F_max/2 and the ends.
+[J-3, J-1] and J takes [J, J+2]. ``similar=False``, or where no placement fits the limits: at
+least ``(min_extent-1)//2`` back and the rest forward, each clipped to F_max/2 and the ends.
 
 ``symmetric=True`` (``RenderConfig.symmetric_windows``, default off as in the paper, which lets the
 two walks end apart) cuts both walks to the shorter before the minimal extent: a window
@@ -197,30 +201,34 @@ def windows_reference(counts: npt.ArrayLike, n_emitted: npt.ArrayLike, *, fmax: 
         b, w = walked
         if symmetric:
             b = w = np.minimum(b, w)
-        placed = _place_similar(counts, n_emitted, f, b, w, half_lo + half_hi, max_back, max_fwd) if similar \
+        extent = half_lo + half_hi
+        placed = _place_similar(counts, n_emitted, f, b, w, extent, max_back, max_fwd, k2) if similar \
             else np.full(n_elements, -1)
         back[i] = np.where(placed >= 0, placed, np.maximum(b, min(half_lo, max_back)))
-        fwd[i] = np.where(placed >= 0, half_lo + half_hi - placed, np.maximum(w, min(half_hi, max_fwd)))
+        fwd[i] = np.where(placed >= 0, np.where(b + w >= extent, w, extent - placed),
+                          np.maximum(w, min(half_hi, max_fwd)))
     return back, fwd
 
 
 def _unlike(counts: np.ndarray, n_emitted: np.ndarray, e: int, f: int, g: int) -> float:
-    """(r_g - r_f)^2 N_g of element e, r = c / N: how unlike frame f frame g is (temporal.cl ``unlike``)."""
-    r_f = float(counts[f, e]) / n_emitted[f]
-    d = float(counts[g, e]) / n_emitted[g] - r_f
-    return d * d * n_emitted[g]
+    """z^2 of r_g - r_f of element e under one common rate (temporal.cl ``unlike``)."""
+    s = float(counts[f, e]) + float(counts[g, e])
+    if s == 0.0:
+        return 0.0
+    d = float(counts[g, e]) / n_emitted[g] - float(counts[f, e]) / n_emitted[f]
+    return d * d * (n_emitted[f] * n_emitted[g]) / s
 
 
 def _place_similar(counts: np.ndarray, n_emitted: np.ndarray, f: int, b: np.ndarray, w: np.ndarray, extra: int,
-                   max_back: int, max_fwd: int) -> np.ndarray:
-    """Per element, the back extent of the minimal-extent placement least unlike frame f (module
-    docstring), or -1 where the walks already cover ``extra`` frames or nothing fits; scalar loops
+                   max_back: int, max_fwd: int, k2: float) -> np.ndarray:
+    """Per element, the back extent of the minimal extent's placement (module docstring): the walked
+    one where the walks cover ``extra`` frames, -1 where no placement fits the limits; scalar loops
     in the kernel's order, so the sums round alike."""
-    out = np.full(len(b), -1, np.int64)
+    out = np.where(b + w >= extra, b, -1).astype(np.int64)
     for e in np.flatnonzero(b + w < extra):
         b_e, w_e = int(b[e]), int(w[e])
         need = extra - b_e - w_e
-        best_b, best, best_skew = -1, 0.0, 0
+        best_b, centre_b, centre_skew, best, centre = -1, -1, 0, 0.0, 0.0
         for more in range(need + 1):
             nb, nw = b_e + more, w_e + need - more
             if nb > max_back or nw > max_fwd:
@@ -230,8 +238,11 @@ def _place_similar(counts: np.ndarray, n_emitted: np.ndarray, f: int, b: np.ndar
                 cost += _unlike(counts, n_emitted, e, f, f - j)
             for j in range(w_e + 1, nw + 1):
                 cost += _unlike(counts, n_emitted, e, f, f + j)
+            if best_b < 0 or cost < best:
+                best_b, best = nb, cost
             skew = abs(nb - nw)
-            if best_b < 0 or cost < best or (cost == best and skew < best_skew):
-                best_b, best, best_skew = nb, cost, skew
-        out[e] = best_b
+            if centre_b < 0 or skew < centre_skew:
+                centre_b, centre, centre_skew = nb, cost, skew
+        if centre_b >= 0:
+            out[e] = best_b if centre - best > k2 else centre_b
     return out

@@ -154,6 +154,20 @@ def test05b_frames_beside_an_abrupt_change_keep_to_their_side():
     assert ((back + fwd)[:, 0] >= 2).all()
 
 
+def test05d_a_small_difference_keeps_the_centred_extent():
+    # Both neighbours of frame 10 fail Condition (1) (125 against 100 +- 20): z^2 of each is
+    # 25^2 / 225 = 2.8; one-sided forward costs 2.8 (frame 12 equals frame 10), centred 5.6. The
+    # saving, 2.8, is below k^2 = 4: not significant, so the centred placement stays
+    counts = np.full((21, 1), 100, np.uint32)
+    counts[9] = counts[11] = 125
+    counts[8] = 122
+    back, fwd = both(counts, np.full(21, 1e4), fmax=30, smoothing_frames=1)
+    assert (back[10, 0], fwd[10, 0]) == (1, 1)
+    counts[11] = 160  # now the forward neighbour differs a lot (z^2 = 13.8): backward it goes
+    back, fwd = both(counts, np.full(21, 1e4), fmax=30, smoothing_frames=1)
+    assert (back[10, 0], fwd[10, 0]) == (2, 0)
+
+
 def test05c_symmetric_windows_cut_the_longer_walk():
     # Lighting rises slowly (inside Condition (1)) until a jump at frame 26: frame 20's forward walk
     # stops after 4 frames, its backward walk reaches F_max/2. Its window [5, 24] pools the light
@@ -196,7 +210,9 @@ def test07_sigma_grows_for_frames_with_fewer_photons():
     counts_same = counts.copy()
     counts_same[11:] = 132
     back2, fwd2 = both(counts_same, np.full(30, 1e4), fmax=30, smoothing_frames=1)
-    assert fwd2[10, 0] == 1  # only the minimal extent
+    assert fwd2[10, 0] == 0 and back2[10, 0] == 10  # the walk stops; the backward one covers the minimal extent
+    back3, fwd3 = both(counts_same, np.full(30, 1e4), fmax=30, smoothing_frames=1, similar=False)
+    assert fwd3[10, 0] == 1  # the centred rule takes one frame forward whatever the walks cover
 
 
 def test09_refuses_bad_input():
