@@ -145,6 +145,18 @@ def _reporting(client, performance_report: str | None, echo):
         yield
 
 
+def task_key(name: str, *where: str) -> str:
+    """``name`` tagged with a digest of where the task writes (store, output folder).
+
+    A submission whose key the cluster still holds gets the earlier task's result without running
+    (distributed reuses keys), so two runs of the same work into different stores (the error
+    benchmark's warm-up and first run, two renders on one long-lived scheduler) must never share a
+    key: the second run's files were silently not written."""
+    from .config import stable_digest
+
+    return f"{name}-{stable_digest(list(where))[:8]}"
+
+
 def run_tasks(client: Client | None, func: Callable, calls: Iterable[tuple[str, dict]], *, desc: str,
               progress: bool = True) -> dict[str, object]:
     """Run ``func(**kwargs)`` for every ``(key, kwargs)`` and return ``{key: result}``.

@@ -38,7 +38,7 @@ from typing import TYPE_CHECKING, Callable, Iterable, Iterator
 import numpy as np
 
 from .cluster import result as wait_result
-from .cluster import run_tasks
+from .cluster import run_tasks, task_key
 from .config import RenderConfig, stable_digest
 from .segment_records import SegmentRecord, read_record, write_record
 from .segments import (
@@ -177,7 +177,7 @@ class SegmentRun:
             if self.store.prefix_for(f - 1, n) is not None:
                 continue
             have, batch = self.store.photons_emitted(f - 1), len(self.store.done_batches(f - 1))
-            calls.append((f"shoot-{cfg8}-s{self.config.seed}-f{f:05d}-b{batch:02d}", dict(
+            calls.append((task_key(f"shoot-{cfg8}-s{self.config.seed}-f{f:05d}-b{batch:02d}", self.job.store_url), dict(
                 store_url=self.job.store_url, scene_path=self.job.scene_path, scene_hash=self.job.scene_hash,
                 element_size=self.job.element_size, frame=f, frame_index=f - 1, batch=batch,
                 n_photons=n - have, photon_start=have, seed=self.config.seed,
@@ -381,7 +381,7 @@ class SegmentRun:
         job = self.job
         use = self.batches(targets).tolist()
         frames = self.frames_of(rec)
-        return [(f"reconstruct-{job.decision_hash[:8]}-f{frames[i]:05d}", dict(
+        return [(task_key(f"reconstruct-{job.decision_hash[:8]}-f{frames[i]:05d}", job.store_url), dict(
             store_url=job.store_url, scene_path=job.scene_path, scene_hash=job.scene_hash, camera=job.camera,
             element_size=job.element_size, frames=frames[i:i + CHUNK_FRAMES], fmax=rec.fmax, mode=rec.temporal,
             batches=use, config=job.config, aspect=job.width / job.height))
@@ -516,7 +516,7 @@ def composite_calls(job: Job, frames: list[int], frames_info: dict[int, dict], *
         exr, png = frame_paths(job.out_dir, f)
         if f not in force and frame_is_valid(exr, png, job.width, job.height, fh):
             continue
-        calls.append((f"composite-{fh[:8]}-f{f:05d}", dict(
+        calls.append((task_key(f"composite-{fh[:8]}-f{f:05d}", job.store_url, job.out_dir), dict(
             store_url=job.store_url, scene_path=job.scene_path, scene_hash=job.scene_hash, camera=job.camera,
             element_size=job.element_size, frame=f, width=job.width, height=job.height, spp=job.spp,
             seed=job.config["seed"], max_depth=job.reflection_depth, area_samples=job.area_samples,

@@ -11,7 +11,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
-from .cluster import connect, run_tasks
+from .cluster import connect, run_tasks, task_key
 from .config import RenderConfig
 from .errors import LoomError
 from .paths import check_writable_dir
@@ -77,7 +77,7 @@ def tasks(p: ShootPlan, store: PhotonStore, url: str) -> list[tuple[str, dict]]:
         if have >= p.n_photons:
             continue
         batch = len(done)
-        out.append((f"shoot-{cfg8}-s{p.config.seed}-f{f:05d}-b{batch:02d}", dict(
+        out.append((task_key(f"shoot-{cfg8}-s{p.config.seed}-f{f:05d}-b{batch:02d}", url), dict(
             store_url=url, scene_path=str(p.scene.path), scene_hash=p.scene.scene_hash,
             element_size=p.elements.element_size, frame=f, frame_index=f - 1, batch=batch,
             n_photons=p.n_photons - have, photon_start=have, seed=p.config.seed,

@@ -147,3 +147,20 @@ def test_photons_fill_the_room_frames(scenes, tmp_path):
     counts = store.counts("all", frames=[59])[0]
     assert counts.sum() == len(recs.key)
     assert np.count_nonzero(counts) > 0.2 * store.n_elements
+
+
+def test_two_stores_never_share_a_task_key(scenes, tmp_path):
+    # A key the cluster still holds returns the earlier task's result without running it, so the
+    # same batches shot into two stores must have different keys (the second store stayed empty)
+    from pipeline.config import RenderConfig
+    from pipeline.scene import Scene
+    from pipeline.shoot import plan, tasks
+
+    p = plan(Scene.load(scenes["cornell"]), "1-2", 2_000, RenderConfig())
+    keys = {}
+    for name in ("a", "b"):
+        url = str(tmp_path / f"{name}.zarr")
+        shoot(scenes["cornell"], frames="1-2", n_photons=1_000, store_url=url, scheduler="synchronous",
+              progress=False)
+        keys[name] = [k for k, _ in tasks(p, PhotonStore.open(url), url)]  # the second batch of each frame
+    assert len(keys["a"]) == len(keys["b"]) == 2 and not set(keys["a"]) & set(keys["b"])
