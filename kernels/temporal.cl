@@ -56,7 +56,7 @@ inline double unlike(__global const uint *counts, __global const double *n_emitt
 // F_max/2 frames each way and to the animation's ends; then at least min_extent = half_lo +
 // half_hi + 1 frames. similar != 0: where the walks cover fewer, the missing frames are placed
 // (inside the limits) on the side(s) whose frames are least unlike f, summed z^2 of the added
-// frames, if that beats the most centred placement by more than k^2 (a significant difference,
+// frames, if that beats the most centred placement by more than k^2 (k of Eq. (1); a significant difference,
 // so noise alone keeps the centred one); where the walks cover min_extent frames they stay. So a
 // frame beside an abrupt change pools the frames on its own side of it. similar == 0, or no
 // placement inside the limits: at least half_lo back and half_hi forward (clipped likewise).

@@ -19,15 +19,15 @@ say where the extra frames lie. ``similar=True`` (the default, ``RenderConfig.mi
 where the walks cover fewer than ``min_extent`` frames, the missing ones are placed on the side(s)
 least unlike f, by the summed z^2 of the added frames, z^2(g) = (r_g - r_f)^2 N_f N_g / (c_f + c_g)
 (r = c/N, the Poisson z-score of a common rate), but only if that beats the most centred placement
-by more than k^2, so noise alone mostly keeps the centred one (choosing by similarity to f's own
+by more than k^2 (k of Eq. (1)), so noise alone mostly keeps the centred one (choosing by similarity to f's own
 noisy count pulls the estimate towards that noise); where the walks already cover ``min_extent``
 frames they stay as walked. Cost where nothing jumps, ROOM's K_1 at 640,000 photons a frame
 against a 64,000,000-photon reference: rel L2 0.0205 against 0.0200 centred, d_AQM 2.95 % against
-2.94 % (0.0206 and 2.96 % ungated). Why: beside an
-abrupt change (a light switched at frame J) the 3-frame means put a third of the change into mu at
-J-1 and J, so both walks stop at once there, and a centred extent pooled frame J into J-1 and J-1
-into J: a third of the wrong lighting for two frames, and a flicker the error benchmark
-(pipeline/benchmarks/error.py) measured as half of the guided run's. With the placement, J-1 takes
+2.94 % (0.0206 and 2.96 % ungated). Why: beside an abrupt change (a light switched at frame J)
+the 3-frame means put a third of the change into mu at J-1 and J, so both walks stop at once
+there, and a centred extent pooled frame J into J-1 and J-1 into J: a third of the wrong lighting
+for two frames, and a flicker the error benchmark (pipeline/benchmarks/error.py) measured as half
+of the guided run's. With the placement, J-1 takes
 [J-3, J-1] and J takes [J, J+2]. ``similar=False``, or where no placement fits the limits: at
 least ``(min_extent-1)//2`` back and the rest forward, each clipped to F_max/2 and the ends.
 
@@ -203,11 +203,11 @@ def windows_reference(counts: npt.ArrayLike, n_emitted: npt.ArrayLike, *, fmax: 
         b, w = walked
         if symmetric:
             b = w = np.minimum(b, w)
-        extent = half_lo + half_hi
-        placed = _place_similar(counts, n_emitted, f, b, w, extent, max_back, max_fwd, k2) if similar \
+        span = half_lo + half_hi  # frames besides f the minimal extent needs
+        placed = _place_similar(counts, n_emitted, f, b, w, span, max_back, max_fwd, k2) if similar \
             else np.full(n_elements, -1)
         back[i] = np.where(placed >= 0, placed, np.maximum(b, min(half_lo, max_back)))
-        fwd[i] = np.where(placed >= 0, np.where(b + w >= extent, w, extent - placed),
+        fwd[i] = np.where(placed >= 0, np.where(b + w >= span, w, span - placed),
                           np.maximum(w, min(half_hi, max_fwd)))
     return back, fwd
 
@@ -221,15 +221,15 @@ def _unlike(counts: np.ndarray, n_emitted: np.ndarray, e: int, f: int, g: int) -
     return d * d * (n_emitted[f] * n_emitted[g]) / s
 
 
-def _place_similar(counts: np.ndarray, n_emitted: np.ndarray, f: int, b: np.ndarray, w: np.ndarray, extra: int,
+def _place_similar(counts: np.ndarray, n_emitted: np.ndarray, f: int, b: np.ndarray, w: np.ndarray, span: int,
                    max_back: int, max_fwd: int, k2: float) -> np.ndarray:
     """Per element, the back extent of the minimal extent's placement (module docstring): the walked
-    one where the walks cover ``extra`` frames, -1 where no placement fits the limits; scalar loops
-    in the kernel's order, so the sums round alike."""
-    out = np.where(b + w >= extra, b, -1).astype(np.int64)
-    for e in np.flatnonzero(b + w < extra):
+    one where the walks cover ``span`` frames besides f, -1 where no placement fits the limits;
+    scalar loops in the kernel's order, so the sums round alike."""
+    out = np.where(b + w >= span, b, -1).astype(np.int64)
+    for e in np.flatnonzero(b + w < span):
         b_e, w_e = int(b[e]), int(w[e])
-        need = extra - b_e - w_e
+        need = span - b_e - w_e
         best_b, centre_b, centre_skew, best, centre = -1, -1, 0, 0.0, 0.0
         for more in range(need + 1):
             nb, nw = b_e + more, w_e + need - more

@@ -13,6 +13,7 @@ from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator
 
 from tqdm import tqdm
 
+from .config import stable_digest
 from .errors import LoomError
 
 if TYPE_CHECKING:
@@ -152,8 +153,6 @@ def task_key(name: str, *where: str) -> str:
     (distributed reuses keys), so two runs of the same work into different stores (the error
     benchmark's warm-up and first run, two renders on one long-lived scheduler) must never share a
     key: the second run's files were silently not written."""
-    from .config import stable_digest
-
     return f"{name}-{stable_digest(list(where))[:8]}"
 
 

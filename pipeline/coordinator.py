@@ -53,6 +53,7 @@ from .segments import (
     pilot_n_frame,
     place_segment,
 )
+from .shoot import shoot_key
 
 if TYPE_CHECKING:
     from distributed import Client
@@ -171,13 +172,12 @@ class SegmentRun:
         for f, n in targets.items():
             src = self.store.source_frame(f - 1) + 1
             want[src] = max(want.get(src, 0), int(n))
-        cfg8 = self.config.photon_hash(self.job.element_size)[:8]
         calls = []
         for f, n in sorted(want.items()):
             if self.store.prefix_for(f - 1, n) is not None:
                 continue
             have, batch = self.store.photons_emitted(f - 1), len(self.store.done_batches(f - 1))
-            calls.append((task_key(f"shoot-{cfg8}-s{self.config.seed}-f{f:05d}-b{batch:02d}", self.job.store_url), dict(
+            calls.append((shoot_key(self.config, self.job.element_size, f, batch, self.job.store_url), dict(
                 store_url=self.job.store_url, scene_path=self.job.scene_path, scene_hash=self.job.scene_hash,
                 element_size=self.job.element_size, frame=f, frame_index=f - 1, batch=batch,
                 n_photons=n - have, photon_start=have, seed=self.config.seed,

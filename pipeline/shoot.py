@@ -67,17 +67,22 @@ def open_store(p: ShootPlan, url: str) -> PhotonStore:
     return store
 
 
+def shoot_key(config: RenderConfig, element_size: float, frame: int, batch: int, store_url: str) -> str:
+    """The Dask key of photon batch ``batch`` of ``frame`` shot into ``store_url``."""
+    name = f"shoot-{config.photon_hash(element_size)[:8]}-s{config.seed}-f{frame:05d}-b{batch:02d}"
+    return task_key(name, store_url)
+
+
 def tasks(p: ShootPlan, store: PhotonStore, url: str) -> list[tuple[str, dict]]:
     """(key, kwargs) of every batch still to trace."""
     out = []
-    cfg8 = p.config.photon_hash(p.elements.element_size)[:8]
     for f in p.traced_frames:
         done = store.done_batches(f - 1)
         have = store.photons_emitted(f - 1)
         if have >= p.n_photons:
             continue
         batch = len(done)
-        out.append((task_key(f"shoot-{cfg8}-s{p.config.seed}-f{f:05d}-b{batch:02d}", url), dict(
+        out.append((shoot_key(p.config, p.elements.element_size, f, batch, url), dict(
             store_url=url, scene_path=str(p.scene.path), scene_hash=p.scene.scene_hash,
             element_size=p.elements.element_size, frame=f, frame_index=f - 1, batch=batch,
             n_photons=p.n_photons - have, photon_start=have, seed=p.config.seed,

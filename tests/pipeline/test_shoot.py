@@ -11,9 +11,11 @@ import pytest
 from click.testing import CliRunner
 
 from pipeline.cli import main
+from pipeline.config import RenderConfig
 from pipeline.errors import LoomError
+from pipeline.scene import Scene
 from pipeline.scene.builtin import write_builtin
-from pipeline.shoot import shoot
+from pipeline.shoot import plan, shoot, tasks
 from pipeline.store import PhotonStore
 from tests.pipeline.shoot_helpers import store_fingerprint
 
@@ -152,10 +154,6 @@ def test_photons_fill_the_room_frames(scenes, tmp_path):
 def test_two_stores_never_share_a_task_key(scenes, tmp_path):
     # A key the cluster still holds returns the earlier task's result without running it, so the
     # same batches shot into two stores must have different keys (the second store stayed empty)
-    from pipeline.config import RenderConfig
-    from pipeline.scene import Scene
-    from pipeline.shoot import plan, tasks
-
     p = plan(Scene.load(scenes["cornell"]), "1-2", 2_000, RenderConfig())
     keys = {}
     for name in ("a", "b"):
