@@ -232,10 +232,6 @@ def finish(job: Job, records: list[SegmentRecord], *, rays: dict, batches: int, 
     of a rendered job. ``ran_here`` False: the frames were written by other processes (a farm's
     recipes), whose ray counts and timings this one does not know."""
     out = Path(job.out_dir)
-    config = RenderConfig.from_dict(job.config)
-    if job.n_photons is None:
-        from .segment_plot import plot_segments
-        plot_segments(records, out / "segments" / "segments.png", d_thr=config.d_thr, p_thr=config.p_thr)
     video = out / "preview.mp4"
     from workers.camera_paths import RAY_KINDS
     from workers.scene_cache import load_scene

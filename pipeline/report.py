@@ -28,6 +28,7 @@ from pathlib import Path
 from string import Template
 
 from .errors import LoomError
+from .figures import figure
 from .segment_records import SegmentRecord, read_records
 
 VIDEO_EMBED_MAX = 64 * 2**20
@@ -89,7 +90,7 @@ def page_parts(out: Path, report: dict, records: list[SegmentRecord]) -> dict[st
     the video, what was skipped and the settings, so none of it waits for the video or the run's
     final times."""
     config = report.get("settings", {}).get("config", {})
-    return dict(segments=_segments(records, config), costs=_costs(report, records), windows=_windows(records),
+    return dict(segments=_segments(out, records, config), costs=_costs(report, records), windows=_windows(records),
                 aqm=_aqm_maps(out, records), filmstrip=_filmstrip(out, report.get("frames", [])))
 
 
@@ -123,27 +124,15 @@ def _png_uri(data: bytes, mime: str = "image/png") -> str:
 
 
 def _figure_uri(fig) -> str:
-    from matplotlib import pyplot as plt
+    from .figures import png_bytes
 
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=90)
-    plt.close(fig)
-    return _png_uri(buf.getvalue())
+    return _png_uri(png_bytes(fig, dpi=90))
 
 
 def _img(uri: str, alt: str, caption: str = "", cls: str = "plot", width: int | None = None) -> str:
     w = f" width=\"{width}\"" if width else ""
     cap = f"<figcaption>{_e(caption)}</figcaption>" if caption else ""
     return f"<figure><img class=\"{cls}\" id=\"{_e(alt)}\" alt=\"{_e(alt)}\" src=\"{uri}\"{w}>{cap}</figure>"
-
-
-def _pyplot():
-    import matplotlib
-
-    matplotlib.use("Agg")
-    from matplotlib import pyplot as plt
-
-    return plt
 
 
 def _summary(report: dict, records: list[SegmentRecord]) -> str:
@@ -174,7 +163,7 @@ def _ranges(frames: list[int]) -> str:
     return ",".join(parts)
 
 
-def _segments(records: list[SegmentRecord], config: dict) -> str:
+def _segments(out: Path, records: list[SegmentRecord], config: dict) -> str:
     rows = []
     for r in records:
         last = r.fmax_steps[-1] if r.fmax_steps else {}
@@ -199,13 +188,12 @@ def _segments(records: list[SegmentRecord], config: dict) -> str:
     return (table + (f"<ul>{''.join(steps)}</ul>" if steps else "")
             + _img(_per_segment_plot(records, config), "segment-plot",
                    "N_frame, F_max and d_AQM of each segment over the frames it covers")
-            + (_img(_fig6_plot(records, config), "fig6-plot", "Fig. 6: d_AQM against N_frame at each K; "
+            + (_img(_fig6_plot(out, records, config), "fig6-plot", "Fig. 6: d_AQM against N_frame at each K; "
                     "p_me against F_max (§5.2.2-3)") if any(r.guided for r in records) else ""))
 
 
 def _per_segment_plot(records: list[SegmentRecord], config: dict) -> str:
-    plt = _pyplot()
-    fig, axes = plt.subplots(1, 3, figsize=(12.5, 3.4))
+    fig, (axes,) = figure(1, 3, (12.5, 3.4))
     for r in records:
         x = [r.start - 0.5, r.end + 0.5]
         colour = f"C{r.index % 10}"
@@ -227,19 +215,17 @@ def _per_segment_plot(records: list[SegmentRecord], config: dict) -> str:
     for ax in axes:
         ax.set_xlabel("frame (dotted: K)")
         ax.grid(alpha=0.3)
-    fig.tight_layout()
     return _figure_uri(fig)
 
 
-def _fig6_plot(records: list[SegmentRecord], config: dict) -> str:
-    import tempfile
-
+def _fig6_plot(out: Path, records: list[SegmentRecord], config: dict) -> str:
+    """Fig. 6, written as the render's ``segments/segments.png`` (drawn once: it is the same picture)
+    and embedded."""
     from .segment_plot import plot_segments
 
-    with tempfile.TemporaryDirectory() as tmp:
-        path = plot_segments(records, Path(tmp) / "segments.png", d_thr=config.get("d_thr"),
-                             p_thr=config.get("p_thr"))
-        return _png_uri(path.read_bytes())
+    path = plot_segments(records, out / "segments" / "segments.png", d_thr=config.get("d_thr"),
+                         p_thr=config.get("p_thr"))
+    return _png_uri(path.read_bytes())
 
 
 def _costs(report: dict, records: list[SegmentRecord]) -> str:
@@ -265,8 +251,7 @@ def _costs(report: dict, records: list[SegmentRecord]) -> str:
 
 
 def _per_frame_plot(report: dict, records: list[SegmentRecord]) -> str:
-    plt = _pyplot()
-    fig, axes = plt.subplots(1, 3, figsize=(12.5, 3.2))
+    fig, (axes,) = figure(1, 3, (12.5, 3.2))
     times = report.get("frame_times_s", {})
     if times:
         f = sorted(int(k) for k in times)
@@ -288,7 +273,6 @@ def _per_frame_plot(report: dict, records: list[SegmentRecord]) -> str:
     axes[2].set(xlabel="frame", ylabel="frames", title="mean collection window per frame")
     for ax in axes:
         ax.grid(alpha=0.3)
-    fig.tight_layout()
     return _figure_uri(fig)
 
 
@@ -297,10 +281,9 @@ def _windows(records: list[SegmentRecord]) -> str:
     if not have:
         return ("<p>No window distribution at K recorded: segments with fixed settings (<code>--photons N</code>) "
                 "run no decision at K. The mean window of every frame is plotted under Table 2.</p>")
-    plt = _pyplot()
     cols = min(3, len(have))
     rows = (len(have) + cols - 1) // cols
-    fig, axes = plt.subplots(rows, cols, figsize=(4.2 * cols, 3.0 * rows), squeeze=False)
+    fig, axes = figure(rows, cols, (4.2 * cols, 3.0 * rows))
     for ax, r in zip(axes.ravel(), have):
         w = r.windows_at_k
         n = max(w["elements"], 1)
@@ -313,7 +296,6 @@ def _windows(records: list[SegmentRecord]) -> str:
         ax.legend(fontsize=7)
     for ax in axes.ravel()[len(have):]:
         ax.axis("off")
-    fig.tight_layout()
     return _img(_figure_uri(fig), "windows-plot", "Fig. 5: how many frames before and after K each element "
                 "collects photons from (Condition (1), §5.1), over the elements the segment's photons hit")
 

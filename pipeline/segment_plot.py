@@ -4,7 +4,6 @@ F_max steps of §5.2.2 (p_me both ways at each F_max tried), one PNG (``OUT/segm
 from __future__ import annotations
 
 import math
-import os
 from pathlib import Path
 
 from .segment_records import SegmentRecord
@@ -13,12 +12,9 @@ from .segment_records import SegmentRecord
 def plot_segments(records: list[SegmentRecord], path: str | Path, *, d_thr: float | None = None,
                   p_thr: float | None = None) -> Path:
     """Write the figure atomically and return its path."""
-    import matplotlib
+    from .figures import figure, save_png
 
-    matplotlib.use("Agg")
-    from matplotlib import pyplot as plt
-
-    fig, (left, right) = plt.subplots(1, 2, figsize=(10, 4), dpi=100)
+    fig, ((left, right),) = figure(1, 2, (10, 4))
     for r in records:
         colour = f"C{r.index % 10}"
         if r.n_frame_steps:
@@ -51,11 +47,4 @@ def plot_segments(records: list[SegmentRecord], path: str | Path, *, d_thr: floa
         ax.grid(alpha=0.3)
         if ax.get_legend_handles_labels()[0]:
             ax.legend(fontsize=7)
-    fig.tight_layout()
-    path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    tmp = path.with_name(f".{path.stem}.{os.getpid()}.partial.png")
-    fig.savefig(tmp)
-    plt.close(fig)
-    os.replace(tmp, path)
-    return path
+    return save_png(fig, path)
