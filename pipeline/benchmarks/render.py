@@ -99,6 +99,16 @@ def _print_table(echo: Callable[[str], None], title: str, run: dict) -> None:
         echo(f"  {row:<22}{wall[row] / n:>10.4f}{100 * wall[row] / total if total else 0:>8.1f}%{core[row] / n:>14.4f}")
 
 
+def _warm_imports() -> None:
+    """Import what a render's client process imports (distributed, its dashboard, matplotlib) before
+    the first timed run: the first render in a process pays those imports (about 2 s), which made
+    the first pair's 1-worker run slower than the others and its ratio too good."""
+    import distributed  # noqa: F401
+    import matplotlib.backends.backend_agg  # noqa: F401
+    import matplotlib.figure  # noqa: F401
+    from distributed.dashboard import scheduler  # noqa: F401
+
+
 def run(scene: str = "room", *, frames: str | None = None, width: int = 320, height: int = 240, spp: int = 2,
         workers: int = 2, n_photons: int = 40_000, fmax: int = 30, skip_guided: bool = False, repeat: int = 1,
         json_path: str | Path | None = None, echo: Callable[[str], None] = click.echo) -> dict:
@@ -115,6 +125,7 @@ def run(scene: str = "room", *, frames: str | None = None, width: int = 320, hei
         if not skip_guided:
             results["guided"] = run_render(path, tmp / "guided", workers=workers, n_photons=None, fmax=None, **common)
             _print_table(echo, f"(a) guided (--photons auto), {workers} workers", results["guided"])
+        _warm_imports()
         pairs = []
         for i in range(repeat):
             one = run_render(path, tmp / f"fixed1-{i}", workers=1, n_photons=n_photons, fmax=fmax, **common)
