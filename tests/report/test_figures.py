@@ -37,13 +37,18 @@ def test_png_has_the_figure_size_at_the_dpi(tmp_path):
 
 def test_labels_of_the_reports_kind_fit_inside_the_figure():
     """Six-character tick labels, an axis label and a title per axes (as the report's plots have) are
-    not clipped by the fixed margins: every axes' drawn extent lies inside the figure."""
+    not clipped by the fixed margins and do not run into the neighbouring axes."""
     fig, axes = figure(2, 3, (12.6, 6.0))
     for ax in axes.ravel():
         ax.plot([0, 135], [0, 640_000])
         ax.set(xlabel="frame (dotted: K)", ylabel="N_frame (photons per frame)", title="N_frame per segment")
     renderer = fig.canvas.get_renderer()
     page = fig.bbox
-    for ax in axes.ravel():
-        box = ax.get_tightbbox(renderer)
-        assert page.x0 <= box.x0 and box.x1 <= page.x1 and page.y0 <= box.y0 and box.y1 <= page.y1
+    boxes = [[ax.get_tightbbox(renderer) for ax in row] for row in axes]
+    for row in boxes:
+        for box in row:
+            assert page.x0 <= box.x0 and box.x1 <= page.x1 and page.y0 <= box.y0 and box.y1 <= page.y1
+        for left, right in zip(row, row[1:]):  # neighbours' labels do not overlap
+            assert left.x1 <= right.x0
+    for upper, lower in zip(boxes, boxes[1:]):
+        assert all(lo.y1 <= up.y0 for up, lo in zip(upper, lower))
