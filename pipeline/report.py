@@ -28,7 +28,7 @@ from pathlib import Path
 from string import Template
 
 from .errors import LoomError
-from .figures import figure
+from .figures import figure, png_bytes
 from .segment_records import SegmentRecord, read_records
 
 VIDEO_EMBED_MAX = 64 * 2**20
@@ -124,8 +124,6 @@ def _png_uri(data: bytes, mime: str = "image/png") -> str:
 
 
 def _figure_uri(fig) -> str:
-    from .figures import png_bytes
-
     return _png_uri(png_bytes(fig, dpi=90))
 
 
