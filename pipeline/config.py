@@ -51,6 +51,10 @@ class RenderConfig:
                                       "unlike the frame, not centred (kernels/temporal.py; §5.1 leaves it open)")
     symmetric_windows: bool = _param(False, "collection", "cut both walks to the shorter one: no bias from a linear "
                                      "drift, more noise (off: the paper's asymmetric windows, §5.1)")
+    step_k: float = _param(6.0, "collection", "z of the regional step test: windows stop at an abrupt change "
+                           "(pipeline/regional_steps.py)", 0.0)
+    step_levels: int = _param(0, "collection", "cell sizes of the regional step test, from 2x the element size, "
+                              "doubling (pipeline/regional_steps.py; 0: off, Condition (1) alone as the paper)", 0, 16)
 
     # --- filter: adaptive object-space filter (§5.2.5, Volevich et al. 2000), kernels/filter.py -----
     spatial_filter: bool = _param(True, "filter", "Step 5 of §5.2: filter where too few photons were collected")

@@ -239,7 +239,7 @@ class SegmentRun:
 
     # --- Step 2 ------------------------------------------------------------------------------
     def p_me(self, place: Placement, targets: dict[int, int]) -> tuple[float, float]:
-        from .temporal import collection_windows
+        from .temporal import collection_windows, step_regions
 
         use = self.batches(targets)
         counts = self.store.counts(kind="all", batches=use)
@@ -247,7 +247,8 @@ class SegmentRun:
         # p_me counts how far Condition (1)'s walks reach each way, so not the symmetric cut of
         # the collection (which would make the two shares one)
         back, fwd = collection_windows(counts, emitted, [place.k - 1], mode="adaptive", fmax=place.fmax,
-                                       config=self.config.replace(symmetric_windows=False))
+                                       config=self.config.replace(symmetric_windows=False),
+                                       regions=step_regions(self.elements, self.config))
         hit = counts[place.start - 1:place.end].sum(axis=0) > 0
         pb, pf = p_me(back[0], fwd[0], place.fmax, hit)
         progress(f"segment {self._index}: F_max {place.fmax}, K {place.k}: p_me {pb:.2f} back, {pf:.2f} forward")

@@ -36,6 +36,7 @@ from kernels.temporal import MAX_HALF_FMAX, MODES, windows_cl
 
 from .config import RenderConfig
 from .errors import LoomError
+from .regional_steps import clamp_at_steps, region_levels
 
 if TYPE_CHECKING:
     from .scene import ElementMesh, Scene
@@ -79,7 +80,8 @@ def check_window_options(mode: str, fmax: object) -> None:
 
 
 def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames: npt.ArrayLike, *, mode: str, fmax: int,
-                       config: RenderConfig, counts_from: int = 0) -> tuple[np.ndarray, np.ndarray]:
+                       config: RenderConfig, counts_from: int = 0,
+                       regions: list[np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(len(frames), E) back and fwd windows of the requested frame indices, per run of frames
     with photons (a requested frame without photons is an error).
 
@@ -87,6 +89,9 @@ def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames: npt.Ar
     rows within :func:`window_reach` of the requested frames are read, and the windows are the
     same bits as from the whole table: every rate and walk inside the reach sees the same rows
     and the same run ends (``n_emitted`` is of every frame).
+
+    With ``config.step_levels`` > 0, adaptive windows also stop at the abrupt changes of the element
+    regions ``regions`` (pipeline/regional_steps.py), which the caller must then give.
 
     A mode or F_max the user gave outside what the kernel takes is a LoomError naming the option
     (kernels/temporal.py raises ValueError for a broken contract)."""
@@ -99,6 +104,9 @@ def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames: npt.Ar
     if len(missing):
         raise LoomError(f"frame index(es) {missing[:5].tolist()} have no photons; shoot them first")
     reach = window_reach(fmax, mode, config)
+    steps = mode == "adaptive" and config.step_levels > 0
+    if steps and regions is None:
+        raise ValueError("config.step_levels > 0 needs the element regions")
     for start, stop in _runs(n_emitted > 0):
         inside = np.flatnonzero((frames >= start) & (frames < stop))
         if not len(inside):
@@ -112,6 +120,9 @@ def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames: npt.Ar
                           k_sigma=config.k_sigma, smoothing_frames=config.smoothing_frames,
                           min_extent=config.min_extent, similar=config.min_extent_similar,
                           symmetric=config.symmetric_windows, frames=(lo - a, hi - a))
+        if steps:
+            b, w = clamp_at_steps(b, w, np.arange(lo - a, hi - a), counts[a - counts_from:z - counts_from],
+                                  n_emitted[a:z], regions, config.step_k)
         back[inside] = b[frames[inside] - lo]
         fwd[inside] = w[frames[inside] - lo]
     return back, fwd
@@ -170,7 +181,7 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
     else:  # the table's values are not read
         counts = np.zeros((last - first, store.n_elements), np.uint32)
     back, fwd = collection_windows(counts, n_emitted, frames, mode=mode, fmax=fmax, config=config,
-                                   counts_from=first)
+                                   counts_from=first, regions=step_regions(elements, config))
     hood = _neighbourhood(elements, config.filter_rings, config.filter_angle) if spatial_filter else None
     clock.lap("windows_s")
     n_parity = 2 if split_parity else 1
@@ -202,23 +213,37 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
                                     None if rings is None else rings[i], own[i])
 
 
-_hoods: dict[int, tuple] = {}  # id(element mesh) -> (weak reference to it, {(rings, angle): rings})
+_per_mesh: dict[int, tuple] = {}  # id(element mesh) -> (weak reference to it, {key: value})
+
+
+def _mesh_cached(elements, key: tuple, compute):
+    """``compute()`` once per element mesh, key and process."""
+    import weakref
+
+    entry = _per_mesh.get(id(elements))
+    if entry is None or entry[0]() is not elements:
+        entry = (weakref.ref(elements, lambda _, k=id(elements): _per_mesh.pop(k, None)), {})
+        _per_mesh[id(elements)] = entry
+    if key not in entry[1]:
+        entry[1][key] = compute()
+    return entry[1][key]
 
 
 def _neighbourhood(elements, rings: int, angle: float):
     """The filter's vertex rings of an element mesh, computed once per mesh and process (a
     reconstruction task of 16 frames spent a quarter of its time on them)."""
-    import weakref
+    return _mesh_cached(elements, ("rings", int(rings), float(angle)), lambda: neighbourhood(
+        elements.element_vertices, elements.vertex_local, elements.vertex_instance, max_rings=rings,
+        max_angle=angle))
 
-    entry = _hoods.get(id(elements))
-    if entry is None or entry[0]() is not elements:
-        entry = (weakref.ref(elements, lambda _, k=id(elements): _hoods.pop(k, None)), {})
-        _hoods[id(elements)] = entry
-    key = (int(rings), float(angle))
-    if key not in entry[1]:
-        entry[1][key] = neighbourhood(elements.element_vertices, elements.vertex_local, elements.vertex_instance,
-                                      max_rings=rings, max_angle=angle)
-    return entry[1][key]
+
+def step_regions(elements, config: RenderConfig) -> list[np.ndarray] | None:
+    """The element regions of the regional step test (None when ``config.step_levels`` is 0), once
+    per mesh and process."""
+    if not config.step_levels:
+        return None
+    return _mesh_cached(elements, ("steps", int(config.step_levels)),
+                        lambda: region_levels(elements, config.step_levels))
 
 
 class _Clock:

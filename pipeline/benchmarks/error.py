@@ -356,9 +356,11 @@ def _table(echo: Callable[[str], None], result: dict) -> None:
     echo("(* per-frame figure extrapolated beyond its runs along the power law of the two nearest)")
 
 
-def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2,
+def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, config=None,
         echo: Callable[[str], None] = click.echo) -> dict:
-    """Render, measure, print the tables, write ``error.json`` and ``error.png``/``.svg`` in ``out_dir``."""
+    """Render, measure, print the tables, write ``error.json`` and ``error.png``/``.svg`` in ``out_dir``.
+    ``config`` (a RenderConfig; default the defaults) is every method's; the reference has no
+    temporal collection and reads only its photon depth."""
     from pipeline.cluster import connect
     from pipeline.config import RenderConfig
     from pipeline.errors import LoomError
@@ -379,7 +381,7 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2,
             raise LoomError(f"frames {first}-{last} are not inside the scene's {scene.timeline.first}-"
                             f"{scene.timeline.last}", path=str(path), field="--frames")
         elements = ElementMesh.build(scene)
-        config = RenderConfig()
+        config = config or RenderConfig()
         echo(f"loom bench error {Path(path).stem}: frames {first}-{last}, {plan.width}x{plan.height}, {plan.spp} spp, "
              f"budgets {', '.join(f'{n:,}' for n in plan.budgets)}, F_max {plan.fmax}, d_thr "
              f"{', '.join(f'{d:g}' for d in plan.d_thr)}; reference {plan.reference_photons:,} photons a frame "
@@ -429,7 +431,7 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2,
                      f"{r['measures']['flicker']:.4f}, lag {r['measures']['lag']}")
                 runs.append(r)
     ref_photons = 2 * plan.reference_photons * (last - first + 1)
-    result = {"scene": Path(path).stem, "plan": {**plan.__dict__, "event": plan.event},
+    result = {"scene": Path(path).stem, "plan": {**plan.__dict__, "event": plan.event}, "config": config.to_dict(),
               "elements": elements.n_elements, "workers": workers, "adaptation": ev.adaptation,
               "event": {"frame": event, "size": size}, "highlight_region": highlight_is,
               "reference": {"photons": plan.reference_photons, "seeds": [101, 202], "wall_s": ref_s, "cpu_s": ref_cpu,

@@ -128,8 +128,10 @@ def bench_render(scene, frames, resolution, spp, workers, n_photons, fmax, skip_
 @click.option("--workers", type=int, default=2, show_default=True)
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
               help="Folder of error.json, error.png and error.svg (default: bench-error-SCENE).")
+@click.option("--config", "config_file", type=click.Path(dir_okay=False), default=None,
+              help="JSON object of RenderConfig fields (pipeline/config.py) for every run but the reference.")
 def bench_error(scene, quick, frames, budgets, fmax, d_thr, resolution, spp, reference_factor, aqm_every, workers,
-                out_dir):
+                out_dir, config_file):
     """Run time against error vs a converged per-frame reference: per-frame, fixed and adaptive windows at
     several budgets, the guided coordinator at several d_thr (default: ROOM)."""
     from pathlib import Path
@@ -165,4 +167,7 @@ def bench_error(scene, quick, frames, budgets, fmax, d_thr, resolution, spp, ref
     if any(n <= 0 for n in changes.get("budgets", plan.budgets)):
         raise LoomError("budgets must be positive photon counts", field="--budgets")
     plan = Plan(**{**plan.__dict__, **changes})
-    run(scene, plan, Path(out_dir or f"bench-error-{name}"), workers=workers)
+    from pipeline.config import RenderConfig, load_config
+
+    config = RenderConfig.from_dict(load_config(config_file)) if config_file else RenderConfig()
+    run(scene, plan, Path(out_dir or f"bench-error-{name}"), workers=workers, config=config)
