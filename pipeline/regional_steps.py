@@ -19,7 +19,12 @@ the chunk of frames around it (pipeline/temporal.py).
 """
 from __future__ import annotations
 
+from typing import TYPE_CHECKING
+
 import numpy as np
+
+if TYPE_CHECKING:
+    from pipeline.scene import ElementMesh
 
 
 def element_regions(element_vertices: np.ndarray, vertex_local: np.ndarray, element_instance: np.ndarray,
@@ -80,7 +85,7 @@ def clamp_at_steps(back: np.ndarray, fwd: np.ndarray, rows: np.ndarray, counts: 
     return back, fwd
 
 
-def region_levels(elements, levels: int) -> list[np.ndarray]:
+def region_levels(elements: ElementMesh, levels: int) -> list[np.ndarray]:
     """The element regions of ``levels`` cell sizes, ``2 x`` the mesh's element size and doubling
     (pipeline/scene/elements.py)."""
     return [element_regions(elements.element_vertices, elements.vertex_local, elements.element_instance,

@@ -237,7 +237,7 @@ def _neighbourhood(elements, rings: int, angle: float):
         max_angle=angle))
 
 
-def step_regions(elements, config: RenderConfig) -> list[np.ndarray] | None:
+def step_regions(elements: ElementMesh, config: RenderConfig) -> list[np.ndarray] | None:
     """The element regions of the regional step test (None when ``config.step_levels`` is 0), once
     per mesh and process."""
     if not config.step_levels:

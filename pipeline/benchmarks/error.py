@@ -356,7 +356,7 @@ def _table(echo: Callable[[str], None], result: dict) -> None:
     echo("(* per-frame figure extrapolated beyond its runs along the power law of the two nearest)")
 
 
-def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, config=None,
+def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, config: RenderConfig | None = None,
         echo: Callable[[str], None] = click.echo) -> dict:
     """Render, measure, print the tables, write ``error.json`` and ``error.png``/``.svg`` in ``out_dir``.
     ``config`` (a RenderConfig; default the defaults) is every method's; the reference has no
