@@ -53,6 +53,8 @@ class RenderConfig:
                                      "drift, more noise (off: the paper's asymmetric windows, §5.1)")
     step_k: float = _param(6.0, "collection", "z of the regional step test: windows stop at an abrupt change "
                            "(pipeline/regional_steps.py)", 0.0)
+    step_relative: float = _param(0.1, "collection", "smallest change of a cell's photon rate between two frames "
+                                  "that is a step, relative to the larger rate (pipeline/regional_steps.py)", 0.0, 1.0)
     step_levels: int = _param(0, "collection", "cell sizes of the regional step test, from 2x the element size, "
                               "doubling (pipeline/regional_steps.py; 0: off, Condition (1) alone as the paper)", 0, 16)
 

@@ -39,9 +39,11 @@ def element_regions(element_vertices: np.ndarray, vertex_local: np.ndarray, elem
     return np.unique(key, axis=0, return_inverse=True)[1].reshape(-1).astype(np.int64)
 
 
-def step_boundaries(counts: np.ndarray, n_emitted: np.ndarray, regions: np.ndarray, k: float) -> np.ndarray:
-    """(T - 1, R) bool: region r's photon rate steps by more than ``k`` sigma between rows t, t + 1
-    of ``counts`` (T, E). Every row must have photons (``n_emitted`` > 0)."""
+def step_boundaries(counts: np.ndarray, n_emitted: np.ndarray, regions: np.ndarray, k: float,
+                    relative: float = 0.0) -> np.ndarray:
+    """(T - 1, R) bool: region r's photon rate steps by more than ``k`` sigma, and by more than
+    ``relative`` of the larger of the two rates, between rows t, t + 1 of ``counts`` (T, E).
+    Every row must have photons (``n_emitted`` > 0)."""
     counts = np.asarray(counts)
     n = np.asarray(n_emitted, np.float64)
     if counts.shape[0] != len(n) or np.any(n <= 0):
@@ -54,7 +56,8 @@ def step_boundaries(counts: np.ndarray, n_emitted: np.ndarray, regions: np.ndarr
     var = summed / (n * n)[:, None]
     diff = rate[1:] - rate[:-1]
     both = var[1:] + var[:-1]
-    return diff * diff > k * k * both  # zero counts on both sides: 0 > 0, no step
+    large = np.abs(diff) > relative * np.maximum(rate[1:], rate[:-1])
+    return (diff * diff > k * k * both) & large  # zero counts on both sides: 0 > 0, no step
 
 
 def clamp_windows(back: np.ndarray, fwd: np.ndarray, rows: np.ndarray, cut: np.ndarray,
@@ -78,10 +81,12 @@ def clamp_windows(back: np.ndarray, fwd: np.ndarray, rows: np.ndarray, cut: np.n
 
 
 def clamp_at_steps(back: np.ndarray, fwd: np.ndarray, rows: np.ndarray, counts: np.ndarray,
-                   n_emitted: np.ndarray, regions: list[np.ndarray], k: float) -> tuple[np.ndarray, np.ndarray]:
+                   n_emitted: np.ndarray, regions: list[np.ndarray], k: float,
+                   relative: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """:func:`clamp_windows` at the steps of every region level in ``regions``."""
     for level in regions:
-        back, fwd = clamp_windows(back, fwd, rows, step_boundaries(counts, n_emitted, level, k), level)
+        cut = step_boundaries(counts, n_emitted, level, k, relative)
+        back, fwd = clamp_windows(back, fwd, rows, cut, level)
     return back, fwd
 
 

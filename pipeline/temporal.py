@@ -122,7 +122,7 @@ def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames: npt.Ar
                           symmetric=config.symmetric_windows, frames=(lo - a, hi - a))
         if steps:
             b, w = clamp_at_steps(b, w, np.arange(lo - a, hi - a), counts[a - counts_from:z - counts_from],
-                                  n_emitted[a:z], regions, config.step_k)
+                                  n_emitted[a:z], regions, config.step_k, config.step_relative)
         back[inside] = b[frames[inside] - lo]
         fwd[inside] = w[frames[inside] - lo]
     return back, fwd
