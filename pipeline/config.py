@@ -55,7 +55,7 @@ class RenderConfig:
                            "(pipeline/regional_steps.py)", 0.0)
     step_relative: float = _param(0.1, "collection", "smallest change of a cell's photon rate between two frames "
                                   "that is a step, relative to the larger rate (pipeline/regional_steps.py)", 0.0, 1.0)
-    step_levels: int = _param(0, "collection", "cell sizes of the regional step test, from 2x the element size, "
+    step_levels: int = _param(4, "collection", "cell sizes of the regional step test, from 2x the element size, "
                               "doubling (pipeline/regional_steps.py; 0: off, Condition (1) alone as the paper)", 0, 16)
 
     # --- filter: adaptive object-space filter (§5.2.5, Volevich et al. 2000), kernels/filter.py -----

@@ -88,7 +88,7 @@ def test_p_me_sees_a_lighting_step_at_a_known_frame(rng):
     counts = rng.poisson(np.broadcast_to(mu, (frames, elements))).astype(np.uint32)
     step = np.arange(elements) < elements // 2
     counts[k + 5:, step] *= 2
-    cfg = RenderConfig()
+    cfg = RenderConfig(step_levels=0)  # Condition (1) alone: no element mesh for the regional step test
     back, fwd = collection_windows(counts, np.full(frames, 40_000.0), [k], mode="adaptive", fmax=20, config=cfg)
     pb, pf = p_me(back[0], fwd[0], 20)
     assert pb > 0.9 and pf == pytest.approx(0.5 * pb, abs=0.03)

@@ -158,22 +158,24 @@ def test_b_against_the_papers_2M_photon_reference(tmp_path):
 def test_windows_from_the_reached_count_rows_are_the_whole_tables(room):
     """A chunk's windows from only the count rows within F_max/2 + smoothing of its frames are the
     windows computed from the whole table, bit for bit; so are the maps the task writes from them."""
-    from pipeline.temporal import collection_windows, window_reach
+    from pipeline.temporal import collection_windows, step_regions, window_reach
 
     cfg = RenderConfig()
+    regions = step_regions(room.mesh, cfg)  # the regional step test reads the same rows
     store = room.store
     counts = store.counts()
     emitted = store.emitted().astype(np.float64)
     assert np.array_equal(emitted, [store.photons_emitted(f) for f in range(store.n_frames)])
     reach = window_reach(FMAX, "adaptive", cfg)
     for frames in ([room.index], list(range(K2 - 16, K2 + 4)), [K2 + 10, K2 + 14]):
-        whole = collection_windows(counts, emitted, frames, mode="adaptive", fmax=FMAX, config=cfg)
+        whole = collection_windows(counts, emitted, frames, mode="adaptive", fmax=FMAX, config=cfg, regions=regions)
         lo, hi = max(0, min(frames) - reach), min(store.n_frames, max(frames) + 1 + reach)
         part = collection_windows(counts[lo:hi], emitted, frames, mode="adaptive", fmax=FMAX, config=cfg,
-                                  counts_from=lo)
+                                  counts_from=lo, regions=regions)
         assert all(np.array_equal(a, b) for a, b in zip(whole, part))
     with pytest.raises(Exception, match="count rows"):
-        collection_windows(counts[K2:], emitted, [K2], mode="adaptive", fmax=FMAX, config=cfg, counts_from=K2)
+        collection_windows(counts[K2:], emitted, [K2], mode="adaptive", fmax=FMAX, config=cfg, counts_from=K2,
+                           regions=regions)
 
 
 def test_shared_store_caches_decoded_frames_read_only(room):
