@@ -245,7 +245,8 @@ class SegmentRun:
         counts = self.store.counts(kind="all", batches=use)
         emitted = np.array([self.store.photons_in(f, int(use[f])) for f in range(self.store.n_frames)], np.float64)
         # p_me counts how far Condition (1)'s walks reach each way, so not the symmetric cut of
-        # the collection (which would make the two shares one)
+        # the collection (which would make the two shares one); a regional step stops a walk as
+        # it stops the collection (pipeline/regional_steps.py)
         back, fwd = collection_windows(counts, emitted, [place.k - 1], mode="adaptive", fmax=place.fmax,
                                        config=self.config.replace(symmetric_windows=False),
                                        regions=step_regions(self.elements, self.config))

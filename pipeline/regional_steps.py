@@ -68,7 +68,7 @@ def clamp_windows(back: np.ndarray, fwd: np.ndarray, rows: np.ndarray, cut: np.n
     """Back and fwd windows (F, E) of the count rows ``rows`` (F,), cut so that none crosses a
     step of its element's region (``cut`` (T - 1, R) from :func:`step_boundaries`)."""
     n_rows = cut.shape[0] + 1
-    # last_step[t, r]: first row of the step-free run holding row t; next_step[t, r]: its last row
+    # starts[t, r]: first row of region r's step-free run holding row t; ends[t, r]: its last row
     starts = np.zeros((n_rows, cut.shape[1]), np.int64)
     ends = np.full((n_rows, cut.shape[1]), n_rows - 1, np.int64)
     for t in range(1, n_rows):

@@ -137,6 +137,7 @@ def bench_error(scene, quick, frames, budgets, fmax, d_thr, resolution, spp, ref
     from pathlib import Path
 
     from pipeline.benchmarks.error import FULL, QUICK, Plan, run
+    from pipeline.config import RenderConfig, load_config
     from pipeline.errors import LoomError
     from pipeline.render import parse_resolution
 
@@ -167,7 +168,5 @@ def bench_error(scene, quick, frames, budgets, fmax, d_thr, resolution, spp, ref
     if any(n <= 0 for n in changes.get("budgets", plan.budgets)):
         raise LoomError("budgets must be positive photon counts", field="--budgets")
     plan = Plan(**{**plan.__dict__, **changes})
-    from pipeline.config import RenderConfig, load_config
-
     config = RenderConfig.from_dict(load_config(config_file)) if config_file else RenderConfig()
     run(scene, plan, Path(out_dir or f"bench-error-{name}"), workers=workers, config=config)
