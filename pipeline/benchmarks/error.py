@@ -14,7 +14,10 @@ The reference is per-frame photon tracing with no temporal reuse, ``--reference-
 largest budget per frame, traced on the workers straight into vertex maps (:func:`reference_map`:
 the same tracer, elements and estimator as a render, so discretisation is common to both and every
 difference is noise or temporal bias), twice with different seeds: the second reference against
-the first is the noise floor printed beside every error.
+the first is the noise floor printed beside every error. The references are kept in
+``OUT/references/`` (:func:`reference_key`: scene, elements, frames, photons, seeds, photon depth and
+the tracer's source), so a rerun with another ``--config`` or other budgets of the same reference
+does not trace them again: they are most of a full run's time.
 
 Measures per run (pipeline/benchmarks/error_measures.py), all frames: relative L2 of the indirect
 vertex irradiance; after one frozen tone mapping (Ward's scale at the log-average luminance of the
@@ -32,7 +35,9 @@ the largest frame-to-frame change of the reference is taken.
 """
 from __future__ import annotations
 
+import hashlib
 import json
+import os
 import shutil
 import tempfile
 import time
@@ -125,6 +130,38 @@ def reference_map(*, scene_path: str, scene_hash: str, element_size: float, fram
         total += vertex_irradiance(b.key[ind] & np.uint32(0x3FFFFFFF), b.bary[ind, 0], b.bary[ind, 1],
                                    b.energy[ind], elements, areas, 1)
     return total / n_photons
+
+
+def reference_key(*, scene_hash: str, element_size: float, frames: tuple[int, int], n_photons: int,
+                  seeds: Sequence[int], max_depth: int) -> str:
+    """Name of a cached pair of references: everything :func:`reference_map` reads, and the source of
+    the code that traces and estimates (workers/, kernels/, pipeline/scene/), so a changed tracer
+    never meets a stale reference."""
+    h = hashlib.sha256(json.dumps([scene_hash, element_size, list(frames), n_photons, list(seeds), max_depth])
+                       .encode())
+    root = Path(__file__).resolve().parents[2]
+    for folder in ("workers", "kernels", "pipeline/scene"):
+        for f in sorted((root / folder).rglob("*")):
+            if f.suffix in (".py", ".cl"):
+                h.update(f.relative_to(root).as_posix().encode() + b"\0" + f.read_bytes())
+    return h.hexdigest()[:20]
+
+
+def load_references(path: Path) -> tuple[np.ndarray, float, float] | None:
+    """``(refs, wall_s, cpu_s)`` of a cached reference pair, or None when there is none."""
+    if not path.exists():
+        return None
+    with np.load(path) as z:
+        return z["refs"], float(z["wall_s"]), float(z["cpu_s"])
+
+
+def save_references(path: Path, refs: np.ndarray, wall_s: float, cpu_s: float) -> None:
+    """Write atomically: a kill leaves the old file or none, never half of one."""
+    path.parent.mkdir(parents=True, exist_ok=True)
+    tmp = path.with_name(path.name + ".partial")
+    with open(tmp, "wb") as f:
+        np.savez(f, refs=refs, wall_s=wall_s, cpu_s=cpu_s)
+    os.replace(tmp, path)
 
 
 def displayed_d_aqm(test: np.ndarray, ref: np.ndarray, adaptation: float) -> float:
@@ -386,18 +423,29 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, config:
              f"budgets {', '.join(f'{n:,}' for n in plan.budgets)}, F_max {plan.fmax}, d_thr "
              f"{', '.join(f'{d:g}' for d in plan.d_thr)}; reference {plan.reference_photons:,} photons a frame "
              f"x 2 seeds; {elements.n_elements:,} elements; {workers} workers")
+        seeds = (101, 202)
+        cache = out_dir / "references" / (reference_key(
+            scene_hash=scene.scene_hash, element_size=elements.element_size, frames=plan.frames,
+            n_photons=plan.reference_photons, seeds=seeds, max_depth=config.photon_depth) + ".npz")
         with connect("local", workers) as client:
-            cpu0, t0 = _cpu_seconds(client), time.perf_counter()
-            refs = []
-            for seed in (101, 202):
-                futures = [client.submit(reference_map, scene_path=str(Path(path).resolve()),
-                                         scene_hash=scene.scene_hash, element_size=elements.element_size, frame=f,
-                                         n_photons=plan.reference_photons, seed=seed, max_depth=config.photon_depth,
-                                         pure=False) for f in range(first, last + 1)]
-                refs.append(np.stack(client.gather(futures)))
-            refs = np.stack(refs)
-            ref_s, ref_cpu = time.perf_counter() - t0, _cpu_seconds(client) - cpu0
-            echo(f"references: {ref_s:.1f} s")
+            cached = load_references(cache)
+            if cached is not None:
+                refs, ref_s, ref_cpu = cached
+                echo(f"references: reused {cache} (traced in {ref_s:.1f} s)")
+            else:
+                cpu0, t0 = _cpu_seconds(client), time.perf_counter()
+                refs = []
+                for seed in seeds:
+                    futures = [client.submit(reference_map, scene_path=str(Path(path).resolve()),
+                                             scene_hash=scene.scene_hash, element_size=elements.element_size,
+                                             frame=f, n_photons=plan.reference_photons, seed=seed,
+                                             max_depth=config.photon_depth, pure=False)
+                               for f in range(first, last + 1)]
+                    refs.append(np.stack(client.gather(futures)))
+                refs = np.stack(refs)
+                ref_s, ref_cpu = time.perf_counter() - t0, _cpu_seconds(client) - cpu0
+                save_references(cache, refs, ref_s, ref_cpu)
+                echo(f"references: {ref_s:.1f} s, kept in {cache}")
             states = [scene.pose_frame(f) for f in range(first, last + 1)]
             areas = np.stack([elements.vertex_areas(s) for s in states])
             highlight, highlight_is = highlight_regions(scene, elements, states, refs[0], areas)
@@ -434,7 +482,8 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, config:
     result = {"scene": Path(path).stem, "plan": {**plan.__dict__, "event": plan.event}, "config": config.to_dict(),
               "elements": elements.n_elements, "workers": workers, "adaptation": ev.adaptation,
               "event": {"frame": event, "size": size}, "highlight_region": highlight_is,
-              "reference": {"photons": plan.reference_photons, "seeds": [101, 202], "wall_s": ref_s, "cpu_s": ref_cpu,
+              "reference": {"photons": plan.reference_photons, "seeds": list(seeds), "file": str(cache),
+                            "wall_s": ref_s, "cpu_s": ref_cpu,
                             "floor": {k: v for k, v in floor.items() if k != "per_frame"},
                             "floor_per_frame": floor["per_frame"]["rel_l2"]},
               "runs": runs, "comparison": {c: summarise(runs, c, {"cpu_s": ref_cpu, "wall_s": ref_s}[c] / ref_photons)

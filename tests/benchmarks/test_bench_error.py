@@ -9,7 +9,7 @@ import pytest
 from click.testing import CliRunner
 
 from pipeline.benchmarks import error_measures as em
-from pipeline.benchmarks.error import Plan, run
+from pipeline.benchmarks.error import Plan, reference_key, run
 from pipeline.errors import LoomError
 
 
@@ -116,8 +116,28 @@ def test_bench_error_runs_end_to_end_on_a_tiny_cornell(tmp_path):
     assert len(saved["comparison"]["wall_s"]["rows"]) == len(saved["comparison"]["cpu_s"]["rows"]) == 5
     assert saved["event"]["frame"] == plan.event == 3
     assert any(line.startswith("| per-frame 1,000 |") for line in lines)
-    # No temporary folder is left beside the results
-    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["error.json", "error.png", "error.svg"]
+    # No temporary folder is left beside the results; the references are kept for a rerun
+    assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["error.json", "error.png", "error.svg",
+                                                                   "references"]
+    (cache,) = (tmp_path / "out" / "references").iterdir()
+    assert cache.suffix == ".npz" and saved["reference"]["file"] == str(cache)
+
+    # A rerun with other budgets of the same reference size reuses it, and measures the same floor
+    lines.clear()
+    again = run("cornell", Plan((1, 4), (2_000,), 2, (0.5,), width=48, height=36, spp=1), tmp_path / "out",
+                workers=1, echo=lines.append)
+    assert any(line.startswith(f"references: reused {cache}") for line in lines)
+    assert again["reference"]["floor"] == saved["reference"]["floor"]
+    assert [r["method"] for r in again["runs"]] == ["per-frame", "fixed", "adaptive", "guided"]
+
+
+def test_reference_key_names_everything_the_reference_reads():
+    base = dict(scene_hash="abc", element_size=0.1, frames=(1, 4), n_photons=1000, seeds=(101, 202), max_depth=256)
+    key = reference_key(**base)
+    assert reference_key(**base) == key
+    for change in (dict(scene_hash="abd"), dict(element_size=0.2), dict(frames=(1, 5)), dict(n_photons=1001),
+                   dict(seeds=(101, 203)), dict(max_depth=8)):
+        assert reference_key(**{**base, **change}) != key
 
 
 def test_bench_error_refuses_a_reference_under_50x(tmp_path):
