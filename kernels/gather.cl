@@ -86,19 +86,52 @@ __kernel void frame_sums_prefix_step(__global const double *sums, const int j, c
     for (int c = 0; c < SLOTS; ++c) o[c] = prev[c] + acc[c];
 }
 
+// The linear-window estimate of one element corner (docs/estimators.md §1.6): the value at frame `row`
+// of the least-squares line, weighted by photons emitted, through the window's per-frame sums
+// (frames [lo, hi), read as differences of consecutive prefix rows), its slope shrunk by the
+// positive-part James-Stein factor 1 - var(slope) / slope^2 of its photon noise (luminance). `t` is
+// the window sum (R, G, B, Q); u gets (R, G, B) per photon emitted and the variance term.
+inline void linear_window(__global const double *te, const long width, const int lo, const int hi,
+                          const int row, __global const double *cum_n, const double inv_parity,
+                          const double t[4], double u[4])
+{
+    double n = 0.0, x1 = 0.0, x2 = 0.0, s1[3] = {0.0, 0.0, 0.0}, w1 = 0.0, w2 = 0.0;
+    for (int g = lo; g < hi; ++g) {
+        const double x = (double)(g - row);
+        const double ng = (cum_n[g + 1] - cum_n[g]) * inv_parity;
+        n += ng; x1 += ng * x; x2 += ng * x * x;
+        __global const double *a = te + (long)g * width, *b = te + (long)(g + 1) * width;
+        for (int c = 0; c < 3; ++c) s1[c] += x * (b[c] - a[c]);
+        const double q = b[3] - a[3];
+        w1 += x * q; w2 += x * x * q;
+    }
+    const double xb = x1 / n, sxx = x2 - x1 * xb;
+    double lam = 0.0, beta[3] = {0.0, 0.0, 0.0}, var_b = 0.0;
+    if (sxx > 1e-9 * n) {
+        for (int c = 0; c < 3; ++c) beta[c] = (s1[c] - xb * t[c]) / sxx;
+        var_b = fmax(w2 - 2.0 * xb * w1 + xb * xb * t[3], 0.0) / (sxx * sxx);
+        const double by = LUMA_R * beta[0] + LUMA_G * beta[1] + LUMA_B * beta[2];
+        if (by * by > var_b) lam = 1.0 - var_b / (by * by);
+    }
+    for (int c = 0; c < 3; ++c) u[c] = fmax(t[c] / n - xb * lam * beta[c], 0.0);
+    u[3] = t[3] / (n * n) + xb * xb * lam * lam * var_b;
+}
+
 // Vertex flux of every output frame i (work item v; frames in order, so an element's rows are
 // read while in cache): vertex v adds, over the element corners in slots[voffsets[v] ..
 // voffsets[v+1]) (element * 3 + corner, ascending), the corner's window sum over its element's
 // window [f - back, f + fwd] divided by the photons emitted in the window, U = sum / sum_g N_g
 // (Q: / (sum_g N_g)^2), with N_g halved per parity. Output frame i is frame rows[i] of the
 // element-major prefix table (E, n_table_rows, n_parity, 12) of frame_sums_prefix_step (row 0 = 0,
-// row j+1 = sum of frames 0..j): a window sum is the difference of two rows.
+// row j+1 = sum of frames 0..j): a window sum is the difference of two rows. With `linear`, a corner
+// gives its linear-window estimate (linear_window) instead of the pooled mean.
 __kernel void vertex_window_flux(__global const double *table, __global const double *cum_n,
                                  __global const uchar *back, __global const uchar *fwd, // (E, n_out)
                                  __global const int *rows, __global const long *voffsets,
                                  __global const int *slots, const int n_vertices,
                                  const int n_elements, const int n_parity, const int n_table_rows,
-                                 const int n_out, __global double *out)  // (V, n_out, n_parity, 4)
+                                 const int n_out, const int linear,
+                                 __global double *out)  // (V, n_out, n_parity, 4)
 {
     const int v = get_global_id(0);
     if (v >= n_vertices) return;
@@ -117,8 +150,14 @@ __kernel void vertex_window_flux(__global const double *table, __global const do
                 __global const double *te = table + (long)e * n_table_rows * width + p * SLOTS + 4 * k;
                 double t[4];
                 for (int c = 0; c < 4; ++c) t[c] = te[hi * width + c] - te[lo * width + c];
-                a0 += t[0] * inv_n; a1 += t[1] * inv_n; a2 += t[2] * inv_n;
-                a3 += t[3] * (inv_n * inv_n);
+                if (linear) {
+                    double u[4];
+                    linear_window(te, width, lo, hi, row, cum_n, 1.0 / n_parity, t, u);
+                    a0 += u[0]; a1 += u[1]; a2 += u[2]; a3 += u[3];
+                } else {
+                    a0 += t[0] * inv_n; a1 += t[1] * inv_n; a2 += t[2] * inv_n;
+                    a3 += t[3] * (inv_n * inv_n);
+                }
             }
             __global double *o = out + (((long)v * n_out + i) * n_parity + p) * 4;
             o[0] = a0; o[1] = a1; o[2] = a2; o[3] = a3;

@@ -178,7 +178,7 @@ def _check_windows(sums, n_emitted, back, fwd, rows):
 
 
 def _flux(d_table: cl.Buffer, n_emitted, back, fwd, rows, element_vertices, n_vertices: int, n_elements: int,
-          n_parity: int) -> np.ndarray:
+          n_parity: int, linear: bool) -> np.ndarray:
     """Steps 2 and 3 from an element-major device prefix table (E, len(n_emitted) + 1, P, 12),
     all output frames in one launch."""
     ctx, queue = device_context()
@@ -193,14 +193,15 @@ def _flux(d_table: cl.Buffer, n_emitted, back, fwd, rows, element_vertices, n_ve
     kernel("gather", "vertex_window_flux")(
         queue, (n_vertices,), None, d_table, _upload(ctx, cum_n), _upload(ctx, back_t), _upload(ctx, fwd_t),
         _upload(ctx, rows.astype(np.int32)), _upload(ctx, voffsets), _upload(ctx, slots), np.int32(n_vertices),
-        np.int32(n_elements), np.int32(n_parity), np.int32(len(n_emitted) + 1), np.int32(len(rows)), d_out)
+        np.int32(n_elements), np.int32(n_parity), np.int32(len(n_emitted) + 1), np.int32(len(rows)),
+        np.int32(bool(linear)), d_out)
     cl.enqueue_copy(queue, out, d_out)
     return np.moveaxis(out, 0, 2)  # (n_out, P, V, 4), a view
 
 
 def frame_sums_flux_cl(frame_sums: Iterable[npt.ArrayLike], n_emitted: npt.ArrayLike, back: npt.ArrayLike,
                        fwd: npt.ArrayLike, rows: npt.ArrayLike, element_vertices: npt.ArrayLike,
-                       n_vertices: int) -> np.ndarray:
+                       n_vertices: int, *, linear: bool = False) -> np.ndarray:
     """Steps 2-3 on PoCL from per-frame element sums made earlier: what lets pipeline/temporal.py sum
     a frame's records once per worker, however many chunks' windows reach it. The prefix table is
     filled one launch a frame from the arrays where they lie (no host stacking or transposition),
@@ -213,12 +214,14 @@ def frame_sums_flux_cl(frame_sums: Iterable[npt.ArrayLike], n_emitted: npt.Array
     back, fwd : (n_out, E) windows of the output frames (kernels/temporal.py).
     rows : (n_out,) row of each output frame among the J frames.
     element_vertices : (E, 3) vertex ids; ``n_vertices`` V.
+    linear : each element corner's value is its window's linear fit at the frame, the slope shrunk
+        by its photon noise (docs/estimators.md §1.6), instead of the window's pooled mean.
 
     Returns
     -------
     (n_out, P, V, 4) float64: RGB ``S_v`` (energy / photons emitted) and the variance term
-    ``sum b^2 Y^2 / N^2``. Irradiance is ``S_v / A_v`` (:func:`irradiance`). NumPy twin:
-    :func:`window_flux_reference` of the stacked sums.
+    (pooled mean: ``sum b^2 Y^2 / N^2``). Irradiance is ``S_v / A_v`` (:func:`irradiance`). NumPy
+    twin: :func:`window_flux_reference` of the stacked sums.
     """
     frame_sums = [np.ascontiguousarray(a, np.float64) for a in frame_sums]
     n_rows = len(frame_sums)
@@ -241,31 +244,65 @@ def frame_sums_flux_cl(frame_sums: Iterable[npt.ArrayLike], n_emitted: npt.Array
              np.int32(n_elements), np.int32(n_parity), d_table)
     queue.finish()
     del held
-    return _flux(d_table, n_emitted, back, fwd, rows, element_vertices, n_vertices, n_elements, n_parity)
+    return _flux(d_table, n_emitted, back, fwd, rows, element_vertices, n_vertices, n_elements, n_parity, linear)
 
 
 def window_flux_reference(sums: npt.ArrayLike, n_emitted: npt.ArrayLike, back: npt.ArrayLike, fwd: npt.ArrayLike,
-                          rows: npt.ArrayLike, element_vertices: npt.ArrayLike, n_vertices: int) -> np.ndarray:
+                          rows: npt.ArrayLike, element_vertices: npt.ArrayLike, n_vertices: int, *,
+                          linear: bool = False) -> np.ndarray:
     """NumPy twin of :func:`frame_sums_flux_cl` (``sums`` (J, E, P, 3, 4): its ``frame_sums``
     stacked): window rows added directly, corners scattered with ``np.bincount``."""
     sums, n_emitted, back, fwd, rows = _check_windows(sums, n_emitted, back, fwd, rows)
     n_rows, n_elements, n_parity = sums.shape[:3]
     ev = np.asarray(element_vertices, np.int64).reshape(n_elements, 3)
     out = np.zeros((len(rows), n_parity, n_vertices, 4))
+    per_parity = n_emitted / n_parity
     for i, row in enumerate(rows):
         lo, hi = row - back[i].astype(np.int64), row + fwd[i].astype(np.int64) + 1
         total = np.zeros((n_elements, n_parity, 3, 4))
+        # weighted moments of x = g - row: photons, and the sums' first (RGB) and Q's first and second
+        n, x1, x2 = (np.zeros(n_elements) for _ in range(3))
+        s1 = np.zeros((n_elements, n_parity, 3, 3))
+        q1, q2 = np.zeros((n_elements, n_parity, 3)), np.zeros((n_elements, n_parity, 3))
         for g in range(int(lo.min(initial=row)), int(hi.max(initial=row + 1))):
             inside = (lo <= g) & (g < hi)
+            x = float(g - row)
             total[inside] += sums[g, inside]
-        cum_n = np.concatenate([[0.0], np.cumsum(n_emitted)])
-        n_sum = ((cum_n[hi] - cum_n[lo]) / n_parity)[:, None, None]
-        total[..., :3] /= n_sum[..., None]
-        total[..., 3] /= n_sum ** 2
+            n[inside] += per_parity[g]
+            x1[inside] += per_parity[g] * x
+            x2[inside] += per_parity[g] * x * x
+            s1[inside] += x * sums[g, inside, ..., :3]
+            q1[inside] += x * sums[g, inside, ..., 3]
+            q2[inside] += x * x * sums[g, inside, ..., 3]
+        n_sum = n[:, None, None]
+        if linear:
+            total = _linear_windows(total, n, x1, x2, s1, q1, q2)
+        else:
+            total[..., :3] /= n_sum[..., None]
+            total[..., 3] /= n_sum ** 2
         for p in range(n_parity):
             for c in range(4):
                 out[i, p, :, c] = np.bincount(ev.reshape(-1), weights=total[:, p, :, c].reshape(-1),
                                               minlength=n_vertices)
+    return out
+
+
+def _linear_windows(total: np.ndarray, n: np.ndarray, x1: np.ndarray, x2: np.ndarray, s1: np.ndarray,
+                    q1: np.ndarray, q2: np.ndarray) -> np.ndarray:
+    """``linear_window`` of gather.cl for every element corner: (E, P, 3, 4) window sums and the
+    window's moments (``n``, ``x1``, ``x2`` (E,) photons; ``s1`` (E, P, 3, 3), ``q1``, ``q2``
+    (E, P, 3)) -> (R, G, B) per photon at the frame and the variance term."""
+    xb = (x1 / n)[:, None, None]
+    sxx = (x2 - x1 * x1 / n)[:, None, None]
+    fit = np.broadcast_to(sxx > 1e-9 * n[:, None, None], total.shape[:3])
+    safe = np.where(fit, sxx, 1.0)
+    beta = (s1 - xb[..., None] * total[..., :3]) / safe[..., None]
+    var_b = np.maximum(q2 - 2.0 * xb * q1 + xb * xb * total[..., 3], 0.0) / (safe * safe)
+    by = beta @ np.asarray(LUMA)
+    lam = np.where(fit & (by * by > var_b), 1.0 - var_b / np.where(by != 0, by * by, 1.0), 0.0)
+    out = np.empty_like(total)
+    out[..., :3] = np.maximum(total[..., :3] / n[:, None, None, None] - (xb * lam)[..., None] * beta, 0.0)
+    out[..., 3] = total[..., 3] / (n * n)[:, None, None] + xb * xb * lam * lam * np.where(fit, var_b, 0.0)
     return out
 
 

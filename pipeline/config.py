@@ -51,6 +51,9 @@ class RenderConfig:
                                       "unlike the frame, not centred (kernels/temporal.py; §5.1 leaves it open)")
     symmetric_windows: bool = _param(False, "collection", "cut both walks to the shorter one: no bias from a linear "
                                      "drift, more noise (off: the paper's asymmetric windows, §5.1)")
+    linear_windows: bool = _param(True, "collection", "a window's value is its linear fit at the frame, the slope "
+                                  "shrunk by its noise: no bias from a drift under an asymmetric window "
+                                  "(docs/estimators.md §1.6; off: the paper's pooled mean, §5.1)")
     step_k: float = _param(6.0, "collection", "z of the regional step test: windows stop at an abrupt change "
                            "(pipeline/regional_steps.py)", 0.0)
     step_relative: float = _param(0.1, "collection", "smallest change of a cell's photon rate between two frames "

@@ -141,7 +141,8 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
     store : PhotonStore (pipeline/store) of the scene's photons.
     elements : the ElementMesh the photons were bucketed on; ``scene`` poses frames (vertex areas).
     frames : store frame indices (0-based; default all).
-    mode : "adaptive" (Condition (1), §5.1), "fixed" (+-F_max/2 always, §6 Fig. 3b) or "off".
+    mode : "adaptive" (Condition (1), §5.1; with ``config.linear_windows`` each window's linear fit
+        at the frame, docs/estimators.md §1.6), "fixed" (+-F_max/2 pooled, always, §6 Fig. 3b) or "off".
     fmax : F_max in frames (default ``config.fmax_initial``).
     kind : records gathered: "indirect" (the map the compositor reads), "direct" or "all".
     count_kind : photons whose counts drive Condition (1): "all" (default: every photon hit of an
@@ -196,7 +197,8 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
                                   elements, direct=g in outputs, times=times) for g in range(lo, hi)}
         clock.lap(None)  # FrameSums adds its own read_s and frame_sums_s
         flux = frame_sums_flux_cl([sums[g].sums for g in range(lo, hi)], n_emitted[lo:hi], back[part],
-                                  fwd[part], f - lo, elements.element_vertices, elements.n_vertices)
+                                  fwd[part], f - lo, elements.element_vertices, elements.n_vertices,
+                                  linear=mode == "adaptive" and config.linear_windows)
         areas = np.stack([frame_geometry(scene, elements, store.frame_numbers[g]).vertex_areas for g in f.tolist()])
         clock.lap("sums_s")
         own = [sums[g].direct_irradiance(a) if with_direct else None for g, a in zip(f.tolist(), areas)]

@@ -60,6 +60,8 @@ if TYPE_CHECKING:
 
 # Built-in scene -> (light node, offset of its STEP jump in metres): the abrupt lighting change
 EVENTS = {"room": ("corner_spot", (-2.0, 0.0, 1.5)), "cornell": ("ceiling_lamp", (-0.3, 0.0, 0.0))}
+# Kernels that run on stored photons only (windows, gather, filter): not the reference's
+RECONSTRUCTION_KERNELS = ("temporal", "gather", "filter")
 REFERENCE_BATCH = 250_000  # photons traced per call into a reference map (bounded worker memory)
 
 
@@ -135,14 +137,14 @@ def reference_map(*, scene_path: str, scene_hash: str, element_size: float, fram
 def reference_key(*, scene_hash: str, element_size: float, frames: tuple[int, int], n_photons: int,
                   seeds: Sequence[int], max_depth: int) -> str:
     """Name of a cached pair of references: everything :func:`reference_map` reads, and the source of
-    the code that traces and estimates (workers/, kernels/, pipeline/scene/), so a changed tracer
-    never meets a stale reference."""
+    the code that traces and estimates (workers/, kernels/ but the programs that reconstruct from a
+    store, pipeline/scene/), so a changed tracer never meets a stale reference."""
     h = hashlib.sha256(json.dumps([scene_hash, element_size, list(frames), n_photons, list(seeds), max_depth])
                        .encode())
     root = Path(__file__).resolve().parents[2]
     for folder in ("workers", "kernels", "pipeline/scene"):
         for f in sorted((root / folder).rglob("*")):
-            if f.suffix in (".py", ".cl"):
+            if f.suffix in (".py", ".cl") and not (folder == "kernels" and f.stem in RECONSTRUCTION_KERNELS):
                 h.update(f.relative_to(root).as_posix().encode() + b"\0" + f.read_bytes())
     return h.hexdigest()[:20]
 

@@ -122,6 +122,58 @@ class TestFrameSumsFluxTwin(KernelTwinTests):
         return _close_rule(want)
 
 
+class TestLinearWindowFluxTwin(TestFrameSumsFluxTwin):
+    """The same path with ``linear`` (``linear_window`` in gather.cl, docs/estimators.md §1.6)
+    against the NumPy twin's fit, within 1e-6."""
+
+    def device(self, per_frame, *args):
+        return frame_sums_flux_cl(per_frame, *args, linear=True)
+
+    def twin(self, per_frame, *args):
+        return window_flux_reference(np.stack(per_frame), *args, linear=True)
+
+
+def drifting_sums(values, n_emitted, noise_q):
+    """(J, E, 1, 3, 4) element sums whose every corner receives n_g * values[g, e] in each channel,
+    with Q = noise_q * n_g * values^2 (the photon noise of the linear-window tests)."""
+    values = np.asarray(values, float)
+    n_emitted = np.asarray(n_emitted, float)
+    sums = np.zeros(values.shape + (1, 3, 4))
+    sums[..., 0, :, :3] = (n_emitted[:, None] * values)[..., None, None]
+    sums[..., 0, :, 3] = (noise_q * n_emitted[:, None] * values ** 2)[..., None]
+    return sums
+
+
+@pytest.mark.parametrize("device", [True, False])
+def test_linear_windows_remove_a_drift_and_keep_the_pooled_mean_otherwise(device):
+    """Closed forms: lighting a + b g seen through the asymmetric window [f, f + 6] is a + b f from
+    the linear fit and a + b (f + 3) (the window's centre) from the pooled mean; a symmetric window
+    gives the pooled mean exactly; a slope lost in its photon noise is dropped (lambda = 0)."""
+    flux = frame_sums_flux_cl if device else (lambda s, *a, **k: window_flux_reference(np.stack(s), *a, **k))
+    n_frames, n = 9, np.array([1000, 2000, 1000, 1500, 1000, 1000, 3000, 1000, 1000.0])
+    ev = np.arange(6).reshape(2, 3)
+    a, b = 2.0, 0.1
+    clean = drifting_sums(np.stack([a + b * np.arange(n_frames)] * 2, axis=1), n, 1e-12)
+    ones = np.ones((1, 2), np.uint8)
+    f, z = 1, np.zeros((1, 2), np.uint8)
+    for linear, want in ((True, a + b * f), (False, None)):
+        got = flux(list(clean), n, z, 6 * ones, [f], ev, 6, linear=linear)[0, 0]
+        if want is None:
+            g = np.arange(f, f + 7)
+            want = np.sum(n[g] * (a + b * g)) / n[g].sum()  # the pooled mean: the centre's lighting
+            assert want == pytest.approx(a + b * (f + 3), rel=0.02)
+        np.testing.assert_allclose(got[:, :3], want, rtol=1e-9)
+    # Symmetric windows: x-bar = 0 with equal photons, so the fit is the pooled mean
+    even = np.full(n_frames, 1000.0)
+    sym = drifting_sums(np.stack([a + b * np.arange(n_frames) ** 2] * 2, axis=1), even, 1e-12)
+    np.testing.assert_allclose(flux(list(sym), even, 3 * ones, 3 * ones, [4], ev, 6, linear=True),
+                               flux(list(sym), even, 3 * ones, 3 * ones, [4], ev, 6, linear=False), rtol=1e-12)
+    # A slope far inside its noise (Q huge) is shrunk away entirely: the pooled mean again
+    noisy = drifting_sums(np.stack([a + b * np.arange(n_frames)] * 2, axis=1), n, 1e3)
+    np.testing.assert_allclose(flux(list(noisy), n, z, 6 * ones, [f], ev, 6, linear=True)[..., :3],
+                               flux(list(noisy), n, z, 6 * ones, [f], ev, 6, linear=False)[..., :3], rtol=1e-12)
+
+
 def test01_parity_halves_add_up_to_the_whole(rng):
     frames = [frame_records(rng, int(rng.integers(0, 4000)), 300) for _ in range(4)]
     for kind in TestElementSumsTwin.KINDS:
