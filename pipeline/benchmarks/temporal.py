@@ -24,6 +24,8 @@ from typing import TYPE_CHECKING
 import click
 import numpy as np
 
+from pipeline.config import RenderConfig
+
 if TYPE_CHECKING:
     from collections.abc import Callable
 
@@ -86,7 +88,7 @@ class SyntheticPhotons:
 
 
 def _gather_chunk(cache: dict, photons: "SyntheticPhotons", lo: int, hi: int, n_emitted, back, fwd, rows, mesh,
-                  t: dict, kind: str = "indirect"):
+                  t: dict, kind: str = "indirect", linear: bool = RenderConfig().linear_windows):
     """The gather as pipeline/temporal.py runs it for one chunk: each frame's element sums once
     (kept in ``cache`` while later chunks' windows reach the frame), then window and vertex flux
     from them on the device. Adds seconds to ``t["sums"]`` and ``t["flux"]``; returns the flux
@@ -100,8 +102,8 @@ def _gather_chunk(cache: dict, photons: "SyntheticPhotons", lo: int, hi: int, n_
             n_summed += len(records.key)
             cache[g], dt = _timed(lambda r=records: element_sums_cl([r], kind=kind)[0])
             t["sums"] += dt
-    flux, dt = _timed(frame_sums_flux_cl, [cache[g] for g in range(lo, hi)], n_emitted[lo:hi], back, fwd, rows,
-                      mesh.element_vertices, mesh.n_vertices)
+    flux, dt = _timed(lambda: frame_sums_flux_cl([cache[g] for g in range(lo, hi)], n_emitted[lo:hi], back, fwd,
+                                                 rows, mesh.element_vertices, mesh.n_vertices, linear=linear))
     t["flux"] += dt
     return flux, n_summed
 
@@ -187,8 +189,9 @@ def run(trace_frames: int = 3, numpy_frames: int = 4, n_frames: int = N_FRAMES,
     lo, hi = max(0, mid - FMAX // 2), min(n_frames, mid + k + FMAX // 2)
     table = np.stack([element_sums_cl([photons.records(g)])[0] for g in range(lo, hi)])
     rows = np.arange(mid, mid + k)
-    _, dt = _timed(window_flux_reference, table, n_emitted[lo:hi], back[rows], fwd[rows], rows - lo,
-                   mesh.element_vertices, mesh.n_vertices)
+    _, dt = _timed(lambda: window_flux_reference(table, n_emitted[lo:hi], back[rows], fwd[rows], rows - lo,
+                                                 mesh.element_vertices, mesh.n_vertices,
+                                                 linear=config.linear_windows))
     twins["flux"] = dt / k * 1e3
     flux, _ = _gather_chunk(dict(enumerate(table, lo)), photons, lo, hi, n_emitted, back[rows], fwd[rows], rows - lo,
                             mesh, dict(sums=0.0, flux=0.0))
