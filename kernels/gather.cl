@@ -88,22 +88,24 @@ __kernel void frame_sums_prefix_step(__global const double *sums, const int j, c
 
 // The linear-window estimate of one element corner (docs/estimators.md §1.6): the value at frame `row`
 // of the least-squares line, weighted by photons emitted, through the window's per-frame sums
-// (frames [lo, hi), read as differences of consecutive prefix rows), its slope shrunk by the
-// positive-part James-Stein factor 1 - var(slope) / slope^2 of its photon noise (luminance). `t` is
-// the window sum (R, G, B, Q); u gets (R, G, B) per photon emitted and the variance term.
+// (frames [lo, hi), read as differences of consecutive prefix rows, each row once), its slope shrunk
+// by the positive-part James-Stein factor 1 - var(slope) / slope^2 of its photon noise (luminance).
+// `t` is the window sum (R, G, B, Q); n, x1, x2 the window's photons and their first two moments of
+// x = g - row; u gets (R, G, B) per photon emitted and the variance term.
 inline void linear_window(__global const double *te, const long width, const int lo, const int hi,
-                          const int row, __global const double *cum_n, const double inv_parity,
+                          const int row, const double n, const double x1, const double x2,
                           const double t[4], double u[4])
 {
-    double n = 0.0, x1 = 0.0, x2 = 0.0, s1[3] = {0.0, 0.0, 0.0}, w1 = 0.0, w2 = 0.0;
+    double s1[3] = {0.0, 0.0, 0.0}, w1 = 0.0, w2 = 0.0, prev[4];
+    __global const double *a = te + (long)lo * width;
+    for (int c = 0; c < 4; ++c) prev[c] = a[c];
     for (int g = lo; g < hi; ++g) {
         const double x = (double)(g - row);
-        const double ng = (cum_n[g + 1] - cum_n[g]) * inv_parity;
-        n += ng; x1 += ng * x; x2 += ng * x * x;
-        __global const double *a = te + (long)g * width, *b = te + (long)(g + 1) * width;
-        for (int c = 0; c < 3; ++c) s1[c] += x * (b[c] - a[c]);
-        const double q = b[3] - a[3];
-        w1 += x * q; w2 += x * x * q;
+        __global const double *b = te + (long)(g + 1) * width;
+        double d[4];
+        for (int c = 0; c < 4; ++c) { d[c] = b[c] - prev[c]; prev[c] = b[c]; }
+        for (int c = 0; c < 3; ++c) s1[c] += x * d[c];
+        w1 += x * d[3]; w2 += x * x * d[3];
     }
     const double xb = x1 / n, sxx = x2 - x1 * xb;
     double lam = 0.0, beta[3] = {0.0, 0.0, 0.0}, var_b = 0.0;
@@ -126,6 +128,7 @@ inline void linear_window(__global const double *te, const long width, const int
 // row j+1 = sum of frames 0..j): a window sum is the difference of two rows. With `linear`, a corner
 // gives its linear-window estimate (linear_window) instead of the pooled mean.
 __kernel void vertex_window_flux(__global const double *table, __global const double *cum_n,
+                                 __global const double *cum_gn, __global const double *cum_ggn,
                                  __global const uchar *back, __global const uchar *fwd, // (E, n_out)
                                  __global const int *rows, __global const long *voffsets,
                                  __global const int *slots, const int n_vertices,
@@ -150,9 +153,16 @@ __kernel void vertex_window_flux(__global const double *table, __global const do
                 __global const double *te = table + (long)e * n_table_rows * width + p * SLOTS + 4 * k;
                 double t[4];
                 for (int c = 0; c < 4; ++c) t[c] = te[hi * width + c] - te[lo * width + c];
-                if (linear) {
+                // Linear windows: photons of the window and their moments of x = g - row from prefix
+                // sums (exact: integer photon counts); a window centred on the frame (x1 = 0) is its
+                // pooled mean, so only the off-centre ones loop over their frames
+                const double np = cum_n[hi] - cum_n[lo], g1 = cum_gn[hi] - cum_gn[lo];
+                const double x1 = (g1 - row * np) / n_parity;
+                if (linear && fabs(x1) > 1e-12 * np) {
+                    const double g2 = cum_ggn[hi] - cum_ggn[lo];
+                    const double x2 = (g2 - 2.0 * row * g1 + (double)row * row * np) / n_parity;
                     double u[4];
-                    linear_window(te, width, lo, hi, row, cum_n, 1.0 / n_parity, t, u);
+                    linear_window(te, width, lo, hi, row, np / n_parity, x1, x2, t, u);
                     a0 += u[0]; a1 += u[1]; a2 += u[2]; a3 += u[3];
                 } else {
                     a0 += t[0] * inv_n; a1 += t[1] * inv_n; a2 += t[2] * inv_n;

@@ -187,11 +187,15 @@ def _flux(d_table: cl.Buffer, n_emitted, back, fwd, rows, element_vertices, n_ve
         return np.moveaxis(np.zeros((n_vertices, len(rows), n_parity, 4)), 0, 2)
     out = np.empty((n_vertices, len(rows), n_parity, 4))
     cum_n = np.concatenate([[0.0], np.cumsum(n_emitted)])
+    g = np.arange(len(n_emitted), dtype=np.float64)  # prefix sums of g N_g and g^2 N_g: linear windows' moments
+    cum_gn = np.concatenate([[0.0], np.cumsum(g * n_emitted)])
+    cum_ggn = np.concatenate([[0.0], np.cumsum(g * g * n_emitted)])
     voffsets, slots = vertex_slots(element_vertices, n_vertices)
     d_out = scratch("gather.vertex_flux", out.nbytes)
     back_t, fwd_t = (np.ascontiguousarray(a.T) for a in (back, fwd))  # (E, n_out)
     kernel("gather", "vertex_window_flux")(
-        queue, (n_vertices,), None, d_table, _upload(ctx, cum_n), _upload(ctx, back_t), _upload(ctx, fwd_t),
+        queue, (n_vertices,), None, d_table, _upload(ctx, cum_n), _upload(ctx, cum_gn), _upload(ctx, cum_ggn),
+        _upload(ctx, back_t), _upload(ctx, fwd_t),
         _upload(ctx, rows.astype(np.int32)), _upload(ctx, voffsets), _upload(ctx, slots), np.int32(n_vertices),
         np.int32(n_elements), np.int32(n_parity), np.int32(len(n_emitted) + 1), np.int32(len(rows)),
         np.int32(bool(linear)), d_out)
