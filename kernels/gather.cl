@@ -149,16 +149,17 @@ __kernel void vertex_window_flux(__global const double *table, __global const do
                 const int e = ek / 3, k = ek - 3 * (ek / 3);
                 const long w = (long)e * n_out + i;
                 const int lo = row - back[w], hi = row + fwd[w] + 1;  // frames [lo, hi)
-                const double inv_n = (double)n_parity / (cum_n[hi] - cum_n[lo]);  // 1 / photons
+                const double np = cum_n[hi] - cum_n[lo];  // photons emitted in the window
+                const double inv_n = (double)n_parity / np;  // 1 / photons of one parity
                 __global const double *te = table + (long)e * n_table_rows * width + p * SLOTS + 4 * k;
                 double t[4];
                 for (int c = 0; c < 4; ++c) t[c] = te[hi * width + c] - te[lo * width + c];
-                // Linear windows: photons of the window and their moments of x = g - row from prefix
-                // sums (exact: integer photon counts); a window centred on the frame (x1 = 0) is its
-                // pooled mean, so only the off-centre ones loop over their frames
-                const double np = cum_n[hi] - cum_n[lo], g1 = cum_gn[hi] - cum_gn[lo];
-                const double x1 = (g1 - row * np) / n_parity;
-                if (linear && fabs(x1) > 1e-12 * np) {
+                // Linear windows: the photons' moments of x = g - row from prefix sums (exact: integer
+                // photon counts); a window centred on the frame (x1 = 0) is its pooled mean, so only
+                // the off-centre ones loop over their frames
+                const double g1 = linear ? cum_gn[hi] - cum_gn[lo] : 0.0;
+                const double x1 = linear ? (g1 - row * np) / n_parity : 0.0;
+                if (fabs(x1) > 1e-12 * np) {
                     const double g2 = cum_ggn[hi] - cum_ggn[lo];
                     const double x2 = (g2 - 2.0 * row * g1 + (double)row * row * np) / n_parity;
                     double u[4];

@@ -264,26 +264,27 @@ def window_flux_reference(sums: npt.ArrayLike, n_emitted: npt.ArrayLike, back: n
     for i, row in enumerate(rows):
         lo, hi = row - back[i].astype(np.int64), row + fwd[i].astype(np.int64) + 1
         total = np.zeros((n_elements, n_parity, 3, 4))
-        # weighted moments of x = g - row: photons, and the sums' first (RGB) and Q's first and second
+        # photons; with ``linear`` also the weighted moments of x = g - row: photons' first and second,
+        # the sums' first (RGB) and Q's first and second
         n, x1, x2 = (np.zeros(n_elements) for _ in range(3))
         s1 = np.zeros((n_elements, n_parity, 3, 3))
         q1, q2 = np.zeros((n_elements, n_parity, 3)), np.zeros((n_elements, n_parity, 3))
         for g in range(int(lo.min(initial=row)), int(hi.max(initial=row + 1))):
             inside = (lo <= g) & (g < hi)
-            x = float(g - row)
             total[inside] += sums[g, inside]
             n[inside] += per_parity[g]
-            x1[inside] += per_parity[g] * x
-            x2[inside] += per_parity[g] * x * x
-            s1[inside] += x * sums[g, inside, ..., :3]
-            q1[inside] += x * sums[g, inside, ..., 3]
-            q2[inside] += x * x * sums[g, inside, ..., 3]
-        n_sum = n[:, None, None]
+            if linear:
+                x = float(g - row)
+                x1[inside] += per_parity[g] * x
+                x2[inside] += per_parity[g] * x * x
+                s1[inside] += x * sums[g, inside, ..., :3]
+                q1[inside] += x * sums[g, inside, ..., 3]
+                q2[inside] += x * x * sums[g, inside, ..., 3]
         if linear:
             total = _linear_windows(total, n, x1, x2, s1, q1, q2)
         else:
-            total[..., :3] /= n_sum[..., None]
-            total[..., 3] /= n_sum ** 2
+            total[..., :3] /= n[:, None, None, None]
+            total[..., 3] /= (n * n)[:, None, None]
         for p in range(n_parity):
             for c in range(4):
                 out[i, p, :, c] = np.bincount(ev.reshape(-1), weights=total[:, p, :, c].reshape(-1),

@@ -24,8 +24,6 @@ from typing import TYPE_CHECKING
 import click
 import numpy as np
 
-from pipeline.config import RenderConfig
-
 if TYPE_CHECKING:
     from collections.abc import Callable
 
@@ -88,7 +86,7 @@ class SyntheticPhotons:
 
 
 def _gather_chunk(cache: dict, photons: "SyntheticPhotons", lo: int, hi: int, n_emitted, back, fwd, rows, mesh,
-                  t: dict, kind: str = "indirect", linear: bool = RenderConfig().linear_windows):
+                  t: dict, *, linear: bool, kind: str = "indirect"):
     """The gather as pipeline/temporal.py runs it for one chunk: each frame's element sums once
     (kept in ``cache`` while later chunks' windows reach the frame), then window and vertex flux
     from them on the device. Adds seconds to ``t["sums"]`` and ``t["flux"]``; returns the flux
@@ -134,7 +132,9 @@ def run(trace_frames: int = 3, numpy_frames: int = 4, n_frames: int = N_FRAMES,
     # Warm-up: build every program once (PoCL compile, cached on disk after the first run)
     windows_cl(counts[:8], n_emitted[:8], fmax=4)
     zero = np.zeros((1, mesh.n_elements), np.uint8)
-    wf, _ = _gather_chunk({}, photons, 0, 1, n_emitted, zero, zero, [0], mesh, dict(sums=0.0, flux=0.0))
+    linear = config.linear_windows  # the gather renders run (pipeline/temporal.py)
+    wf, _ = _gather_chunk({}, photons, 0, 1, n_emitted, zero, zero, [0], mesh, dict(sums=0.0, flux=0.0),
+                          linear=linear)
     hood, hood_s = _timed(neighbourhood, mesh.element_vertices, mesh.vertex_local, mesh.vertex_instance,
                           max_rings=config.filter_rings, max_angle=config.filter_angle)
     adaptive_filter_cl(wf[0], areas, hood)
@@ -150,7 +150,8 @@ def run(trace_frames: int = 3, numpy_frames: int = 4, n_frames: int = N_FRAMES,
         hi = int((out[:, None] + fwd[out]).max()) + 1
         for g in [g for g in cache if g < lo]:
             del cache[g]
-        flux, n = _gather_chunk(cache, photons, lo, hi, n_emitted, back[out], fwd[out], out - lo, mesh, t)
+        flux, n = _gather_chunk(cache, photons, lo, hi, n_emitted, back[out], fwd[out], out - lo, mesh, t,
+                                linear=linear)
         n_summed += n
         (_, rings), dt = _timed(adaptive_filter_cl, flux, areas, hood, photons=config.filter_photons)
         t["filter"] += dt
@@ -174,7 +175,7 @@ def run(trace_frames: int = 3, numpy_frames: int = 4, n_frames: int = N_FRAMES,
     few = np.full((len(rows), mesh.n_elements), n_dense // 4, np.uint8)
     dense = dict(sums=0.0, flux=0.0)
     _, n_big = _gather_chunk({}, big, 0, n_dense, np.full(n_dense, 1e6 / 0.75), few, few, rows, mesh, dense,
-                             kind="all")
+                             linear=linear, kind="all")
     result["records_per_s_sums_1M"] = n_big / dense["sums"]
     result["records_per_s_gather_1M"] = n_big / (dense["sums"] + dense["flux"])
 
@@ -190,11 +191,10 @@ def run(trace_frames: int = 3, numpy_frames: int = 4, n_frames: int = N_FRAMES,
     table = np.stack([element_sums_cl([photons.records(g)])[0] for g in range(lo, hi)])
     rows = np.arange(mid, mid + k)
     want, dt = _timed(lambda: window_flux_reference(table, n_emitted[lo:hi], back[rows], fwd[rows], rows - lo,
-                                                    mesh.element_vertices, mesh.n_vertices,
-                                                    linear=config.linear_windows))
+                                                    mesh.element_vertices, mesh.n_vertices, linear=linear))
     twins["flux"] = dt / k * 1e3
     flux, _ = _gather_chunk(dict(enumerate(table, lo)), photons, lo, hi, n_emitted, back[rows], fwd[rows], rows - lo,
-                            mesh, dict(sums=0.0, flux=0.0))
+                            mesh, dict(sums=0.0, flux=0.0), linear=linear)
     # The timed path computes what its twin does: largest difference relative to the largest value
     result["flux_twin_difference"] = float(np.abs(flux - want).max() / max(np.abs(want).max(), 1e-300))
     _, dt = _timed(lambda: [adaptive_filter_reference(flux[i], areas, hood) for i in range(len(rows))])
