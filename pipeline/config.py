@@ -54,6 +54,9 @@ class RenderConfig:
     linear_windows: bool = _param(True, "collection", "a window's value is its linear fit at the frame, the slope "
                                   "shrunk by its noise: no bias from a drift under an asymmetric window "
                                   "(docs/estimators.md §1.6; off: the paper's pooled mean, §5.1)")
+    indirect_counts: bool = _param(True, "collection", "Condition (1), the step test and p_me count the indirect "
+                                   "hits, the photons of the map the windows collect (pipeline/temporal.py "
+                                   "window_counts; off: every hit, direct included, as the per-frame tables of §4)")
     step_k: float = _param(6.0, "collection", "z of the regional step test: windows stop at an abrupt change "
                            "(pipeline/regional_steps.py)", 0.0)
     step_relative: float = _param(0.1, "collection", "smallest change of a cell's photon rate between two frames "

@@ -239,10 +239,10 @@ class SegmentRun:
 
     # --- Step 2 ------------------------------------------------------------------------------
     def p_me(self, place: Placement, targets: dict[int, int]) -> tuple[float, float]:
-        from .temporal import collection_windows, step_regions
+        from .temporal import collection_windows, step_regions, window_counts
 
         use = self.batches(targets)
-        counts = self.store.counts(kind="all", batches=use)
+        counts = window_counts(self.store, self.config, batches=use)
         emitted = np.array([self.store.photons_in(f, int(use[f])) for f in range(self.store.n_frames)], np.float64)
         # p_me counts how far Condition (1)'s walks reach each way, so not the symmetric cut of
         # the collection (which would make the two shares one); a regional step stops a walk as
@@ -266,7 +266,7 @@ class SegmentRun:
         from .images import write_png
         from .perceived import camera_flow, displayed_difference
         from .segment_records import record_path
-        from .temporal import illumination_maps
+        from .temporal import illumination_maps, window_counts
         from .tonemap import ToneMapping
 
         t0 = time.perf_counter()
@@ -289,8 +289,8 @@ class SegmentRun:
         flow = camera_flow(self.scene, k, job.width, job.height, params)
         result = displayed_difference(images[0], images[1], adaptation, params=params,
                                       aqm_size=self.config.aqm_size, flow=flow)
-        self._windows_at_k = window_histogram(lit.back, lit.fwd, place.fmax,
-                                              self.store.counts(kind="all", batches=use)[place.start - 1:place.end])
+        counts = window_counts(self.store, self.config, batches=use)[place.start - 1:place.end]
+        self._windows_at_k = window_histogram(lit.back, lit.fwd, place.fmax, counts)
         picture = record_path(job.out_dir, index).with_suffix(".aqm.png")
         picture.parent.mkdir(parents=True, exist_ok=True)
         write_png(picture, difference_picture(images[0], result.visible))

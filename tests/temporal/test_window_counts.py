@@ -1,0 +1,49 @@
+"""pipeline/temporal.window_counts: Condition (1) counts the indirect hits (the photons of the map the
+windows collect) unless ``indirect_counts`` is off, so a frame where only the direct light changes
+does not cut the windows of the indirect map; with every hit counted, as §4's tables, it does."""
+from __future__ import annotations
+
+import numpy as np
+
+from pipeline.config import RenderConfig
+from pipeline.store import PhotonStore, pack_key
+from pipeline.temporal import collection_windows, window_counts
+from tests.store.photonstore_helpers import IDENTITY
+
+FRAMES, EMITTED, CHANGE = 9, 1000, 4
+INDIRECT, DIRECT = 400, (50, 800)  # hits of element 0 a frame: direct jumps at CHANGE, indirect does not
+
+
+def _store(tmp_path) -> PhotonStore:
+    url = str(tmp_path / "p.zarr")
+    PhotonStore.create(url, n_frames=FRAMES, n_elements=2, frame_numbers=list(range(1, FRAMES + 1)), **IDENTITY)
+    store = PhotonStore.open(url, mode="r+", **IDENTITY)
+    for f in range(FRAMES):
+        n_direct = DIRECT[f >= CHANGE]
+        n = INDIRECT + n_direct
+        direct = np.arange(n) < n_direct
+        store.write_batch(f, 0, key=pack_key(np.zeros(n, np.uint32), np.arange(n), direct),
+                          bary=np.zeros((n, 2), np.uint16), energy=np.ones((n, 3), np.float32),
+                          photons_emitted=EMITTED, photon_start=0)
+    return PhotonStore.open(url, mode="r", **IDENTITY)
+
+
+def _windows(store, config, frame):
+    counts = window_counts(store, config)
+    back, fwd = collection_windows(counts, store.emitted(None).astype(np.float64), [frame], mode="adaptive",
+                                   fmax=8, config=config)
+    return int(back[0, 0]), int(fwd[0, 0])
+
+
+def test_windows_follow_the_indirect_hits_unless_told_otherwise(tmp_path):
+    store = _store(tmp_path)
+    on = RenderConfig(step_levels=0)  # Condition (1) alone: no element regions needed
+    off = on.replace(indirect_counts=False)
+    assert window_counts(store, on)[:, 0].tolist() == [INDIRECT] * FRAMES
+    assert window_counts(store, off)[:, 0].tolist() == [INDIRECT + DIRECT[f >= CHANGE] for f in range(FRAMES)]
+    # The frame after the direct light's jump: its window reaches back over it only on indirect counts
+    assert _windows(store, on, CHANGE) == (4, 4)
+    back, _ = _windows(store, off, CHANGE)
+    assert back == 0
+    # Both kinds of hit stay in the store: the choice is only what the windows read
+    assert store.counts(kind="direct")[:, 0].tolist() == [DIRECT[f >= CHANGE] for f in range(FRAMES)]
