@@ -15,7 +15,8 @@ Condition (1), as implemented (paper symbols; ``s`` = ``smoothing_frames``, defa
 Walks run backward and forward from f independently and stop at the first failing frame, at
 F_max/2 frames and at the animation's ends. Afterwards at least ``min_extent`` frames are taken:
 the paper's minimal extent of 3 frames, justified by temporal masking (§5.1). The paper does not
-say where the extra frames lie. ``similar=True`` (the default, ``RenderConfig.min_extent_similar``):
+say where the extra frames lie. ``similar=True`` (``RenderConfig.min_extent_similar``, default off since the
+regional step test, pipeline/regional_steps.py, stops windows at abrupt changes itself):
 where the walks cover fewer than ``min_extent`` frames, the missing ones are placed on the side(s)
 least unlike f, by the summed z^2 of the added frames, z^2(g) = (r_g - r_f)^2 N_f N_g / (c_f + c_g)
 (r = c/N, the Poisson z-score of a common rate), but only if that beats the most centred placement

@@ -47,7 +47,10 @@ class RenderConfig:
     k_sigma: float = _param(2.0, "collection", "k in mu - k sigma <= x <= mu + k sigma, §5.1 Eq. (1)", 0.0)
     smoothing_frames: int = _param(3, "collection", "frames averaged for mu and x, §5.1", 1, 255, odd=True)
     min_extent: int = _param(3, "collection", "minimal temporal extent in frames, §5.1", 1, 255)
-    min_extent_similar: bool = _param(True, "collection", "the minimal extent's extra frames on the side(s) least "
+    # Off since the step test and linear windows: the step test already keeps a frame beside an
+    # abrupt change to its own side, and a side chosen from the counts flips between neighbouring
+    # frames, which the error benchmark sees as flicker (README, "Windows from the indirect hits")
+    min_extent_similar: bool = _param(False, "collection", "the minimal extent's extra frames on the side(s) least "
                                       "unlike the frame, not centred (kernels/temporal.py; §5.1 leaves it open)")
     symmetric_windows: bool = _param(False, "collection", "cut both walks to the shorter one: no bias from a linear "
                                      "drift, more noise (off: the paper's asymmetric windows, §5.1)")
