@@ -86,12 +86,28 @@ __kernel void frame_sums_prefix_step(__global const double *sums, const int j, c
     for (int c = 0; c < SLOTS; ++c) o[c] = prev[c] + acc[c];
 }
 
-// The linear-window estimate of one element corner (docs/estimators.md §1.6): the value at frame `row`
-// of the least-squares line, weighted by photons emitted, through the window's per-frame sums
-// (frames [lo, hi), read as differences of consecutive prefix rows, each row once), its slope shrunk
-// by the positive-part James-Stein factor 1 - var(slope) / slope^2 of its photon noise (luminance).
-// `t` is the window sum (R, G, B, Q); n, x1, x2 the window's photons and their first two moments of
-// x = g - row; u gets (R, G, B) per photon emitted and the variance term.
+// The value at x = 0 of the window's least-squares line (docs/estimators.md §1.6), its slope shrunk by
+// the positive-part James-Stein factor 1 - var(slope) / slope^2 of its photon noise (luminance): `t`
+// the window sum (R, G, B, Q), n, x1, x2 its photons and their first two moments of x = g - row, s1
+// the sums' first moment, w1, w2 Q's first two; u gets (R, G, B) per photon emitted and the variance.
+inline void fit_at_frame(const double t[4], const double n, const double x1, const double x2, const double s1[3],
+                         const double w1, const double w2, double u[4])
+{
+    const double xb = x1 / n, sxx = x2 - x1 * xb;
+    double lam = 0.0, beta[3] = {0.0, 0.0, 0.0}, var_b = 0.0;
+    if (sxx > 1e-9 * n) {
+        for (int c = 0; c < 3; ++c) beta[c] = (s1[c] - xb * t[c]) / sxx;
+        var_b = fmax(w2 - 2.0 * xb * w1 + xb * xb * t[3], 0.0) / (sxx * sxx);
+        const double by = LUMA_R * beta[0] + LUMA_G * beta[1] + LUMA_B * beta[2];
+        if (by * by > var_b) lam = 1.0 - var_b / (by * by);
+    }
+    for (int c = 0; c < 3; ++c) u[c] = fmax(t[c] / n - xb * lam * beta[c], 0.0);
+    u[3] = t[3] / (n * n) + xb * xb * lam * lam * var_b;
+}
+
+// The linear-window estimate of one element corner: fit_at_frame of the line, weighted by photons
+// emitted, through the window's per-frame sums (frames [lo, hi), read as differences of consecutive
+// prefix rows, each row once). `t` is the window sum, n, x1, x2 its photons' moments (from prefix sums).
 inline void linear_window(__global const double *te, const long width, const int lo, const int hi,
                           const int row, const double n, const double x1, const double x2,
                           const double t[4], double u[4])
@@ -107,16 +123,37 @@ inline void linear_window(__global const double *te, const long width, const int
         for (int c = 0; c < 3; ++c) s1[c] += x * d[c];
         w1 += x * d[3]; w2 += x * x * d[3];
     }
-    const double xb = x1 / n, sxx = x2 - x1 * xb;
-    double lam = 0.0, beta[3] = {0.0, 0.0, 0.0}, var_b = 0.0;
-    if (sxx > 1e-9 * n) {
-        for (int c = 0; c < 3; ++c) beta[c] = (s1[c] - xb * t[c]) / sxx;
-        var_b = fmax(w2 - 2.0 * xb * w1 + xb * xb * t[3], 0.0) / (sxx * sxx);
-        const double by = LUMA_R * beta[0] + LUMA_G * beta[1] + LUMA_B * beta[2];
-        if (by * by > var_b) lam = 1.0 - var_b / (by * by);
+    fit_at_frame(t, n, x1, x2, s1, w1, w2, u);
+}
+
+// A tapered window (docs/estimators.md §1.7): frame g of [lo, hi) weighs a = 1 - |g - row| / taper,
+// its photons by a and its Q by a^2; then the weighted line at the frame (`linear`) or the weighted
+// pooled mean. `per` divides the photons emitted (the parity split).
+inline void tapered_window(__global const double *te, __global const double *cum_n, const long width,
+                           const int lo, const int hi, const int row, const double taper, const double per,
+                           const int linear, double u[4])
+{
+    double t[4] = {0.0, 0.0, 0.0, 0.0}, s1[3] = {0.0, 0.0, 0.0}, n = 0.0, x1 = 0.0, x2 = 0.0, w1 = 0.0,
+           w2 = 0.0, prev[4];
+    __global const double *a0 = te + (long)lo * width;
+    for (int c = 0; c < 4; ++c) prev[c] = a0[c];
+    for (int g = lo; g < hi; ++g) {
+        const double x = (double)(g - row);
+        const double a = 1.0 - fabs(x) / taper, aa = a * a;
+        const double ng = a * ((cum_n[g + 1] - cum_n[g]) / per);
+        __global const double *b = te + (long)(g + 1) * width;
+        double d[4];
+        for (int c = 0; c < 4; ++c) { d[c] = b[c] - prev[c]; prev[c] = b[c]; }
+        for (int c = 0; c < 3; ++c) { t[c] += a * d[c]; s1[c] += a * x * d[c]; }
+        t[3] += aa * d[3]; w1 += aa * x * d[3]; w2 += aa * x * x * d[3];
+        n += ng; x1 += ng * x; x2 += ng * x * x;
     }
-    for (int c = 0; c < 3; ++c) u[c] = fmax(t[c] / n - xb * lam * beta[c], 0.0);
-    u[3] = t[3] / (n * n) + xb * xb * lam * lam * var_b;
+    if (linear) {
+        fit_at_frame(t, n, x1, x2, s1, w1, w2, u);
+    } else {
+        for (int c = 0; c < 3; ++c) u[c] = t[c] / n;
+        u[3] = t[3] / (n * n);
+    }
 }
 
 // Vertex flux of every output frame i (work item v; frames in order, so an element's rows are
@@ -126,14 +163,15 @@ inline void linear_window(__global const double *te, const long width, const int
 // (Q: / (sum_g N_g)^2), with N_g halved per parity. Output frame i is frame rows[i] of the
 // element-major prefix table (E, n_table_rows, n_parity, 12) of frame_sums_prefix_step (row 0 = 0,
 // row j+1 = sum of frames 0..j): a window sum is the difference of two rows. With `linear`, a corner
-// gives its linear-window estimate (linear_window) instead of the pooled mean.
+// gives its linear-window estimate (linear_window) instead of the pooled mean; with `taper` > 0 every
+// window is tapered (tapered_window).
 __kernel void vertex_window_flux(__global const double *table, __global const double *cum_n,
                                  __global const double *cum_gn, __global const double *cum_ggn,
                                  __global const uchar *back, __global const uchar *fwd, // (E, n_out)
                                  __global const int *rows, __global const long *voffsets,
                                  __global const int *slots, const int n_vertices,
                                  const int n_elements, const int n_parity, const int n_table_rows,
-                                 const int n_out, const int linear,
+                                 const int n_out, const int linear, const double taper,
                                  __global double *out)  // (V, n_out, n_parity, 4)
 {
     const int v = get_global_id(0);
@@ -152,6 +190,12 @@ __kernel void vertex_window_flux(__global const double *table, __global const do
                 const double np = cum_n[hi] - cum_n[lo];  // photons emitted in the window
                 const double inv_n = (double)n_parity / np;  // 1 / photons of one parity
                 __global const double *te = table + (long)e * n_table_rows * width + p * SLOTS + 4 * k;
+                if (taper > 0.0) {
+                    double u[4];
+                    tapered_window(te, cum_n, width, lo, hi, row, taper, (double)n_parity, linear, u);
+                    a0 += u[0]; a1 += u[1]; a2 += u[2]; a3 += u[3];
+                    continue;
+                }
                 double t[4];
                 for (int c = 0; c < 4; ++c) t[c] = te[hi * width + c] - te[lo * width + c];
                 // Linear windows: the photons' moments of x = g - row from prefix sums (exact: integer

@@ -57,6 +57,9 @@ class RenderConfig:
     linear_windows: bool = _param(True, "collection", "a window's value is its linear fit at the frame, the slope "
                                   "shrunk by its noise: no bias from a drift under an asymmetric window "
                                   "(docs/estimators.md §1.6; off: the paper's pooled mean, §5.1)")
+    taper_windows: bool = _param(True, "collection", "frame g of an adaptive window weighs 1 - |g - f| / (F_max/2 + "
+                                 "1): nearer frames count more, so less bias from a curving light and smaller "
+                                 "jumps as windows slide (docs/estimators.md §1.7; off: every frame 1, §5.1)")
     indirect_counts: bool = _param(True, "collection", "Condition (1), the step test and p_me count the indirect "
                                    "hits, the photons of the map the windows collect (pipeline/temporal.py "
                                    "window_counts; off: every hit, direct included, as the per-frame tables of §4)")

@@ -76,6 +76,13 @@ def window_counts(store: PhotonStore, config: RenderConfig, frames: Iterable[int
     return store.counts(kind="indirect" if config.indirect_counts else "all", frames=frames, batches=batches)
 
 
+def window_taper(fmax: int, mode: str, config: RenderConfig) -> float:
+    """The gather's taper (kernels/gather.frame_sums_flux_cl): frame g of an adaptive window weighs
+    1 - |g - f| / (F_max/2 + 1) with ``config.taper_windows``, so every frame a window can reach
+    weighs more than 0; 0 (every frame 1) otherwise, and always for ``fixed`` windows (Fig. 3b)."""
+    return float(int(fmax) // 2 + 1) if mode == "adaptive" and config.taper_windows else 0.0
+
+
 def window_reach(fmax: int, mode: str, config: RenderConfig) -> int:
     """Frames of the count table either side of an output frame that its window can depend on:
     F_max/2 frames of walk plus the smoothing half-width of Condition (1)'s rates."""
@@ -210,7 +217,8 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
         clock.lap(None)  # FrameSums adds its own read_s and frame_sums_s
         flux = frame_sums_flux_cl([sums[g].sums for g in range(lo, hi)], n_emitted[lo:hi], back[part],
                                   fwd[part], f - lo, elements.element_vertices, elements.n_vertices,
-                                  linear=mode == "adaptive" and config.linear_windows)
+                                  linear=mode == "adaptive" and config.linear_windows,
+                                  taper=window_taper(fmax, mode, config))
         areas = np.stack([frame_geometry(scene, elements, store.frame_numbers[g]).vertex_areas for g in f.tolist()])
         clock.lap("sums_s")
         own = [sums[g].direct_irradiance(a) if with_direct else None for g, a in zip(f.tolist(), areas)]

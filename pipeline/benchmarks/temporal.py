@@ -86,7 +86,7 @@ class SyntheticPhotons:
 
 
 def _gather_chunk(cache: dict, photons: "SyntheticPhotons", lo: int, hi: int, n_emitted, back, fwd, rows, mesh,
-                  t: dict, *, linear: bool, kind: str = "indirect"):
+                  t: dict, *, shape: dict, kind: str = "indirect"):
     """The gather as pipeline/temporal.py runs it for one chunk: each frame's element sums once
     (kept in ``cache`` while later chunks' windows reach the frame), then window and vertex flux
     from them on the device. Adds seconds to ``t["sums"]`` and ``t["flux"]``; returns the flux
@@ -101,7 +101,7 @@ def _gather_chunk(cache: dict, photons: "SyntheticPhotons", lo: int, hi: int, n_
             cache[g], dt = _timed(lambda r=records: element_sums_cl([r], kind=kind)[0])
             t["sums"] += dt
     flux, dt = _timed(lambda: frame_sums_flux_cl([cache[g] for g in range(lo, hi)], n_emitted[lo:hi], back, fwd,
-                                                 rows, mesh.element_vertices, mesh.n_vertices, linear=linear))
+                                                 rows, mesh.element_vertices, mesh.n_vertices, **shape))
     t["flux"] += dt
     return flux, n_summed
 
@@ -112,6 +112,7 @@ def run(trace_frames: int = 3, numpy_frames: int = 4, n_frames: int = N_FRAMES,
     from kernels.gather import element_sums_cl, element_sums_reference, irradiance, window_flux_reference
     from kernels.temporal import windows_cl, windows_reference
     from pipeline.config import RenderConfig
+    from pipeline.temporal import window_taper
 
     config = RenderConfig()
     with tempfile.TemporaryDirectory() as tmp:
@@ -132,9 +133,10 @@ def run(trace_frames: int = 3, numpy_frames: int = 4, n_frames: int = N_FRAMES,
     # Warm-up: build every program once (PoCL compile, cached on disk after the first run)
     windows_cl(counts[:8], n_emitted[:8], fmax=4)
     zero = np.zeros((1, mesh.n_elements), np.uint8)
-    linear = config.linear_windows  # the gather renders run (pipeline/temporal.py)
+    # The windows' shape the gather of a render takes (pipeline/temporal.py): linear fit and taper
+    shape = dict(linear=config.linear_windows, taper=window_taper(FMAX, "adaptive", config))
     wf, _ = _gather_chunk({}, photons, 0, 1, n_emitted, zero, zero, [0], mesh, dict(sums=0.0, flux=0.0),
-                          linear=linear)
+                          shape=shape)
     hood, hood_s = _timed(neighbourhood, mesh.element_vertices, mesh.vertex_local, mesh.vertex_instance,
                           max_rings=config.filter_rings, max_angle=config.filter_angle)
     adaptive_filter_cl(wf[0], areas, hood)
@@ -151,7 +153,7 @@ def run(trace_frames: int = 3, numpy_frames: int = 4, n_frames: int = N_FRAMES,
         for g in [g for g in cache if g < lo]:
             del cache[g]
         flux, n = _gather_chunk(cache, photons, lo, hi, n_emitted, back[out], fwd[out], out - lo, mesh, t,
-                                linear=linear)
+                                shape=shape)
         n_summed += n
         (_, rings), dt = _timed(adaptive_filter_cl, flux, areas, hood, photons=config.filter_photons)
         t["filter"] += dt
@@ -175,7 +177,7 @@ def run(trace_frames: int = 3, numpy_frames: int = 4, n_frames: int = N_FRAMES,
     few = np.full((len(rows), mesh.n_elements), n_dense // 4, np.uint8)
     dense = dict(sums=0.0, flux=0.0)
     _, n_big = _gather_chunk({}, big, 0, n_dense, np.full(n_dense, 1e6 / 0.75), few, few, rows, mesh, dense,
-                             linear=linear, kind="all")
+                             shape=shape, kind="all")
     result["records_per_s_sums_1M"] = n_big / dense["sums"]
     result["records_per_s_gather_1M"] = n_big / (dense["sums"] + dense["flux"])
 
@@ -191,10 +193,10 @@ def run(trace_frames: int = 3, numpy_frames: int = 4, n_frames: int = N_FRAMES,
     table = np.stack([element_sums_cl([photons.records(g)])[0] for g in range(lo, hi)])
     rows = np.arange(mid, mid + k)
     want, dt = _timed(lambda: window_flux_reference(table, n_emitted[lo:hi], back[rows], fwd[rows], rows - lo,
-                                                    mesh.element_vertices, mesh.n_vertices, linear=linear))
+                                                    mesh.element_vertices, mesh.n_vertices, **shape))
     twins["flux"] = dt / k * 1e3
     flux, _ = _gather_chunk(dict(enumerate(table, lo)), photons, lo, hi, n_emitted, back[rows], fwd[rows], rows - lo,
-                            mesh, dict(sums=0.0, flux=0.0), linear=linear)
+                            mesh, dict(sums=0.0, flux=0.0), shape=shape)
     # The timed path computes what its twin does: largest difference relative to the largest value
     result["flux_twin_difference"] = float(np.abs(flux - want).max() / max(np.abs(want).max(), 1e-300))
     _, dt = _timed(lambda: [adaptive_filter_reference(flux[i], areas, hood) for i in range(len(rows))])
