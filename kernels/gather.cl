@@ -105,49 +105,54 @@ inline void fit_at_frame(const double t[4], const double n, const double x1, con
     u[3] = t[3] / (n * n) + xb * xb * lam * lam * var_b;
 }
 
+// One walk over a window's frames [lo, hi), read as differences of consecutive prefix rows (each row
+// once), x = g - row: frame g weighs a = 1 - |x| / taper (a = 1 with taper 0, docs/estimators.md §1.7),
+// its sums by a and its Q by a^2. Accumulates the weighted window sum t, the sums' first moment s1, Q's
+// first two w1, w2, and with `cum_n` the photons' (divided by `per`, the parity split) n, x1, x2.
+inline void window_moments(__global const double *te, __global const double *cum_n, const long width,
+                           const int lo, const int hi, const int row, const double taper, const double per,
+                           double t[4], double s1[3], double *w1, double *w2, double *n, double *x1,
+                           double *x2)
+{
+    double prev[4];
+    __global const double *a0 = te + (long)lo * width;
+    for (int c = 0; c < 4; ++c) prev[c] = a0[c];
+    for (int g = lo; g < hi; ++g) {
+        const double x = (double)(g - row);
+        const double a = taper > 0.0 ? 1.0 - fabs(x) / taper : 1.0, aa = a * a;
+        __global const double *b = te + (long)(g + 1) * width;
+        double d[4];
+        for (int c = 0; c < 4; ++c) { d[c] = b[c] - prev[c]; prev[c] = b[c]; }
+        for (int c = 0; c < 3; ++c) { t[c] += a * d[c]; s1[c] += a * x * d[c]; }
+        t[3] += aa * d[3]; *w1 += aa * x * d[3]; *w2 += aa * x * x * d[3];
+        if (cum_n) {
+            const double ng = a * ((cum_n[g + 1] - cum_n[g]) / per);
+            *n += ng; *x1 += ng * x; *x2 += ng * x * x;
+        }
+    }
+}
+
 // The linear-window estimate of one element corner: fit_at_frame of the line, weighted by photons
-// emitted, through the window's per-frame sums (frames [lo, hi), read as differences of consecutive
-// prefix rows, each row once). `t` is the window sum, n, x1, x2 its photons' moments (from prefix sums).
+// emitted, through the window's per-frame sums. `t` is the window sum, n, x1, x2 its photons' moments
+// (all from prefix sums); the walk adds only the sums' moments.
 inline void linear_window(__global const double *te, const long width, const int lo, const int hi,
                           const int row, const double n, const double x1, const double x2,
                           const double t[4], double u[4])
 {
-    double s1[3] = {0.0, 0.0, 0.0}, w1 = 0.0, w2 = 0.0, prev[4];
-    __global const double *a = te + (long)lo * width;
-    for (int c = 0; c < 4; ++c) prev[c] = a[c];
-    for (int g = lo; g < hi; ++g) {
-        const double x = (double)(g - row);
-        __global const double *b = te + (long)(g + 1) * width;
-        double d[4];
-        for (int c = 0; c < 4; ++c) { d[c] = b[c] - prev[c]; prev[c] = b[c]; }
-        for (int c = 0; c < 3; ++c) s1[c] += x * d[c];
-        w1 += x * d[3]; w2 += x * x * d[3];
-    }
+    double walked[4] = {0.0, 0.0, 0.0, 0.0}, s1[3] = {0.0, 0.0, 0.0}, w1 = 0.0, w2 = 0.0;
+    window_moments(te, 0, width, lo, hi, row, 0.0, 1.0, walked, s1, &w1, &w2, 0, 0, 0);
     fit_at_frame(t, n, x1, x2, s1, w1, w2, u);
 }
 
-// A tapered window (docs/estimators.md §1.7): frame g of [lo, hi) weighs a = 1 - |g - row| / taper,
-// its photons by a and its Q by a^2; then the weighted line at the frame (`linear`) or the weighted
-// pooled mean. `per` divides the photons emitted (the parity split).
+// A tapered window (docs/estimators.md §1.7): the weighted line at the frame (`linear`) or the weighted
+// pooled mean, everything from one walk.
 inline void tapered_window(__global const double *te, __global const double *cum_n, const long width,
                            const int lo, const int hi, const int row, const double taper, const double per,
                            const int linear, double u[4])
 {
     double t[4] = {0.0, 0.0, 0.0, 0.0}, s1[3] = {0.0, 0.0, 0.0}, n = 0.0, x1 = 0.0, x2 = 0.0, w1 = 0.0,
-           w2 = 0.0, prev[4];
-    __global const double *a0 = te + (long)lo * width;
-    for (int c = 0; c < 4; ++c) prev[c] = a0[c];
-    for (int g = lo; g < hi; ++g) {
-        const double x = (double)(g - row);
-        const double a = 1.0 - fabs(x) / taper, aa = a * a;
-        const double ng = a * ((cum_n[g + 1] - cum_n[g]) / per);
-        __global const double *b = te + (long)(g + 1) * width;
-        double d[4];
-        for (int c = 0; c < 4; ++c) { d[c] = b[c] - prev[c]; prev[c] = b[c]; }
-        for (int c = 0; c < 3; ++c) { t[c] += a * d[c]; s1[c] += a * x * d[c]; }
-        t[3] += aa * d[3]; w1 += aa * x * d[3]; w2 += aa * x * x * d[3];
-        n += ng; x1 += ng * x; x2 += ng * x * x;
-    }
+           w2 = 0.0;
+    window_moments(te, cum_n, width, lo, hi, row, taper, per, t, s1, &w1, &w2, &n, &x1, &x2);
     if (linear) {
         fit_at_frame(t, n, x1, x2, s1, w1, w2, u);
     } else {
