@@ -185,7 +185,7 @@ class SegmentRun:
         with _writing(self.job.store_url):
             results = run_tasks(self.client, shoot_task, calls, desc="shoot", progress=False)
         for r in results.values():
-            self.add_times(r, ("pose_s", "trace_s", "write_s"))
+            self.add_times(r, ("pose_s", "trace_s", "write_s", "sums_s"))
         self.batches_traced += len(calls)
         self.times["shoot_s"] += time.perf_counter() - t0
 

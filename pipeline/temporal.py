@@ -4,9 +4,9 @@ What the render pipeline calls to turn stored photons into per-frame vertex irra
 
 1. windows   from the store's frames x elements count table (never the records), per frame and
              element, Condition (1) (kernels/temporal.py), ``mode`` adaptive | fixed | off;
-2. gather    per chunk of output frames the element sums of the records of every frame its
-             windows reach (made once per frame and worker, :class:`FrameSums`), turned into
-             prefix sums over frames on the device; per output frame the window sums as
+2. gather    per chunk of output frames the element sums of every frame its windows reach
+             (stored with the photons, read once per frame and worker: pipeline/batch_sums.py),
+             turned into prefix sums over frames on the device; per output frame the window sums as
              differences of prefix sums, pooled over the photons emitted in the window,
              distributed to the vertices (kernels/gather.py);
 3. filter    optionally the adaptive object-space filter for vertices that collected too few
@@ -18,9 +18,9 @@ photons is its own animation, with its own ends. Frames sharing another frame's 
 
 Memory: output frames are processed in chunks of consecutive frames; a chunk holds the element
 sums of its frames and their windows' reach (F_max/2 each side): (chunk + F_max) x E x 12 doubles
-per photon parity, about 590 MB for ATRIUM (43,000 elements, F_max = 44, chunk 96), and one
-frame's records at a time. The per-frame sums are kept (:class:`FrameSums`, bounded by bytes), so
-frames in the overlap of two chunks that run on one worker are read and summed once.
+per photon parity, about 590 MB for ATRIUM (43,000 elements, F_max = 44, chunk 96). The per-batch
+sums are kept (pipeline/batch_sums.FrameSums, bounded by bytes), so frames in the overlap of two
+chunks that run on one worker are read once.
 """
 from __future__ import annotations
 
@@ -31,12 +31,14 @@ import numpy as np
 import numpy.typing as npt
 
 from kernels.filter import adaptive_filter_cl, neighbourhood
-from kernels.gather import element_sums_cl, frame_sums_flux_cl, irradiance
+from kernels.gather import frame_sums_flux_cl, irradiance
 from kernels.temporal import MAX_HALF_FMAX, MODES, windows_cl
 
+from .batch_sums import FRAME_SUMS
 from .config import RenderConfig
 from .errors import LoomError
 from .regional_steps import clamp_at_steps, region_levels
+from .stage_clock import StageClock
 
 if TYPE_CHECKING:
     from .scene import ElementMesh, Scene
@@ -172,16 +174,19 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
     batches : (n_frames,) leading batches in use per store frame (None: every done batch); a
         segment uses the batches that make up its N_frame (pipeline/coordinator.py).
     with_direct : also give each frame's mesh-based direct estimate from its own direct photons
-        (workers/reconstruct.vertex_irradiance, §4), from the records the gather holds already.
-    times : if given, seconds spent are added to its keys ``read_s`` (records), ``frame_sums_s``
-        (a frame's element sums and direct flux, once per worker), ``windows_s``, ``sums_s``
-        (gather), ``filter_s`` (filter and irradiance) and ``direct_s``.
+        (workers/reconstruct.vertex_irradiance, §4), from the batch sums the gather holds already
+        (kind "indirect" only).
+    times : if given, seconds spent are added to its keys ``read_s`` (stored sums or records),
+        ``frame_sums_s`` (records summed where a batch has no stored sums, once per worker),
+        ``windows_s``, ``sums_s`` (gather), ``filter_s`` (filter and irradiance) and ``direct_s``.
     """
     from workers.reconstruct import frame_geometry
 
-    clock = _Clock(times)
+    clock = StageClock(times)
     fmax = config.fmax_initial if fmax is None else fmax
     check_window_options(mode, fmax)
+    if with_direct and kind != "indirect":
+        raise ValueError("with_direct comes with the indirect map's batch sums (kind 'indirect')")
     fmax = int(fmax)
     frames = np.arange(store.n_frames) if frames is None else np.unique(np.asarray(frames, np.int64))
     if len(frames) and (frames.min() < 0 or frames.max() >= store.n_frames):
@@ -211,9 +216,8 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
         lo = int((f[:, None] - back[part]).min())
         hi = int((f[:, None] + fwd[part]).max()) + 1
         clock.lap(None)
-        outputs = set(f.tolist()) if with_direct else set()
         sums = {g: FRAME_SUMS.get(store, g, None if batches is None else int(batches[g]), kind, n_parity,
-                                  elements, direct=g in outputs, times=times) for g in range(lo, hi)}
+                                  elements, times=times) for g in range(lo, hi)}
         clock.lap(None)  # FrameSums adds its own read_s and frame_sums_s
         flux = frame_sums_flux_cl([sums[g].sums for g in range(lo, hi)], n_emitted[lo:hi], back[part],
                                   fwd[part], f - lo, elements.element_vertices, elements.n_vertices,
@@ -266,115 +270,3 @@ def step_regions(elements: ElementMesh, config: RenderConfig) -> list[np.ndarray
         return None
     return _mesh_cached(elements, ("steps", int(config.step_levels)),
                         lambda: region_levels(elements, config.step_levels))
-
-
-class _Clock:
-    """Adds the seconds since the last lap to ``times[key]`` (nothing when ``times`` is None)."""
-
-    def __init__(self, times: dict | None):
-        import time
-
-        self.times, self.now = times, time.perf_counter
-        self.last = self.now()
-
-    def lap(self, key: str | None) -> None:
-        if self.times is None:
-            return
-        t = self.now()
-        if key is not None:
-            self.times[key] = self.times.get(key, 0.0) + t - self.last
-        self.last = t
-
-
-@dataclass
-class SummedFrame:
-    """What the gather reads of one frame's records: element sums (E, P, 3, 4) of a kind, and for
-    output frames the direct photons' vertex flux (V, 3) and the photons emitted."""
-
-    sums: np.ndarray
-    direct_flux: np.ndarray | None
-    photons_emitted: int
-
-    @property
-    def nbytes(self) -> int:
-        return self.sums.nbytes + (0 if self.direct_flux is None else self.direct_flux.nbytes)
-
-    def direct_irradiance(self, vertex_areas: np.ndarray) -> np.ndarray:
-        """The frame's own direct estimate, workers/reconstruct.records_irradiance's bits."""
-        from workers.reconstruct import flux_to_irradiance
-
-        return flux_to_irradiance(self.direct_flux, self.photons_emitted, vertex_areas)
-
-
-class FrameSums:
-    """Per-process cache of the element sums of single photon batches (least recently used out
-    first, at most ``max_bytes``): a batch's records are read and summed once per worker, however
-    many chunks' windows reach its frame and however many doublings of N_frame (§5.2.3) use it. A
-    frame's sums are its batches' sums added in batch order (one batch: exactly element_sums of
-    its records). At 640,000 photons a frame a chunk of 16 frames reaches 62 frames of 40 MB of
-    records each, which the store's record cache (192 MB) could not keep; their sums take 0.5 MB
-    a batch (ROOM). Keyed by store, source frame, batch, its digest, kind and parity split, so a
-    rewritten store never serves stale sums, and frames that share another frame's photons
-    share its entries."""
-
-    def __init__(self, max_bytes: int):
-        from collections import OrderedDict
-
-        self.max_bytes, self.bytes = int(max_bytes), 0
-        self._entries: OrderedDict = OrderedDict()
-
-    def get(self, store: PhotonStore, frame_index: int, n_batches: int | None, kind: str, n_parity: int,
-            elements: ElementMesh, *, direct: bool = False, times: dict[str, float] | None = None) -> SummedFrame:
-        """The sums of ``frame_index``'s first ``n_batches`` batches (None: every done batch);
-        with ``direct`` also its direct photons' vertex flux."""
-        src = store.source_frame(frame_index)
-        chosen = store.done_batches(src) if n_batches is None else list(range(n_batches))
-        if not chosen:
-            raise ValueError(f"frame {frame_index} has no batches to sum")
-        parts = [self._batch(store, src, b, kind, n_parity, elements, direct, times) for b in chosen]
-        sums = parts[0].sums.copy() if len(parts) > 1 else parts[0].sums
-        flux = None if not direct else parts[0].direct_flux.copy() if len(parts) > 1 else parts[0].direct_flux
-        for p in parts[1:]:
-            sums += p.sums
-            if direct:
-                flux += p.direct_flux
-        return SummedFrame(sums, flux, sum(p.photons_emitted for p in parts))
-
-    def _batch(self, store, src: int, batch: int, kind: str, n_parity: int, elements, direct: bool,
-               times: dict | None) -> SummedFrame:
-        digest = (store.batch_info(src, batch) or {}).get("digest")
-        key = (store.url, src, batch, digest, kind, n_parity)
-        found = self._entries.get(key)
-        if found is not None and (found.direct_flux is not None or not direct):
-            self._entries.move_to_end(key)
-            return found
-        clock = _Clock(times)
-        records = store.read_frame(src, batches=[batch])
-        clock.lap("read_s")
-        sums = element_sums_cl([records], kind=kind, split_parity=n_parity == 2)[0]
-        sums.flags.writeable = False  # shared by every later reader
-        direct_flux = None
-        if direct:
-            from workers.reconstruct import records_vertex_flux
-
-            direct_flux = records_vertex_flux(records, records.direct, elements.element_vertices, elements.n_vertices)
-            direct_flux.flags.writeable = False
-        entry = SummedFrame(sums, direct_flux, int(records.photons_emitted))
-        clock.lap("frame_sums_s")
-        self._put(key, entry)
-        return entry
-
-    def _put(self, key, entry: SummedFrame) -> None:
-        old = self._entries.pop(key, None)
-        self.bytes -= 0 if old is None else old.nbytes
-        if entry.nbytes > self.max_bytes:
-            return
-        self._entries[key] = entry
-        self.bytes += entry.nbytes
-        while self.bytes > self.max_bytes:
-            _, gone = self._entries.popitem(last=False)
-            self.bytes -= gone.nbytes
-
-
-FRAME_SUMS = FrameSums(1 << 30)  # ATRIUM (43,000 elements): ~120 batches of split sums
-

@@ -163,6 +163,7 @@ def shoot_task(*, store_url: str, scene_path: str, scene_hash: str, element_size
     """
     import time
 
+    from pipeline.batch_sums import batch_summary
     from pipeline.store import PhotonStore
 
     from .scene_cache import load_elements, load_scene
@@ -178,9 +179,17 @@ def shoot_task(*, store_url: str, scene_path: str, scene_hash: str, element_size
     result = trace_batch(state, elements, n_photons=n_photons, photon_start=photon_start, seed=seed,
                          frame=frame, max_depth=max_depth)
     t2 = time.perf_counter()
+    summed = [0.0]
+
+    def summarise(records):  # the gather's batch sums, made while the sorted records are in memory
+        t = time.perf_counter()
+        out = batch_summary(records, elements)
+        summed[0] += time.perf_counter() - t
+        return out
+
     store.write_batch(frame_index, batch, key=result.key, bary=result.bary, energy=result.energy,
-                      photons_emitted=n_photons, photon_start=photon_start)
+                      photons_emitted=n_photons, photon_start=photon_start, summarise=summarise)
     t3 = time.perf_counter()
     return {"frame": frame, "batch": batch, "skipped": False, "photons": n_photons,
             "records": len(result.key), "rays": result.rays_cast, "capped": result.stats["capped"],
-            "pose_s": t1 - t0, "trace_s": t2 - t1, "write_s": t3 - t2}
+            "pose_s": t1 - t0, "trace_s": t2 - t1, "write_s": t3 - t2 - summed[0], "sums_s": summed[0]}

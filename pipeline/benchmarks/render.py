@@ -54,13 +54,18 @@ def stage_table(records: Iterable[SegmentRecord]) -> dict:
     decide_rest = max(0.0, g("decide_s", 0.0) - shoot - aqm)
     trace_core = g("task_pose_s", 0.0) + g("task_trace_s", 0.0)
     write_core = g("task_write_s", 0.0)
+    sums_core = g("task_sums_s", 0.0)  # the batch sums the shoot tasks make (pipeline/batch_sums.py)
+    shoot_core = trace_core + write_core + sums_core
     rec_core = sum(v for k, v in t.items() if k.startswith("task_reconstruct_"))
     rec_io_core = sum(g(k, 0.0) for k in IO_KEYS)
-    shoot_io = shoot * write_core / (trace_core + write_core) if trace_core + write_core > 0 else 0.0
+    shoot_io = shoot * write_core / shoot_core if shoot_core > 0 else 0.0
+    shoot_sums = shoot * sums_core / shoot_core if shoot_core > 0 else 0.0
     rec_io = temporal * rec_io_core / rec_core if rec_core > 0 else 0.0
-    wall = {"photon tracing": shoot - shoot_io, "AQM": aqm, "temporal processing": temporal - rec_io + decide_rest,
+    wall = {"photon tracing": shoot - shoot_io - shoot_sums, "AQM": aqm,
+            "temporal processing": temporal - rec_io + shoot_sums + decide_rest,
             "I/O": shoot_io + rec_io, "ray tracing": composite}
-    core = {"photon tracing": trace_core, "AQM": aqm, "temporal processing": rec_core - rec_io_core + decide_rest,
+    core = {"photon tracing": trace_core, "AQM": aqm,
+            "temporal processing": rec_core - rec_io_core + sums_core + decide_rest,
             "I/O": write_core + rec_io_core,
             "ray tracing": sum(g(f"task_composite_{k}_s", 0.0) for k in ("load", "render", "write"))}
     for d in (wall, core):

@@ -9,8 +9,8 @@ import time
 import urllib.parse
 import urllib.request
 from collections import OrderedDict
-from collections.abc import Iterable
-from dataclasses import dataclass
+from collections.abc import Callable, Iterable
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numcodecs.blosc
@@ -47,6 +47,7 @@ BATCH_FIELDS = ("done_magic", "photon_start", "photons_emitted", "n_records", "d
 DONE_MAGIC = 0x4C4F4F4D  # "LOOM": the batch chunk is written last, so its presence means done
 RECORD_CHUNK = 1 << 20  # records per chunk of the per-batch arrays (20 MiB raw)
 RECORD_CACHE_BYTES = 192 << 20  # decoded frames an open_shared instance keeps (LRU, read-only)
+SUMMARY_MAGIC = b"LOOMSUM1"  # header of a batch summary object (see write_batch)
 LISTING_MARGIN_NS = 100_000_000  # a done-table listing is reused once the directory is 0.1 s old
 # Chunk keys with "." (c.f.b.0): all chunks of an array in its one directory. A new directory
 # costs about 1 ms on ext4 (a block and a journal entry) against 0.1 ms for a new file, and "/" keys
@@ -185,6 +186,7 @@ class _Prepared:
     batch: int
     records: SortedBatch
     row: np.ndarray  # u64 (5,) in BATCH_FIELDS order
+    summary: np.ndarray | None = None  # f64, stored with the records (write_batch's summarise)
 
 
 def make_store(url: str | os.PathLike[str], read_only: bool) -> LocalStore | FsspecStore:
@@ -553,14 +555,23 @@ class PhotonStore:
             raise LoomError("photon store is open read-only (mode='r')", path=self.url)
 
     def write_batch(self, frame_index: int, batch: int, *, key: npt.ArrayLike, bary: npt.ArrayLike,
-                    energy: npt.ArrayLike, photons_emitted: int, photon_start: int) -> bool:
+                    energy: npt.ArrayLike, photons_emitted: int, photon_start: int,
+                    summarise: Callable[[FrameRecords], np.ndarray] | None = None) -> bool:
         """Sort and write one batch, done marker last. Returns False if it was already done.
 
         Rerunning a batch rewrites identical bytes; a done batch is only compared by digest and
         a different one is refused (non-deterministic tracer). Batch b needs b-1 done.
+        ``summarise``: float64 values derived from the sorted records (as :meth:`read_frame` gives
+        them back), stored beside them before the done marker (:meth:`read_summary`).
         """
         prepared = self._prepare(frame_index, batch, key, bary, energy, photons_emitted,
                                  photon_start)
+        if summarise is not None:
+            rows = prepared.records.packed()
+            mine = FrameRecords.merge(prepared.frame, prepared.frame, (prepared.batch,),
+                                      [unpack_records(rows, self.n_elements)], self.n_elements,
+                                      int(prepared.row[2]))
+            prepared = replace(prepared, summary=np.ascontiguousarray(summarise(mine), np.float64))
         done = self.batch_info(prepared.frame, prepared.batch)
         if done is not None:
             if np.array_equal(np.array(list(done.values()), dtype=np.uint64), prepared.row):
@@ -622,7 +633,39 @@ class PhotonStore:
         if p.batch == 0:  # the frame's group, as zarr writes it (bytes equal to require_group's)
             items.append((f"frames/{p.frame}/zarr.json", _GROUP_METADATA))
         items.append((self._count_key(p.frame, p.batch), _encode_rows(running.astype(np.uint32))))
+        if p.summary is not None:
+            items.append((self._summary_key(p.frame, p.batch), SUMMARY_MAGIC + np.array(
+                [int(p.row[4]), p.summary.size], "<u8").tobytes() + numcodecs.blosc.compress(
+                p.summary.astype("<f8").tobytes(), b"lz4", 5, numcodecs.blosc.SHUFFLE, 0, 8)))
         self._raw.set_many(items)
+
+    @staticmethod
+    def _summary_key(frame: int, batch: int) -> str:
+        return f"summaries/c.{frame}.{batch}"
+
+    def read_summary(self, frame_index: int, batch: int) -> np.ndarray | None:
+        """The float64 summary a done batch's writer stored (``write_batch(summarise=...)``), or
+        None when there is none, it belongs to other records (digest) or it is damaged (a warning):
+        the caller then derives it from the records, which stay the store's truth."""
+        f = self.source_frame(frame_index)
+        info = self.batch_info(f, batch)
+        if info is None:
+            return None
+        (data,) = self._raw.get_many([self._summary_key(f, int(batch))])
+        if data is None:
+            return None
+        head = len(SUMMARY_MAGIC) + 16
+        try:
+            digest, n = (int(v) for v in np.frombuffer(data[len(SUMMARY_MAGIC):head], "<u8"))
+            values = np.frombuffer(numcodecs.blosc.decompress(data[head:]), "<f8") \
+                if data[:len(SUMMARY_MAGIC)] == SUMMARY_MAGIC and digest == info["digest"] else None
+        except (ValueError, RuntimeError):
+            values = None
+        if values is None or values.size != n or not np.isfinite(values).all():
+            log.warning("%s: frame %d batch %d: damaged or foreign batch summary ignored (the records are "
+                        "summed instead)", self.url, f, int(batch))
+            return None
+        return values
 
     @staticmethod
     def _count_key(frame: int, batch: int) -> str:

@@ -1,67 +1,142 @@
-"""pipeline/temporal.FrameSums: a frame's element sums are its batches' sums added in batch order
-(one batch: exactly kernels/gather.element_sums_cl of its records), each batch is read once per
-process, and a rewritten store never serves stale sums."""
+"""pipeline/batch_sums: a batch's sums (indirect element sums split by parity, direct vertex flux)
+are stored by its writer and read instead of its records, with the bits of summing the records;
+a frame's sums are its batches' sums added in batch order; each batch is read once per process;
+a rewritten store never serves stale sums; a missing, foreign or damaged summary falls back to
+the records."""
 from __future__ import annotations
 
+import logging
 import shutil
+from pathlib import Path
 from types import SimpleNamespace
 
 import numpy as np
+import pytest
 
 from kernels.gather import element_sums_cl
+from pipeline.batch_sums import FrameSums, batch_summary, summariser
 from pipeline.store import PhotonStore
-from pipeline.temporal import FrameSums
-from tests.store.photonstore_helpers import IDENTITY, write_frame
+from tests.store.photonstore_helpers import IDENTITY, make_batch, write_frame
 from workers.reconstruct import records_vertex_flux
 
-N_ELEMENTS = 40
+N_ELEMENTS, N_VERTICES = 40, 30
 
 
-def _store(tmp_path, sizes):
-    url = str(tmp_path / "p.zarr")
+def _elements(seed=3):
+    rng = np.random.default_rng(seed)
+    ev = np.stack([rng.choice(N_VERTICES, 3, replace=False) for _ in range(N_ELEMENTS)]).astype(np.int32)
+    return SimpleNamespace(element_vertices=ev, n_vertices=N_VERTICES, n_elements=N_ELEMENTS)
+
+
+def _store(tmp_path, sizes, *, summarise=False, name="p.zarr"):
+    """A store with one frame of batches ``sizes``, written with or without batch summaries."""
+    url = str(tmp_path / name)
     shutil.rmtree(url, ignore_errors=True)
     PhotonStore.create(url, n_frames=2, n_elements=N_ELEMENTS, frame_numbers=[1, 2], **IDENTITY)
-    write_frame(url, 0, sizes, N_ELEMENTS)
+    store = PhotonStore.open(url, mode="r+", **IDENTITY)
+    start = 0
+    for b, n in enumerate(sizes):
+        batch = make_batch(0, b, n, N_ELEMENTS, photon_start=start)
+        store.write_batch(0, b, **batch, summarise=summariser(_elements()) if summarise else None)
+        start += batch["photons_emitted"]
     return PhotonStore.open(url, mode="r", **IDENTITY)
 
 
-def _elements(rng):
-    ev = np.stack([rng.choice(30, 3, replace=False) for _ in range(N_ELEMENTS)]).astype(np.int32)
-    return SimpleNamespace(element_vertices=ev, n_vertices=30)
+def _want(store, n_batches, n_parity):
+    """The frame's sums from its records, summed the documented way."""
+    parts = [store.read_frame(0, batches=[b]) for b in range(n_batches)]
+    split = [element_sums_cl([r], kind="indirect", split_parity=True)[0] for r in parts]
+    sums = [s if n_parity == 2 else s[:, :1] + s[:, 1:] for s in split]
+    total = sums[0].copy()
+    for s in sums[1:]:
+        total += s
+    ev = _elements().element_vertices
+    flux = [records_vertex_flux(r, r.direct, ev, N_VERTICES) for r in parts]
+    total_flux = flux[0].copy()
+    for f in flux[1:]:
+        total_flux += f
+    return total, total_flux
 
 
-def test_frame_sums_add_batches_in_order_and_read_each_once(tmp_path, rng):
-    store, elements, cache = _store(tmp_path, [300, 500, 200]), _elements(rng), FrameSums(1 << 24)
+@pytest.mark.parametrize("stored", [False, True], ids=["from records", "stored"])
+@pytest.mark.parametrize("n_parity", [1, 2])
+def test_frame_sums_add_batches_in_order_with_the_records_bits(tmp_path, stored, n_parity):
+    store, cache = _store(tmp_path, [300, 500, 200], summarise=stored), FrameSums(1 << 24)
     times: dict = {}
-    got = cache.get(store, 0, 3, "indirect", 2, elements, direct=True, times=times)
-    parts = [store.read_frame(0, batches=[b]) for b in range(3)]
-    want = sum((element_sums_cl([r], kind="indirect", split_parity=True)[0] for r in parts[1:]),
-               element_sums_cl([parts[0]], kind="indirect", split_parity=True)[0].copy())
-    assert got.sums.tobytes() == want.tobytes()
-    flux = [records_vertex_flux(r, r.direct, elements.element_vertices, 30) for r in parts]
-    assert got.direct_flux.tobytes() == (flux[0] + flux[1] + flux[2]).tobytes()
-    assert got.photons_emitted == sum(r.photons_emitted for r in parts)
-    # One batch: exactly the element sums of its records; and nothing is read again
-    one = cache.get(store, 0, 1, "indirect", 2, elements)
-    assert one.sums.tobytes() == element_sums_cl([parts[0]], kind="indirect", split_parity=True)[0].tobytes()
+    got = cache.get(store, 0, 3, "indirect", n_parity, _elements(), times=times)
+    sums, flux = _want(store, 3, n_parity)
+    assert got.sums.shape == (N_ELEMENTS, n_parity, 3, 4)
+    assert got.sums.tobytes() == sums.tobytes()
+    assert got.direct_flux.tobytes() == flux.tobytes()
+    assert got.photons_emitted == store.photons_emitted(0)
+    # stored summaries are read, never summed again; without them the records are summed once
+    assert ("frame_sums_s" in times) != stored and "read_s" in times
     again: dict = {}
-    cache.get(store, 0, 3, "indirect", 2, elements, direct=True, times=again)
-    assert "read_s" not in again and "read_s" in times
-    # Another kind or parity split is another entry
-    assert not np.array_equal(cache.get(store, 0, 1, "all", 1, elements).sums[:, 0],
-                              one.sums.sum(axis=1))
+    cache.get(store, 0, 3, "indirect", 3 - n_parity, _elements(), times=again)
+    assert again == {}  # the other parity split comes from the same entries
 
 
-def test_a_rewritten_store_is_not_served_stale_sums(tmp_path, rng):
-    elements, cache = _elements(rng), FrameSums(1 << 24)
-    first = cache.get(_store(tmp_path, [300]), 0, 1, "indirect", 1, elements).sums.copy()
-    second = cache.get(_store(tmp_path, [301]), 0, 1, "indirect", 1, elements).sums  # same url, new photons
-    assert not np.array_equal(first, second)
+def test_the_stored_summary_is_the_records_summary(tmp_path):
+    store = _store(tmp_path, [700], summarise=True)
+    stored = store.read_summary(0, 0)
+    assert stored.tobytes() == batch_summary(store.read_frame(0, batches=[0]), _elements()).tobytes()
+    assert _store(tmp_path, [700], name="bare.zarr").read_summary(0, 0) is None
 
 
-def test_the_cache_stays_within_its_bytes(tmp_path, rng):
-    store, elements = _store(tmp_path, [100, 100, 100]), _elements(rng)
-    one_batch = N_ELEMENTS * 2 * 12 * 8
+def _summary_file(store) -> Path:
+    return Path(store.url) / "summaries" / "c.0.0"
+
+
+@pytest.mark.parametrize("damage", ["nan", "truncated", "foreign"])
+def test_a_damaged_or_foreign_summary_falls_back_to_the_records(tmp_path, damage, caplog):
+    store = _store(tmp_path, [400], summarise=True)
+    path = _summary_file(store)
+    data = bytearray(path.read_bytes())
+    if damage == "nan":  # a summary whose values decode to NaN
+        import numcodecs.blosc as blosc
+
+        head = 8 + 16
+        values = np.frombuffer(blosc.decompress(bytes(data[head:])), "<f8").copy()
+        values[5] = np.nan
+        data[head:] = blosc.compress(values.tobytes(), b"lz4", 5, blosc.SHUFFLE, 0, 8)
+    elif damage == "truncated":
+        data = data[:len(data) // 2]
+    else:  # another batch's summary: the digest in its header does not match
+        data[8] ^= 0xFF
+    path.write_bytes(bytes(data))
+    with caplog.at_level(logging.WARNING, logger="pipeline.store.photon_store"):
+        assert store.read_summary(0, 0) is None
+    assert "damaged or foreign batch summary ignored" in caplog.text
+    times: dict = {}
+    got = FrameSums(1 << 24).get(store, 0, 1, "indirect", 2, _elements(), times=times)
+    assert "frame_sums_s" in times and np.isfinite(got.sums).all()
+    assert got.sums.tobytes() == _want(store, 1, 2)[0].tobytes()
+
+
+def test_other_kinds_are_summed_from_the_records(tmp_path):
+    store = _store(tmp_path, [500], summarise=True)
+    got = FrameSums(1 << 24).get(store, 0, 1, "all", 1, _elements())
+    split = element_sums_cl([store.read_frame(0, batches=[0])], kind="all", split_parity=True)[0]
+    assert got.sums.tobytes() == (split[:, :1] + split[:, 1:]).tobytes() and got.direct_flux is None
+
+
+def test_a_rewritten_store_is_not_served_stale_sums(tmp_path):
+    cache = FrameSums(1 << 24)
+    first = cache.get(_store(tmp_path, [300], summarise=True), 0, 1, "indirect", 1, _elements()).sums.copy()
+    second = cache.get(_store(tmp_path, [301], summarise=True), 0, 1, "indirect", 1, _elements()).sums
+    assert not np.array_equal(first, second)  # same url, new photons
+
+
+def test_the_cache_stays_within_its_bytes(tmp_path):
+    store = _store(tmp_path, [100, 100, 100])
+    one_batch = N_ELEMENTS * 2 * 12 * 8 + N_VERTICES * 3 * 8
     cache = FrameSums(2 * one_batch)
-    cache.get(store, 0, 3, "indirect", 2, elements)
+    cache.get(store, 0, 3, "indirect", 2, _elements())
     assert cache.bytes <= 2 * one_batch and len(cache._entries) == 2
+
+
+def test_write_frame_helper_still_writes_plain_batches(tmp_path):
+    url = str(tmp_path / "h.zarr")
+    PhotonStore.create(url, n_frames=1, n_elements=N_ELEMENTS, frame_numbers=[1], **IDENTITY)
+    write_frame(url, 0, [50], N_ELEMENTS)
+    assert PhotonStore.open(url, **IDENTITY).read_summary(0, 0) is None

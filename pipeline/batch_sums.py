@@ -1,0 +1,146 @@
+"""What the temporal gather reads of a photon batch: its element sums, made once.
+
+A batch's *summary* is the indirect records' element sums split by photon parity, (E, 2, 3, 4)
+float64 (kernels/gather.element_sums_cl, docs/estimators.md §1.2-1.3), followed by its direct
+records' vertex flux, (V, 3) float64 (workers/reconstruct.records_vertex_flux): everything
+Steps 3-5 of §5.2 read of the records. The shoot task makes it while the sorted records are in
+memory and the store keeps it beside them (``PhotonStore.write_batch(summarise=...)``), so a
+reconstruction reads about 0.8 MB of sums a ROOM batch instead of 1.8 MB of records to unpack
+and sum, and two workers whose windows reach the same frames no longer both sum them. A batch
+without a usable summary (a store written before summaries, a damaged one) is summed from its
+records by :func:`batch_summary`, the same function, so the bits do not depend on which path
+ran.
+
+One parity split for every use: the unsplit sums of a batch are its even plus its odd sums, and a
+frame's sums are its batches' sums added in batch order.
+"""
+from __future__ import annotations
+
+from collections import OrderedDict
+from dataclasses import dataclass
+from typing import TYPE_CHECKING, Callable
+
+import numpy as np
+
+from kernels.gather import element_sums_cl
+
+from .stage_clock import StageClock
+
+if TYPE_CHECKING:
+    from .scene import ElementMesh
+    from .store import PhotonStore
+    from .store.records import FrameRecords
+
+SLOTS = 2 * 3 * 4  # parity x corner x (R, G, B, Q) doubles per element
+
+
+def batch_summary(records: FrameRecords, elements: ElementMesh) -> np.ndarray:
+    """The flat float64 summary of one batch's records (module docstring)."""
+    from workers.reconstruct import records_vertex_flux
+
+    sums = element_sums_cl([records], kind="indirect", split_parity=True)[0]
+    flux = records_vertex_flux(records, records.direct, elements.element_vertices, elements.n_vertices)
+    return np.concatenate([sums.reshape(-1), flux.reshape(-1)])
+
+
+def summariser(elements: ElementMesh) -> Callable[[FrameRecords], np.ndarray]:
+    """``write_batch``'s ``summarise`` for batches bucketed on ``elements``."""
+    return lambda records: batch_summary(records, elements)
+
+
+@dataclass
+class SummedFrame:
+    """What the gather reads of one frame: element sums (E, P, 3, 4) of a kind, the direct
+    photons' vertex flux (V, 3) (None for kinds other than indirect) and the photons emitted."""
+
+    sums: np.ndarray
+    direct_flux: np.ndarray | None
+    photons_emitted: int
+
+    @property
+    def nbytes(self) -> int:
+        return self.sums.nbytes + (0 if self.direct_flux is None else self.direct_flux.nbytes)
+
+    def direct_irradiance(self, vertex_areas: np.ndarray) -> np.ndarray:
+        """The frame's own direct estimate, workers/reconstruct.records_irradiance's bits."""
+        from workers.reconstruct import flux_to_irradiance
+
+        return flux_to_irradiance(self.direct_flux, self.photons_emitted, vertex_areas)
+
+
+class FrameSums:
+    """Per-process cache of single batches' sums (least recently used out first, at most
+    ``max_bytes``): a batch is read once per worker, however many chunks' windows reach its frame
+    and however many doublings of N_frame (§5.2.3) use it. Keyed by store, source frame, batch, its
+    digest and kind, so a rewritten store never serves stale sums, and frames that share another
+    frame's photons share its entries."""
+
+    def __init__(self, max_bytes: int):
+        self.max_bytes, self.bytes = int(max_bytes), 0
+        self._entries: OrderedDict = OrderedDict()
+
+    def get(self, store: PhotonStore, frame_index: int, n_batches: int | None, kind: str, n_parity: int,
+            elements: ElementMesh, *, times: dict[str, float] | None = None) -> SummedFrame:
+        """The sums of ``frame_index``'s first ``n_batches`` batches (None: every done batch),
+        split by parity (``n_parity`` 2) or not (1); ``times`` gets ``read_s`` (summaries or
+        records read) and ``frame_sums_s`` (records summed where no summary was stored)."""
+        src = store.source_frame(frame_index)
+        chosen = store.done_batches(src) if n_batches is None else list(range(n_batches))
+        if not chosen:
+            raise ValueError(f"frame {frame_index} has no batches to sum")
+        parts = [self._batch(store, src, b, kind, elements, times) for b in chosen]
+        sums = [p.sums if n_parity == 2 else p.sums[:, :1] + p.sums[:, 1:] for p in parts]
+        total = sums[0].copy() if len(parts) > 1 else sums[0]
+        flux = None if parts[0].direct_flux is None else \
+            parts[0].direct_flux.copy() if len(parts) > 1 else parts[0].direct_flux
+        for s, p in zip(sums[1:], parts[1:]):
+            total += s
+            if flux is not None:
+                flux += p.direct_flux
+        return SummedFrame(total, flux, sum(p.photons_emitted for p in parts))
+
+    def _batch(self, store, src: int, batch: int, kind: str, elements, times: dict | None) -> SummedFrame:
+        info = store.batch_info(src, batch) or {}
+        key = (store.url, src, batch, info.get("digest"), kind)
+        found = self._entries.get(key)
+        if found is not None:
+            self._entries.move_to_end(key)
+            return found
+        clock = StageClock(times)
+        summary = store.read_summary(src, batch) if kind == "indirect" else None
+        n_sums = elements.n_elements * SLOTS
+        if summary is not None and summary.size != n_sums + 3 * elements.n_vertices:
+            summary = None  # made on another element mesh: the store's identity check missed it
+        if summary is None:
+            records = store.read_frame(src, batches=[batch])
+            clock.lap("read_s")
+            if kind == "indirect":
+                summary = batch_summary(records, elements)
+            else:
+                entry = SummedFrame(element_sums_cl([records], kind=kind, split_parity=True)[0], None,
+                                    int(records.photons_emitted))
+            clock.lap("frame_sums_s")
+        else:
+            clock.lap("read_s")
+        if kind == "indirect":
+            entry = SummedFrame(summary[:n_sums].reshape(elements.n_elements, 2, 3, 4),
+                                summary[n_sums:].reshape(elements.n_vertices, 3), int(info["photons_emitted"]))
+        for a in (entry.sums, entry.direct_flux):
+            if a is not None:
+                a.flags.writeable = False  # shared by every later reader
+        self._put(key, entry)
+        return entry
+
+    def _put(self, key, entry: SummedFrame) -> None:
+        old = self._entries.pop(key, None)
+        self.bytes -= 0 if old is None else old.nbytes
+        if entry.nbytes > self.max_bytes:
+            return
+        self._entries[key] = entry
+        self.bytes += entry.nbytes
+        while self.bytes > self.max_bytes:
+            _, gone = self._entries.popitem(last=False)
+            self.bytes -= gone.nbytes
+
+
+FRAME_SUMS = FrameSums(1 << 30)  # ATRIUM (43,000 elements): ~120 batches of split sums
