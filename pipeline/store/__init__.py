@@ -31,6 +31,13 @@ version is refused with a one-line error: version 2 had BLAKE2b digests and zstd
         <b>              (5, n) u32 array, chunk (5, 2^20), keys "c.0.i", made by the writer of
                          (f, b) and by nobody else; records sorted by element (an element's
                          records are contiguous: the reader recovers the offsets from the keys)
+      summaries/c.f.b    not a zarr array: the batch's summary, float64 values its writer derived
+                         from the sorted records (``write_batch(summarise=...)``; the shoot task
+                         stores the gather's batch sums, pipeline/batch_sums.py), written with the
+                         records before the done marker: "LOOMSUM1", the batch digest and the
+                         value count (u64 each), then blosc lz4 + shuffle. Optional and derived:
+                         a reader that finds none, or one whose digest or values are wrong
+                         (:meth:`PhotonStore.read_summary` warns), recomputes it from the records.
 
 Why this layout. Record counts per batch are unknown until traced and vary 2x per doubling
 (§5.2.3), so each batch gets its own exactly-sized array, created by its writer at
