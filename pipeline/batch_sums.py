@@ -4,12 +4,12 @@ A batch's *summary* is the indirect records' element sums split by photon parity
 float64 (kernels/gather.element_sums_cl, docs/estimators.md §1.2-1.3), followed by its direct
 records' vertex flux, (V, 3) float64 (:func:`vertex_flux` of their element sums): everything
 Steps 3-5 of §5.2 read of the records. The shoot task makes it while the sorted records are in
-memory and the store keeps it beside them (``PhotonStore.write_batch(summarise=...)``), so a
-reconstruction reads about 0.8 MB of sums a ROOM batch instead of 1.8 MB of records to unpack
-and sum, and two workers whose windows reach the same frames no longer both sum them. A batch
-without a usable summary (a store written before summaries, a damaged one) is summed from its
-records by :func:`batch_summary`, the same function, so the bits do not depend on which path
-ran.
+memory and the store keeps it beside them (``PhotonStore.write_batch(summarise=...)``) when it is
+smaller than the records (:func:`summariser`), so a reconstruction reads about 0.8 MB of sums a
+ROOM batch of 40,000 photons instead of 1.8 MB of records to unpack and sum, and two workers whose
+windows reach the same frames no longer both sum them. A batch without a usable summary (a store
+written before summaries, a batch too small for one, a damaged one) is summed from its records by
+:func:`batch_summary`, the same function, so the bits do not depend on which path ran.
 
 One parity split for every use: the unsplit sums of a batch are its even plus its odd sums, and a
 frame's sums are its batches' sums added in batch order.
@@ -25,6 +25,7 @@ import numpy as np
 from kernels.gather import element_sums_cl
 
 from .stage_clock import StageClock
+from .store.records import RECORD_BYTES
 
 if TYPE_CHECKING:
     from .scene import ElementMesh
@@ -54,9 +55,13 @@ def vertex_flux(corner_sums: np.ndarray, element_vertices: np.ndarray, n_vertice
     return out
 
 
-def summariser(elements: ElementMesh) -> Callable[[FrameRecords], np.ndarray]:
-    """``write_batch``'s ``summarise`` for batches bucketed on ``elements``."""
-    return lambda records: batch_summary(records, elements)
+def summariser(elements: ElementMesh) -> Callable[[FrameRecords], np.ndarray | None]:
+    """``write_batch``'s ``summarise`` for batches bucketed on ``elements``: the batch's summary
+    when it is smaller than its records (20 bytes each), else None. A fine mesh and a small batch
+    (ATRIUM's 43,000 elements: 8.3 MB of sums against 2.6 MB for 130,000 records) would store more
+    than the records and read slower than summing them, which the reader then does."""
+    size = (elements.n_elements * SLOTS + 3 * elements.n_vertices) * 8
+    return lambda records: batch_summary(records, elements) if size <= RECORD_BYTES * len(records) else None
 
 
 @dataclass

@@ -163,7 +163,7 @@ def shoot_task(*, store_url: str, scene_path: str, scene_hash: str, element_size
     """
     import time
 
-    from pipeline.batch_sums import batch_summary
+    from pipeline.batch_sums import summariser
     from pipeline.store import PhotonStore
 
     from .scene_cache import load_elements, load_scene
@@ -179,11 +179,11 @@ def shoot_task(*, store_url: str, scene_path: str, scene_hash: str, element_size
     result = trace_batch(state, elements, n_photons=n_photons, photon_start=photon_start, seed=seed,
                          frame=frame, max_depth=max_depth)
     t2 = time.perf_counter()
-    summed = [0.0]
+    summed, summary = [0.0], summariser(elements)
 
     def summarise(records):  # the gather's batch sums, made while the sorted records are in memory
         t = time.perf_counter()
-        out = batch_summary(records, elements)
+        out = summary(records)
         summed[0] += time.perf_counter() - t
         return out
 

@@ -556,13 +556,14 @@ class PhotonStore:
 
     def write_batch(self, frame_index: int, batch: int, *, key: npt.ArrayLike, bary: npt.ArrayLike,
                     energy: npt.ArrayLike, photons_emitted: int, photon_start: int,
-                    summarise: Callable[[FrameRecords], np.ndarray] | None = None) -> bool:
+                    summarise: Callable[[FrameRecords], np.ndarray | None] | None = None) -> bool:
         """Sort and write one batch, done marker last. Returns False if it was already done.
 
         Rerunning a batch rewrites identical bytes; a done batch is only compared by digest and
         a different one is refused (non-deterministic tracer). Batch b needs b-1 done.
         ``summarise``: float64 values derived from the sorted records (as :meth:`read_frame` gives
-        them back), stored beside them before the done marker (:meth:`read_summary`).
+        them back), stored beside them before the done marker (:meth:`read_summary`); None stores
+        no summary.
         """
         prepared = self._prepare(frame_index, batch, key, bary, energy, photons_emitted,
                                  photon_start)
@@ -571,7 +572,9 @@ class PhotonStore:
             mine = FrameRecords.merge(prepared.frame, prepared.frame, (prepared.batch,),
                                       [unpack_records(rows, self.n_elements)], self.n_elements,
                                       int(prepared.row[2]))
-            prepared = replace(prepared, summary=np.ascontiguousarray(summarise(mine), np.float64))
+            summary = summarise(mine)
+            if summary is not None:
+                prepared = replace(prepared, summary=np.ascontiguousarray(summary, np.float64))
         done = self.batch_info(prepared.frame, prepared.batch)
         if done is not None:
             if np.array_equal(np.array(list(done.values()), dtype=np.uint64), prepared.row):

@@ -41,7 +41,7 @@ def _damage(url: str, frame_index: int, values) -> None:
     arr[...] = rows
     # The batch's stored sums were made from the undamaged records (pipeline/batch_sums.py): remove
     # them, as a store written without summaries has none, so the render sums the damaged records.
-    (Path(url) / "summaries" / f"c.{frame_index}.0").unlink()
+    (Path(url) / "summaries" / f"c.{frame_index}.0").unlink(missing_ok=True)
 
 
 def _run(tmp, name, values):

@@ -61,7 +61,7 @@ def _want(store, n_batches, n_parity):
 @pytest.mark.parametrize("stored", [False, True], ids=["from records", "stored"])
 @pytest.mark.parametrize("n_parity", [1, 2])
 def test_frame_sums_add_batches_in_order_with_the_records_bits(tmp_path, stored, n_parity):
-    store, cache = _store(tmp_path, [300, 500, 200], summarise=stored), FrameSums(1 << 24)
+    store, cache = _store(tmp_path, [700, 900, 500], summarise=stored), FrameSums(1 << 24)
     times: dict = {}
     got = cache.get(store, 0, 3, "indirect", n_parity, _elements(), times=times)
     sums, flux = _want(store, 3, n_parity)
@@ -99,7 +99,7 @@ def _summary_file(store) -> Path:
 
 @pytest.mark.parametrize("damage", ["nan", "truncated", "foreign"])
 def test_a_damaged_or_foreign_summary_falls_back_to_the_records(tmp_path, damage, caplog):
-    store = _store(tmp_path, [400], summarise=True)
+    store = _store(tmp_path, [800], summarise=True)
     path = _summary_file(store)
     data = bytearray(path.read_bytes())
     if damage == "nan":  # a summary whose values decode to NaN
@@ -123,8 +123,17 @@ def test_a_damaged_or_foreign_summary_falls_back_to_the_records(tmp_path, damage
     assert got.sums.tobytes() == _want(store, 1, 2)[0].tobytes()
 
 
+def test_a_summary_larger_than_its_records_is_not_stored(tmp_path):
+    """40 elements and 30 vertices: 8,400 bytes of sums, stored for 420 records (8,400 bytes) and more."""
+    store = _store(tmp_path, [419, 420], summarise=True)
+    assert store.read_summary(0, 0) is None and store.read_summary(0, 1) is not None
+    sums, flux = _want(store, 2, 2)
+    got = FrameSums(1 << 24).get(store, 0, 2, "indirect", 2, _elements())
+    assert got.sums.tobytes() == sums.tobytes() and got.direct_flux.tobytes() == flux.tobytes()
+
+
 def test_other_kinds_are_summed_from_the_records(tmp_path):
-    store = _store(tmp_path, [500], summarise=True)
+    store = _store(tmp_path, [600], summarise=True)
     got = FrameSums(1 << 24).get(store, 0, 1, "all", 1, _elements())
     split = element_sums_cl([store.read_frame(0, batches=[0])], kind="all", split_parity=True)[0]
     assert got.sums.tobytes() == (split[:, :1] + split[:, 1:]).tobytes() and got.direct_flux is None
@@ -132,8 +141,8 @@ def test_other_kinds_are_summed_from_the_records(tmp_path):
 
 def test_a_rewritten_store_is_not_served_stale_sums(tmp_path):
     cache = FrameSums(1 << 24)
-    first = cache.get(_store(tmp_path, [300], summarise=True), 0, 1, "indirect", 1, _elements()).sums.copy()
-    second = cache.get(_store(tmp_path, [301], summarise=True), 0, 1, "indirect", 1, _elements()).sums
+    first = cache.get(_store(tmp_path, [700], summarise=True), 0, 1, "indirect", 1, _elements()).sums.copy()
+    second = cache.get(_store(tmp_path, [701], summarise=True), 0, 1, "indirect", 1, _elements()).sums
     assert not np.array_equal(first, second)  # same url, new photons
 
 
