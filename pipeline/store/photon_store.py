@@ -567,14 +567,6 @@ class PhotonStore:
         """
         prepared = self._prepare(frame_index, batch, key, bary, energy, photons_emitted,
                                  photon_start)
-        if summarise is not None:
-            rows = prepared.records.packed()
-            mine = FrameRecords.merge(prepared.frame, prepared.frame, (prepared.batch,),
-                                      [unpack_records(rows, self.n_elements)], self.n_elements,
-                                      int(prepared.row[2]))
-            summary = summarise(mine)
-            if summary is not None:
-                prepared = replace(prepared, summary=np.ascontiguousarray(summary, np.float64))
         done = self.batch_info(prepared.frame, prepared.batch)
         if done is not None:
             if np.array_equal(np.array(list(done.values()), dtype=np.uint64), prepared.row):
@@ -582,6 +574,13 @@ class PhotonStore:
             raise LoomError("is already done with different photons (digest, count or range "
                             "differ): the tracer is not deterministic", path=self.url,
                             field=f"frame {prepared.frame} batch {prepared.batch}")
+        if summarise is not None:
+            mine = FrameRecords.merge(prepared.frame, prepared.frame, (prepared.batch,),
+                                      [unpack_records(prepared.records.packed(), self.n_elements)],
+                                      self.n_elements, int(prepared.row[2]))
+            summary = summarise(mine)
+            if summary is not None:
+                prepared = replace(prepared, summary=np.ascontiguousarray(summary, np.float64))
         self._write_payload(prepared)
         self._mark_done(prepared)
         return True
