@@ -296,9 +296,17 @@ def window_flux_reference(sums: npt.ArrayLike, n_emitted: npt.ArrayLike, back: n
             total[..., :3] /= n[:, None, None, None]
             total[..., 3] /= (n * n)[:, None, None]
         for p in range(n_parity):
-            for c in range(4):
-                out[i, p, :, c] = np.bincount(ev.reshape(-1), weights=total[:, p, :, c].reshape(-1),
-                                              minlength=n_vertices)
+            out[i, p] = corners_to_vertices(total[:, p], ev, n_vertices)
+    return out
+
+
+def corners_to_vertices(corners: np.ndarray, element_vertices: np.ndarray, n_vertices: int) -> np.ndarray:
+    """(V, C) the sum, at each vertex, of the values (E, 3, C) of the element corners that are that
+    vertex (docs/estimators.md §1.2: S_v sums b_k x energy over the hits of every element at v)."""
+    ev = np.asarray(element_vertices).reshape(-1)
+    out = np.empty((int(n_vertices), corners.shape[-1]))
+    for c in range(corners.shape[-1]):
+        out[:, c] = np.bincount(ev, weights=corners[:, :, c].reshape(-1), minlength=int(n_vertices))
     return out
 
 

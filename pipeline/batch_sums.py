@@ -2,7 +2,8 @@
 
 A batch's *summary* is the indirect records' element sums split by photon parity, (E, 2, 3, 4)
 float64 (kernels/gather.element_sums_cl, docs/estimators.md §1.2-1.3), followed by its direct
-records' vertex flux, (V, 3) float64 (:func:`vertex_flux` of their element sums): everything
+records' vertex flux, (V, 3) float64 (their element sums scattered to the vertices, as the gather
+scatters the indirect ones: kernels/gather.corners_to_vertices): everything
 Steps 3-5 of §5.2 read of the records. The shoot task makes it while the sorted records are in
 memory and the store keeps it beside them (``PhotonStore.write_batch(summarise=...)``) when it is
 smaller than the records (:func:`summariser`), so a reconstruction reads about 0.8 MB of sums a
@@ -22,7 +23,7 @@ from typing import TYPE_CHECKING, Callable
 
 import numpy as np
 
-from kernels.gather import element_sums_cl
+from kernels.gather import corners_to_vertices, element_sums_cl
 
 from .stage_clock import StageClock
 from .store.records import RECORD_BYTES
@@ -38,21 +39,16 @@ SLOTS = 2 * 3 * 4  # parity x corner x (R, G, B, Q) doubles per element
 def batch_summary(records: FrameRecords, elements: ElementMesh) -> np.ndarray:
     """The flat float64 summary of one batch's records (module docstring)."""
     sums = element_sums_cl([records], kind="indirect", split_parity=True)[0]
-    direct = element_sums_cl([records], kind="direct")[0, :, 0]
-    flux = vertex_flux(direct, elements.element_vertices, elements.n_vertices)
+    # The direct flux from element sums, not per record (workers/reconstruct.records_vertex_flux):
+    # the same sum to rounding, over E x 3 corners; a million-record batch took 20 ms the other way
+    direct = element_sums_cl([records], kind="direct")[0, :, 0, :, :3]
+    flux = corners_to_vertices(direct, elements.element_vertices, elements.n_vertices)
     return np.concatenate([sums.reshape(-1), flux.reshape(-1)])
 
 
-def vertex_flux(corner_sums: np.ndarray, element_vertices: np.ndarray, n_vertices: int) -> np.ndarray:
-    """(V, 3) S_v = sum over the elements' corners at v of their sums of b_k x energy (docs/estimators.md
-    §1.2): the per-record sum of workers/reconstruct.records_vertex_flux, added element by element
-    first. ``corner_sums``: (E, 3, 4) (R, G, B, Q) per corner, as element_sums_cl gives them. Works on
-    E x 3 corners instead of every record: a batch of a million records took 20 ms the other way."""
-    ev = np.asarray(element_vertices).reshape(-1)
-    out = np.empty((int(n_vertices), 3))
-    for c in range(3):
-        out[:, c] = np.bincount(ev, weights=corner_sums[:, :, c].reshape(-1), minlength=int(n_vertices))
-    return out
+def summary_size(elements: ElementMesh) -> int:
+    """Values in a batch's summary on ``elements``: the split indirect sums, then the direct flux."""
+    return elements.n_elements * SLOTS + 3 * elements.n_vertices
 
 
 def summariser(elements: ElementMesh) -> Callable[[FrameRecords], np.ndarray | None]:
@@ -60,7 +56,7 @@ def summariser(elements: ElementMesh) -> Callable[[FrameRecords], np.ndarray | N
     when it is smaller than its records (20 bytes each), else None. A fine mesh and a small batch
     (ATRIUM's 43,000 elements: 8.3 MB of sums against 2.6 MB for 130,000 records) would store more
     than the records and read slower than summing them, which the reader then does."""
-    size = (elements.n_elements * SLOTS + 3 * elements.n_vertices) * 8
+    size = summary_size(elements) * 8
     return lambda records: batch_summary(records, elements) if size <= RECORD_BYTES * len(records) else None
 
 
@@ -143,7 +139,7 @@ class FrameSums:
         """A batch's indirect sums and direct flux: its stored summary, else summed from its records."""
         n_sums = elements.n_elements * SLOTS
         summary = store.read_summary(src, batch)
-        if summary is not None and summary.size != n_sums + 3 * elements.n_vertices:
+        if summary is not None and summary.size != summary_size(elements):
             summary = None  # made on another element mesh: the store's identity check missed it
         if summary is None:
             records = store.read_frame(src, batches=[batch])

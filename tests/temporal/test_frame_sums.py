@@ -13,8 +13,8 @@ from types import SimpleNamespace
 import numpy as np
 import pytest
 
-from kernels.gather import element_sums_cl
-from pipeline.batch_sums import FrameSums, batch_summary, summariser, vertex_flux
+from kernels.gather import corners_to_vertices, element_sums_cl
+from pipeline.batch_sums import FrameSums, batch_summary, summariser
 from pipeline.store import PhotonStore
 from tests.store.photonstore_helpers import IDENTITY, make_batch, write_frame
 from workers.reconstruct import records_vertex_flux
@@ -51,7 +51,7 @@ def _want(store, n_batches, n_parity):
     for s in sums[1:]:
         total += s
     ev = _elements().element_vertices
-    flux = [vertex_flux(element_sums_cl([r], kind="direct")[0, :, 0], ev, N_VERTICES) for r in parts]
+    flux = [corners_to_vertices(element_sums_cl([r], kind="direct")[0, :, 0, :, :3], ev, N_VERTICES) for r in parts]
     total_flux = flux[0].copy()
     for f in flux[1:]:
         total_flux += f
@@ -77,10 +77,10 @@ def test_frame_sums_add_batches_in_order_with_the_records_bits(tmp_path, stored,
 
 
 def test_the_direct_flux_is_the_per_record_sum(tmp_path):
-    """vertex_flux of the direct element sums equals workers/reconstruct's per-record sum to rounding."""
+    """The direct element sums scattered to the vertices equal workers/reconstruct's per-record sum to rounding."""
     records = _store(tmp_path, [900]).read_frame(0, batches=[0])
     ev = _elements().element_vertices
-    got = vertex_flux(element_sums_cl([records], kind="direct")[0, :, 0], ev, N_VERTICES)
+    got = corners_to_vertices(element_sums_cl([records], kind="direct")[0, :, 0, :, :3], ev, N_VERTICES)
     want = records_vertex_flux(records, records.direct, ev, N_VERTICES)
     assert want.max() > 0
     np.testing.assert_allclose(got, want, rtol=1e-12, atol=1e-12 * want.max())
