@@ -21,7 +21,9 @@ Scaling: the wall time of the whole fixed render (``render()``, cluster start-up
 worker against ``--workers``, and the same without the cluster start-up and video (the
 segments' wall time). On a shared machine identical runs vary by 10-20 %, and the load drifts
 between the two runs of a pair, so ``--repeat N`` alternates N pairs and reports every pair's
-ratio and their median; the tables are those of the median pair.
+ratio and their median; the tables are those of the median pair. What the machine charged for
+fresh memory and new files before and after the renders is printed too (pipeline/benchmarks/machine.py):
+on the shared build machines it moves the I/O row by 2x between runs of the same bits.
 """
 from __future__ import annotations
 
@@ -121,12 +123,16 @@ def run(scene: str = "room", *, frames: str | None = None, width: int = 320, hei
     the figures (also written to ``json_path`` if given)."""
     from pipeline.scene.builtin import BUILTIN_SCENES, write_builtin
 
+    from .machine import describe, machine_costs
+
     results: dict = {}
     with tempfile.TemporaryDirectory(prefix="loom-bench-render-") as tmp:
         tmp = Path(tmp)
         path = write_builtin(scene, tmp / f"{scene}.glb") if scene in BUILTIN_SCENES else Path(scene)
         common = dict(frames=frames, width=width, height=height, spp=spp)
         echo(f"loom bench render: {Path(path).stem}, {width}x{height}, {spp} spp, LocalCluster")
+        results["machine"] = {"before": machine_costs(tmp)}
+        echo(f"machine before: {describe(results['machine']['before'])}")
         if not skip_guided:
             results["guided"] = run_render(path, tmp / "guided", workers=workers, n_photons=None, fmax=None, **common)
             _print_table(echo, f"(a) guided (--photons auto), {workers} workers", results["guided"])
@@ -140,6 +146,8 @@ def run(scene: str = "room", *, frames: str | None = None, width: int = 320, hei
             if repeat > 1:
                 echo(f"  pair {i + 1}/{repeat}: 1 worker {one['wall_s']:.1f} s, {workers} workers "
                      f"{many['wall_s']:.1f} s: {pairs[-1][0]:.2f}x (segments only {pairs[-1][1]:.2f}x)")
+        results["machine"]["after"] = machine_costs(tmp)
+        echo(f"machine after: {describe(results['machine']['after'])}")
     ratio = statistics.median(p[0] for p in pairs)
     ratio_segments = statistics.median(p[1] for p in pairs)
     median_pair = min(pairs, key=lambda p: abs(p[0] - ratio))
