@@ -188,29 +188,36 @@ def completed(client: Client, futures: Iterable[Future],
               workerless_timeout: float = WORKERLESS_TIMEOUT_S) -> Iterator[tuple[object, object]]:
     """``(future, result)`` as futures finish, like ``distributed.as_completed(with_results=True)``,
     but bounded: a LoomError once tasks have waited ``workerless_timeout`` seconds with no worker in
-    the cluster (all died, or none ever started), instead of waiting forever."""
-    from distributed import wait
+    the cluster (all died, or none ever started), instead of waiting forever.
+
+    Each future reports itself on a queue when done (``add_done_callback``): O(n) for n futures,
+    where calling ``distributed.wait(pending, return_when=FIRST_COMPLETED)`` once a completion
+    made a waiter for every pending future each time, O(n^2): 300 short tasks cost the client
+    process 1.2-1.3 CPU seconds that way against 0.7-0.9 (README "Table 2")."""
+    import queue
 
     pending = list(futures)
+    finished: queue.SimpleQueue = queue.SimpleQueue()
+    for future in pending:
+        future.add_done_callback(finished.put)
     since = None
-    while pending:
-        try:
-            done, _ = wait(pending, timeout=min(_POLL_S, workerless_timeout), return_when="FIRST_COMPLETED")
-        except TimeoutError:
-            done = set()
-        if done:
-            since = None
-            for future in [f for f in pending if f in done]:
-                yield future, future.result()
-            pending = [f for f in pending if f not in done]
-            continue
-        if client.nthreads():
-            since = None
-        elif since is None:
-            since = time.monotonic()
-        elif time.monotonic() - since > workerless_timeout:
-            raise LoomError(f"{len(pending)} task(s) waited {workerless_timeout:.0f} s for a Dask worker and the "
-                            "cluster has none (its workers died or never started)", field="--scheduler")
+    for done in range(len(pending)):
+        while True:
+            try:
+                future = finished.get(timeout=min(_POLL_S, workerless_timeout))
+                break
+            except queue.Empty:
+                pass
+            if client.nthreads():
+                since = None
+            elif since is None:
+                since = time.monotonic()
+            elif time.monotonic() - since > workerless_timeout:
+                raise LoomError(f"{len(pending) - done} task(s) waited {workerless_timeout:.0f} s for a Dask worker "
+                                "and the cluster has none (its workers died or never started)",
+                                field="--scheduler")
+        since = None
+        yield future, future.result()
 
 
 def result(client: Client, future: Future) -> Any:
