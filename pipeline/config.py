@@ -93,8 +93,8 @@ class RenderConfig:
     pilot_photons: int = _param(10_000, "segments", "photons of the pilot run at K, §5.2.1 (the paper's 10,000)",
                                 100, 1 << 30)
     n_frame_min: int = _param(1_000, "segments", "smallest N_frame the pilot may choose, §5.2.1", 1, 1 << 30)
-    # 1,280,000: ROOM's loop reaches this cap in every segment (our AQM sees noise the paper's did not,
-    # README "Why the loop climbs"), and at 640,000 the guided frame at K 113 was 2.5 % of its pixels
+    # 1,280,000: ROOM's loop climbs past 640,000 in every segment (our AQM sees noise the paper's did
+    # not, README "Why the loop climbs"); at 640,000 the guided frame at K 113 was 2.5 % of its pixels
     # from a 64,000,000-photon reference, at 1,280,000 0.8 %: the paper's < 1 % (§6; README "Table 1")
     n_frame_max: int = _param(1_280_000, "segments", "largest N_frame of the doubling loop, reported when hit, "
                               "§5.2.3", 1, 1 << 30)
