@@ -116,6 +116,10 @@ def test_bench_error_runs_end_to_end_on_a_tiny_cornell(tmp_path):
     assert len(saved["comparison"]["wall_s"]["rows"]) == len(saved["comparison"]["cpu_s"]["rows"]) == 5
     assert saved["event"]["frame"] == plan.event == 3
     assert any(line.startswith("| per-frame 1,000 |") for line in lines)
+    # What the machine charged before and after the runs is printed and kept beside the figures
+    assert set(saved["machine"]) == {"before", "after"} and all(
+        v > 0 for costs in saved["machine"].values() for v in costs.values())
+    assert any(line.startswith("machine before: a new 1.5 MB file") for line in lines)
     # No temporary folder is left beside the results; the references are kept for a rerun
     assert sorted(p.name for p in (tmp_path / "out").iterdir()) == ["error.json", "error.png", "error.svg",
                                                                    "references"]
