@@ -45,13 +45,13 @@ def new_file_ms(directory: str | os.PathLike[str], size: int = 1_500_000, count:
     try:
         for i in range(count):
             tmp, path = base / f".loom-machine-{os.getpid()}-{i}.partial", base / f".loom-machine-{os.getpid()}-{i}"
+            made += [tmp, path]
             t = time.perf_counter()
             with open(tmp, "wb") as fh:
                 fh.write(data)
             os.replace(tmp, path)
             times.append(time.perf_counter() - t)
-            made.append(path)
-    finally:
+    finally:  # also a temporary file a failed write left
         for path in made:
             path.unlink(missing_ok=True)
     times.sort()
