@@ -406,7 +406,7 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, config:
     from pipeline.scene import ElementMesh, Scene
     from pipeline.scene.builtin import BUILTIN_SCENES
 
-    from .machine import describe, machine_costs
+    from .machine import announce
 
     if plan.reference_factor < 50:
         raise LoomError(f"must be at least 50, got {plan.reference_factor}", field="--reference-factor")
@@ -427,8 +427,7 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, config:
              f"budgets {', '.join(f'{n:,}' for n in plan.budgets)}, F_max {plan.fmax}, d_thr "
              f"{', '.join(f'{d:g}' for d in plan.d_thr)}; reference {plan.reference_photons:,} photons a frame "
              f"x 2 seeds; {elements.n_elements:,} elements; {workers} workers")
-        machine = {"before": machine_costs(tmp)}  # equal-time ratios move with it (pipeline/benchmarks/machine.py)
-        echo(f"machine before: {describe(machine['before'])}")
+        machine = {"before": announce(tmp, "before", echo)}  # equal-time ratios move with it
         seeds = (101, 202)
         cache = out_dir / "references" / (reference_key(
             scene_hash=scene.scene_hash, element_size=elements.element_size, frames=plan.frames,
@@ -484,8 +483,7 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, config:
                      f"rel L2 {r['measures']['rel_l2']:.4f}, d_AQM {r['measures']['d_aqm']:.2f} %, flicker "
                      f"{r['measures']['flicker']:.4f}, lag {r['measures']['lag']}")
                 runs.append(r)
-        machine["after"] = machine_costs(tmp)
-        echo(f"machine after: {describe(machine['after'])}")
+        machine["after"] = announce(tmp, "after", echo)
     ref_photons = 2 * plan.reference_photons * (last - first + 1)
     result = {"scene": Path(path).stem, "plan": {**plan.__dict__, "event": plan.event}, "config": config.to_dict(),
               "elements": elements.n_elements, "workers": workers, "machine": machine, "adaptation": ev.adaptation,

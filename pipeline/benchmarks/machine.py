@@ -17,8 +17,10 @@ import mmap
 import os
 import time
 from pathlib import Path
+from typing import Callable
 
 PAGE = mmap.PAGESIZE
+FILE_BYTES = 1_500_000  # about a ROOM batch's records at 40,000 photons (1.9 MB) or its summary (0.8 MB)
 
 
 def first_touch_us(megabytes: int = 64) -> float:
@@ -33,7 +35,7 @@ def first_touch_us(megabytes: int = 64) -> float:
         return (time.perf_counter() - t) / (n // PAGE) * 1e6
 
 
-def new_file_ms(directory: str | os.PathLike[str], size: int = 1_500_000, count: int = 8) -> float:
+def new_file_ms(directory: str | os.PathLike[str], size: int = FILE_BYTES, count: int = 8) -> float:
     """Milliseconds to write one new file of ``size`` bytes in ``directory`` under a temporary name
     and rename it into place, as the photon store writes a batch's records (the median of
     ``count``); the files are removed."""
@@ -64,5 +66,12 @@ def machine_costs(directory: str | os.PathLike[str]) -> dict:
 
 
 def describe(costs: dict) -> str:
-    return (f"a new 1.5 MB file {costs['new_file_ms']:.1f} ms, fresh memory "
+    return (f"a new {FILE_BYTES / 1e6:g} MB file {costs['new_file_ms']:.1f} ms, fresh memory "
             f"{costs['first_touch_us']:.1f} us a page")
+
+
+def announce(directory: str | os.PathLike[str], when: str, echo: Callable[[str], None]) -> dict:
+    """:func:`machine_costs` now, printed as ``machine WHEN: ...`` (a benchmark's before and after)."""
+    costs = machine_costs(directory)
+    echo(f"machine {when}: {describe(costs)}")
+    return costs

@@ -123,7 +123,7 @@ def run(scene: str = "room", *, frames: str | None = None, width: int = 320, hei
     the figures (also written to ``json_path`` if given)."""
     from pipeline.scene.builtin import BUILTIN_SCENES, write_builtin
 
-    from .machine import describe, machine_costs
+    from .machine import announce
 
     results: dict = {}
     with tempfile.TemporaryDirectory(prefix="loom-bench-render-") as tmp:
@@ -131,8 +131,7 @@ def run(scene: str = "room", *, frames: str | None = None, width: int = 320, hei
         path = write_builtin(scene, tmp / f"{scene}.glb") if scene in BUILTIN_SCENES else Path(scene)
         common = dict(frames=frames, width=width, height=height, spp=spp)
         echo(f"loom bench render: {Path(path).stem}, {width}x{height}, {spp} spp, LocalCluster")
-        results["machine"] = {"before": machine_costs(tmp)}
-        echo(f"machine before: {describe(results['machine']['before'])}")
+        results["machine"] = {"before": announce(tmp, "before", echo)}
         if not skip_guided:
             results["guided"] = run_render(path, tmp / "guided", workers=workers, n_photons=None, fmax=None, **common)
             _print_table(echo, f"(a) guided (--photons auto), {workers} workers", results["guided"])
@@ -146,8 +145,7 @@ def run(scene: str = "room", *, frames: str | None = None, width: int = 320, hei
             if repeat > 1:
                 echo(f"  pair {i + 1}/{repeat}: 1 worker {one['wall_s']:.1f} s, {workers} workers "
                      f"{many['wall_s']:.1f} s: {pairs[-1][0]:.2f}x (segments only {pairs[-1][1]:.2f}x)")
-        results["machine"]["after"] = machine_costs(tmp)
-        echo(f"machine after: {describe(results['machine']['after'])}")
+        results["machine"]["after"] = announce(tmp, "after", echo)
     ratio = statistics.median(p[0] for p in pairs)
     ratio_segments = statistics.median(p[1] for p in pairs)
     median_pair = min(pairs, key=lambda p: abs(p[0] - ratio))

@@ -3,7 +3,7 @@ import math
 
 import pytest
 
-from pipeline.benchmarks.machine import describe, first_touch_us, machine_costs, new_file_ms
+from pipeline.benchmarks.machine import announce, describe, first_touch_us, machine_costs, new_file_ms
 
 
 def test_costs_are_finite_positive_and_leave_no_file(tmp_path):
@@ -12,6 +12,10 @@ def test_costs_are_finite_positive_and_leave_no_file(tmp_path):
     assert all(math.isfinite(v) and v > 0 for v in costs.values())
     assert list(tmp_path.iterdir()) == []
     assert "ms" in describe(costs) and "us a page" in describe(costs)
+    lines = []
+    again = announce(tmp_path, "before", lines.append)
+    assert set(again) == set(costs) and lines == [f"machine before: {describe(again)}"]
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_a_bigger_file_costs_more_to_write(tmp_path):
