@@ -24,6 +24,7 @@ from zarr.core.sync import sync
 from zarr.storage import FsspecStore, LocalStore
 
 from ..errors import LoomError
+from . import direct_write
 from .records import (
     BARY_SCALE,
     CATEGORIES,
@@ -131,27 +132,13 @@ class _Raw:
             return [None if g is None else g.to_bytes() for g in got]
         return sync(fetch())
 
-    def set_many(self, items: list[tuple[str, bytes]]) -> None:
+    def set_many(self, items: list[tuple[str, bytes]], *, write_once: Iterable[str] = ()) -> None:
+        """Write every (key, bytes); on a LocalStore the keys of ``write_once`` (objects nothing
+        in a render reads back) go past the page cache (pipeline/store/direct_write.py)."""
         if self.root is not None:
+            direct = frozenset(write_once)
             for key, data in items:
-                path = os.path.join(self.root, key)
-                head, name = os.path.split(path)
-                tmp = os.path.join(head, f".{name}.{os.getpid()}.{id(data):x}.partial")
-                try:
-                    fh = open(tmp, "wb")
-                except FileNotFoundError:  # first object under this prefix
-                    os.makedirs(head, exist_ok=True)
-                    fh = open(tmp, "wb")
-                try:
-                    with fh:
-                        fh.write(data)
-                    os.replace(tmp, path)
-                except BaseException:
-                    try:
-                        os.unlink(tmp)
-                    except FileNotFoundError:
-                        pass
-                    raise
+                _write_object(os.path.join(self.root, key), data, key in direct)
             return
 
         async def put():
@@ -176,6 +163,31 @@ class _Raw:
             out.append((st.st_ino, st.st_mtime_ns, st.st_ctime_ns, st.st_size))
         reusable = all(s is None or max(s[1], s[2]) < now - LISTING_MARGIN_NS for s in out)
         return tuple(out), reusable
+
+
+def _write_object(path: str, data: bytes, direct: bool) -> None:
+    """Write ``path`` atomically: a temp file beside it (``*.partial``, removed on failure), then
+    a rename; ``direct``: past the page cache where the file system allows it."""
+    head, name = os.path.split(path)
+    tmp = os.path.join(head, f".{name}.{os.getpid()}.{id(data):x}.partial")
+    try:
+        for first in (True, False):
+            try:
+                if not (direct and direct_write.write_new(tmp, data)):
+                    with open(tmp, "wb") as fh:
+                        fh.write(data)
+                break
+            except FileNotFoundError:  # first object under this prefix
+                if not first:
+                    raise
+                os.makedirs(head, exist_ok=True)
+        os.replace(tmp, path)
+    except BaseException:
+        try:
+            os.unlink(tmp)
+        except FileNotFoundError:
+            pass
+        raise
 
 
 @dataclass(frozen=True)
@@ -631,6 +643,9 @@ class PhotonStore:
             raise LoomError("per-element hit count overflows u32", path=self.url)
         items = [(f"{base}/c.0.{i}", _encode_rows(self._chunk(block, i * rows, rows)))
                  for i in range(max(1, -(-n // rows)))]
+        # Only the records' chunks skip the page cache: a render reads the batch's summary, not
+        # its records, when it has one; without one the reconstruction will read them back soon
+        bulk = [k for k, _ in items] if p.summary is not None else []
         items.append((f"{base}/zarr.json", _batch_metadata(n, rows)))
         if p.batch == 0:  # the frame's group, as zarr writes it (bytes equal to require_group's)
             items.append((f"frames/{p.frame}/zarr.json", _GROUP_METADATA))
@@ -639,7 +654,7 @@ class PhotonStore:
             items.append((self._summary_key(p.frame, p.batch), SUMMARY_MAGIC + np.array(
                 [int(p.row[4]), p.summary.size], "<u8").tobytes() + numcodecs.blosc.compress(
                 p.summary.astype("<f8").tobytes(), b"lz4", 5, numcodecs.blosc.SHUFFLE, 0, 8)))
-        self._raw.set_many(items)
+        self._raw.set_many(items, write_once=bulk)
 
     @staticmethod
     def _summary_key(frame: int, batch: int) -> str:
