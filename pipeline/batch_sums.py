@@ -1,16 +1,24 @@
 """What the temporal gather reads of a photon batch: its element sums, made once.
 
 A batch's *summary* is the indirect records' element sums split by photon parity, (E, 2, 3, 4)
-float64 (kernels/gather.element_sums_cl, docs/estimators.md §1.2-1.3), followed by its direct
-records' vertex flux, (V, 3) float64 (their element sums scattered to the vertices, as the gather
-scatters the indirect ones: kernels/gather.corners_to_vertices): everything
-Steps 3-5 of §5.2 read of the records. The shoot task makes it while the sorted records are in
-memory and the store keeps it beside them (``PhotonStore.write_batch(summarise=...)``) when it is
-smaller than the records (:func:`summariser`), so a reconstruction reads about 0.8 MB of sums a
-ROOM batch of 40,000 photons instead of 1.8 MB of records to unpack and sum, and two workers whose
-windows reach the same frames no longer both sum them. A batch without a usable summary (a store
-written before summaries, a batch too small for one, a damaged one) is summed from its records by
+(kernels/gather.element_sums_cl, docs/estimators.md §1.2-1.3), followed by its direct records'
+vertex flux, (V, 3) (their element sums scattered to the vertices, as the gather scatters the
+indirect ones: kernels/gather.corners_to_vertices): everything Steps 3-5 of §5.2 read of the
+records. The shoot task makes it while the sorted records are in memory and the store keeps it
+beside them (``PhotonStore.write_batch(summarise=...)``) when it is smaller than the records
+(:func:`summariser`), so a reconstruction reads about 0.4 MB of sums a ROOM batch of 40,000
+photons instead of 1.8 MB of records to unpack and sum, and two workers whose windows reach the
+same frames no longer both sum them. A batch without a usable summary (a store written before
+summaries, a batch too small for one, a damaged one) is summed from its records by
 :func:`batch_summary`, the same function, so the bits do not depend on which path ran.
+
+Stored in float32 (:func:`stored_form`), with sqrt(Q) in Q's slot: the sums are made in float64
+and rounded once per batch (relative 6e-8, below the float32 records' own rounding), and the
+square root keeps Q, a sum of squared energies, inside float32's range wherever the energies are
+(a light 1e30 times as bright squares to 1e60; tests/stress/test_scale.py). Half the bytes of
+float64: on the build machines every new page of a written file costs CPU (README "Where the
+I/O row's time goes"), and the ROOM summary fell from 842 to 421 KB a batch. A frame's sums are
+then added in float64 (:class:`FrameSums`).
 
 One parity split for every use: the unsplit sums of a batch are its even plus its odd sums, and a
 frame's sums are its batches' sums added in batch order.
@@ -37,13 +45,32 @@ SLOTS = 2 * 3 * 4  # parity x corner x (R, G, B, Q) doubles per element
 
 
 def batch_summary(records: FrameRecords, elements: ElementMesh) -> np.ndarray:
-    """The flat float64 summary of one batch's records (module docstring)."""
+    """The flat float32 summary of one batch's records, as stored (module docstring)."""
     sums = element_sums_cl([records], kind="indirect", split_parity=True)[0]
     # The direct flux from element sums, not per record (workers/reconstruct.records_vertex_flux):
     # the same sum to rounding, over E x 3 corners; a million-record batch took 20 ms the other way
     direct = element_sums_cl([records], kind="direct")[0, :, 0, :, :3]
     flux = corners_to_vertices(direct, elements.element_vertices, elements.n_vertices)
-    return np.concatenate([sums.reshape(-1), flux.reshape(-1)])
+    return stored_form(np.concatenate([sums.reshape(-1), flux.reshape(-1)]), elements)
+
+
+def stored_form(summary: np.ndarray, elements: ElementMesh) -> np.ndarray:
+    """A float64 summary (sums with Q, then the direct flux) as stored: float32 with sqrt(Q)."""
+    out = np.array(summary, np.float64)
+    q = out[:elements.n_elements * SLOTS].reshape(-1, 4)[:, 3]  # a view: Q of every (element, parity, corner)
+    np.sqrt(q, out=q)
+    return out.astype(np.float32)
+
+
+def working_form(stored: np.ndarray, elements: ElementMesh) -> tuple[np.ndarray, np.ndarray]:
+    """(sums (E, 2, 3, 4), direct flux (V, 3)), float64, of a stored summary: Q squared back.
+    A float64 summary (a store written before float32 ones) is first rounded as a new one is."""
+    if stored.dtype != np.float32:
+        stored = stored_form(stored, elements)
+    n_sums = elements.n_elements * SLOTS
+    sums = stored[:n_sums].astype(np.float64).reshape(elements.n_elements, 2, 3, 4)
+    sums[..., 3] *= sums[..., 3]
+    return sums, stored[n_sums:].astype(np.float64).reshape(elements.n_vertices, 3)
 
 
 def summary_size(elements: ElementMesh) -> int:
@@ -54,9 +81,9 @@ def summary_size(elements: ElementMesh) -> int:
 def summariser(elements: ElementMesh) -> Callable[[FrameRecords], np.ndarray | None]:
     """``write_batch``'s ``summarise`` for batches bucketed on ``elements``: the batch's summary
     when it is smaller than its records (20 bytes each), else None. A fine mesh and a small batch
-    (ATRIUM's 43,000 elements: 8.3 MB of sums against 2.6 MB for 130,000 records) would store more
+    (ATRIUM's 43,000 elements: 4.2 MB of sums against 2.6 MB for 130,000 records) would store more
     than the records and read slower than summing them, which the reader then does."""
-    size = summary_size(elements) * 8
+    size = summary_size(elements) * 4
     return lambda records: batch_summary(records, elements) if size <= RECORD_BYTES * len(records) else None
 
 
@@ -137,7 +164,6 @@ class FrameSums:
     @staticmethod
     def _summary(store, src: int, batch: int, elements, photons_emitted: int, clock: StageClock) -> SummedFrame:
         """A batch's indirect sums and direct flux: its stored summary, else summed from its records."""
-        n_sums = elements.n_elements * SLOTS
         summary = store.read_summary(src, batch)
         if summary is not None and summary.size != summary_size(elements):
             summary = None  # made on another element mesh: the store's identity check missed it
@@ -148,8 +174,7 @@ class FrameSums:
             clock.lap("frame_sums_s")
         else:
             clock.lap("read_s")
-        return SummedFrame(summary[:n_sums].reshape(elements.n_elements, 2, 3, 4),
-                           summary[n_sums:].reshape(elements.n_vertices, 3), photons_emitted)
+        return SummedFrame(*working_form(summary, elements), photons_emitted)
 
     def _put(self, key, entry: SummedFrame) -> None:
         old = self._entries.pop(key, None)

@@ -31,11 +31,12 @@ version is refused with a one-line error: version 2 had BLAKE2b digests and zstd
         <b>              (5, n) u32 array, chunk (5, 2^20), keys "c.0.i", made by the writer of
                          (f, b) and by nobody else; records sorted by element (an element's
                          records are contiguous: the reader recovers the offsets from the keys)
-      summaries/c.f.b    not a zarr array: the batch's summary, float64 values its writer derived
-                         from the sorted records (``write_batch(summarise=...)``; the shoot task
-                         stores the gather's batch sums, pipeline/batch_sums.py), written with the
-                         records before the done marker: "LOOMSUM1", the batch digest and the
-                         value count (u64 each), then blosc lz4 + shuffle. Optional and derived:
+      summaries/c.f.b    not a zarr array: the batch's summary, float32 or float64 values its
+                         writer derived from the sorted records (``write_batch(summarise=...)``;
+                         the shoot task stores the gather's batch sums, pipeline/batch_sums.py),
+                         written with the records before the done marker: "LOOMSUM4" (float32)
+                         or "LOOMSUM1" (float64), the batch digest and the value count (u64 each),
+                         then blosc lz4 + shuffle. Optional and derived:
                          a reader that finds none, or one whose digest or values are wrong
                          (:meth:`PhotonStore.read_summary` warns), recomputes it from the records.
 

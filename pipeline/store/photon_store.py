@@ -48,7 +48,9 @@ BATCH_FIELDS = ("done_magic", "photon_start", "photons_emitted", "n_records", "d
 DONE_MAGIC = 0x4C4F4F4D  # "LOOM": the batch chunk is written last, so its presence means done
 RECORD_CHUNK = 1 << 20  # records per chunk of the per-batch arrays (20 MiB raw)
 RECORD_CACHE_BYTES = 192 << 20  # decoded frames an open_shared instance keeps (LRU, read-only)
-SUMMARY_MAGIC = b"LOOMSUM1"  # header of a batch summary object (see write_batch)
+# Header of a batch summary object by the type of its values (see write_batch): "LOOMSUM1" float64
+# (stores written before 2026-12-03's ninth session), "LOOMSUM4" float32
+SUMMARY_MAGIC = {np.dtype("<f8"): b"LOOMSUM1", np.dtype("<f4"): b"LOOMSUM4"}
 LISTING_MARGIN_NS = 100_000_000  # a done-table listing is reused once the directory is 0.1 s old
 # Chunk keys with "." (c.f.b.0): all chunks of an array in its one directory. A new directory
 # costs about 1 ms on ext4 (a block and a journal entry) against 0.1 ms for a new file, and "/" keys
@@ -573,9 +575,9 @@ class PhotonStore:
 
         Rerunning a batch rewrites identical bytes; a done batch is only compared by digest and
         a different one is refused (non-deterministic tracer). Batch b needs b-1 done.
-        ``summarise``: float64 values derived from the sorted records (as :meth:`read_frame` gives
-        them back), stored beside them before the done marker (:meth:`read_summary`); None stores
-        no summary.
+        ``summarise``: float32 or float64 values derived from the sorted records (as
+        :meth:`read_frame` gives them back), stored beside them, in their type, before the done
+        marker (:meth:`read_summary`); None stores no summary.
         """
         prepared = self._prepare(frame_index, batch, key, bary, energy, photons_emitted,
                                  photon_start)
@@ -592,7 +594,10 @@ class PhotonStore:
                                       self.n_elements, int(prepared.row[2]))
             summary = summarise(mine)
             if summary is not None:
-                prepared = replace(prepared, summary=np.ascontiguousarray(summary, np.float64))
+                summary = np.asarray(summary)
+                if summary.dtype.newbyteorder("<") not in SUMMARY_MAGIC:
+                    raise TypeError(f"a batch summary holds float32 or float64 values, not {summary.dtype}")
+                prepared = replace(prepared, summary=np.ascontiguousarray(summary))
         self._write_payload(prepared)
         self._mark_done(prepared)
         return True
@@ -651,9 +656,10 @@ class PhotonStore:
             items.append((f"frames/{p.frame}/zarr.json", _GROUP_METADATA))
         items.append((self._count_key(p.frame, p.batch), _encode_rows(running.astype(np.uint32))))
         if p.summary is not None:
-            items.append((self._summary_key(p.frame, p.batch), SUMMARY_MAGIC + np.array(
+            values = p.summary.astype(p.summary.dtype.newbyteorder("<"))
+            items.append((self._summary_key(p.frame, p.batch), SUMMARY_MAGIC[values.dtype] + np.array(
                 [int(p.row[4]), p.summary.size], "<u8").tobytes() + numcodecs.blosc.compress(
-                p.summary.astype("<f8").tobytes(), b"lz4", 5, numcodecs.blosc.SHUFFLE, 0, 8)))
+                values.tobytes(), b"lz4", 5, numcodecs.blosc.SHUFFLE, 0, values.itemsize)))
         self._raw.set_many(items, write_once=bulk)
 
     @staticmethod
@@ -661,9 +667,10 @@ class PhotonStore:
         return f"summaries/c.{frame}.{batch}"
 
     def read_summary(self, frame_index: int, batch: int) -> np.ndarray | None:
-        """The float64 summary a done batch's writer stored (``write_batch(summarise=...)``), or
-        None when there is none, it belongs to other records (digest) or it is damaged (a warning):
-        the caller then derives it from the records, which stay the store's truth."""
+        """The summary a done batch's writer stored (``write_batch(summarise=...)``), float32 or
+        float64 as written, or None when there is none, it belongs to other records (digest) or
+        it is damaged (a warning): the caller then derives it from the records, which stay the
+        store's truth."""
         f = self.source_frame(frame_index)
         info = self.batch_info(f, batch)
         if info is None:
@@ -671,11 +678,12 @@ class PhotonStore:
         (data,) = self._raw.get_many([self._summary_key(f, int(batch))])
         if data is None:
             return None
-        head = len(SUMMARY_MAGIC) + 16
+        kind = next((t for t, magic in SUMMARY_MAGIC.items() if data.startswith(magic)), None)
+        head = 8 + 16  # the magic, the digest and the value count
         try:
-            digest, n = (int(v) for v in np.frombuffer(data[len(SUMMARY_MAGIC):head], "<u8"))
-            values = np.frombuffer(numcodecs.blosc.decompress(data[head:]), "<f8") \
-                if data[:len(SUMMARY_MAGIC)] == SUMMARY_MAGIC and digest == info["digest"] else None
+            digest, n = (int(v) for v in np.frombuffer(data[8:head], "<u8"))
+            values = np.frombuffer(numcodecs.blosc.decompress(data[head:]), kind) \
+                if kind is not None and digest == info["digest"] else None
         except (ValueError, RuntimeError):
             values = None
         if values is None or values.size != n or not np.isfinite(values).all():

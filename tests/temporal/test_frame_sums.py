@@ -14,7 +14,7 @@ import numpy as np
 import pytest
 
 from kernels.gather import corners_to_vertices, element_sums_cl
-from pipeline.batch_sums import FrameSums, batch_summary, summariser
+from pipeline.batch_sums import FrameSums, batch_summary, stored_form, summariser, working_form
 from pipeline.store import PhotonStore
 from tests.store.photonstore_helpers import IDENTITY, make_batch, write_frame
 from workers.reconstruct import records_vertex_flux
@@ -43,15 +43,22 @@ def _store(tmp_path, sizes, *, summarise=False, name="p.zarr"):
 
 
 def _want(store, n_batches, n_parity):
-    """The frame's sums from its records, summed the documented way."""
+    """The frame's sums from its records, summed the documented way: each batch's float64 sums
+    rounded as stored (float32, sqrt(Q)), then added in float64 in batch order."""
     parts = [store.read_frame(0, batches=[b]) for b in range(n_batches)]
-    split = [element_sums_cl([r], kind="indirect", split_parity=True)[0] for r in parts]
+    ev = _elements().element_vertices
+    split, flux = [], []
+    for r in parts:
+        exact = np.concatenate([element_sums_cl([r], kind="indirect", split_parity=True)[0].reshape(-1),
+                                corners_to_vertices(element_sums_cl([r], kind="direct")[0, :, 0, :, :3], ev,
+                                                    N_VERTICES).reshape(-1)])
+        sums, f = working_form(stored_form(exact, _elements()), _elements())
+        split.append(sums)
+        flux.append(f)
     sums = [s if n_parity == 2 else s[:, :1] + s[:, 1:] for s in split]
     total = sums[0].copy()
     for s in sums[1:]:
         total += s
-    ev = _elements().element_vertices
-    flux = [corners_to_vertices(element_sums_cl([r], kind="direct")[0, :, 0, :, :3], ev, N_VERTICES) for r in parts]
     total_flux = flux[0].copy()
     for f in flux[1:]:
         total_flux += f
@@ -106,9 +113,9 @@ def test_a_damaged_or_foreign_summary_falls_back_to_the_records(tmp_path, damage
         import numcodecs.blosc as blosc
 
         head = 8 + 16
-        values = np.frombuffer(blosc.decompress(bytes(data[head:])), "<f8").copy()
+        values = np.frombuffer(blosc.decompress(bytes(data[head:])), "<f4").copy()
         values[5] = np.nan
-        data[head:] = blosc.compress(values.tobytes(), b"lz4", 5, blosc.SHUFFLE, 0, 8)
+        data[head:] = blosc.compress(values.tobytes(), b"lz4", 5, blosc.SHUFFLE, 0, 4)
     elif damage == "truncated":
         data = data[:len(data) // 2]
     else:  # another batch's summary: the digest in its header does not match
@@ -124,8 +131,8 @@ def test_a_damaged_or_foreign_summary_falls_back_to_the_records(tmp_path, damage
 
 
 def test_a_summary_larger_than_its_records_is_not_stored(tmp_path):
-    """40 elements and 30 vertices: 8,400 bytes of sums, stored for 420 records (8,400 bytes) and more."""
-    store = _store(tmp_path, [419, 420], summarise=True)
+    """40 elements and 30 vertices: 4,200 bytes of float32 sums, stored for 210 records (4,200 bytes) and more."""
+    store = _store(tmp_path, [209, 210], summarise=True)
     assert store.read_summary(0, 0) is None and store.read_summary(0, 1) is not None
     sums, flux = _want(store, 2, 2)
     got = FrameSums(1 << 24).get(store, 0, 2, "indirect", 2, _elements())
@@ -159,3 +166,54 @@ def test_write_frame_helper_still_writes_plain_batches(tmp_path):
     PhotonStore.create(url, n_frames=1, n_elements=N_ELEMENTS, frame_numbers=[1], **IDENTITY)
     write_frame(url, 0, [50], N_ELEMENTS)
     assert PhotonStore.open(url, **IDENTITY).read_summary(0, 0) is None
+
+
+@pytest.mark.parametrize("scale", [1e-30, 1.0, 1e30])
+def test_the_stored_form_keeps_sums_and_q_to_float32_rounding_at_any_brightness(scale):
+    """float32 with sqrt(Q): every value within float32's rounding of the float64 one, Q too,
+    where Q itself (1e60 for energies of 1e30) would overflow float32."""
+    el = _elements()
+    rng = np.random.default_rng(9)
+    rgb = rng.random((N_ELEMENTS, 2, 3, 3)) * scale
+    sums = np.concatenate([rgb, (rgb.sum(axis=-1, keepdims=True) * scale) * 0.3], axis=-1)  # Q ~ energy^2
+    flux = rng.random((N_VERTICES, 3)) * scale
+    stored = stored_form(np.concatenate([sums.reshape(-1), flux.reshape(-1)]), el)
+    assert stored.dtype == np.float32 and np.isfinite(stored).all()
+    got_sums, got_flux = working_form(stored, el)
+    np.testing.assert_allclose(got_sums, sums, rtol=2.5e-7, atol=0)
+    np.testing.assert_allclose(got_flux, flux, rtol=1.2e-7, atol=0)
+    # A float64 summary of an older store is rounded the same way on reading
+    old = np.concatenate([sums.reshape(-1), flux.reshape(-1)])
+    assert all(a.tobytes() == b.tobytes() for a, b in zip(working_form(old, el), (got_sums, got_flux)))
+
+
+def test_a_float64_summary_of_an_older_store_reads_as_a_float32_one(tmp_path):
+    """Stores written before float32 summaries hold float64 ones ("LOOMSUM1"): read, rounded as
+    new ones are, and the frame's sums carry the same bits as from a new store."""
+    new = _store(tmp_path, [700, 900], summarise=True, name="new.zarr")
+    el = _elements()
+
+    def float64_summary(records):
+        exact = np.concatenate([
+            element_sums_cl([records], kind="indirect", split_parity=True)[0].reshape(-1),
+            corners_to_vertices(element_sums_cl([records], kind="direct")[0, :, 0, :, :3], el.element_vertices,
+                                N_VERTICES).reshape(-1)])
+        return exact
+
+    url = str(tmp_path / "old.zarr")
+    PhotonStore.create(url, n_frames=2, n_elements=N_ELEMENTS, frame_numbers=[1, 2], **IDENTITY)
+    store = PhotonStore.open(url, mode="r+", **IDENTITY)
+    start = 0
+    for b, n in enumerate([700, 900]):
+        batch = make_batch(0, b, n, N_ELEMENTS, photon_start=start)
+        store.write_batch(0, b, **batch, summarise=float64_summary)
+        start += batch["photons_emitted"]
+    old = PhotonStore.open(url, mode="r", **IDENTITY)
+    assert (Path(url) / "summaries" / "c.0.0").read_bytes()[:8] == b"LOOMSUM1"
+    assert old.read_summary(0, 0).dtype == np.float64
+    times: dict = {}
+    got_old = FrameSums(1 << 24).get(old, 0, 2, "indirect", 2, el, times=times)
+    got_new = FrameSums(1 << 24).get(new, 0, 2, "indirect", 2, el)
+    assert "frame_sums_s" not in times  # read, not summed again
+    assert got_old.sums.tobytes() == got_new.sums.tobytes()
+    assert got_old.direct_flux.tobytes() == got_new.direct_flux.tobytes()
