@@ -186,40 +186,74 @@ def as_array(value: npt.ArrayLike, name: str, shape_tail: tuple[int, ...], dtype
 
 
 def sort_records(key: np.ndarray, bary: np.ndarray, energy: np.ndarray) -> np.ndarray:
-    """Permutation into the total order (element, key, b1, b2, energy bits): input-order free."""
+    """Permutation into the total order (element, key, b1, b2, energy bits): input-order free.
+    Slow twin: :func:`sort_records_reference`."""
     key = np.asarray(key, np.uint32)
     n = key.shape[0]
-    top = int((key & np.uint32(ELEMENT_MASK)).max()).bit_length() if n else 0
+    if n == 0:
+        return np.empty(0, np.int64)
+    # element << 2 | category is key rotated left by 2, b1 << 16 | b2 the little-endian pair
+    # rotated by 16 (u32 work)
+    group = (key << np.uint32(2)) | (key >> np.uint32(ELEMENT_BITS))
+    pair = np.ascontiguousarray(bary, "<u2").view("<u4").reshape(n)
+    pair = (pair << np.uint32(16)) | (pair >> np.uint32(16))
+    top = int(group.max()).bit_length()
     low = max(1, (n - 1).bit_length())  # bits of a record index
-    if top + 34 + low <= 64:
-        # (element, category, b1, b2) with the record index below it in one u64: sorting values
-        # is 3x faster than argsort and gives the stable order. element << 2 | category is key
-        # rotated left by 2 and b1 << 16 | b2 the little-endian pair rotated by 16 (u32 work)
-        pair = np.ascontiguousarray(bary, "<u2").view("<u4").reshape(n)  # b1 | b2 << 16
-        packed = ((key << np.uint32(2)) | (key >> np.uint32(ELEMENT_BITS))).astype(np.uint64)
-        packed <<= np.uint64(32 + low)
-        packed |= ((pair << np.uint32(16)) | (pair >> np.uint32(16))).astype(np.uint64) << np.uint64(low)
+    ranked = None
+    if top + 32 + low <= 64:
+        # (group, pair) with the record index below it in one u64: sorting values is 10x faster
+        # than argsort (np.sort of 2,000,000 u64 22 ms, np.argsort 260 ms) and gives the stable order
+        packed = group.astype(np.uint64) << np.uint64(32 + low)
+        packed |= pair.astype(np.uint64) << np.uint64(low)
         packed |= np.arange(n, dtype=np.uint64)
         packed.sort()
         order = (packed & np.uint64((1 << low) - 1)).astype(np.int64)
         ranked = packed >> np.uint64(low)
-        primary = None
     else:
-        element = (key & ELEMENT_MASK).astype(np.uint64)
-        primary = ((element << np.uint64(2) | (key >> np.uint32(ELEMENT_BITS)).astype(np.uint64)) << np.uint64(32)
-                   | bary[:, 0].astype(np.uint64) << np.uint64(16) | bary[:, 1].astype(np.uint64))
+        # Too many records for their index beside (group, pair) (ROOM: 13 + 2 + 32 bits leave 17,
+        # and a batch of 40,000 photons has 134,000 records): two sorts of packed values, first
+        # by group with the record index below it, then by (group, pair) with the rank inside the
+        # group below it, which needs only the bits of the largest group
+        first = group.astype(np.uint64) << np.uint64(low)
+        first |= np.arange(n, dtype=np.uint64)
+        first.sort()
+        by_group = (first & np.uint64((1 << low) - 1)).astype(np.int64)
+        grouped = first >> np.uint64(low)
+        start = np.arange(n, dtype=np.int64)  # where each position's group starts
+        start[1:][grouped[1:] == grouped[:-1]] = 0
+        np.maximum.accumulate(start, out=start)
+        rank = np.arange(n, dtype=np.int64) - start
+        rank_bits = max(1, int(rank.max()).bit_length())
+        if top + 32 + rank_bits <= 64:
+            second = grouped << np.uint64(32 + rank_bits)
+            second |= np.take(pair, by_group).astype(np.uint64) << np.uint64(rank_bits)
+            second |= rank.astype(np.uint64)
+            second.sort()  # groups stay where the first sort put them: ``start`` still holds
+            order = np.take(by_group, start + (second & np.uint64((1 << rank_bits) - 1)).astype(np.int64))
+            ranked = second >> np.uint64(rank_bits)
+    primary = None
+    if ranked is None:  # one group too large even for that: sort the u64 primary keys
+        primary = (group.astype(np.uint64) << np.uint64(32)) | pair.astype(np.uint64)
         # Any correct sort gives the same permutation when the primary keys are distinct, so the
         # faster unstable one is used; ties are broken by the energy bits (equal records: any order)
         order = np.argsort(primary)
         ranked = np.take(primary, order)
     if ranked.size > 1 and (ranked[1:] == ranked[:-1]).any():  # ties: break by energy bits
         if primary is None:
-            element = (key & ELEMENT_MASK).astype(np.uint64)
-            primary = ((element << np.uint64(2) | (key >> np.uint32(ELEMENT_BITS)).astype(np.uint64)) << np.uint64(32)
-                       | bary[:, 0].astype(np.uint64) << np.uint64(16) | bary[:, 1].astype(np.uint64))
+            primary = (group.astype(np.uint64) << np.uint64(32)) | pair.astype(np.uint64)
         bits = energy.view(np.uint32)
         order = np.lexsort((bits[:, 2], bits[:, 1], bits[:, 0], primary))
     return order
+
+
+def sort_records_reference(key: np.ndarray, bary: np.ndarray, energy: np.ndarray) -> np.ndarray:
+    """The order of :func:`sort_records` by its definition: element, category, b1, b2, then the
+    energy bits, then the input index (one lexsort, several times slower)."""
+    key = np.asarray(key, np.uint32)
+    bary = np.asarray(bary, np.uint16)
+    bits = np.ascontiguousarray(energy, np.float32).view(np.uint32)
+    return np.lexsort((bits[:, 2], bits[:, 1], bits[:, 0], bary[:, 1], bary[:, 0],
+                       key >> np.uint32(ELEMENT_BITS), key & np.uint32(ELEMENT_MASK)))
 
 
 def prepare_records(key: npt.ArrayLike, bary: npt.ArrayLike, energy: npt.ArrayLike, n_elements: int,

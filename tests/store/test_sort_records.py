@@ -1,0 +1,49 @@
+"""The records' total order (pipeline/store/records.sort_records) equals its definition
+(sort_records_reference: one lexsort over element, category, b1, b2 and the energy bits) on every
+path the fast sort takes: one packed sort, two packed sorts for batches too large for one, and the
+argsort of primary keys where a group is too large for both; with and without ties."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from pipeline.store.records import ELEMENT_BITS, sort_records, sort_records_reference
+
+
+def _batch(n, n_elements, seed, *, bary_levels=65536, energy_levels=None):
+    rng = np.random.default_rng(seed)
+    key = rng.integers(0, n_elements, n).astype(np.uint32) | (rng.integers(0, 4, n).astype(np.uint32)
+                                                              << np.uint32(ELEMENT_BITS))
+    bary = rng.integers(0, bary_levels, (n, 2)).astype(np.uint16)
+    energy = rng.random((n, 3)).astype(np.float32)
+    if energy_levels:  # few distinct energies: whole records repeat
+        energy = (rng.integers(0, energy_levels, (n, 1)) * np.ones((1, 3))).astype(np.float32)
+    return key, bary, energy
+
+
+@pytest.mark.parametrize("n, n_elements, bary_levels, energy_levels, path", [
+    (5_000, 5_464, 65536, None, "one sort"),              # 13 + 2 + 32 + 13 bits
+    (200_000, 5_464, 65536, None, "two sorts"),           # 13 + 2 + 32 + 18 bits: too many for one
+    (200_000, 5_464, 4, None, "two sorts, ties"),         # (element, category, b1, b2) repeat
+    (200_000, 5_464, 4, 3, "two sorts, equal records"),   # whole records repeat
+    (3_000, 1 << 29, 65536, None, "argsort"),             # 29 + 2 + 32 bits leave one for the rank
+    (3_000, 1 << 29, 2, 2, "argsort, ties"),
+    (3_000, 3, 8, 2, "one sort, ties"),
+])
+def test_the_fast_order_is_the_defined_order(n, n_elements, bary_levels, energy_levels, path):
+    key, bary, energy = _batch(n, n_elements, n + n_elements, bary_levels=bary_levels,
+                               energy_levels=energy_levels)
+    if path.startswith("argsort"):
+        key[:1000] = key[0]  # one group of 1,000 records
+    got = sort_records(key, bary, energy)
+    want = sort_records_reference(key, bary, energy)
+    assert got.dtype == np.int64 and np.array_equal(got, want)
+
+
+def test_the_order_does_not_depend_on_the_input_order():
+    key, bary, energy = _batch(150_000, 5_464, 7, bary_levels=16, energy_levels=4)
+    shuffle = np.random.default_rng(1).permutation(len(key))
+    a = sort_records(key, bary, energy)
+    b = sort_records(key[shuffle], bary[shuffle], energy[shuffle])
+    for x in (key, bary, energy):
+        assert np.array_equal(x[a], x[shuffle][b])
