@@ -18,10 +18,10 @@ composited while later chunks are reconstructed), so its wall time (``temporal_s
 ``composite_s``) is split between them the same way, by their tasks' core time: the coordinator's
 own clock runs ``temporal_s`` until the last reconstruction ends, and on two workers that counted
 the other worker's compositing meanwhile as temporal time (ROOM, 40,000 photons: 2.4-2.8 s of
-``temporal_s`` on 2 workers against 1.4 s on one, for 3.2 s of reconstruction tasks' core time). Total indirect = tracing + AQM +
-temporal + I/O; ray tracing is the compositing stage (rendering, tone mapping, EXR and PNG).
-Per frame = divided by the frames rendered; shares are of indirect + ray tracing. "core s" is
-the tasks' summed time per frame (what one core would spend).
+``temporal_s`` on 2 workers against 1.4 s on one, for 3.2 s of reconstruction tasks' core time).
+Total indirect = tracing + AQM + temporal + I/O; ray tracing is the compositing stage
+(rendering, tone mapping, EXR and PNG). Per frame = divided by the frames rendered; shares are of
+indirect + ray tracing. "core s" is the tasks' summed time per frame (what one core would spend).
 
 Scaling: the wall time of the whole fixed render (``render()``, cluster start-up included) on 1
 worker against ``--workers``, and the same without the cluster start-up and video (the
