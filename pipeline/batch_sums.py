@@ -41,7 +41,7 @@ if TYPE_CHECKING:
     from .store import PhotonStore
     from .store.records import FrameRecords
 
-SLOTS = 2 * 3 * 4  # parity x corner x (R, G, B, Q) doubles per element
+SLOTS = 2 * 3 * 4  # parity x corner x (R, G, B, Q) values per element
 
 
 def batch_summary(records: FrameRecords, elements: ElementMesh) -> np.ndarray:

@@ -48,8 +48,8 @@ BATCH_FIELDS = ("done_magic", "photon_start", "photons_emitted", "n_records", "d
 DONE_MAGIC = 0x4C4F4F4D  # "LOOM": the batch chunk is written last, so its presence means done
 RECORD_CHUNK = 1 << 20  # records per chunk of the per-batch arrays (20 MiB raw)
 RECORD_CACHE_BYTES = 192 << 20  # decoded frames an open_shared instance keeps (LRU, read-only)
-# Header of a batch summary object by the type of its values (see write_batch): "LOOMSUM1" float64
-# (stores written before 2026-12-03's ninth session), "LOOMSUM4" float32
+# Header of a batch summary object by the type of its values (see write_batch): "LOOMSUM4" float32,
+# "LOOMSUM1" float64 (what older stores hold; still read)
 SUMMARY_MAGIC = {np.dtype("<f8"): b"LOOMSUM1", np.dtype("<f4"): b"LOOMSUM4"}
 LISTING_MARGIN_NS = 100_000_000  # a done-table listing is reused once the directory is 0.1 s old
 # Chunk keys with "." (c.f.b.0): all chunks of an array in its one directory. A new directory
