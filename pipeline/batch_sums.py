@@ -55,7 +55,8 @@ def batch_summary(records: FrameRecords, elements: ElementMesh) -> np.ndarray:
 
 
 def stored_form(summary: np.ndarray, elements: ElementMesh) -> np.ndarray:
-    """A float64 summary (sums with Q, then the direct flux) as stored: float32 with sqrt(Q)."""
+    """A float64 summary (sums with Q, docs/estimators.md §1.3, then the direct flux) as stored:
+    float32 with sqrt(Q)."""
     out = np.array(summary, np.float64)
     q = out[:elements.n_elements * SLOTS].reshape(-1, 4)[:, 3]  # a view: Q of every (element, parity, corner)
     np.sqrt(q, out=q)

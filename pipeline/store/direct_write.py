@@ -63,15 +63,11 @@ def write_new(path: str, data: bytes | memoryview) -> bool:
             finally:
                 view.release()
         os.ftruncate(fd, n)
-    except OSError as e:
+    except BaseException as e:
         os.close(fd)
         os.unlink(path)
-        if e.errno == errno.EINVAL:  # refused at the first write rather than at open
+        if isinstance(e, OSError) and e.errno == errno.EINVAL:  # refused at the first write, not at open
             return False
-        raise
-    except BaseException:
-        os.close(fd)
-        os.unlink(path)
         raise
     os.close(fd)
     return True

@@ -200,7 +200,7 @@ class _Prepared:
     batch: int
     records: SortedBatch
     row: np.ndarray  # u64 (5,) in BATCH_FIELDS order
-    summary: np.ndarray | None = None  # f64, stored with the records (write_batch's summarise)
+    summary: np.ndarray | None = None  # little-endian f4 or f8, stored with the records (write_batch's summarise)
 
 
 def make_store(url: str | os.PathLike[str], read_only: bool) -> LocalStore | FsspecStore:
@@ -595,9 +595,10 @@ class PhotonStore:
             summary = summarise(mine)
             if summary is not None:
                 summary = np.asarray(summary)
-                if summary.dtype.newbyteorder("<") not in SUMMARY_MAGIC:
+                stored = summary.dtype.newbyteorder("<")
+                if stored not in SUMMARY_MAGIC:
                     raise TypeError(f"a batch summary holds float32 or float64 values, not {summary.dtype}")
-                prepared = replace(prepared, summary=np.ascontiguousarray(summary))
+                prepared = replace(prepared, summary=np.ascontiguousarray(summary, stored))
         self._write_payload(prepared)
         self._mark_done(prepared)
         return True
@@ -656,10 +657,9 @@ class PhotonStore:
             items.append((f"frames/{p.frame}/zarr.json", _GROUP_METADATA))
         items.append((self._count_key(p.frame, p.batch), _encode_rows(running.astype(np.uint32))))
         if p.summary is not None:
-            values = p.summary.astype(p.summary.dtype.newbyteorder("<"))
-            items.append((self._summary_key(p.frame, p.batch), SUMMARY_MAGIC[values.dtype] + np.array(
+            items.append((self._summary_key(p.frame, p.batch), SUMMARY_MAGIC[p.summary.dtype] + np.array(
                 [int(p.row[4]), p.summary.size], "<u8").tobytes() + numcodecs.blosc.compress(
-                values.tobytes(), b"lz4", 5, numcodecs.blosc.SHUFFLE, 0, values.itemsize)))
+                p.summary.tobytes(), b"lz4", 5, numcodecs.blosc.SHUFFLE, 0, p.summary.itemsize)))
         self._raw.set_many(items, write_once=bulk)
 
     @staticmethod
@@ -678,10 +678,10 @@ class PhotonStore:
         (data,) = self._raw.get_many([self._summary_key(f, int(batch))])
         if data is None:
             return None
-        kind = next((t for t, magic in SUMMARY_MAGIC.items() if data.startswith(magic)), None)
-        head = 8 + 16  # the magic, the digest and the value count
+        kind, magic = next(((t, m) for t, m in SUMMARY_MAGIC.items() if data.startswith(m)), (None, b""))
+        head = len(magic) + 16  # the magic, the digest and the value count
         try:
-            digest, n = (int(v) for v in np.frombuffer(data[8:head], "<u8"))
+            digest, n = (int(v) for v in np.frombuffer(data[len(magic):head], "<u8"))
             values = np.frombuffer(numcodecs.blosc.decompress(data[head:]), kind) \
                 if kind is not None and digest == info["digest"] else None
         except (ValueError, RuntimeError):

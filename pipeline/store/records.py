@@ -233,17 +233,22 @@ def sort_records(key: np.ndarray, bary: np.ndarray, energy: np.ndarray) -> np.nd
             ranked = second >> np.uint64(rank_bits)
     primary = None
     if ranked is None:  # one group too large even for that: sort the u64 primary keys
-        primary = (group.astype(np.uint64) << np.uint64(32)) | pair.astype(np.uint64)
+        primary = _primary_keys(group, pair)
         # Any correct sort gives the same permutation when the primary keys are distinct, so the
         # faster unstable one is used; ties are broken by the energy bits (equal records: any order)
         order = np.argsort(primary)
         ranked = np.take(primary, order)
     if ranked.size > 1 and (ranked[1:] == ranked[:-1]).any():  # ties: break by energy bits
         if primary is None:
-            primary = (group.astype(np.uint64) << np.uint64(32)) | pair.astype(np.uint64)
+            primary = _primary_keys(group, pair)
         bits = energy.view(np.uint32)
         order = np.lexsort((bits[:, 2], bits[:, 1], bits[:, 0], primary))
     return order
+
+
+def _primary_keys(group: np.ndarray, pair: np.ndarray) -> np.ndarray:
+    """(element << 2 | category) << 32 | b1 << 16 | b2 as u64: the order before the energy bits."""
+    return (group.astype(np.uint64) << np.uint64(32)) | pair.astype(np.uint64)
 
 
 def sort_records_reference(key: np.ndarray, bary: np.ndarray, energy: np.ndarray) -> np.ndarray:

@@ -28,8 +28,16 @@ def _elements(seed=3):
     return SimpleNamespace(element_vertices=ev, n_vertices=N_VERTICES, n_elements=N_ELEMENTS)
 
 
+def _float64_summary(records):
+    """A batch's summary as float64 values, before the store's rounding (older stores hold these)."""
+    return np.concatenate([element_sums_cl([records], kind="indirect", split_parity=True)[0].reshape(-1),
+                           corners_to_vertices(element_sums_cl([records], kind="direct")[0, :, 0, :, :3],
+                                               _elements().element_vertices, N_VERTICES).reshape(-1)])
+
+
 def _store(tmp_path, sizes, *, summarise=False, name="p.zarr"):
-    """A store with one frame of batches ``sizes``, written with or without batch summaries."""
+    """A store with one frame of batches ``sizes``, written with or without batch summaries
+    (``summarise`` True: the shoot task's summariser; a function: that one)."""
     url = str(tmp_path / name)
     shutil.rmtree(url, ignore_errors=True)
     PhotonStore.create(url, n_frames=2, n_elements=N_ELEMENTS, frame_numbers=[1, 2], **IDENTITY)
@@ -37,7 +45,8 @@ def _store(tmp_path, sizes, *, summarise=False, name="p.zarr"):
     start = 0
     for b, n in enumerate(sizes):
         batch = make_batch(0, b, n, N_ELEMENTS, photon_start=start)
-        store.write_batch(0, b, **batch, summarise=summariser(_elements()) if summarise else None)
+        how = summarise if callable(summarise) else summariser(_elements()) if summarise else None
+        store.write_batch(0, b, **batch, summarise=how)
         start += batch["photons_emitted"]
     return PhotonStore.open(url, mode="r", **IDENTITY)
 
@@ -46,13 +55,9 @@ def _want(store, n_batches, n_parity):
     """The frame's sums from its records, summed the documented way: each batch's float64 sums
     rounded as stored (float32, sqrt(Q)), then added in float64 in batch order."""
     parts = [store.read_frame(0, batches=[b]) for b in range(n_batches)]
-    ev = _elements().element_vertices
     split, flux = [], []
     for r in parts:
-        exact = np.concatenate([element_sums_cl([r], kind="indirect", split_parity=True)[0].reshape(-1),
-                                corners_to_vertices(element_sums_cl([r], kind="direct")[0, :, 0, :, :3], ev,
-                                                    N_VERTICES).reshape(-1)])
-        sums, f = working_form(stored_form(exact, _elements()), _elements())
+        sums, f = working_form(stored_form(_float64_summary(r), _elements()), _elements())
         split.append(sums)
         flux.append(f)
     sums = [s if n_parity == 2 else s[:, :1] + s[:, 1:] for s in split]
@@ -191,25 +196,9 @@ def test_a_float64_summary_of_an_older_store_reads_as_a_float32_one(tmp_path):
     """Stores written before float32 summaries hold float64 ones ("LOOMSUM1"): read, rounded as
     new ones are, and the frame's sums carry the same bits as from a new store."""
     new = _store(tmp_path, [700, 900], summarise=True, name="new.zarr")
+    old = _store(tmp_path, [700, 900], summarise=_float64_summary, name="old.zarr")
     el = _elements()
-
-    def float64_summary(records):
-        exact = np.concatenate([
-            element_sums_cl([records], kind="indirect", split_parity=True)[0].reshape(-1),
-            corners_to_vertices(element_sums_cl([records], kind="direct")[0, :, 0, :, :3], el.element_vertices,
-                                N_VERTICES).reshape(-1)])
-        return exact
-
-    url = str(tmp_path / "old.zarr")
-    PhotonStore.create(url, n_frames=2, n_elements=N_ELEMENTS, frame_numbers=[1, 2], **IDENTITY)
-    store = PhotonStore.open(url, mode="r+", **IDENTITY)
-    start = 0
-    for b, n in enumerate([700, 900]):
-        batch = make_batch(0, b, n, N_ELEMENTS, photon_start=start)
-        store.write_batch(0, b, **batch, summarise=float64_summary)
-        start += batch["photons_emitted"]
-    old = PhotonStore.open(url, mode="r", **IDENTITY)
-    assert (Path(url) / "summaries" / "c.0.0").read_bytes()[:8] == b"LOOMSUM1"
+    assert _summary_file(old).read_bytes()[:8] == b"LOOMSUM1"
     assert old.read_summary(0, 0).dtype == np.float64
     times: dict = {}
     got_old = FrameSums(1 << 24).get(old, 0, 2, "indirect", 2, el, times=times)
