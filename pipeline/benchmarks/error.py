@@ -14,7 +14,13 @@ The reference is per-frame photon tracing with no temporal reuse, ``--reference-
 largest budget per frame, traced on the workers straight into vertex maps (:func:`reference_map`:
 the same tracer, elements and estimator as a render, so discretisation is common to both and every
 difference is noise or temporal bias), twice with different seeds: the second reference against
-the first is the noise floor printed beside every error. The references are kept in
+the first is the noise floor printed beside every error. Every frame of one reference draws the
+same random numbers (common random numbers: the Philox stream of the range's first frame, posed
+at its own frame), so where a frame's scene equals the one before, so does its reference noise:
+the reference's noise stays out of the error's *flicker*, where independent per-frame noise would
+add sqrt(2) x its amplitude to every method's figure (README "Common random numbers in the
+reference"). Each frame alone is still an independent-seed estimate, so every per-frame measure
+and the floor are as before. The references are kept in
 ``OUT/references/`` (:func:`reference_key`: scene, elements, frames, photons, seeds, photon depth and
 the tracer's source), so a rerun with another ``--config`` or other budgets of the same reference
 does not trace them again: they are most of a full run's time.
@@ -113,9 +119,11 @@ def write_scene(name: str, path: Path, event: int) -> Path:
 
 
 def reference_map(*, scene_path: str, scene_hash: str, element_size: float, frame: int, n_photons: int,
-                  seed: int, max_depth: int) -> np.ndarray:
-    """Dask task: (V, 3) indirect vertex irradiance of ``n_photons`` of the frame's own photons,
-    traced in batches and summed in float64 (no store: nothing is reused across frames)."""
+                  seed: int, stream: int, max_depth: int) -> np.ndarray:
+    """Dask task: (V, 3) indirect vertex irradiance of ``n_photons`` photons traced in the scene as
+    posed at ``frame``, drawn from the Philox stream (``seed``, ``stream``), in batches summed in
+    float64 (no store: nothing is reused across frames; a common ``stream`` for every frame makes
+    the frames' noise alike where their scenes are)."""
     from workers.photons import trace_batch
     from workers.reconstruct import vertex_irradiance
     from workers.scene_cache import load_elements, load_scene
@@ -127,7 +135,8 @@ def reference_map(*, scene_path: str, scene_hash: str, element_size: float, fram
     total = np.zeros((elements.n_vertices, 3))
     for start in range(0, n_photons, REFERENCE_BATCH):
         n = min(REFERENCE_BATCH, n_photons - start)
-        b = trace_batch(state, elements, n_photons=n, photon_start=start, seed=seed, frame=frame, max_depth=max_depth)
+        b = trace_batch(state, elements, n_photons=n, photon_start=start, seed=seed, frame=stream,
+                        max_depth=max_depth)
         ind = (b.key >> np.uint32(31)) == 0
         total += vertex_irradiance(b.key[ind] & np.uint32(0x3FFFFFFF), b.bary[ind, 0], b.bary[ind, 1],
                                    b.energy[ind], elements, areas, 1)
@@ -139,8 +148,8 @@ def reference_key(*, scene_hash: str, element_size: float, frames: tuple[int, in
     """Name of a cached pair of references: everything :func:`reference_map` reads, and the source of
     the code that traces and estimates (workers/, kernels/ but the programs that reconstruct from a
     store, pipeline/scene/), so a changed tracer never meets a stale reference."""
-    h = hashlib.sha256(json.dumps([scene_hash, element_size, list(frames), n_photons, list(seeds), max_depth])
-                       .encode())
+    h = hashlib.sha256(json.dumps([scene_hash, element_size, list(frames), n_photons, list(seeds), max_depth,
+                                   "common random numbers"]).encode())
     root = Path(__file__).resolve().parents[2]
     for folder in ("workers", "kernels", "pipeline/scene"):
         for f in sorted((root / folder).rglob("*")):
@@ -444,7 +453,7 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, config:
                     futures = [client.submit(reference_map, scene_path=str(Path(path).resolve()),
                                              scene_hash=scene.scene_hash, element_size=elements.element_size,
                                              frame=f, n_photons=plan.reference_photons, seed=seed,
-                                             max_depth=config.photon_depth, pure=False)
+                                             stream=first, max_depth=config.photon_depth, pure=False)
                                for f in range(first, last + 1)]
                     refs.append(np.stack(client.gather(futures)))
                 refs = np.stack(refs)

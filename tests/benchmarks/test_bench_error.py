@@ -154,3 +154,24 @@ def test_bench_error_is_a_bench_command():
 
     out = CliRunner().invoke(main, ["bench", "error", "--help"])
     assert out.exit_code == 0 and "--quick" in out.output
+
+
+def test_a_reference_draws_the_same_random_numbers_in_every_frame(tmp_path):
+    """Common random numbers: where two frames' scenes are the same (the STATIC scene: only its camera
+    moves), one reference's maps are the same bits, so its noise adds nothing to the error's flicker;
+    another stream gives another estimate of the same light (a noise the floor measures)."""
+    from pipeline.benchmarks.error import reference_map
+    from pipeline.scene import ElementMesh, Scene
+    from pipeline.scene.builtin import write_builtin
+
+    path = write_builtin("static", tmp_path / "static.glb")
+    scene = Scene.load(path)
+    elements = ElementMesh.build(scene)
+    common = dict(scene_path=str(path), scene_hash=scene.scene_hash, element_size=elements.element_size,
+                  n_photons=3_000, seed=101, max_depth=256)
+    a = reference_map(frame=1, stream=1, **common)
+    b = reference_map(frame=2, stream=1, **common)
+    other = reference_map(frame=2, stream=2, **common)
+    assert a.sum() > 0 and np.array_equal(a, b)
+    assert not np.array_equal(a, other)
+    assert other.sum() == pytest.approx(a.sum(), rel=0.1)
