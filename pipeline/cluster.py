@@ -42,6 +42,10 @@ WORKER_ENV = {
     "MALLOC_MMAP_THRESHOLD_": "33554432",
     "MALLOC_TRIM_THRESHOLD_": "134217728",
 }
+# What a worker process imports before its first task: imported once in the fork server that
+# forks the local workers (see :func:`start_worker_server`), not once per worker and run
+WORKER_PRELOAD = ("distributed", "numpy", "pyopencl", "embreex", "zarr", "OpenImageIO",
+                  "workers.photons", "workers.reconstruct", "workers.composite")
 TASK_RETRIES = 3
 # Bounds on waiting for a cluster: worker processes of --scheduler local (more than 4 per core
 # only thrash), and how long tasks may wait while the cluster has no worker at all (a cluster
@@ -69,6 +73,33 @@ def check_workers(workers: int | None) -> int | None:
         raise LoomError(f"must be a number of worker processes in [1, {limit}] ({MAX_WORKERS_PER_CORE} per core), "
                         f"got {workers!r}", field="--workers")
     return workers
+
+
+def start_worker_server() -> None:
+    """Start, if not running, the fork server that the local cluster's worker processes are forked
+    from (multiprocessing's ``forkserver``, which Dask's nannies use with
+    ``distributed.worker.multiprocessing-method``), with the worker environment and
+    :data:`WORKER_PRELOAD` imported.
+
+    Why: spawned workers each started a new interpreter and imported distributed, NumPy, PyOpenCL,
+    Embree and our tasks' modules (about 0.8 s for the cluster and 0.4 s more before a worker's
+    first task, both serial in every render); forked from a server that did this once, a cluster
+    starts in about 0.1 s, and the server starts while the client is still importing and loading
+    the scene (pipeline/cli/render.py). The server is a fresh single-threaded interpreter (not the
+    client, whose threads a fork would copy badly) and holds no device: each worker still makes its
+    own OpenCL context and Embree scenes. The environment must be the server's from its start
+    (a forked child keeps it), hence :data:`WORKER_ENV` here and not only in the nannies'."""
+    import multiprocessing
+    from multiprocessing import forkserver
+
+    saved = {k: os.environ.get(k) for k in (*WORKER_ENV, "PYTHONHASHSEED")}
+    try:
+        os.environ.update(WORKER_ENV)
+        os.environ["PYTHONHASHSEED"] = "6640"  # Dask's nannies' value: every worker hashes alike
+        multiprocessing.get_context("forkserver").set_forkserver_preload(list(WORKER_PRELOAD))
+        forkserver.ensure_running()
+    finally:
+        _restore_environ(saved)
 
 
 @contextmanager
@@ -100,8 +131,10 @@ def connect(scheduler: str = "local", workers: int | None = None, *, performance
         # there; a LocalCluster's nannies live in this process, so without the restore the caller's
         # own OpenCL would find one thread and the basic device after the run.
         saved = {k: os.environ.get(k) for k in (*WORKER_ENV, "PYTHONHASHSEED")}
+        start_worker_server()
         try:
             with dask.config.set({"distributed.nanny.pre-spawn-environ": WORKER_ENV,
+                                  "distributed.worker.multiprocessing-method": "forkserver",
                                   "distributed.worker.daemon": False}):
                 # The scheduler serves HTTP (metrics) even without a dashboard, on 8787 unless told
                 # otherwise, and warns when another cluster holds it: any free port instead.

@@ -20,6 +20,7 @@ import logging
 import os
 import re
 import time
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
@@ -198,20 +199,23 @@ def render(scene_path: str | Path, *, frames: str | None, out_dir: str | Path,
              f"N_frame {rec.n_frame:,}{d}{cap}; {len(result['rays'])} frames written")
 
     # The scheduler is reached before anything is written: an address with nothing listening
-    # leaves no output folder behind
-    with connect(scheduler, workers, performance_report=performance_report, echo=echo) as client:
-        job = prepare_job(scene_path, frames=frames, out_dir=out_dir, settings=settings, n_photons=n_photons,
-                          store_url=store_url, camera=camera, config=config, temporal=temporal, fmax=fmax,
-                          light=light)
-        if segment is not None:
-            report_segment(*reprocess(job, client, segment))
-            from .segment_records import read_records
-            records = read_records(job.out_dir)
-        else:
-            records = coordinate(job, client, on_segment=report_segment,
-                                 on_progress=None if echo is None else (lambda line: echo(f"  {line}")))
-    report = finish(job, records, rays=rays, batches=batches, t_start=t_start, frame_times=frame_times,
-                    segments_done=segments_done)
+    # leaves no output folder behind. The report, video and figures (finish) are made while the
+    # cluster closes: both are serial ends of the run (README "Table 2").
+    with ThreadPoolExecutor(1) as pool:
+        with connect(scheduler, workers, performance_report=performance_report, echo=echo) as client:
+            job = prepare_job(scene_path, frames=frames, out_dir=out_dir, settings=settings, n_photons=n_photons,
+                              store_url=store_url, camera=camera, config=config, temporal=temporal, fmax=fmax,
+                              light=light)
+            if segment is not None:
+                report_segment(*reprocess(job, client, segment))
+                from .segment_records import read_records
+                records = read_records(job.out_dir)
+            else:
+                records = coordinate(job, client, on_segment=report_segment,
+                                     on_progress=None if echo is None else (lambda line: echo(f"  {line}")))
+            finishing = pool.submit(finish, job, records, rays=rays, batches=batches, t_start=t_start,
+                                    frame_times=frame_times, segments_done=segments_done)
+        report = finishing.result()
     if echo is not None:
         from .skipped import summary_lines
         for line in summary_lines(report["skipped_work"]):
@@ -254,8 +258,6 @@ def finish(job: Job, records: list[SegmentRecord], *, rays: dict, batches: int, 
     }
     # The video (an ffmpeg process) encodes while this process draws the report's figures: both
     # are the render's last serial steps (README "Table 2")
-    from concurrent.futures import ThreadPoolExecutor
-
     from .report import page_parts, write_report
     with ThreadPoolExecutor(1) as pool:
         encoding = pool.submit(_timed, write_video, [frame_paths(out, f)[1] for f in job.selection], video,

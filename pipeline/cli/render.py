@@ -137,6 +137,9 @@ def job_arguments(scene_file: str, frames: str | None, out_dir: str, resolution:
 @scheduler_options
 def render_command(segment, quiet, verbose, performance_report, scheduler, workers, **job) -> None:
     """Render frames of SCENE_FILE: photons, segments, illumination maps, EXR/PNG frames, preview.mp4."""
+    if scheduler == "local":  # the workers' fork server imports while this process does (pipeline/cluster.py)
+        from pipeline.cluster import start_worker_server
+        start_worker_server()
     from pipeline.render import render
 
     if verbose:
