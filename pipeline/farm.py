@@ -2,8 +2,12 @@
 
 The targets follow the dependencies of §5.2 and of the coordinator (pipeline/coordinator.py):
 
+    shoot-000-C       fixed settings only (--photons N --fmax F, photons that differ between
+                      frames): chunk C's frames traced at N, no dependencies, so make -j runs
+                      the tracing in parallel as loom render's shoot tasks do
     decide-I          Steps 1-3 of segment I (its photons traced); needs decide-(I-1), since a
-                      segment starts after the previous one's end with its F_max
+                      segment starts after the previous one's end with its F_max; with fixed
+                      settings it needs the shoot targets and only writes the record
     reconstruct-I-C   Steps 4-5 for chunk C (16 frames) of segment I; needs decide-I and
                       decide-(I+1): its windows reach the neighbours' photons
     frames-I-C        the composites of chunk C of segment I; needs every reconstruct before it,
@@ -49,6 +53,17 @@ def bounds(job: Job) -> tuple[int, int]:
     return max(1, math.ceil(n / (job.fmax + 1))), max(1, math.ceil(longest / CHUNK_FRAMES))
 
 
+def shoot_chunks(job: Job) -> list[list[int]]:
+    """Frames of each shoot target: with fixed settings every frame's photons are known before
+    any decision (``_fixed_record`` traces N_frame for each frame of the selection), so they are
+    traced in chunks that make can run side by side; none when the decide step itself must trace
+    (guided segments) or when all frames share one photon set (camera-only motion)."""
+    if job.n_photons is None or job.single_state:
+        return []
+    frames = list(job.selection)
+    return [frames[i:i + CHUNK_FRAMES] for i in range(0, len(frames), CHUNK_FRAMES)]
+
+
 def write_plan(job: Job, loom: str | None = None, decide_workers: int = 1) -> Path:
     """``OUT/plan.json`` and ``OUT/Makefile`` for ``job``; returns the Makefile's path.
     ``decide_workers`` > 1: the decide recipes trace their photons on a LocalCluster of that many
@@ -80,8 +95,11 @@ def write_plan(job: Job, loom: str | None = None, decide_workers: int = 1) -> Pa
         lines.append(f"\t$(LOOM) farm {command}")
         lines.append("")
 
+    shoots = [f"shoot-000-{c:02d}" for c in range(len(shoot_chunks(job)))]
+    for c, target in enumerate(shoots):
+        rule(target, [], f"shoot {d} 0 {c}")
     for i in range(segments):
-        rule(f"decide-{i:03d}", [f"decide-{i - 1:03d}"] if i else [], f"decide {d} {i}")
+        rule(f"decide-{i:03d}", [f"decide-{i - 1:03d}"] if i else shoots, f"decide {d} {i}")
     for i in range(segments):
         neighbours = [f"decide-{i:03d}"] + ([f"decide-{i + 1:03d}"] if i + 1 < segments else [])
         for c in range(chunks):
@@ -122,7 +140,7 @@ def load_job(out_dir: str | Path) -> Job:
 def step(name: str, out_dir: str | Path, *args: int) -> str:
     """Run one farm step; returns what it did (one line). Writes the step's stamp last."""
     job = load_job(out_dir)
-    run = {"decide": _decide, "reconstruct": _reconstruct, "frames": _frames, "done": _done,
+    run = {"shoot": _shoot, "decide": _decide, "reconstruct": _reconstruct, "frames": _frames, "done": _done,
            "finish": _finish}[name]
     said = run(job, *args)
     target = "-".join([name] + [f"{a:03d}" if k == 0 else f"{a:02d}" for k, a in enumerate(args)])
@@ -153,6 +171,18 @@ def _current(job: Job, i: int):
     return rec
 
 
+def _shoot(job: Job, i: int, c: int) -> str:
+    """Chunk ``c``'s photons at the fixed N_frame, traced in this process; frames whose batches
+    are already stored are skipped (``SegmentRun.shoot``), so a rerun traces nothing."""
+    chunks = shoot_chunks(job)
+    if i or c >= len(chunks):
+        return f"segment {i} chunk {c}: no photons to trace here"
+    run = SegmentRun(job, None)
+    run.shoot({f: job.n_photons for f in chunks[c]})
+    what = f"{run.batches_traced} batch(es) traced" if run.batches_traced else "already traced"
+    return f"segment {i} chunk {c}: frames {chunks[c][0]}-{chunks[c][-1]} {what}"
+
+
 def _decide(job: Job, i: int) -> str:
     if i and (job.n_photons is not None or job.single_state):
         return f"segment {i}: none (one segment)"
@@ -161,7 +191,8 @@ def _decide(job: Job, i: int) -> str:
         return f"segment {i}: none (the animation ends in segment {i - 1})"
     from .cluster import connect
 
-    workers = int(_plan(job.out_dir).get("decide_workers", 1))
+    # With fixed settings the shoot targets traced the photons: nothing for workers to do
+    workers = 1 if shoot_chunks(job) else int(_plan(job.out_dir).get("decide_workers", 1))
     start, fmax = (job.first, job.fmax) if prev is None else (prev.end + 1, prev.fmax)
     with connect("synchronous" if workers == 1 else "local", workers) as client:
         rec = SegmentRun(job, client).record(i, start, fmax)

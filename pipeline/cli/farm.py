@@ -30,7 +30,7 @@ def plan_command(loom_command, decide_workers, **job) -> None:
 
 
 @click.command("farm", hidden=True)
-@click.argument("step", type=click.Choice(["decide", "reconstruct", "frames", "done", "finish"]))
+@click.argument("step", type=click.Choice(["shoot", "decide", "reconstruct", "frames", "done", "finish"]))
 @click.argument("out_dir", type=click.Path(file_okay=False))
 @click.argument("numbers", type=int, nargs=-1)
 def farm_command(step: str, out_dir: str, numbers: tuple[int, ...]) -> None:
@@ -39,7 +39,7 @@ def farm_command(step: str, out_dir: str, numbers: tuple[int, ...]) -> None:
 
     logging.getLogger("pipeline.scene.notices").setLevel(logging.WARNING)  # `loom plan` showed them once
 
-    want = {"decide": 1, "reconstruct": 2, "frames": 2, "done": 1, "finish": 0}[step]
+    want = {"shoot": 2, "decide": 1, "reconstruct": 2, "frames": 2, "done": 1, "finish": 0}[step]
     if len(numbers) != want or any(n < 0 for n in numbers):
         raise LoomError(f"{step} takes {want} index(es) >= 0, got {list(numbers)}", field="farm")
     click.echo(run_step(step, out_dir, *numbers))

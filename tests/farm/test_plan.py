@@ -67,6 +67,24 @@ def test_plan_and_make_give_the_frames_of_loom_render(room):
     assert "already reconstructed" in again
 
 
+def test_fixed_settings_trace_in_shoot_targets_that_make_runs_side_by_side(room):
+    tmp, scene, config, _ = room
+    fixed = ["--photons", "3000", "--fmax", "6"]
+    ref, out = tmp / "fixed-ref", tmp / "fixed-farm"
+    _run(*LOOM, "render", scene, *_options(ref, config), *fixed, "--scheduler", "synchronous", "--quiet")
+    _run(*LOOM, "plan", scene, *_options(out, config), *fixed)
+    rules = {line.split(":")[0]: line.split(":")[1].split() for line in (out / "Makefile").read_text().splitlines()
+             if line.startswith(".farm/")}
+    shoots = sorted(t for t in rules if "shoot-" in t)
+    assert len(shoots) == 2 and all(rules[t] == [] for t in shoots)  # 21 frames: chunks of 16 and 5
+    assert rules[".farm/decide-000.ok"] == shoots
+    _make(out, "-j2")
+    assert _frames(out) == _frames(ref)
+    assert [r.without_times() for r in read_records(out)] == [r.without_times() for r in read_records(ref)]
+    assert "already traced" in _run(*LOOM, "farm", "shoot", out, "0", "1").stdout
+    assert "frames 76-80" in (out / ".farm" / "shoot-000-01.ok").read_text()
+
+
 def test_a_killed_make_resumes_to_the_same_frames(room):
     tmp, scene, config, ref = room
     out = tmp / "killed"
