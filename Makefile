@@ -42,10 +42,15 @@ demo: setup
 
 # A make-driven farm render: make render SCENE=room.glb FRAMES=1-135 OUT=out/room [JOBS=2] [OPTS="--spp 4"]
 # (`loom plan` writes OUT/Makefile, whose targets make then runs; a rerun does only what is missing).
+# SCENE may also name a built-in scene (room, atrium, cornell, static) where no such file exists:
+# it is written to OUT/NAME.glb first, as `loom scene NAME` writes it.
 JOBS ?= $(shell nproc)
 render: setup
-	@test -n "$(SCENE)" -a -n "$(OUT)" || { echo "usage: make render SCENE=scene.glb OUT=dir [FRAMES=1-100] [JOBS=N] [OPTS=...]"; exit 2; }
-	$(LOOM) plan $(SCENE) --out $(OUT) $(if $(FRAMES),--frames $(FRAMES)) $(OPTS)
+	@test -n "$(SCENE)" -a -n "$(OUT)" || { echo "usage: make render SCENE=scene.glb|room|cornell|... OUT=dir [FRAMES=1-100] [JOBS=N] [OPTS=...]"; exit 2; }
+	@scene='$(SCENE)'; \
+	if [ ! -e "$$scene" ]; then $(LOOM) scene "$$scene" -o '$(OUT)'/"$$scene".glb || exit 2; scene='$(OUT)'/"$$scene".glb; fi; \
+	echo "$(LOOM) plan $$scene --out $(OUT) $(if $(FRAMES),--frames $(FRAMES)) $(OPTS)"; \
+	$(LOOM) plan "$$scene" --out '$(OUT)' $(if $(FRAMES),--frames $(FRAMES)) $(OPTS)
 	$(MAKE) -C $(OUT) -j$(JOBS)
 
 # Speed is measured here, never in tests: ratios measured in one run (see the README for figures).

@@ -66,9 +66,10 @@ def shoot_chunks(job: Job) -> list[list[int]]:
 
 def write_plan(job: Job, loom: str | None = None, decide_workers: int = 1) -> Path:
     """``OUT/plan.json`` and ``OUT/Makefile`` for ``job``; returns the Makefile's path.
-    ``decide_workers`` > 1: the decide recipes trace their photons on a LocalCluster of that many
+    ``decide_workers`` > 1: guided decide recipes trace their photons on a LocalCluster of that many
     workers (decisions are sequential, nothing else of a segment can run before them, so a farm may
-    give a decide target a whole machine); 1: in the recipe's own process."""
+    give a decide target a whole machine); 1: in the recipe's own process. Fixed settings trace in
+    the shoot targets instead (:func:`shoot_chunks`)."""
     out = Path(job.out_dir)
     loom = loom or str(Path(sys.executable).with_name("loom"))
     if not 1 <= decide_workers <= 1024:

@@ -15,7 +15,8 @@ from .render import job_arguments, job_options
 @click.option("--loom", "loom_command", default=None,
               help="The loom command the recipes run (default: this one; a farm may wrap it, e.g. 'srun loom').")
 @click.option("--decide-workers", type=int, default=1, show_default=True,
-              help="Worker processes a decide recipe traces its photons on (1: in its own process).")
+              help="Worker processes a guided decide recipe traces its photons on (1: in its own process; "
+                   "with --photons N the shoot targets trace instead).")
 def plan_command(loom_command, decide_workers, **job) -> None:
     """Write OUT/Makefile: a make-driven farm render (make -C OUT -j N) of what `loom render` would make."""
     from pipeline.farm import bounds, write_plan

@@ -8,6 +8,7 @@ import signal
 import subprocess
 import sys
 import time
+from pathlib import Path
 
 import pytest
 
@@ -102,6 +103,46 @@ def test_a_killed_make_resumes_to_the_same_frames(room):
     _make(out, "-j2")
     assert _frames(out) == _frames(ref)
     assert not list(out.rglob("*.partial*"))
+
+
+def test_make_k_goes_on_past_a_failed_target_and_a_rerun_finishes(room, tmp_path):
+    tmp, scene, config, ref = room
+    out = tmp / "keep-going"
+    _run(*LOOM, "plan", scene, *_options(out, config))
+    # A recipe wrapper that fails the first segment's composites and runs every other recipe
+    wrapper = tmp_path / "loom.sh"
+    wrapper.write_text('case "$*" in *"farm frames "*" 0 0") echo "failing on purpose" >&2; exit 1;; esac\n'
+                       f'exec {sys.executable} -m pipeline "$@"\n')
+    failed = _run("make", "-s", "-k", "-C", out, f"LOOM=sh {wrapper}", check=False)
+    assert failed.returncode != 0 and "failing on purpose" in failed.stderr
+    stamps = {p.name for p in (out / ".farm").glob("*.ok")}
+    assert "frames-000-00.ok" not in stamps and "done-000.ok" not in stamps and "finish.ok" not in stamps
+    assert "frames-001-00.ok" in stamps  # made after the failure: it does not depend on it
+    first = read_records(out)[0]
+    assert not any(frame_paths(out, f)[0].exists() for f in range(first.start, first.end + 1))
+    assert frame_paths(out, first.end + 1)[0].exists()
+    _make(out)  # the rerun does what is missing
+    assert _make(out, "-q", check=False).returncode == 0
+    assert _frames(out) == _frames(ref)
+
+
+def test_make_render_takes_a_built_in_scene_by_name(tmp_path):
+    """The top-level `make render SCENE=cornell ...` writes the built-in scene into OUT, plans and
+    makes it: the frames of `loom render` with the same settings; an unknown name is one line."""
+    root = Path(__file__).resolve().parents[2]
+    opts = "--resolution 32x24 --spp 1 --photons 2000 --fmax 4"
+    out = tmp_path / "c"
+    _run("make", "-s", "-C", root, "render", "SCENE=cornell", "FRAMES=1-3", f"OUT={out}", "JOBS=2", f"OPTS={opts}",
+         f"LOOM={sys.executable} -m pipeline")
+    assert (out / "cornell.glb").is_file() and _make(out, "-q", check=False).returncode == 0
+    ref = tmp_path / "ref"
+    _run(*LOOM, "render", out / "cornell.glb", "--frames", "1-3", "--out", ref, *opts.split(), "--quiet")
+    for f in (1, 2, 3):
+        assert [p.read_bytes() for p in frame_paths(out, f)] == [p.read_bytes() for p in frame_paths(ref, f)]
+    bad = _run("make", "-s", "-C", root, "render", "SCENE=nosuch", f"OUT={tmp_path / 'x'}",
+               f"LOOM={sys.executable} -m pipeline", check=False)
+    assert bad.returncode != 0 and "unknown built-in scene 'nosuch'" in bad.stderr
+    assert not (tmp_path / "x").exists()
 
 
 def test_bad_plan_input_is_one_line(room, tmp_path):
