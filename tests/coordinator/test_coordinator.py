@@ -4,6 +4,7 @@ rerun, and after reprocessing one segment; camera-only motion traces one photon 
 from __future__ import annotations
 
 import json
+import re
 import shutil
 import signal
 import subprocess
@@ -89,7 +90,9 @@ def test_every_step_runs_and_is_recorded(reference):
 def test_cluster_gives_the_same_records_and_frames(room, reference):
     tmp, scene, config = room
     out = tmp / "cluster"
-    _loom(*_render_args(scene, out, config, "--scheduler", "local", "--workers", "2"))
+    said = _loom(*[a for a in _render_args(scene, out, config, "--scheduler", "local", "--workers", "2")
+                   if a != "--quiet"]).stdout
+    assert re.search(r"dask dashboard: http://127\.0\.0\.1:\d+/status", said), said  # the link loom render prints
     assert _records(out) == _records(reference)
     assert _frames(out) == _frames(reference)
 
