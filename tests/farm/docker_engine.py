@@ -10,12 +10,13 @@ a proxy that re-signs TLS: pip inside a container would refuse PyPI without it.
 """
 from __future__ import annotations
 
-import os
 import shlex
 import shutil
 import subprocess
 import time
 from pathlib import Path
+
+from tests.debian_packages import apt_install
 
 OFFICIAL_BASE = "python:3.11-slim-bookworm"
 STAND_IN = "photonloom-test-base:bookworm"
@@ -31,12 +32,6 @@ ENV PATH=/usr/local/python/bin:/usr/local/sbin:/usr/local/bin:/usr/sbin:/usr/bin
 LABEL org.photonloom.stand-in-for=python:3.11-slim-bookworm
 CMD ["python3"]
 """
-
-
-def _apt(*packages: str) -> None:
-    env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
-    subprocess.run(["apt-get", "update", "-qq"], check=True, env=env, stdout=subprocess.DEVNULL)
-    subprocess.run(["apt-get", "install", "-y", "-qq", *packages], check=True, env=env, stdout=subprocess.DEVNULL)
 
 
 def _answers() -> bool:
@@ -55,7 +50,7 @@ def ensure_engine(log: Path) -> None:
     missing = [pkg for pkg, exe in (("docker.io", "dockerd"), ("docker-compose", "docker-compose"),
                                     ("debootstrap", "debootstrap")) if shutil.which(exe) is None]
     if missing:
-        _apt(*missing)
+        apt_install(*missing)
     if _answers():
         return
     # Started by a shell that exits at once: the daemon outlives the test, nothing waits for it

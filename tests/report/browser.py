@@ -9,13 +9,14 @@ from __future__ import annotations
 
 import base64
 import json
-import os
 import shutil
 import subprocess
 import tempfile
 import time
 import urllib.request
 from pathlib import Path
+
+from tests.debian_packages import apt_install
 
 BROWSERS = ("chromium", "chromium-browser")
 
@@ -25,9 +26,7 @@ def ensure_chromium() -> str:
     for name in BROWSERS:
         if shutil.which(name):
             return shutil.which(name)
-    env = {**os.environ, "DEBIAN_FRONTEND": "noninteractive"}
-    subprocess.run(["apt-get", "update", "-qq"], check=True, env=env, stdout=subprocess.DEVNULL)
-    subprocess.run(["apt-get", "install", "-y", "-qq", "chromium"], check=True, env=env, stdout=subprocess.DEVNULL)
+    apt_install("chromium")
     path = shutil.which("chromium")
     if path is None:
         raise RuntimeError("apt-get installed chromium but it is not on the PATH")
