@@ -26,8 +26,8 @@ indirect + ray tracing. "core s" is the tasks' summed time per frame (what one c
 Scaling: the wall time of the whole fixed render (``render()``, cluster start-up included) on 1
 worker against ``--workers``, and the same without the cluster start-up and video (the
 segments' wall time). On a shared machine identical runs vary by 10-20 %, and the load drifts
-between the two runs of a pair, so ``--repeat N`` alternates N pairs and reports every pair's
-ratio and their median; the tables are those of the median pair. What the machine charged for
+between the two runs of a pair, so ``--repeat N`` runs N pairs in ABBA order (1 worker first in
+even pairs, ``--workers`` first in odd ones) and reports every pair's ratio and their median; the tables are those of the median pair. What the machine charged for
 fresh memory and new files before and after the renders is printed too (pipeline/benchmarks/machine.py):
 on the shared build machines it moves the I/O row by 2x between runs of the same bits.
 """
@@ -117,14 +117,18 @@ def _print_table(echo: Callable[[str], None], title: str, run: dict) -> None:
         echo(f"  {row:<22}{wall[row] / n:>10.4f}{100 * wall[row] / total if total else 0:>8.1f}%{core[row] / n:>14.4f}")
 
 
-def _warm_imports() -> None:
-    """Import what a render's client process imports (distributed, its dashboard, matplotlib) before
-    the first timed run: the first render in a process pays those imports (about 2 s), which made
-    the first pair's 1-worker run slower than the others and its ratio too good."""
-    import distributed  # noqa: F401
+def _warm_up() -> None:
+    """Import what a render's client process imports (distributed, its dashboard, matplotlib) and
+    start and close one local cluster (the fork server the workers come from, the scheduler's
+    first-time set-up) before the first timed run. The first render in a process paid about 2 s of
+    imports and 0.8 s more cluster start-up (0.95 against 0.17 s), which made the first pair's
+    first run slower than the others and that pair's ratio wrong."""
     import matplotlib.backends.backend_agg  # noqa: F401
     import matplotlib.figure  # noqa: F401
-    from distributed.dashboard import scheduler  # noqa: F401
+
+    from pipeline.cluster import connect
+    with connect("local", 1):
+        pass
 
 
 def run(scene: str = "room", *, frames: str | None = None, width: int = 320, height: int = 240, spp: int = 2,
@@ -146,12 +150,16 @@ def run(scene: str = "room", *, frames: str | None = None, width: int = 320, hei
         if not skip_guided:
             results["guided"] = run_render(path, tmp / "guided", workers=workers, n_photons=None, fmax=None, **common)
             _print_table(echo, f"(a) guided (--photons auto), {workers} workers", results["guided"])
-        _warm_imports()
+        _warm_up()
         pairs = []
         for i in range(repeat):
-            one = run_render(path, tmp / f"fixed1-{i}", workers=1, n_photons=n_photons, fmax=fmax, **common)
-            many = run_render(path, tmp / f"fixed{workers}-{i}", workers=workers, n_photons=n_photons, fmax=fmax,
-                              **common)
+            # ABBA order (1 then N, N then 1, ...): a machine that speeds up or slows down steadily
+            # favours neither side of the median
+            runs = {}
+            for n in ((1, workers) if i % 2 == 0 else (workers, 1)):
+                runs[n] = run_render(path, tmp / f"fixed{n}-{i}", workers=n, n_photons=n_photons, fmax=fmax,
+                                     **common)
+            one, many = runs[1], runs[workers]
             pairs.append((one["wall_s"] / many["wall_s"], one["segments_wall_s"] / many["segments_wall_s"], one, many))
             if repeat > 1:
                 echo(f"  pair {i + 1}/{repeat}: 1 worker {one['wall_s']:.1f} s, {workers} workers "

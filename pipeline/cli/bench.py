@@ -101,7 +101,7 @@ def bench_noise(photons, fmax, resolution, spp, element_scale, filter_photons, c
 @click.option("--fmax", type=int, default=30, show_default=True, help="Fixed F_max.")
 @click.option("--skip-guided", is_flag=True, help="Only the fixed runs (Table 2 b and scaling).")
 @click.option("--repeat", type=click.IntRange(1, 20), default=1, show_default=True,
-              help="Pairs of fixed runs (1 worker, then --workers), alternated; the scaling is their median.")
+              help="Pairs of fixed runs (1 worker and --workers, in ABBA order); the scaling is their median.")
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None, help="Also write the figures here.")
 def bench_render(scene, frames, resolution, spp, workers, n_photons, fmax, skip_guided, repeat, json_path):
     """Table 2 per frame (guided and fixed N_frame/F_max) and 1 vs N worker scaling (default: ROOM)."""
