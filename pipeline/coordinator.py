@@ -37,8 +37,8 @@ from typing import TYPE_CHECKING, Callable, Iterable, Iterator
 
 import numpy as np
 
+from .cluster import group_size, run_tasks, task_key
 from .cluster import result as wait_result
-from .cluster import run_tasks, task_key
 from .config import RenderConfig, stable_digest
 from .segment_records import SegmentRecord, read_record, write_record
 from .segments import (
@@ -59,6 +59,11 @@ if TYPE_CHECKING:
     from distributed import Client
 
 CHUNK_FRAMES = 16  # frames per reconstruction task: fixed, so the gather's bits never depend on workers
+# Frames per photon-batch task and per composite task at most (pipeline/cluster.py group_size):
+# ROOM's batches take about 0.1 s and its composites 0.2 s a frame, against 8 ms of Dask's own CPU a
+# task; a composite group is smaller, as the last ones end the render and a longer last task
+# leaves the other workers idle longer.
+SHOOT_GROUP, COMPOSITE_GROUP = 4, 2
 
 
 @dataclass(frozen=True)
@@ -156,6 +161,10 @@ class SegmentRun:
         self._index = None  # the segment being decided, for progress lines
         self._windows_at_k: dict = {}  # Fig. 5 at K of the segment being decided (its last d_AQM step)
 
+    def n_workers(self) -> int:
+        """Workers of the cluster now (1 without one)."""
+        return max(1, len(self.client.scheduler_info().get("workers", {}))) if self.client is not None else 1
+
     def add_times(self, result: dict, keys: Iterable[str]) -> None:
         """Sum a task's own timings (seconds of work, whichever worker did it) into this segment's."""
         for k in keys:
@@ -183,7 +192,8 @@ class SegmentRun:
                 n_photons=n - have, photon_start=have, seed=self.config.seed,
                 max_depth=self.config.photon_depth)))
         with _writing(self.job.store_url):
-            results = run_tasks(self.client, shoot_task, calls, desc="shoot", progress=False)
+            results = run_tasks(self.client, shoot_task, calls, desc="shoot", progress=False,
+                                group=group_size(len(calls), self.n_workers(), SHOOT_GROUP))
         for r in results.values():
             self.add_times(r, ("pose_s", "trace_s", "write_s", "sums_s"))
         self.batches_traced += len(calls)
@@ -435,13 +445,14 @@ class SegmentRun:
                     written[int(r["frame"])] = r
             self.times["temporal_s"] += time.perf_counter() - t0
             return out, written
-        from .cluster import completed
+        from .cluster import completed, submit_grouped
 
         submit = self.client.submit
         # Consecutive chunks share the frames their windows reach: contiguous runs of chunks go to
         # one worker each (a hint, so the frame cache of workers/reconstruct.py hits; Dask may still
         # move a chunk, and placement never changes a bit of the result)
         workers = sorted(self.client.scheduler_info().get("workers", {}))
+        group = group_size(len(self.frames_of(rec)), len(workers), COMPOSITE_GROUP)
         # Priorities: a worker takes its chunks in frame order (so composites can follow chunk by
         # chunk and its frame cache sees the frames of the chunk before) and any reconstruction
         # before any composite (the temporal stage is not slowed by the ray tracing it feeds).
@@ -449,17 +460,17 @@ class SegmentRun:
                            workers=[workers[i * len(workers) // len(calls)]] if workers else None,
                            allow_other_workers=True, **kw): i
                     for i, (key, kw) in enumerate(calls)}
-        ready, following, composites = {}, 0, []
+        ready, following, composites = {}, 0, {}
         for future, result in completed(self.client, list(chunk_of)):
             ready[chunk_of[future]] = result
             while following in ready:
-                for key, ckw in take(ready.pop(following), calls[following][1]["frames"]):
-                    composites.append(submit(composite_task, key=key, retries=TASK_RETRIES, pure=False, priority=0,
-                                             **ckw))
+                composites.update(submit_grouped(self.client, composite_task,
+                                                 take(ready.pop(following), calls[following][1]["frames"]), group,
+                                                 priority=0))
                 following += 1
         self.times["temporal_s"] += time.perf_counter() - t0
-        for _, r in completed(self.client, composites):
-            written[int(r["frame"])] = r
+        for _, results in completed(self.client, composites):
+            written.update((int(r["frame"]), r) for r in results)
         return out, written
 
 

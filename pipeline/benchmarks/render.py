@@ -27,8 +27,9 @@ Scaling: the wall time of the whole fixed render (``render()``, cluster start-up
 worker against ``--workers``, and the same without the cluster start-up and video (the
 segments' wall time). On a shared machine identical runs vary by 10-20 %, and the load drifts
 between the two runs of a pair, so ``--repeat N`` runs N pairs in ABBA order (1 worker first in
-even pairs, ``--workers`` first in odd ones) and reports every pair's ratio and their median; the tables are those of the median pair. What the machine charged for
-fresh memory and new files before and after the renders is printed too (pipeline/benchmarks/machine.py):
+even pairs, ``--workers`` first in odd ones) and reports every pair's ratio and their median;
+the tables are those of the median pair. What the machine charged for fresh memory and new files
+before and after the renders is printed too (pipeline/benchmarks/machine.py):
 on the shared build machines it moves the I/O row by 2x between runs of the same bits.
 """
 from __future__ import annotations

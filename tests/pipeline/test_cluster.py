@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import os
 
-from pipeline.cluster import LOCAL_DASK_CONFIG, WORKER_ENV, connect
+from pipeline.cluster import LOCAL_DASK_CONFIG, WORKER_ENV, connect, group_size, grouped, run_tasks
 
 
 def _worker_view() -> dict:
@@ -43,3 +43,37 @@ def test_local_workers_run_without_the_profiler_unless_a_performance_report_is_a
         (reporting,) = client.run(_profiler_and_monitors).values()
     assert reporting["distributed.worker.profile.enabled"] is True  # the report shows the profile
     assert (tmp_path / "report.html").stat().st_size > 0
+
+
+def test_group_size_keeps_enough_tasks_for_every_worker():
+    assert group_size(135, 2, 4) == 4  # ROOM's frames on two workers: 34 tasks
+    assert group_size(135, 2, 2) == 2
+    assert group_size(135, 8, 4) == 2  # 68 tasks, 8 a worker
+    assert group_size(40, 2, 4) == 2
+    assert group_size(10, 2, 4) == 1
+    assert group_size(0, 0, 4) == 1
+
+
+def test_groups_cover_the_calls_in_order_under_keys_their_members_decide():
+    calls = [(f"job-{i}", {"i": i}) for i in range(7)]
+    groups = grouped(calls, 3)
+    assert [[k for k, _ in members] for _, members in groups] == [
+        ["job-0", "job-1", "job-2"], ["job-3", "job-4", "job-5"], ["job-6"]]
+    assert groups[-1][0] == "job-6"  # a group of one keeps its call's key
+    assert len({key for key, _ in groups}) == 3
+    other = grouped([calls[0], calls[2], calls[1]], 3)  # same first call, other members: another key
+    assert other[0][0] != groups[0][0] and other[0][0].startswith("job-0-x3-")
+    assert grouped(calls, 3) == groups  # stable
+
+
+def _square(x: int) -> dict:
+    return {"x": x, "square": x * x, "pid": os.getpid()}
+
+
+def test_grouped_tasks_give_every_call_its_own_result_on_a_cluster():
+    calls = [(f"square-{i}", {"x": i}) for i in range(11)]
+    with connect("local", 2) as client:
+        results = run_tasks(client, _square, calls, desc="square", progress=False, group=4)
+    assert sorted(results) == sorted(k for k, _ in calls)
+    assert all(results[f"square-{i}"]["square"] == i * i for i in range(11))
+    assert run_tasks(None, _square, calls, desc="square", progress=False, group=4).keys() == results.keys()
