@@ -51,6 +51,8 @@ TASK_RETRIES = 3
 # only thrash), and how long tasks may wait while the cluster has no worker at all (a cluster
 # that lost or never got its workers) before the run stops with an error instead of hanging.
 MAX_WORKERS_PER_CORE = 4
+WORKERLESS_TIMEOUT_S = 60.0
+_POLL_S = 2.0
 # Dask's bookkeeping on a local cluster, where it shares the cores with the tasks. Each worker's
 # event loop sampled its task thread's stack 100 times a second for the dashboard's profile (2 of
 # its 5 s of CPU in a 1-worker ROOM render of 48 s, holding the GIL while it walks the stack), and
@@ -63,8 +65,6 @@ LOCAL_DASK_CONFIG = {
     "distributed.admin.system-monitor.interval": "2s",
     "distributed.worker.memory.monitor-interval": "1s",
 }
-WORKERLESS_TIMEOUT_S = 60.0
-_POLL_S = 2.0
 
 
 def _restore_environ(saved: dict[str, str | None]) -> None:

@@ -161,9 +161,9 @@ class SegmentRun:
         self._index = None  # the segment being decided, for progress lines
         self._windows_at_k: dict = {}  # Fig. 5 at K of the segment being decided (its last d_AQM step)
 
-    def n_workers(self) -> int:
-        """Workers of the cluster now (1 without one)."""
-        return max(1, len(self.client.scheduler_info().get("workers", {}))) if self.client is not None else 1
+    def workers(self) -> list[str]:
+        """Addresses of the cluster's workers now, sorted (none without a cluster)."""
+        return sorted(self.client.scheduler_info().get("workers", {})) if self.client is not None else []
 
     def add_times(self, result: dict, keys: Iterable[str]) -> None:
         """Sum a task's own timings (seconds of work, whichever worker did it) into this segment's."""
@@ -193,7 +193,7 @@ class SegmentRun:
                 max_depth=self.config.photon_depth)))
         with _writing(self.job.store_url):
             results = run_tasks(self.client, shoot_task, calls, desc="shoot", progress=False,
-                                group=group_size(len(calls), self.n_workers(), SHOOT_GROUP))
+                                group=group_size(len(calls), len(self.workers()), SHOOT_GROUP))
         for r in results.values():
             self.add_times(r, ("pose_s", "trace_s", "write_s", "sums_s"))
         self.batches_traced += len(calls)
@@ -451,7 +451,7 @@ class SegmentRun:
         # Consecutive chunks share the frames their windows reach: contiguous runs of chunks go to
         # one worker each (a hint, so the frame cache of workers/reconstruct.py hits; Dask may still
         # move a chunk, and placement never changes a bit of the result)
-        workers = sorted(self.client.scheduler_info().get("workers", {}))
+        workers = self.workers()
         group = group_size(len(self.frames_of(rec)), len(workers), COMPOSITE_GROUP)
         # Priorities: a worker takes its chunks in frame order (so composites can follow chunk by
         # chunk and its frame cache sees the frames of the chunk before) and any reconstruction
