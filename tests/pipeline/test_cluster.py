@@ -1,6 +1,6 @@
 """The embedded LocalCluster (pipeline/cluster.py): its workers get WORKER_ENV (one thread each,
 PoCL's single-threaded device first) and the calling process keeps its own environment; Dask's
-profiler and monitors are turned down there (LOCAL_DASK_CONFIG)."""
+profiler, monitors and event-loop ticks are turned down there (LOCAL_DASK_CONFIG)."""
 from __future__ import annotations
 
 import os
@@ -35,10 +35,21 @@ def _profiler_and_monitors() -> dict:
     return {k: dask.config.get(k) for k in LOCAL_DASK_CONFIG}
 
 
+def _tick_seconds(dask_worker) -> float:
+    return dask_worker._tick_interval
+
+
+def _tick_seconds_of_scheduler(dask_scheduler) -> float:
+    return dask_scheduler._tick_interval
+
+
 def test_local_workers_run_without_the_profiler_unless_a_performance_report_is_asked_for(tmp_path):
     with connect("local", 1) as client:
         (quiet,) = client.run(_profiler_and_monitors).values()
+        (tick,) = client.run(_tick_seconds).values()
+        scheduler_tick = client.run_on_scheduler(_tick_seconds_of_scheduler)
     assert quiet == LOCAL_DASK_CONFIG
+    assert tick == scheduler_tick == 1.0  # the servers took it: one event-loop health check a second, not 50
     with connect("local", 1, performance_report=str(tmp_path / "report.html")) as client:
         (reporting,) = client.run(_profiler_and_monitors).values()
     assert reporting["distributed.worker.profile.enabled"] is True  # the report shows the profile
