@@ -449,12 +449,12 @@ class SegmentRun:
 
         submit = self.client.submit
         # Consecutive chunks share the frames their windows reach: contiguous runs of chunks go to
-        # one worker each (a hint, so the frame cache of workers/reconstruct.py hits; Dask may still
-        # move a chunk, and placement never changes a bit of the result)
+        # one worker each (a hint, so the batch-sums cache of pipeline/batch_sums.FrameSums hits;
+        # Dask may still move a chunk, and placement never changes a bit of the result)
         workers = self.workers()
         group = group_size(len(self.frames_of(rec)), len(workers), COMPOSITE_GROUP)
         # Priorities: a worker takes its chunks in frame order (so composites can follow chunk by
-        # chunk and its frame cache sees the frames of the chunk before) and any reconstruction
+        # chunk and its batch-sums cache sees the frames of the chunk before) and any reconstruction
         # before any composite (the temporal stage is not slowed by the ray tracing it feeds).
         chunk_of = {submit(reconstruct_task, key=key, retries=TASK_RETRIES, pure=False, priority=len(calls) - i,
                            workers=[workers[i * len(workers) // len(calls)]] if workers else None,
