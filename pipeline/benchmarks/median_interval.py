@@ -11,6 +11,7 @@ returned with its own (lower) coverage.
 """
 from __future__ import annotations
 
+from collections.abc import Iterable
 from dataclasses import dataclass
 from math import comb
 
@@ -23,7 +24,7 @@ class MedianInterval:
     n: int
 
 
-def median_interval(values, confidence: float = 0.95) -> MedianInterval:
+def median_interval(values: Iterable[float], confidence: float = 0.95) -> MedianInterval:
     """The order-statistics interval of the median of ``values`` (see the module docstring)."""
     xs = sorted(float(v) for v in values)
     n = len(xs)
