@@ -32,12 +32,12 @@ def median_interval(values: Iterable[float], confidence: float = 0.95) -> Median
         raise ValueError("no values")
     if not 0.0 < confidence < 1.0:
         raise ValueError(f"confidence must be in (0, 1), got {confidence}")
-    below = 0.0  # P(B <= k - 1), accumulated as k grows
-    best = 1
-    for k in range(1, n // 2 + 1):
+    # k = 1 (the whole range) always; then the largest k whose coverage 1 - 2 P(B <= k - 1) holds
+    below = 1 / 2**n  # P(B <= 0)
+    best, coverage = 1, 1.0 - 2.0 * below
+    for k in range(2, n // 2 + 1):
         below += comb(n, k - 1) / 2**n
         if 1.0 - 2.0 * below < confidence:
             break
-        best = k
-    tail = sum(comb(n, i) for i in range(best)) / 2**n
-    return MedianInterval(xs[best - 1], xs[n - best], 1.0 - 2.0 * tail, n)
+        best, coverage = k, 1.0 - 2.0 * below
+    return MedianInterval(xs[best - 1], xs[n - best], coverage, n)
