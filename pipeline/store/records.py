@@ -187,68 +187,39 @@ def as_array(value: npt.ArrayLike, name: str, shape_tail: tuple[int, ...], dtype
 
 def sort_records(key: np.ndarray, bary: np.ndarray, energy: np.ndarray) -> np.ndarray:
     """Permutation into the total order (element, key, b1, b2, energy bits): input-order free.
-    Slow twin: :func:`sort_records_reference`."""
+    Slow twin: :func:`sort_records_reference`.
+
+    A least-significant-digit radix sort over 16-bit digits: numpy's stable argsort of u16 values
+    is a counting sort, O(n) a pass, so (b2, b1, then the group's 16-bit digits) take 3 passes on
+    ROOM, and the energy bits 6 more only where (element, category, b1, b2) repeat. A ROOM batch of
+    134,000 records: 2.4 against 12.6 ms for the two packed u64 sorts this replaced (README
+    "Radix-sorted records")."""
     key = np.asarray(key, np.uint32)
     n = key.shape[0]
     if n == 0:
         return np.empty(0, np.int64)
-    # element << 2 | category is key rotated left by 2, b1 << 16 | b2 the little-endian pair
-    # rotated by 16 (u32 work)
+    # element << 2 | category is key rotated left by 2: the order's leading part in one u32
     group = (key << np.uint32(2)) | (key >> np.uint32(ELEMENT_BITS))
-    pair = np.ascontiguousarray(bary, "<u2").view("<u4").reshape(n)
-    pair = (pair << np.uint32(16)) | (pair >> np.uint32(16))
-    top = int(group.max()).bit_length()
-    low = max(1, (n - 1).bit_length())  # bits of a record index
-    ranked = None
-    if top + 32 + low <= 64:
-        # (group, pair) with the record index below it in one u64: sorting values is 10x faster
-        # than argsort (np.sort of 2,000,000 u64 22 ms, np.argsort 260 ms) and gives the stable order
-        packed = group.astype(np.uint64) << np.uint64(32 + low)
-        packed |= pair.astype(np.uint64) << np.uint64(low)
-        packed |= np.arange(n, dtype=np.uint64)
-        packed.sort()
-        order = (packed & np.uint64((1 << low) - 1)).astype(np.int64)
-        ranked = packed >> np.uint64(low)
-    else:
-        # Too many records for their index beside (group, pair) (ROOM: 13 + 2 + 32 bits leave 17,
-        # and a batch of 40,000 photons has 134,000 records): two sorts of packed values, first
-        # by group with the record index below it, then by (group, pair) with the rank inside the
-        # group below it, which needs only the bits of the largest group
-        first = group.astype(np.uint64) << np.uint64(low)
-        first |= np.arange(n, dtype=np.uint64)
-        first.sort()
-        by_group = (first & np.uint64((1 << low) - 1)).astype(np.int64)
-        grouped = first >> np.uint64(low)
-        start = np.arange(n, dtype=np.int64)  # where each position's group starts
-        start[1:][grouped[1:] == grouped[:-1]] = 0
-        np.maximum.accumulate(start, out=start)
-        rank = np.arange(n, dtype=np.int64) - start
-        rank_bits = max(1, int(rank.max()).bit_length())
-        if top + 32 + rank_bits <= 64:
-            second = grouped << np.uint64(32 + rank_bits)
-            second |= np.take(pair, by_group).astype(np.uint64) << np.uint64(rank_bits)
-            second |= rank.astype(np.uint64)
-            second.sort()  # groups stay where the first sort put them: ``start`` still holds
-            order = np.take(by_group, start + (second & np.uint64((1 << rank_bits) - 1)).astype(np.int64))
-            ranked = second >> np.uint64(rank_bits)
-    primary = None
-    if ranked is None:  # one group too large even for that: sort the u64 primary keys
-        primary = _primary_keys(group, pair)
-        # Any correct sort gives the same permutation when the primary keys are distinct, so the
-        # faster unstable one is used; ties are broken by the energy bits (equal records: any order)
-        order = np.argsort(primary)
-        ranked = np.take(primary, order)
-    if ranked.size > 1 and (ranked[1:] == ranked[:-1]).any():  # ties: break by energy bits
-        if primary is None:
-            primary = _primary_keys(group, pair)
-        bits = energy.view(np.uint32)
-        order = np.lexsort((bits[:, 2], bits[:, 1], bits[:, 0], primary))
+    b = np.ascontiguousarray(bary, "<u2")
+    digits = [b[:, 1], b[:, 0]] + [(group >> np.uint32(s)).astype(np.uint16)
+                                   for s in range(0, max(1, int(group.max()).bit_length()), 16)]
+    order = _lsd_order(digits)
+    g = np.take(group, order)
+    pair = np.take(b.view("<u4").reshape(n), order)
+    if ((g[1:] == g[:-1]) & (pair[1:] == pair[:-1])).any():  # ties: the energy bits decide
+        bits = np.ascontiguousarray(energy, np.float32).view(np.uint32)
+        low_first = [(bits[:, c] >> np.uint32(s)).astype(np.uint16) for c in (2, 1, 0) for s in (0, 16)]
+        order = _lsd_order(low_first + digits)
     return order
 
 
-def _primary_keys(group: np.ndarray, pair: np.ndarray) -> np.ndarray:
-    """(element << 2 | category) << 32 | b1 << 16 | b2 as u64: the order before the energy bits."""
-    return (group.astype(np.uint64) << np.uint64(32)) | pair.astype(np.uint64)
+def _lsd_order(digits: list[np.ndarray]) -> np.ndarray:
+    """The stable order of rows keyed by u16 ``digits``, least significant first (equal rows keep
+    their input order)."""
+    order = np.argsort(digits[0], kind="stable")
+    for d in digits[1:]:
+        order = np.take(order, np.argsort(np.take(d, order), kind="stable"))
+    return order.astype(np.int64, copy=False)
 
 
 def sort_records_reference(key: np.ndarray, bary: np.ndarray, energy: np.ndarray) -> np.ndarray:

@@ -1,7 +1,7 @@
-"""The records' total order (pipeline/store/records.sort_records) equals its definition
-(sort_records_reference: one lexsort over element, category, b1, b2 and the energy bits) on every
-path the fast sort takes: one packed sort, two packed sorts for batches too large for one, and the
-argsort of primary keys where a group is too large for both; with and without ties."""
+"""The records' total order (pipeline/store/records.sort_records, an LSD radix sort over 16-bit
+digits) equals its definition (sort_records_reference: one lexsort over element, category, b1, b2
+and the energy bits): groups of one and of two 16-bit digits, small and large batches, with and
+without ties (where the energy bits' six digits join the sort)."""
 from __future__ import annotations
 
 import numpy as np
@@ -22,18 +22,18 @@ def _batch(n, n_elements, seed, *, bary_levels=65536, energy_levels=None):
 
 
 @pytest.mark.parametrize("n, n_elements, bary_levels, energy_levels, path", [
-    (5_000, 5_464, 65536, None, "one sort"),              # 13 + 2 + 32 + 13 bits
-    (200_000, 5_464, 65536, None, "two sorts"),           # 13 + 2 + 32 + 18 bits: too many for one
-    (200_000, 5_464, 4, None, "two sorts, ties"),         # (element, category, b1, b2) repeat
-    (200_000, 5_464, 4, 3, "two sorts, equal records"),   # whole records repeat
-    (3_000, 1 << 29, 65536, None, "argsort"),             # 29 + 2 + 32 bits leave one for the rank
-    (3_000, 1 << 29, 2, 2, "argsort, ties"),
-    (3_000, 3, 8, 2, "one sort, ties"),
+    (5_000, 5_464, 65536, None, "one group digit"),          # element 13 bits + category 2
+    (200_000, 5_464, 65536, None, "one group digit, large"),
+    (200_000, 5_464, 4, None, "ties"),                       # (element, category, b1, b2) repeat
+    (200_000, 5_464, 4, 3, "equal records"),                 # whole records repeat
+    (3_000, 1 << 29, 65536, None, "two group digits"),       # 29 + 2 bits: two 16-bit digits
+    (3_000, 1 << 29, 2, 2, "two group digits, ties"),
+    (3_000, 3, 8, 2, "few elements, ties"),
 ])
 def test_the_fast_order_is_the_defined_order(n, n_elements, bary_levels, energy_levels, path):
     key, bary, energy = _batch(n, n_elements, n + n_elements, bary_levels=bary_levels,
                                energy_levels=energy_levels)
-    if path.startswith("argsort"):
+    if path.startswith("two group digits"):
         key[:1000] = key[0]  # one group of 1,000 records
     got = sort_records(key, bary, energy)
     want = sort_records_reference(key, bary, energy)
