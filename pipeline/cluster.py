@@ -34,8 +34,10 @@ WORKER_ENV = {
     "POCL_DEVICES": "basic pthread",
     # OpenImageIO's own pool (default: one thread per core) compresses EXR scanlines in parallel:
     # a lone worker then borrowed the idle core (1.6 cores for an EXR write), and two workers
-    # oversubscribed the machine (frame writes 54 -> 86 ms each); one thread per worker instead
-    "OPENIMAGEIO_OPTIONS": "threads=1,exr_threads=1",
+    # oversubscribed the machine (frame writes 54 -> 86 ms each). exr_threads=1 is not one thread
+    # but OpenEXR's pool of one *more*, which compresses while the caller writes: 25 of a ROOM
+    # frame's 26 ms of compression ran beside the task. -1 is no pool: all in the task's thread
+    "OPENIMAGEIO_OPTIONS": "threads=1,exr_threads=-1",
     # glibc hands freed memory back after every photon batch, so the next batch page-faults ~7 MB
     # of fresh memory (1,860 faults a write); keeping up to 128 MiB cuts a store write from 14 to
     # 10 ms (measured with `loom bench render`)

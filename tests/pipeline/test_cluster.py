@@ -29,6 +29,28 @@ def test_workers_get_the_worker_environment_and_the_caller_keeps_its_own(monkeyp
     assert view["device"].startswith("basic") and view["units"] == 1
 
 
+def test_a_worker_writes_its_frames_in_its_own_thread(tmp_path):
+    """WORKER_ENV's OpenImageIO options leave OpenEXR no compression pool: writing a frame's EXR
+    starts no thread (with ``exr_threads=1`` it started one, which compressed beside the task)."""
+    import subprocess
+    import sys
+
+    code = ("import os, numpy as np\n"
+            "from pipeline.images import LAYERS, write_exr\n"
+            "a = np.ones((64, 64, 3), np.float32)\n"
+            "before = len(os.listdir('/proc/self/task'))\n"
+            f"write_exr({str(tmp_path / 'f.exr')!r}, a, a[..., 0], {{n: a for n in LAYERS}}, {{}})\n"
+            "print(before, len(os.listdir('/proc/self/task')))\n")
+    env = {**os.environ, **WORKER_ENV}
+    before, after = map(int, subprocess.run([sys.executable, "-c", code], env=env, check=True,
+                                            capture_output=True, text=True).stdout.split())
+    assert after == before
+    env["OPENIMAGEIO_OPTIONS"] = "threads=1,exr_threads=1"  # the check can fail: one pool thread more
+    before, after = map(int, subprocess.run([sys.executable, "-c", code], env=env, check=True,
+                                            capture_output=True, text=True).stdout.split())
+    assert after == before + 1
+
+
 def _profiler_and_monitors() -> dict:
     import dask
 
