@@ -64,11 +64,21 @@ def render_frame(state: FrameState, elements: ElementMesh | None, irradiance: np
             out = samples[:, :len(counter)]
             out.fill(0)
             cover = trace_samples(state, sh, key, counter, spp, width, height, max_depth, rays, out)
-            layers[:, lo:hi] = out.reshape(3, hi - lo, spp, 3).mean(axis=2)
+            sample_means(out.reshape(3, hi - lo, spp, 3), layers[:, lo:hi])
             alpha[lo:hi] = cover.reshape(hi - lo, spp).mean(axis=1)
     shape = (height, width, 3)
     direct, indirect, albedo = (layers[i].reshape(shape) for i in range(3))
     return FrameImage(direct + indirect, direct, indirect, albedo, alpha.reshape(shape[:2]), rays)
+
+
+def sample_means(samples: np.ndarray, out: np.ndarray) -> None:
+    """``out`` (L, n, 3) = the mean of ``samples`` (L, n, spp, 3) over its samples, added in sample
+    order: the bits of ``samples.mean(axis=2)`` (tests/render/test_composite.py), which reduced
+    the strided axis element by element, about 13 ms of a ROOM frame's 180 against 2 ms."""
+    np.copyto(out, samples[:, :, 0])
+    for s in range(1, samples.shape[2]):
+        out += samples[:, :, s]
+    out /= np.float32(samples.shape[2])
 
 
 def trace_samples(state: FrameState, sh: ShadingTables, key: int, counter: np.ndarray, spp: int, width: int,

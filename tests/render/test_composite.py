@@ -11,7 +11,7 @@ import pytest
 from kernels.camera import camera_rays_reference
 from pipeline.scene import ElementMesh, Scene
 from tests.render.scenes import EYE, LAMP, area_scene, mirror_scene, plane_scene
-from workers.camera_paths import render_frame
+from workers.camera_paths import render_frame, sample_means
 from workers.random_numbers import frame_key
 
 W, H, SPP = 40, 30, 4
@@ -150,3 +150,14 @@ def test_emitters_shine_from_their_front_face_only(tmp_path):
     assert img.alpha.min() == 1 and np.all(img.beauty == 0)
     _, below, _ = _render(area_scene(tmp_path / "f.glb", eye=(0.0, 0.99, 0.0)), width=8, height=8)
     assert np.all(below.beauty > 0)  # from below the panel, the plane is lit
+
+
+@pytest.mark.parametrize("spp", [1, 2, 3, 4, 8, 9, 16])
+def test_sample_means_are_the_bits_of_numpys_mean(spp):
+    """A pixel's layers are the mean of its samples; summed in sample order they are the bits of
+    numpy's mean over the strided axis, which the frames were written with before."""
+    rng = np.random.default_rng(spp)
+    samples = (rng.random((3, 500, spp, 3)) * np.exp(rng.normal(0.0, 4.0, (3, 500, spp, 3)))).astype(np.float32)
+    out = np.full((3, 500, 3), np.nan, np.float32)
+    sample_means(samples, out)
+    np.testing.assert_array_equal(out, samples.mean(axis=2))
