@@ -214,14 +214,27 @@ def task_key(name: str, *where: str) -> str:
 # Every Dask task costs the cluster about 8 ms of CPU besides its own work (5 ms in the scheduler
 # and client, 3 ms in the worker's event loop: 300 empty tasks on 2 local workers, this machine),
 # CPU that on a small machine comes out of the other tasks' share. Short tasks of the same kind
-# (a frame's photon batch, about 0.1 s; a frame's composite, about 0.2 s) therefore go in groups,
-# as long as every worker still gets GROUP_MIN_PER_WORKER of them to balance the load.
-GROUP_MIN_PER_WORKER = 8
+# (a frame's photon batch, about 0.06 s; a frame's composite, about 0.17 s) therefore go in groups.
+# The groups shrink towards the end of a run of calls, as in guided self-scheduling (Polychronopoulos
+# and Kuck, IEEE Trans. Computers 36(12), 1987), where each task takes a share of the work left: a
+# group holds at most 1/(TAIL_SHARE x workers) of the calls from it on, so the last ones are single
+# calls and the workers run out of work together (a last group of 4 composites would leave the other
+# worker idle 0.5 s).
+TAIL_SHARE = 2
 
 
-def group_size(n_calls: int, n_workers: int, largest: int) -> int:
-    """Calls per task: up to ``largest``, leaving at least GROUP_MIN_PER_WORKER tasks a worker."""
-    return max(1, min(largest, n_calls // (GROUP_MIN_PER_WORKER * max(n_workers, 1))))
+def group_sizes(n_calls: int, n_workers: int, largest: int, left: int | None = None) -> list[int]:
+    """Sizes of the consecutive groups of ``n_calls`` calls: each ``left_here // (TAIL_SHARE x
+    n_workers)`` capped to [1, ``largest``], ``left_here`` the calls from the group's first on.
+    ``left``: calls left from the first of these on when they head a longer run (default
+    ``n_calls``), as a chunk's composites head those of the chunks after it."""
+    left = n_calls if left is None else max(left, n_calls)
+    sizes, done = [], 0
+    while done < n_calls:
+        size = max(1, min(largest, n_calls - done, (left - done) // (TAIL_SHARE * max(n_workers, 1))))
+        sizes.append(size)
+        done += size
+    return sizes
 
 
 def run_group(func: Callable, kwargs: list[dict]) -> list:
@@ -229,33 +242,41 @@ def run_group(func: Callable, kwargs: list[dict]) -> list:
     return [func(**kw) for kw in kwargs]
 
 
-def grouped(calls: list[tuple[str, dict]], size: int) -> list[tuple[str, list[tuple[str, dict]]]]:
-    """Consecutive runs of ``size`` calls, each under a key naming its first call, its size and a
-    digest of all its keys (a group with other members never reuses another's result)."""
-    out = []
-    for i in range(0, len(calls), size):
-        members = calls[i:i + size]
+def grouped(calls: list[tuple[str, dict]], sizes: int | list[int]) -> list[tuple[str, list[tuple[str, dict]]]]:
+    """Consecutive runs of ``sizes`` calls (one size for all, or :func:`group_sizes`), each under a
+    key naming its first call, its size and a digest of all its keys (a group with other members
+    never reuses another's result)."""
+    if isinstance(sizes, int):
+        sizes = [sizes] * -(-len(calls) // max(sizes, 1))
+    out, start = [], 0
+    for size in sizes:
+        members = calls[start:start + size]
+        start += size
+        if not members:
+            break
         key = members[0][0] if len(members) == 1 else \
             f"{members[0][0]}-x{len(members)}-{stable_digest([k for k, _ in members])[:6]}"
         out.append((key, members))
+    if start < len(calls):
+        raise ValueError(f"group sizes {sizes} cover {start} of {len(calls)} calls")
     return out
 
 
-def submit_grouped(client: Client, func: Callable, calls: list[tuple[str, dict]], size: int,
+def submit_grouped(client: Client, func: Callable, calls: list[tuple[str, dict]], sizes: int | list[int],
                    **options: Any) -> dict[Future, list[str]]:
-    """Submit ``calls`` in groups of ``size`` (:func:`run_group`); {future: its calls' keys}."""
+    """Submit ``calls`` in groups of ``sizes`` (:func:`grouped`, :func:`run_group`); {future: its calls' keys}."""
     return {client.submit(run_group, func, [kw for _, kw in members], key=key, retries=TASK_RETRIES, pure=False,
                           **options): [k for k, _ in members]
-            for key, members in grouped(calls, size)}
+            for key, members in grouped(calls, sizes)}
 
 
 def run_tasks(client: Client | None, func: Callable, calls: Iterable[tuple[str, dict]], *, desc: str,
-              progress: bool = True, group: int = 1) -> dict[str, object]:
+              progress: bool = True, group: int | list[int] = 1) -> dict[str, object]:
     """Run ``func(**kwargs)`` for every ``(key, kwargs)`` and return ``{key: result}``.
 
     On a cluster, tasks are submitted with their key (a readable label that also makes a
     resubmission of the same work reuse it) and ``TASK_RETRIES`` retries, ``group`` calls to a task
-    (:func:`grouped`); results are collected as they complete, with a tqdm bar on stderr.
+    (or the sizes of :func:`group_sizes`; :func:`grouped`); results are collected as they complete, with a tqdm bar on stderr.
     """
     calls = list(calls)
     results: dict[str, object] = {}

@@ -37,7 +37,7 @@ from typing import TYPE_CHECKING, Callable, Iterable, Iterator
 
 import numpy as np
 
-from .cluster import group_size, run_tasks, task_key
+from .cluster import group_sizes, run_tasks, task_key
 from .cluster import result as wait_result
 from .config import RenderConfig, stable_digest
 from .segment_records import SegmentRecord, read_record, write_record
@@ -59,11 +59,10 @@ if TYPE_CHECKING:
     from distributed import Client
 
 CHUNK_FRAMES = 16  # frames per reconstruction task: fixed, so the gather's bits never depend on workers
-# Frames per photon-batch task and per composite task at most (pipeline/cluster.py group_size):
-# ROOM's batches take about 0.1 s and its composites 0.2 s a frame, against 8 ms of Dask's own CPU a
-# task; a composite group is smaller, as the last ones end the render and a longer last task
-# leaves the other workers idle longer.
-SHOOT_GROUP, COMPOSITE_GROUP = 4, 2
+# Frames per photon-batch task and per composite task at most (pipeline/cluster.py group_sizes,
+# whose groups shrink to single frames at the end of a run): ROOM's batches take about 0.06 s and
+# its composites 0.17 s a frame, against 8 ms of Dask's own CPU a task.
+SHOOT_GROUP, COMPOSITE_GROUP = 8, 4
 
 
 @dataclass(frozen=True)
@@ -193,7 +192,7 @@ class SegmentRun:
                 max_depth=self.config.photon_depth)))
         with _writing(self.job.store_url):
             results = run_tasks(self.client, shoot_task, calls, desc="shoot", progress=False,
-                                group=group_size(len(calls), len(self.workers()), SHOOT_GROUP))
+                                group=group_sizes(len(calls), len(self.workers()), SHOOT_GROUP))
         for r in results.values():
             self.add_times(r, ("pose_s", "trace_s", "write_s", "sums_s"))
         self.batches_traced += len(calls)
@@ -452,7 +451,6 @@ class SegmentRun:
         # one worker each (a hint, so the batch-sums cache of pipeline/batch_sums.FrameSums hits;
         # Dask may still move a chunk, and placement never changes a bit of the result)
         workers = self.workers()
-        group = group_size(len(self.frames_of(rec)), len(workers), COMPOSITE_GROUP)
         # Priorities: a worker takes its chunks in frame order (so composites can follow chunk by
         # chunk and its batch-sums cache sees the frames of the chunk before) and any reconstruction
         # before any composite (the temporal stage is not slowed by the ray tracing it feeds).
@@ -464,9 +462,10 @@ class SegmentRun:
         for future, result in completed(self.client, list(chunk_of)):
             ready[chunk_of[future]] = result
             while following in ready:
-                composites.update(submit_grouped(self.client, composite_task,
-                                                 take(ready.pop(following), calls[following][1]["frames"]), group,
-                                                 priority=0))
+                todo = take(ready.pop(following), calls[following][1]["frames"])
+                left = sum(len(kw["frames"]) for _, kw in calls[following:])  # the segment's frames from here
+                composites.update(submit_grouped(self.client, composite_task, todo, group_sizes(
+                    len(todo), len(workers), COMPOSITE_GROUP, left=left), priority=0))
                 following += 1
         self.times["temporal_s"] += time.perf_counter() - t0
         for _, results in completed(self.client, composites):

@@ -5,7 +5,9 @@ from __future__ import annotations
 
 import os
 
-from pipeline.cluster import LOCAL_DASK_CONFIG, WORKER_ENV, connect, group_size, grouped, run_tasks
+import pytest
+
+from pipeline.cluster import LOCAL_DASK_CONFIG, TAIL_SHARE, WORKER_ENV, connect, group_sizes, grouped, run_tasks
 
 
 def _worker_view() -> dict:
@@ -79,13 +81,27 @@ def test_local_workers_run_without_the_profiler_unless_a_performance_report_is_a
     assert (tmp_path / "report.html").stat().st_size > 0
 
 
-def test_group_size_keeps_enough_tasks_for_every_worker():
-    assert group_size(135, 2, 4) == 4  # ROOM's frames on two workers: 34 tasks
-    assert group_size(135, 2, 2) == 2
-    assert group_size(135, 8, 4) == 2  # 68 tasks, 8 a worker
-    assert group_size(40, 2, 4) == 2
-    assert group_size(10, 2, 4) == 1
-    assert group_size(0, 0, 4) == 1
+def test_groups_shrink_to_single_calls_as_the_work_runs_out():
+    sizes = group_sizes(135, 2, 4)  # ROOM's composites on two workers
+    assert sum(sizes) == 135 and max(sizes) == 4
+    assert sizes == sorted(sizes, reverse=True)  # never growing towards the end
+    assert sizes[-4:] == [1, 1, 1, 1]  # the last calls one a task: the workers finish together
+    # each group at most 1/(TAIL_SHARE x workers) of the calls from it on (or one call)
+    left = 135
+    for size in sizes:
+        assert size == 1 or size <= left // (TAIL_SHARE * 2)
+        left -= size
+    assert len(sizes) < 135 // 2  # fewer tasks than pairs of calls
+    assert group_sizes(135, 1, 4) == [4] * 32 + [3, 2, 1, 1]  # one worker: the largest groups nearly to the end
+    assert group_sizes(10, 8, 4) == [1] * 10
+    assert group_sizes(0, 0, 4) == []
+
+
+def test_a_chunks_groups_shrink_with_the_calls_after_it():
+    # 16 calls heading 100: full groups; the same 16 as the last of a run: down to single calls
+    assert group_sizes(16, 2, 4, left=100) == [4, 4, 4, 4]
+    assert group_sizes(16, 2, 4) == [4, 3, 2] + [1] * 7
+    assert group_sizes(5, 2, 4, left=3) == group_sizes(5, 2, 4)  # left counts at least these calls
 
 
 def test_groups_cover_the_calls_in_order_under_keys_their_members_decide():
@@ -98,6 +114,10 @@ def test_groups_cover_the_calls_in_order_under_keys_their_members_decide():
     other = grouped([calls[0], calls[2], calls[1]], 3)  # same first call, other members: another key
     assert other[0][0] != groups[0][0] and other[0][0].startswith("job-0-x3-")
     assert grouped(calls, 3) == groups  # stable
+    assert grouped(calls, [3, 3, 1]) == groups  # sizes one by one
+    assert [len(m) for _, m in grouped(calls, [4, 2, 1])] == [4, 2, 1]
+    with pytest.raises(ValueError):
+        grouped(calls, [3, 3])  # sizes that leave calls out are a bug
 
 
 def _square(x: int) -> dict:
