@@ -32,6 +32,7 @@ import math
 import time
 from contextlib import contextmanager
 from dataclasses import asdict, dataclass
+from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Iterable, Iterator
 
@@ -144,14 +145,10 @@ class SegmentRun:
     """One segment task's view of the run: scene, element mesh, store, config, records."""
 
     def __init__(self, job: Job, client: Client | None):
-        from workers.scene_cache import load_elements, load_scene
-
         from .store import PhotonStore
 
         self.job, self.client = job, client
         self.config = RenderConfig.from_dict(job.config)
-        self.scene = load_scene(job.scene_path, job.scene_hash, job.camera)
-        self.elements = load_elements(job.scene_path, job.scene_hash, job.element_size)
         # A store swapped for another run's (another scene, photon settings or seed) is refused here
         self.store = PhotonStore.open(job.store_url, mode="r+", scene_hash=job.scene_hash,
                                       config_hash=self.config.photon_hash(job.element_size), seed=self.config.seed)
@@ -159,6 +156,20 @@ class SegmentRun:
         self.batches_traced = 0
         self._index = None  # the segment being decided, for progress lines
         self._windows_at_k: dict = {}  # Fig. 5 at K of the segment being decided (its last d_AQM step)
+
+    # Loaded when first used, not before the first tasks go out: a fixed render's coordinator never
+    # needs them, and its worker's first photon batch loads them into the process's cache anyway
+    @cached_property
+    def scene(self):
+        from workers.scene_cache import load_scene
+
+        return load_scene(self.job.scene_path, self.job.scene_hash, self.job.camera)
+
+    @cached_property
+    def elements(self):
+        from workers.scene_cache import load_elements
+
+        return load_elements(self.job.scene_path, self.job.scene_hash, self.job.element_size)
 
     def workers(self) -> list[str]:
         """Addresses of the cluster's workers now, sorted (none without a cluster)."""
@@ -176,15 +187,17 @@ class SegmentRun:
         from workers.photons import shoot_task
 
         t0 = time.perf_counter()
-        want: dict[int, int] = {}
+        sources = self.store.source_frames()
+        want: dict[int, int] = {}  # per source frame (1-based)
         for f, n in targets.items():
-            src = self.store.source_frame(f - 1) + 1
+            src = int(sources[f - 1]) + 1
             want[src] = max(want.get(src, 0), int(n))
+        prefix = self.store.prefixes_for({f - 1: n for f, n in want.items()})
+        short = [f for f in sorted(want) if prefix[f - 1] is None]
+        emitted, n_done = (self.store.emitted(), self.store.batches_per_frame()) if short else (None, None)
         calls = []
-        for f, n in sorted(want.items()):
-            if self.store.prefix_for(f - 1, n) is not None:
-                continue
-            have, batch = self.store.photons_emitted(f - 1), len(self.store.done_batches(f - 1))
+        for f in short:
+            n, have, batch = want[f], int(emitted[f - 1]), int(n_done[f - 1])
             calls.append((shoot_key(self.config, self.job.element_size, f, batch, self.job.store_url), dict(
                 store_url=self.job.store_url, scene_path=self.job.scene_path, scene_hash=self.job.scene_hash,
                 element_size=self.job.element_size, frame=f, frame_index=f - 1, batch=batch,
@@ -201,8 +214,9 @@ class SegmentRun:
     def batches(self, targets: dict[int, int]) -> np.ndarray:
         """(n_frames,) leading batches in use per store frame for these targets (0 elsewhere)."""
         use = np.zeros(self.store.n_frames, np.int64)
+        prefix = self.store.prefixes_for({f - 1: n for f, n in targets.items()})
         for f, n in targets.items():
-            nb = self.store.prefix_for(f - 1, n)
+            nb = prefix[f - 1]
             if nb is None:
                 raise RuntimeError(f"frame {f} holds fewer than its {n} photons")
             use[f - 1] = nb

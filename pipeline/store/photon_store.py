@@ -550,11 +550,25 @@ class PhotonStore:
     def prefix_for(self, frame_index: int, n_photons: int) -> int | None:
         """The fewest leading done batches of a frame holding at least ``n_photons`` photons, or
         None when all of them hold fewer (a batch must be shot first)."""
-        f = self.source_frame(frame_index)
-        done = self.done_batches(f)
-        running = np.cumsum(self._meta(f, done)[:, 2].astype(np.int64))
-        reach = np.flatnonzero(running >= n_photons)
-        return int(reach[0]) + 1 if len(reach) else (0 if n_photons <= 0 else None)
+        return self.prefixes_for({frame_index: n_photons})[frame_index]
+
+    def prefixes_for(self, targets: dict[int, int]) -> dict[int, int | None]:
+        """:meth:`prefix_for` of every ``{frame_index: n_photons}``, the store's tables read once:
+        one frame at a time re-reads them for every frame while they are younger than
+        LISTING_MARGIN_NS, as they are right after a store is made or a batch lands (135 frames:
+        60-90 ms that the coordinator spent before its first and after its last photon task)."""
+        sources, done = self._sources(), self._done_table()
+        out: dict[int, int | None] = {}
+        for frame_index, n_photons in targets.items():
+            f = int(sources[self._frame(frame_index)])
+            running = np.cumsum(self._meta(f, np.flatnonzero(done[f]))[:, 2].astype(np.int64))
+            reach = np.flatnonzero(running >= n_photons)
+            out[frame_index] = int(reach[0]) + 1 if len(reach) else (0 if n_photons <= 0 else None)
+        return out
+
+    def source_frames(self) -> np.ndarray:
+        """int64 (n_frames,), read-only: :meth:`source_frame` of every frame."""
+        return self._sources()
 
     def batch_info(self, frame_index: int, batch: int) -> dict[str, int] | None:
         """The done marker of a batch as a dict of BATCH_FIELDS, or None if not done."""
