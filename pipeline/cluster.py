@@ -276,7 +276,8 @@ def run_tasks(client: Client | None, func: Callable, calls: Iterable[tuple[str, 
 
     On a cluster, tasks are submitted with their key (a readable label that also makes a
     resubmission of the same work reuse it) and ``TASK_RETRIES`` retries, ``group`` calls to a task
-    (or the sizes of :func:`group_sizes`; :func:`grouped`); results are collected as they complete, with a tqdm bar on stderr.
+    (or the sizes of :func:`group_sizes`; :func:`grouped`); results are collected as they complete,
+    with a tqdm bar on stderr.
     """
     calls = list(calls)
     results: dict[str, object] = {}
