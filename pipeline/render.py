@@ -89,6 +89,8 @@ def prepare_job(scene_path: str | Path, *, frames: str | None, out_dir: str | Pa
     """Check every input (one-line LoomErrors, before anything is written), then create the output
     folder, the photon store and its illumination arrays (only the client creates arrays: zarr 3
     has no locks) and return the coordinator's Job (pipeline/coordinator.py)."""
+    from workers.scene_cache import keep_scene
+
     from .coordinator import Job
 
     out = Path(out_dir)
@@ -127,6 +129,7 @@ def prepare_job(scene_path: str | Path, *, frames: str | None, out_dir: str | Pa
     # Absolute paths: tasks and farm recipes run elsewhere, and in other working directories
     if "://" not in store_url:
         store_url = str(Path(store_url).resolve())
+    keep_scene(str(scene.path.resolve()), camera, scene)  # for finish(), and tasks run in this process
     return Job(scene_path=str(scene.path.resolve()), scene_hash=scene.scene_hash, camera=camera,
                camera_name=cam_name, element_size=p.elements.element_size, store_url=store_url,
                out_dir=str(out.resolve()),

@@ -5,7 +5,7 @@ import pytest
 
 from pipeline.errors import SceneError
 from pipeline.scene import Scene
-from workers.scene_cache import load_elements, load_scene
+from workers.scene_cache import keep_scene, load_elements, load_scene
 
 
 def test_a_scene_is_parsed_once_however_the_camera_argument_is_spelled(basic_scene_file):
@@ -19,3 +19,9 @@ def test_a_scene_is_parsed_once_however_the_camera_argument_is_spelled(basic_sce
 def test_a_file_that_changed_since_the_run_began_is_refused(basic_scene_file):
     with pytest.raises(SceneError, match="changed during the run"):
         load_scene(str(basic_scene_file), "0" * 16)
+
+
+def test_a_scene_the_client_loaded_is_not_parsed_again(basic_scene_file):
+    scene = Scene.load(basic_scene_file)
+    keep_scene(str(basic_scene_file), "auto", scene)
+    assert load_scene(str(basic_scene_file), scene.scene_hash, "auto") is scene  # a parse makes a new one
