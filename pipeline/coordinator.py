@@ -59,6 +59,8 @@ from .shoot import shoot_key
 if TYPE_CHECKING:
     from distributed import Client
 
+    from .scene import ElementMesh, Scene
+
 CHUNK_FRAMES = 16  # frames per reconstruction task: fixed, so the gather's bits never depend on workers
 # Frames per photon-batch task and per composite task at most (pipeline/cluster.py group_sizes,
 # whose groups shrink to single frames at the end of a run): ROOM's batches take about 0.06 s and
@@ -160,13 +162,13 @@ class SegmentRun:
     # Loaded when first used, not before the first tasks go out: a fixed render's coordinator never
     # needs them, and its worker's first photon batch loads them into the process's cache anyway
     @cached_property
-    def scene(self):
+    def scene(self) -> Scene:
         from workers.scene_cache import load_scene
 
         return load_scene(self.job.scene_path, self.job.scene_hash, self.job.camera)
 
     @cached_property
-    def elements(self):
+    def elements(self) -> ElementMesh:
         from workers.scene_cache import load_elements
 
         return load_elements(self.job.scene_path, self.job.scene_hash, self.job.element_size)
