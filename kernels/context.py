@@ -3,7 +3,11 @@
 Platform choice is explicit (docs/opencl.md §1): ``PYOPENCL_CTX`` if set, else the
 first platform whose name or version mentions PoCL, else any CPU device. PoCL caches compiled
 kernels under ``POCL_CACHE_DIR`` (default ``~/.cache/pocl/kcache``); pyopencl's own invoker cache
-lives under ``XDG_CACHE_HOME``. Programs are built once per process and source text, and kernels
+lives under ``XDG_CACHE_HOME``, and so do the program binaries this module keeps
+(:func:`binary_cache_dir`): a PoCL build from source costs 20-30 ms a program even when PoCL's cache
+has it, a build from the binary 1-3 ms, and every worker process builds all seven programs (0.2 s
+of each worker's first tasks, a serial cost of every extra worker, README "Program binaries").
+Programs are built once per process and source text, and kernels
 are fetched once (``prg.name`` would build a new ``cl.Kernel`` on every access). Every program is
 built with :data:`BUILD_OPTIONS`, the ``-D`` defines of the facts the Python side owns (the record
 layout of kernels/record_layout.py, the luminance weights of kernels/colour.py), so the ``.cl``
@@ -11,6 +15,7 @@ files hold no copies. The buffer helpers at the end are shared by the kernels' w
 """
 from __future__ import annotations
 
+import hashlib
 import os
 import re
 import warnings
@@ -74,13 +79,52 @@ def expanded_source(name: str, seen: frozenset[str] = frozenset()) -> str:
 @lru_cache(maxsize=None)
 def program(name: str, options: tuple[str, ...] = ()) -> cl.Program:
     """Build ``kernels/<name>.cl`` (includes inlined) with :data:`BUILD_OPTIONS` and ``options``
-    once per process."""
+    once per process, from the binary cache when it holds this build."""
     ctx, _ = device_context()
+    return build_program(ctx, expanded_source(name), (*BUILD_OPTIONS, *options), binary_cache_dir(), name)[0]
+
+
+def binary_cache_dir() -> Path:
+    """Where built program binaries are kept: ``$XDG_CACHE_HOME/photonloom/opencl`` (default
+    ``~/.cache``), beside pyopencl's cache and in the worker image's warmed cache (docker/Dockerfile)."""
+    base = os.environ.get("XDG_CACHE_HOME") or os.path.join(os.path.expanduser("~"), ".cache")
+    return Path(base) / "photonloom" / "opencl"
+
+
+def build_program(ctx: cl.Context, source: str, options: Sequence[str], cache_dir: Path,
+                  label: str = "program") -> tuple[cl.Program, bool]:
+    """(program built for ``ctx``'s first device, whether it came from ``cache_dir``).
+
+    The binary's file name hashes everything the build depends on (source, options, device,
+    driver, pyopencl), so a changed kernel or an upgraded PoCL misses instead of loading stale
+    code. A binary the driver refuses (truncated, foreign) is rebuilt from source and replaced; a
+    cache that cannot be written only costs the next process the source build."""
+    device = ctx.devices[0]
+    ident = "\0".join([source, *options, device.name, device.version, device.driver_version,
+                        device.platform.version, cl.VERSION_TEXT])
+    path = cache_dir / f"{label}-{hashlib.sha256(ident.encode()).hexdigest()[:32]}.bin"
     with warnings.catch_warnings():
         # PoCL's build log carries ABI notes on some CPUs (double8 arguments without AVX-512);
         # pyopencl turns a non-empty log into a CompilerWarning although the build succeeded.
         warnings.simplefilter("ignore", cl.CompilerWarning)
-        return cl.Program(ctx, expanded_source(name)).build(options=[*BUILD_OPTIONS, *options])
+        try:
+            binary = path.read_bytes()
+        except OSError:
+            binary = None
+        if binary:
+            try:
+                return cl.Program(ctx, [device], [binary]).build(options=list(options)), True
+            except (cl.Error, RuntimeError):
+                pass  # not a binary this driver takes: built from source below and replaced
+        prg = cl.Program(ctx, source).build(options=list(options))
+    try:
+        cache_dir.mkdir(parents=True, exist_ok=True)
+        tmp = path.with_name(f".{path.name}.{os.getpid()}.partial")
+        tmp.write_bytes(prg.get_info(cl.program_info.BINARIES)[0])
+        os.replace(tmp, path)  # whole or absent: processes building at once each rename a full file
+    except OSError:
+        pass
+    return prg, False
 
 
 @lru_cache(maxsize=None)

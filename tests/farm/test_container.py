@@ -239,6 +239,8 @@ def test_dockerfile_steps_in_a_fresh_venv(tmp_path):
     out = _run([str(py), str(ROOT / script)], work, env).stdout
     assert "PoCL kernel cache" in out
     assert any(p.is_file() for p in (tmp_path / "pocl").rglob("*")), "the PoCL kernel cache is empty"
+    binaries = {p.name.split("-")[0] for p in (tmp_path / "cache" / "photonloom" / "opencl").glob("*.bin")}
+    assert binaries >= {"emit", "scatter", "temporal", "gather", "filter", "camera", "surface"}, binaries
     # The Dockerfile's chmod after warming names cache folders that warming made (else the build fails).
     image_env = env_of(ins)
     chmod = re.search(r"chmod -R \S+ ([^&]+)", next(r for w, r in ins if w == "RUN" and "warm_kernels" in r))
