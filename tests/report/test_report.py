@@ -131,3 +131,23 @@ def test_rerun_reports_what_it_skipped(rendered):
     assert all(t["render_s"] > 0 for t in first["frame_times_s"].values())
     saved = json.loads((out / "report.json").read_text())
     assert saved["skipped_work"] == s2
+
+
+def _record(index, start, end, *, n_frame=40_000, fmax=30, guided=False, d_aqm=None):
+    from pipeline.segment_records import SegmentRecord
+    return SegmentRecord(index=index, start=start, end=end, k=(start + end) // 2, fmax=fmax, n_frame=n_frame,
+                         temporal="adaptive", guided=guided, decision_hash="x",
+                         n_frame_steps=[] if d_aqm is None else [{"n_frame": n_frame, "d_aqm": d_aqm}])
+
+
+def test_segment_plot_only_where_segments_differ_or_were_decided():
+    """Fixed settings give one sentence with the two numbers instead of a plot of flat lines; a
+    guided segment or segments with different settings get the plot."""
+    from pipeline.report import _segment_picture
+    fixed = _segment_picture([_record(0, 1, 40), _record(1, 41, 80)], {"d_thr": 0.03})
+    assert 'id="segment-settings"' in fixed and "N_frame 40,000" in fixed and "F_max 30" in fixed
+    assert "<img" not in fixed
+    mixed = _segment_picture([_record(0, 1, 40), _record(1, 41, 80, n_frame=80_000)], {"d_thr": 0.03})
+    guided = _segment_picture([_record(0, 1, 40, guided=True, d_aqm=2.5)], {"d_thr": 0.03})
+    for html in (mixed, guided):
+        assert 'id="segment-plot"' in html and "data:image/png;base64," in html
