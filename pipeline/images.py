@@ -156,8 +156,8 @@ def write_video(pngs: Iterable[str | Path], path: str | Path, fps: float) -> int
     # -xerror: a PNG ffmpeg cannot decode stops it (it would drop the frame and exit 0)
     cmd = [imageio_ffmpeg.get_ffmpeg_exe(), "-y", "-nostdin", "-loglevel", "error", "-xerror",
            "-f", "image2pipe", "-framerate", f"{fps:g}", "-c:v", "png", "-i", "-",
-           "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", "-c:v", "libx264", "-preset", "ultrafast", "-crf", "18", "-threads", "1",
-           "-pix_fmt", "yuv420p", "-movflags", "+faststart", "-f", "mp4", str(tmp)]
+           "-vf", "pad=ceil(iw/2)*2:ceil(ih/2)*2", "-c:v", "libx264", "-preset", "ultrafast", "-crf", "18",
+           "-threads", "1", "-pix_fmt", "yuv420p", "-movflags", "+faststart", "-f", "mp4", str(tmp)]
     with tempfile.TemporaryFile() as log:  # a file, not a pipe: ffmpeg's messages never block it
         proc = subprocess.Popen(cmd, stdin=subprocess.PIPE, stdout=subprocess.DEVNULL, stderr=log)
         try:
