@@ -117,13 +117,16 @@ def build_program(ctx: cl.Context, source: str, options: Sequence[str], cache_di
             except (cl.Error, RuntimeError):
                 pass  # not a binary this driver takes: built from source below and replaced
         prg = cl.Program(ctx, source).build(options=list(options))
+    tmp = path.with_name(f".{path.name}.{os.getpid()}.partial")
     try:
         cache_dir.mkdir(parents=True, exist_ok=True)
-        tmp = path.with_name(f".{path.name}.{os.getpid()}.partial")
         tmp.write_bytes(prg.get_info(cl.program_info.BINARIES)[0])
         os.replace(tmp, path)  # whole or absent: processes building at once each rename a full file
     except OSError:
-        pass
+        try:
+            tmp.unlink(missing_ok=True)  # a disk that filled mid-write leaves no partial file
+        except OSError:
+            pass
     return prg, False
 
 
