@@ -99,6 +99,11 @@ class RenderConfig:
     n_frame_max: int = _param(1_280_000, "segments", "largest N_frame of the doubling loop, reported when hit, "
                               "§5.2.3", 1, 1 << 30)
     d_thr: float = _param(0.03, "segments", "d_thr, share of AQM pixels above 1 JND, §5.2.3", 0.0, 1.0)
+    # On: ROOM's whole animation at 160,000 photons a frame kept F_max 44 by p_me alone and had a
+    # quarter more error than F_max 14 (README "F_max that pays")
+    fmax_pays: bool = _param(True, "segments", "at each N_frame of Step 3, F_max steps back while its last growth "
+                             "adds more squared bias than the variance it removes (pipeline/segments.py "
+                             "fmax_that_pays; off: p_me alone, §5.2.2)")
     aqm_size: int = _param(256, "segments", "AQM input size in pixels, §6", 16, 4096)
     end_photons: float = _param(2.0, "segments", "N_frame factor for frames within F_max/2 of an animation "
                                 "end, which lack one neighbour segment, §5.2", 1.0, 64.0)

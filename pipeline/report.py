@@ -29,7 +29,7 @@ from string import Template
 
 from .errors import LoomError
 from .figures import figure, png_bytes
-from .segment_records import SegmentRecord, read_records
+from .segment_records import SegmentRecord, fmax_checks_text, read_records, used_fmax_step
 
 VIDEO_EMBED_MAX = 64 * 2**20
 FILMSTRIP_FRAMES = 12
@@ -164,7 +164,7 @@ def _ranges(frames: list[int]) -> str:
 def _segments(out: Path, records: list[SegmentRecord], config: dict) -> str:
     rows = []
     for r in records:
-        last = r.fmax_steps[-1] if r.fmax_steps else {}
+        last = used_fmax_step(r)
         p = f"{last['p_me_back']:.2f} / {last['p_me_fwd']:.2f}" if last else "-"
         t = r.times_s
         rows.append([r.index, f"{r.start}-{r.end}", r.k, f"{r.n_frame:,}", r.fmax,
@@ -183,6 +183,8 @@ def _segments(out: Path, records: list[SegmentRecord], config: dict) -> str:
             steps.append(f"<li>segment {r.index}, F_max steps (p_me back/fwd): "
                          + _e(", ".join(f"{s['fmax']} ({s['p_me_back']:.2f}/{s['p_me_fwd']:.2f})"
                                         for s in r.fmax_steps)) + "</li>")
+        if r.fmax_checks:
+            steps.append(f"<li>segment {r.index}, {_e(fmax_checks_text(r))}</li>")
     return (table + (f"<ul>{''.join(steps)}</ul>" if steps else "")
             + _segment_picture(records, config)
             + (_img(_fig6_plot(out, records, config), "fig6-plot", "Fig. 6: d_AQM against N_frame at each K; "

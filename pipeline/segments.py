@@ -4,7 +4,9 @@ Nothing here touches Dask, zarr or files, so every rule is tested on synthetic i
 answers (tests/coordinator/test_segments.py); pipeline/coordinator.py only runs them.
 
 * :func:`energy_error`, :func:`pilot_n_frame` — Step 1 (§5.2.1, Eq. 2);
-* :func:`p_me`, :func:`grow_fmax` — Step 2 (§5.2.2);
+* :func:`p_me`, :func:`grow_fmax` — Step 2 (§5.2.2); :func:`growth_ratio`, :func:`fmax_that_pays` —
+  Step 2 checked again at each N_frame of Step 3 (ours: a longer segment must remove more noise than
+  the bias it adds);
 * :func:`next_n_frame` — Step 3 (§5.2.3);
 * :func:`place_segment`, :func:`photon_targets` — where segments lie and how many photons each
   frame gets (the first and last segments compensate their missing neighbour, §5.2).
@@ -103,6 +105,65 @@ def grow_fmax(fmax: int, p_back: float, p_fwd: float, *, p_thr: float, step: int
     if max(p_back, p_fwd) < p_thr or fmax >= cap:
         return None
     return min(fmax + step, cap)
+
+
+def pays_below(fmax_short: int, fmax_long: int) -> float:
+    """The :func:`growth_ratio` under which growing F_max from ``fmax_short`` to ``fmax_long`` lowers
+    the expected squared error at K: 2 rho^2 / (rho^2 + 1), rho the ratio of the half-widths.
+
+    Why: the squared change the longer windows make estimates (b_long - b_short)^2 + the variance
+    they remove, V. What the growth costs is b_long^2 - b_short^2, which needs b_short: a light that
+    curves in time biases a window by its curvature times mean(x^2) (docs/estimators.md §1.7; the
+    linear windows of §1.6 take out a drift), so b_long = rho^2 b_short, and then b_long^2 - b_short^2
+    = (b_long - b_short)^2 (rho^2 + 1) / (rho^2 - 1). It pays while that stays below V, that is
+    while the ratio stays below 1 + (rho^2 - 1) / (rho^2 + 1). 15 -> 30: 1.64; 30 -> 44: 1.37; 2
+    for a short window taken as unbiased (rho -> inf); 1 when the windows are the same.
+    """
+    h_s, h_l = int(fmax_short) // 2, int(fmax_long) // 2
+    if h_s <= 0:
+        return 2.0
+    rho2 = (h_l / h_s) ** 2
+    return 2.0 * rho2 / (rho2 + 1.0)
+
+
+def growth_ratio(y_short: np.ndarray, y_long: np.ndarray, var_short: np.ndarray, var_long: np.ndarray,
+                 areas: np.ndarray) -> float:
+    """How much a longer F_max changes the map at K against the noise it removes (ours, not §5.2.2).
+
+    ``y_*`` (V,) luminance irradiance at K with windows limited to the shorter and the longer F_max,
+    ``var_*`` (V,) their variances (pipeline/temporal.py ``with_variance``), ``areas`` (V,). The long
+    window holds the short one's photons, so y_long - y_short has variance var_short - var_long, and
+    E[(y_long - y_short)^2] = (b_long - b_short)^2 + var_short - var_long for the windows' biases b.
+    Returns sum A (y_long - y_short)^2 / sum A (var_short - var_long), area-weighted as the error
+    benchmark's relative L2: 1 where the longer windows only pool more of the same lighting; above
+    :func:`pays_below` the squared bias they add exceeds the variance they remove. inf when nothing
+    was removed.
+    """
+    a = np.asarray(areas, np.float64)
+    d = np.asarray(y_long, np.float64) - np.asarray(y_short, np.float64)
+    removed = float(np.sum(a * (np.asarray(var_short, np.float64) - np.asarray(var_long, np.float64))))
+    if not removed > 0:
+        return math.inf
+    return float(np.sum(a * d * d)) / removed
+
+
+def fmax_that_pays(ladder: list[int], ratio_of: Callable[[int, int], float]) -> tuple[list[int], list[dict]]:
+    """The F_max values of Step 2 (``ladder``, ascending, the last in use) cut back while their last
+    growth no longer pays at the N_frame being tested: ``ratio_of(short, long)`` gives
+    :func:`growth_ratio`. Why again at every N_frame: Step 2 runs at the pilot's N_frame, where the
+    noise hides a bias that the doubled N_frame of Step 3 shows (ROOM at 160,000 photons a frame:
+    F_max 44 raised the error against the reference by a third, README "F_max that pays").
+    Returns the ladder kept and the checks made."""
+    ladder, steps = list(ladder), []
+    while len(ladder) > 1:
+        ratio, limit = float(ratio_of(ladder[-2], ladder[-1])), pays_below(ladder[-2], ladder[-1])
+        pays = ratio < limit
+        steps.append({"fmax_short": int(ladder[-2]), "fmax_long": int(ladder[-1]), "ratio": ratio, "limit": limit,
+                      "pays": pays})
+        if pays:
+            break
+        ladder.pop()
+    return ladder, steps
 
 
 # --- Step 3: number of photons (§5.2.3) --------------------------------------------------------

@@ -66,7 +66,7 @@ def test_every_step_runs_and_is_recorded(reference):
     assert len(recs) >= 2 and recs[0].start == 60 and recs[-1].end == 80
     assert all(r.status == "done" and r.guided for r in recs)
     for a, b in zip(recs, recs[1:]):
-        assert b.start == a.end + 1 and b.fmax >= a.fmax  # segment order, F_max handed on
+        assert b.start == a.end + 1 and b.fmax_steps[0]["fmax"] == a.fmax  # segment order, F_max handed on
     first = recs[0]
     assert [s["fmax"] for s in first.fmax_steps][:2] == [6, 10]  # p_me >= p_thr on ROOM's walls
     assert first.pilot["n_probe"] == 2000 and first.pilot["e_probe"] > 0
@@ -79,6 +79,14 @@ def test_every_step_runs_and_is_recorded(reference):
                                                            for i in range(len(d))]
         assert set(r.frames) == {str(f) for f in range(r.start, r.end + 1)}
         assert all(v["adaptation"] > 0 for v in r.frames.values())
+        # F_max checked at the N_frame steps (segments.fmax_that_pays): the segment keeps what the last check said
+        for c in r.fmax_checks:
+            assert c["pays"] == (c["ratio"] < c["limit"]) and c["n_frame"] in [s["n_frame"] for s in r.n_frame_steps]
+        if r.fmax_checks:
+            last = r.fmax_checks[-1]
+            assert r.fmax == (last["fmax_long"] if last["pays"] else last["fmax_short"])
+        assert r.fmax in [6] + [s["fmax"] for s in r.fmax_steps]  # never below the first segment's F_max
+        assert r.end - r.start >= min(r.fmax, 80 - r.start)
     assert recs[0].end_frames[0] == 60 and recs[-1].end_frames[-1] == 80  # end compensation
     table = _loom("segments", reference).stdout
     assert "N_frame" in table and "F_max" in table and f"{recs[0].k:>4}" in table

@@ -16,14 +16,70 @@ from pipeline.segments import (
     end_frames,
     energy_error,
     fmax_loop,
+    fmax_that_pays,
     grow_fmax,
+    growth_ratio,
     next_n_frame,
     p_me,
+    pays_below,
     photon_targets,
     pilot_n_frame,
     place_segment,
 )
 from pipeline.temporal import collection_windows
+
+
+# --- Step 2 checked at each N_frame: does a longer F_max pay? -----------------------------------
+def test_growth_ratio_is_one_where_the_lighting_holds_and_large_where_it_drifts(rng):
+    v, frames = 4000, 31
+    areas = rng.uniform(0.5, 2.0, v)
+    lam = rng.gamma(3.0, 10.0, v)
+    # Unchanged lighting: the longer window only pools more of the same, E[ratio] = 1 exactly
+    steady = np.broadcast_to(lam, (frames, v))
+    k = frames // 2
+    counts = rng.poisson(steady)
+    short = counts[k - 7:k + 8].sum(0), 15
+    long_ = counts.sum(0), frames
+    y = [c / n / areas for c, n in (short, long_)]
+    var = [c / n ** 2 / areas ** 2 for c, n in (short, long_)]
+    r = growth_ratio(y[0], y[1], var[0], var[1], areas)
+    assert abs(r - 1.0) < 0.1 and r < pays_below(14, 30)
+    # A light brightening away from K (a curve: the pooled mean of the long window is biased by
+    # about 0.002 x mean(x^2) = 16 % where the short one is 4 %): the ratio is well above 2
+    x = np.arange(frames) - k
+    curved = lam * (1.0 + 0.002 * x[:, None] ** 2)
+    counts = rng.poisson(curved)
+    y = [counts[k - 7:k + 8].sum(0) / 15 / areas, counts.sum(0) / frames / areas]
+    var = [counts[k - 7:k + 8].sum(0) / 15 ** 2 / areas ** 2, counts.sum(0) / frames ** 2 / areas ** 2]
+    assert growth_ratio(y[0], y[1], var[0], var[1], areas) > 3 * pays_below(14, 30)
+    # The formula by hand: sum A d^2 / sum A (var_s - var_l)
+    assert growth_ratio(np.array([1.0, 2.0]), np.array([2.0, 2.0]), np.array([0.5, 0.25]), np.array([0.25, 0.0]),
+                        np.array([1.0, 2.0])) == pytest.approx(1.0 / (0.25 + 0.5))
+    # Nothing removed (a window that cannot grow): growth cannot pay
+    assert growth_ratio(y[0], y[0], var[0], var[0], areas) == math.inf
+
+
+def test_pays_below_balances_the_bias_a_curving_light_adds_against_the_variance_removed():
+    # Windows of half-width 7 and 15 (F_max 14 -> 30): a curving light biases them b and (15/7)^2 b
+    rho2 = (15 / 7) ** 2
+    limit = pays_below(14, 30)
+    assert limit == pytest.approx(2 * rho2 / (rho2 + 1))
+    # At the limit, the added squared bias b_l^2 - b_s^2 equals the variance removed V: take V = 1 and
+    # (b_l - b_s)^2 = limit - 1 (the ratio's excess over pure noise)
+    b_s = math.sqrt(limit - 1.0) / (rho2 - 1.0)
+    assert (rho2 * b_s) ** 2 - b_s ** 2 == pytest.approx(1.0)
+    assert pays_below(30, 44) < limit < 2.0 and pays_below(0, 14) == 2.0 and pays_below(30, 30) == 1.0
+
+
+def test_fmax_that_pays_steps_back_until_a_growth_pays():
+    ratios = {(30, 44): 3.0, (15, 30): 1.5}
+    ladder, steps = fmax_that_pays([15, 30, 44], lambda s, l: ratios[(s, l)])
+    assert ladder == [15, 30] and [(c["fmax_long"], c["pays"]) for c in steps] == [(44, False), (30, True)]
+    ladder, steps = fmax_that_pays([15, 30, 44], lambda s, l: 2.5)
+    assert ladder == [15] and len(steps) == 2  # never below Step 2's first F_max
+    ladder, steps = fmax_that_pays([15, 30, 44], lambda s, l: 1.3)
+    assert ladder == [15, 30, 44] and len(steps) == 1 and steps[0]["limit"] == pays_below(30, 44)
+    assert fmax_that_pays([15], lambda s, l: 9.0) == ([15], [])
 
 
 # --- Step 1: Eq. (2) --------------------------------------------------------------------------
