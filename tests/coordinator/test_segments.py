@@ -73,13 +73,13 @@ def test_pays_below_balances_the_bias_a_curving_light_adds_against_the_variance_
 
 def test_fmax_that_pays_steps_back_until_a_growth_pays():
     ratios = {(30, 44): 3.0, (15, 30): 1.5}
-    ladder, steps = fmax_that_pays([15, 30, 44], lambda s, l: ratios[(s, l)])
+    ladder, steps = fmax_that_pays([15, 30, 44], lambda short, long: ratios[(short, long)])
     assert ladder == [15, 30] and [(c["fmax_long"], c["pays"]) for c in steps] == [(44, False), (30, True)]
-    ladder, steps = fmax_that_pays([15, 30, 44], lambda s, l: 2.5)
-    assert ladder == [15] and len(steps) == 2  # never below Step 2's first F_max
-    ladder, steps = fmax_that_pays([15, 30, 44], lambda s, l: 1.3)
+    ladder, steps = fmax_that_pays([15, 30, 44], lambda short, long: 2.5)
+    assert ladder == [15] and len(steps) == 2  # never below the ladder's first F_max
+    ladder, steps = fmax_that_pays([15, 30, 44], lambda short, long: 1.3)
     assert ladder == [15, 30, 44] and len(steps) == 1 and steps[0]["limit"] == pays_below(30, 44)
-    assert fmax_that_pays([15], lambda s, l: 9.0) == ([15], [])
+    assert fmax_that_pays([15], lambda short, long: 9.0) == ([15], [])
 
 
 # --- Step 1: Eq. (2) --------------------------------------------------------------------------
