@@ -16,9 +16,9 @@ import pytest
 from pipeline.images import frame_paths
 from pipeline.segment_records import read_record, read_records
 
-# Small and quick, but every step runs: F_max grows 6 -> 10, N_frame doubles, two segments.
+# Small and quick, but every step runs: F_max grows 6 -> 10 and is checked, N_frame doubles, two segments.
 CHEAP = {"pilot_photons": 2000, "n_frame_min": 1000, "n_frame_max": 16000, "d_thr": 0.45,
-         "fmax_initial": 6, "fmax_step": 4, "fmax_cap": 10}
+         "fmax_initial": 6, "fmax_step": 4, "fmax_cap": 10, "fmax_pays": True}
 FRAMES = "60-80"
 
 
@@ -88,6 +88,7 @@ def test_every_step_runs_and_is_recorded(reference):
         assert r.fmax in [6] + [s["fmax"] for s in r.fmax_steps]  # never below the first segment's F_max
         assert r.end - r.start >= min(r.fmax, 80 - r.start)
     assert recs[0].end_frames[0] == 60 and recs[-1].end_frames[-1] == 80  # end compensation
+    assert recs[0].fmax_checks  # F_max grew in the first segment, so every N_frame step checked it
     table = _loom("segments", reference).stdout
     assert "N_frame" in table and "F_max" in table and f"{recs[0].k:>4}" in table
     assert len(json.loads(_loom("segments", reference, "--json").stdout)) == len(recs)
