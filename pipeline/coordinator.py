@@ -296,7 +296,7 @@ class SegmentRun:
         ratio = growth_ratio(luminance(lits[0].irradiance), luminance(lits[1].irradiance), lits[0].variance,
                              lits[1].variance, areas)
         progress(f"segment {self._index}: N_frame {targets[place.k]:,} at K {place.k}: F_max {short} -> "
-                 f"{place.fmax} bias/variance {ratio:.2f}")
+                 f"{place.fmax} change/variance {ratio:.2f}")
         return ratio
 
     # --- Step 3 ------------------------------------------------------------------------------
@@ -388,9 +388,8 @@ class SegmentRun:
             nonlocal place, ladder
             self.shoot({f: n_frame for f in place.frames})
             if cfg.fmax_pays and len(ladder) > 1:
-                def ratio_of(short: int, long: int) -> float:
+                def ratio_of(short: int, long: int) -> float:  # ``at`` lies inside ``place``: traced above
                     at = place_segment(place.start, long, job.last)
-                    self.shoot({f: n_frame for f in at.frames})
                     return self.growth_ratio(short, at, {**prior, **{f: n_frame for f in at.frames}}, temporal)
 
                 ladder, checks = fmax_that_pays(ladder, ratio_of)
