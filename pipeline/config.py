@@ -105,6 +105,9 @@ class RenderConfig:
     fmax_pays: bool = _param(False, "segments", "at each N_frame of Step 3, F_max steps back while its last growth "
                              "adds more squared bias than the variance it removes (pipeline/segments.py "
                              "fmax_that_pays; off: p_me alone, §5.2.2)")
+    predict_doublings: bool = _param(True, "segments", "Step 3 takes at once the doublings that d_AQM, falling "
+                                     "at most twice as fast (in log) as over its last doubling, cannot skip "
+                                     "(pipeline/segments.py doublings_ahead; off: one a step, §5.2.3)")
     aqm_size: int = _param(256, "segments", "AQM input size in pixels, §6", 16, 4096)
     end_photons: float = _param(2.0, "segments", "N_frame factor for frames within F_max/2 of an animation "
                                 "end, which lack one neighbour segment, §5.2", 1.0, 64.0)

@@ -15,7 +15,9 @@ cannot deadlock); with ``--scheduler synchronous`` the same code runs them in-pr
    - Step 2 (§5.2.2): p_me both ways at K; F_max grows while p_me >= p_thr, K moving with it.
    - Step 3 (§5.2.3): I1(K), I2(K) from the even and odd photons with adaptive collection,
      composited with the same camera samples and direct light, tone mapped as the final frame
-     (pipeline/perceived.py); N_frame doubles (one batch more a frame) while d_AQM > d_thr.
+     (pipeline/perceived.py); N_frame starts on a rung of the cap's halvings and doubles (one
+     batch more a frame) while d_AQM > d_thr, several doublings at once where d_AQM's fall so far
+     cannot reach d_thr sooner (segments.ladder_n_frame, doublings_ahead).
    - Frames within F_max/2 of an animation end get ``end_photons`` x N_frame (§5.2).
 2. Steps 4-5 (§5.2.4-5) for the frames of segment i: reconstruction tasks of ``CHUNK_FRAMES``
    frames each (workers/reconstruct.reconstruct_task), then one composite task a frame.
@@ -45,12 +47,12 @@ from .segment_records import SegmentRecord, read_record, write_record
 from .segments import (
     Placement,
     calibrated_start,
-    clamp_n_frame,
     doubling_loop,
     energy_error,
     fmax_loop,
     fmax_that_pays,
     growth_ratio,
+    ladder_n_frame,
     p_me,
     photon_targets,
     pilot_n_frame,
@@ -362,7 +364,7 @@ class SegmentRun:
                    and before.pilot.get("n_pilot") else None)
         start_n = calibrated_start(pilot["n_pilot"] if pilot["n_pilot"] is not None else float("inf"), carried)
         pilot["n_start"] = start_n if math.isfinite(start_n) else None
-        n = clamp_n_frame(start_n, cfg.n_frame_min, cfg.n_frame_max)
+        n = ladder_n_frame(start_n, cfg.n_frame_min, cfg.n_frame_max)
         t_init = time.perf_counter()
 
         # Step 2: F_max while p_me >= p_thr (never for camera-only motion: all frames share photons)
@@ -398,7 +400,8 @@ class SegmentRun:
                     place = place_segment(place.start, ladder[-1], job.last)
             return self.d_aqm(place, {**prior, **{f: n_frame for f in place.frames}}, index, temporal)
 
-        n, n_steps, capped = doubling_loop(n, d_aqm_of, d_thr=cfg.d_thr, n_max=cfg.n_frame_max)
+        n, n_steps, capped = doubling_loop(n, d_aqm_of, d_thr=cfg.d_thr, n_max=cfg.n_frame_max,
+                                           predict=cfg.predict_doublings)
         t_n = time.perf_counter()
 
         # Frames next to an animation end: more photons for their missing neighbours (§5.2)

@@ -11,14 +11,15 @@ import pytest
 from pipeline.config import RenderConfig
 from pipeline.segments import (
     calibrated_start,
-    clamp_n_frame,
     doubling_loop,
+    doublings_ahead,
     end_frames,
     energy_error,
     fmax_loop,
     fmax_that_pays,
     grow_fmax,
     growth_ratio,
+    ladder_n_frame,
     next_n_frame,
     p_me,
     pays_below,
@@ -106,7 +107,6 @@ def test_energy_error_falls_as_one_over_sqrt_n_and_the_pilot_finds_the_analytic_
     s, q = _moments(rng, p, 20_000)
     assert energy_error(s * 1e-30, q * 1e-60) == pytest.approx(energy_error(s, q), rel=1e-9)
     assert energy_error(np.zeros(5), np.zeros(5)) == math.inf
-    assert clamp_n_frame(math.inf, 1000, 640_000) == 640_000 and clamp_n_frame(12.2, 1000, 9000) == 1000
 
 
 def test_pilot_on_a_real_static_scene_follows_eq2(tmp_path):
@@ -196,6 +196,48 @@ def test_doubling_loop_stops_at_the_first_n_frame_below_d_thr():
     assert next_n_frame(640_000, 0.04, 0.03, 640_000) is None
 
 
+def test_step_3_starts_on_a_rung_of_the_cap_and_lands_on_the_cap():
+    # The rungs of 160,000 are 5,000, 10,000, ..., 80,000, 160,000; the nearest in log is taken
+    assert ladder_n_frame(16_935, 1000, 160_000) == 20_000  # above sqrt(10,000 x 20,000) = 14,142
+    assert ladder_n_frame(14_000, 1000, 160_000) == 10_000
+    assert ladder_n_frame(78_071, 1000, 160_000) == 80_000 and ladder_n_frame(165_098, 1000, 160_000) == 160_000
+    assert ladder_n_frame(math.inf, 1000, 640_000) == 640_000 and ladder_n_frame(12.2, 1000, 9000) == 1125
+    assert ladder_n_frame(12.2, 5000, 160_000) == 5000 and ladder_n_frame(12.2, 5001, 160_000) == 10_000
+    # ROOM's last segment started at 78,071 and went 156,142 -> 160,000, a sliver batch and an AQM
+    # more; from its rung the doubling lands on the cap
+    n, steps, capped = doubling_loop(ladder_n_frame(78_071, 1000, 160_000), lambda n: 30.0, d_thr=0.03,
+                                     n_max=160_000)
+    assert [s["n_frame"] for s in steps] == [80_000, 160_000] and capped
+
+
+def test_doublings_at_once_never_pass_where_plain_doubling_stops_under_the_bound():
+    # ROOM's first segment: 52.5 -> 39.1 % over one doubling, d_thr 3 %. Falling at most 0.745^2
+    # a doubling, d_AQM needs log(3 / 39.1) / log(0.555) = 4.36 doublings: 5 at once
+    assert doublings_ahead((16_935, 0.525), (33_870, 0.391), 0.03) == 5
+    assert doublings_ahead((10_000, 0.12), (20_000, 0.06), 0.03) == 1  # 0.5 left, at 1/4 a doubling
+    assert doublings_ahead((10_000, 0.06), (20_000, 0.06), 0.03) == 1  # no fall: nothing to extrapolate
+    assert doublings_ahead((10_000, 0.05), (20_000, 0.06), 0.03) == 1
+    assert next_n_frame(20_000, 0.391, 0.03, 160_000, before=(10_000, 0.525)) == 160_000
+    # Against plain doubling, on laws of d_AQM that fall as fast as the bound allows or slower: the
+    # predicted loop stops at the same N_frame or below it... never above, and with fewer AQMs
+    for fall in (0.45, 0.6, 0.745, 0.85, 0.95):
+        for d0 in (0.05, 0.2, 0.6):
+            first = [None]
+
+            def law(n, fall=fall, d0=d0):  # the first step's fall, then steeper up to its square
+                j = math.log2(n / 5_000)
+                return 100.0 * d0 * fall ** min(j, 1.0) * (fall ** 1.9) ** max(j - 1.0, 0.0)
+
+            n_plain, plain, _ = doubling_loop(5_000, law, d_thr=0.03, n_max=1_280_000, predict=False)
+            n_pred, pred, _ = doubling_loop(5_000, law, d_thr=0.03, n_max=1_280_000)
+            assert n_pred <= n_plain and len(pred) <= len(plain)
+            assert n_pred == n_plain  # the bound holds, so the jump lands where doubling stops
+    # Where d_AQM falls faster than the bound, a jump can pass plain doubling's stop: the margin's price
+    fast = lambda n: 50.0 if n <= 5_000 else 45.0 if n <= 10_000 else 1.0  # noqa: E731
+    assert doubling_loop(5_000, fast, d_thr=0.03, n_max=1_280_000)[0] > doubling_loop(
+        5_000, fast, d_thr=0.03, n_max=1_280_000, predict=False)[0]
+
+
 # --- placement and end frames -------------------------------------------------------------------
 def test_segments_tile_the_animation_and_the_last_takes_in_a_stub():
     placed, start = [], 1
@@ -257,8 +299,9 @@ def test_camera_flow_is_the_cameras_own_motion(tmp_path):
 
 def test_the_next_segment_starts_where_the_last_ones_aqm_put_the_pilot():
     # Segment 0: the pilot said 10,000, the AQM loop ended at 320,000 (32x). Segment 1's pilot says
-    # 12,000; the loop starts one doubling below the carried ratio, at 12,000 x 16 = 192,000, and a
-    # segment whose AQM is content at 192,000 stops there instead of 5 doublings later.
+    # 12,000; the loop starts one doubling below the carried ratio, at 12,000 x 16 = 192,000 (the
+    # rung 160,000 of the cap 640,000), and a segment whose AQM is content there stops there
+    # instead of 5 doublings later.
     start = calibrated_start(12_000, (10_000, 320_000))
     assert start == 192_000
     need = 150_000  # this segment's d_AQM <= d_thr from here on
@@ -266,8 +309,8 @@ def test_the_next_segment_starts_where_the_last_ones_aqm_put_the_pilot():
     def measure(n):
         return 2.0 if n >= need else 5.0
 
-    n, steps, _ = doubling_loop(clamp_n_frame(start, 1000, 640_000), measure, d_thr=0.03, n_max=640_000)
-    assert n == 192_000 and len(steps) == 1
+    n, steps, _ = doubling_loop(ladder_n_frame(start, 1000, 640_000), measure, d_thr=0.03, n_max=640_000)
+    assert n == 160_000 and len(steps) == 1  # 192,000 on the cap's ladder
     n_paper, steps_paper, _ = doubling_loop(12_000, measure, d_thr=0.03, n_max=640_000)
     assert n_paper == 192_000 and len(steps_paper) == 5  # the paper's start: the same N_frame, 5 AQMs
     assert calibrated_start(12_000, None) == 12_000  # the first segment: Eq. 2 alone
