@@ -219,11 +219,9 @@ def test_doublings_at_once_never_pass_where_plain_doubling_stops_under_the_bound
     assert doublings_ahead((10_000, 0.05), (20_000, 0.06), 0.03) == 1
     assert next_n_frame(20_000, 0.391, 0.03, 160_000, before=(10_000, 0.525)) == 160_000
     # Against plain doubling, on laws of d_AQM that fall as fast as the bound allows or slower: the
-    # predicted loop stops at the same N_frame or below it... never above, and with fewer AQMs
+    # predicted loop stops at the same N_frame, never above, and with no more AQMs
     for fall in (0.45, 0.6, 0.745, 0.85, 0.95):
         for d0 in (0.05, 0.2, 0.6):
-            first = [None]
-
             def law(n, fall=fall, d0=d0):  # the first step's fall, then steeper up to its square
                 j = math.log2(n / 5_000)
                 return 100.0 * d0 * fall ** min(j, 1.0) * (fall ** 1.9) ** max(j - 1.0, 0.0)
