@@ -57,6 +57,7 @@ from .segments import (
     photon_targets,
     pilot_n_frame,
     place_segment,
+    reach_frames,
 )
 from .shoot import shoot_key
 
@@ -285,19 +286,23 @@ class SegmentRun:
         return pb, pf
 
     def growth_ratio(self, short: int, place: Placement, targets: dict[int, int], temporal: str) -> float:
-        """segments.growth_ratio at K of ``place``: its map with windows limited to F_max ``short``
-        against its own F_max, unfiltered (the check is of the pooling in time, not of Step 5)."""
+        """segments.growth_ratio over the frames of segments.check_frames(``place``): its maps with
+        windows limited to F_max ``short`` against its own F_max, unfiltered (the check is of the
+        pooling in time, not of Step 5)."""
+        from .segments import check_frames
         from .temporal import illumination_maps
         from .tonemap import luminance
 
         use = self.batches(targets)
-        lits = [next(iter(illumination_maps(self.store, self.elements, self.scene, [place.k - 1], mode=temporal,
-                                            fmax=f, config=self.config, batches=use, with_variance=True)))
+        frames = check_frames(place)
+        lits = [list(illumination_maps(self.store, self.elements, self.scene, [f - 1 for f in frames], mode=temporal,
+                                       fmax=f, config=self.config, batches=use, with_variance=True))
                 for f in (short, place.fmax)]
-        areas = self.elements.vertex_areas(self.scene.pose_frame(place.k))
-        ratio = growth_ratio(luminance(lits[0].irradiance), luminance(lits[1].irradiance), lits[0].variance,
-                             lits[1].variance, areas)
-        progress(f"segment {self._index}: N_frame {targets[place.k]:,} at K {place.k}: F_max {short} -> "
+        y = [np.concatenate([luminance(lit.irradiance) for lit in one]) for one in lits]
+        v = [np.concatenate([lit.variance for lit in one]) for one in lits]
+        areas = np.concatenate([self.elements.vertex_areas(self.scene.pose_frame(f)) for f in frames])
+        ratio = growth_ratio(y[0], y[1], v[0], v[1], areas)
+        progress(f"segment {self._index}: N_frame {targets[place.k]:,} at frames {frames}: F_max {short} -> "
                  f"{place.fmax} change/variance {ratio:.2f}")
         return ratio
 
@@ -388,11 +393,14 @@ class SegmentRun:
 
         def d_aqm_of(n_frame: int) -> float:
             nonlocal place, ladder
-            self.shoot({f: n_frame for f in place.frames})
-            if cfg.fmax_pays and len(ladder) > 1:
+            checking = cfg.fmax_pays and len(ladder) > 1
+            # the check looks at the last frame too, whose windows reach F_max/2 frames past it
+            self.shoot({f: n_frame for f in (reach_frames(place, job.last) if checking else place.frames)})
+            if checking:
                 def ratio_of(short: int, long: int) -> float:  # ``at`` lies inside ``place``: traced above
                     at = place_segment(place.start, long, job.last)
-                    return self.growth_ratio(short, at, {**prior, **{f: n_frame for f in at.frames}}, temporal)
+                    return self.growth_ratio(short, at, {**prior, **{f: n_frame for f in reach_frames(at, job.last)}},
+                                             temporal)
 
                 ladder, checks = fmax_that_pays(ladder, ratio_of)
                 fmax_checks.extend({"n_frame": int(n_frame), **c} for c in checks)

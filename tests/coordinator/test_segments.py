@@ -11,6 +11,7 @@ import pytest
 from pipeline.config import RenderConfig
 from pipeline.segments import (
     calibrated_start,
+    check_frames,
     doubling_loop,
     doublings_ahead,
     end_frames,
@@ -26,6 +27,7 @@ from pipeline.segments import (
     photon_targets,
     pilot_n_frame,
     place_segment,
+    reach_frames,
 )
 from pipeline.temporal import collection_windows
 
@@ -237,6 +239,15 @@ def test_doublings_at_once_never_pass_where_plain_doubling_stops_under_the_bound
 
 
 # --- placement and end frames -------------------------------------------------------------------
+def test_the_fmax_check_looks_at_k_and_the_last_frame_with_its_windows_traced():
+    place = place_segment(1, 44, 135)  # frames 1-45, K 23
+    assert check_frames(place) == [23, 45]
+    assert reach_frames(place, 135) == list(range(1, 68))  # frame 45's windows reach 22 frames on
+    assert reach_frames(place, 50) == list(range(1, 51))  # never past the animation
+    last = place_segment(121, 14, 135)  # takes in the stub: frames 121-135, K 128
+    assert check_frames(last) == [128, 135] and reach_frames(last, 135) == list(range(121, 136))
+
+
 def test_segments_tile_the_animation_and_the_last_takes_in_a_stub():
     placed, start = [], 1
     while start <= 135:
