@@ -269,6 +269,18 @@ def test_frames_next_to_an_animation_end_get_more_photons():
     assert set(photon_targets(middle, 40_000, first=1, last=100, end_factor=2.0).values()) == {40_000}
 
 
+def test_an_end_factor_of_one_turns_the_end_photons_off():
+    from pipeline.errors import ConfigError
+
+    assert RenderConfig(end_photons=1.0).end_photons == 1.0  # a closed lower bound: 1 is valid
+    with pytest.raises(ConfigError, match="end_photons"):
+        RenderConfig(end_photons=0.999)
+    with pytest.raises(ConfigError, match="k_sigma"):  # other float bounds stay open
+        RenderConfig(k_sigma=0.0)
+    first = place_segment(1, 10, 100)
+    assert set(photon_targets(first, 40_000, first=1, last=100, end_factor=1.0).values()) == {40_000}
+
+
 # --- the config: every field read by one stage --------------------------------------------------
 def test_stage_hashes_cover_only_their_stage():
     base = RenderConfig()
