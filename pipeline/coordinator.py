@@ -53,6 +53,7 @@ from .segments import (
     fmax_that_pays,
     growth_ratio,
     ladder_n_frame,
+    needed_n_frame,
     p_me,
     photon_targets,
     pilot_n_frame,
@@ -365,8 +366,9 @@ class SegmentRun:
         # Step 1: pilot at K, N_frame from Eq. (2)
         pilot = self.pilot(place)
         before = read_record(job.out_dir, index - 1) if index else None
-        carried = ((before.pilot.get("n_pilot"), before.n_frame) if before is not None and before.guided
-                   and before.pilot.get("n_pilot") else None)
+        carried = ((before.pilot.get("n_pilot"), needed_n_frame(before.n_frame, before.n_frame_steps,
+                                                               before.capped, cfg.d_thr))
+                   if before is not None and before.guided and before.pilot.get("n_pilot") else None)
         start_n = calibrated_start(pilot["n_pilot"] if pilot["n_pilot"] is not None else float("inf"), carried)
         pilot["n_start"] = start_n if math.isfinite(start_n) else None
         n = ladder_n_frame(start_n, cfg.n_frame_min, cfg.n_frame_max)

@@ -71,6 +71,23 @@ def calibrated_start(n_pilot: float, previous: tuple[float, float] | None) -> fl
     return n_pilot * max(1.0, previous[1] / previous[0] / 2.0)
 
 
+def needed_n_frame(n_frame: int, steps: list[dict], capped: bool, d_thr: float) -> float:
+    """The N_frame a decided segment needed, for :func:`calibrated_start`: its final N_frame, or,
+    when the cap stopped its loop above d_thr, the cap times the doublings it still lacked at
+    least (:func:`doublings_ahead` over its last two steps; one after a single step).
+
+    Why: a capped segment's final N_frame understates its need. Carried over as it is, halved, it
+    started ROOM's next segments one rung below the cap at a 160,000 cap, though the previous
+    segment's d_AQM there was 26-33 % against d_thr 3 %. Each then spent an AQM and a second photon
+    batch a frame, only to reach the cap (README "Where the guided run's flicker comes from").
+    """
+    if not capped or not steps:
+        return float(n_frame)
+    now = (int(steps[-1]["n_frame"]), steps[-1]["d_aqm"] / 100.0)
+    before = (int(steps[-2]["n_frame"]), steps[-2]["d_aqm"] / 100.0) if len(steps) > 1 else now
+    return float(n_frame) * 2.0 ** doublings_ahead(before, now, d_thr)
+
+
 def ladder_n_frame(n: float, n_min: int, n_max: int) -> int:
     """Step 3's first N_frame: the rung n_max / 2^k nearest to ``n`` in log, inside [n_min, n_max]
     (inf -> n_max).

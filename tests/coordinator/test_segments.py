@@ -21,6 +21,7 @@ from pipeline.segments import (
     grow_fmax,
     growth_ratio,
     ladder_n_frame,
+    needed_n_frame,
     next_n_frame,
     p_me,
     pays_below,
@@ -336,3 +337,20 @@ def test_the_next_segment_starts_where_the_last_ones_aqm_put_the_pilot():
     assert n_paper == 192_000 and len(steps_paper) == 5  # the paper's start: the same N_frame, 5 AQMs
     assert calibrated_start(12_000, None) == 12_000  # the first segment: Eq. 2 alone
     assert calibrated_start(12_000, (10_000, 15_000)) == 12_000  # a ratio under 2 changes nothing
+
+
+def test_a_capped_segment_carries_over_what_it_still_lacked():
+    # ROOM at a 160,000 cap: 80,000 -> 40 %, 160,000 -> 26 % against d_thr 3 %. Falling at most
+    # twice as fast in log as over that doubling, d_AQM needs >= 3 doublings more: 1,280,000.
+    steps = [{"n_frame": 80_000, "d_aqm": 40.0}, {"n_frame": 160_000, "d_aqm": 26.0}]
+    need = needed_n_frame(160_000, steps, True, 0.03)
+    assert need == 160_000 * 2 ** 3
+    # The next segment, whose pilot says what the last one's did, starts at the cap: one AQM
+    start = calibrated_start(20_000, (20_000, need))
+    assert ladder_n_frame(start, 1000, 160_000) == 160_000
+    # Carried over as it ended, it started a rung below and spent an AQM more to reach the cap
+    assert ladder_n_frame(calibrated_start(20_000, (20_000, 160_000)), 1000, 160_000) == 80_000
+    # A segment that met d_thr, or one stopped at the cap in its first step, as before / one doubling
+    assert needed_n_frame(80_000, steps[:1], False, 0.03) == 80_000
+    assert needed_n_frame(160_000, steps[1:], True, 0.03) == 320_000
+    assert needed_n_frame(160_000, [], True, 0.03) == 160_000
