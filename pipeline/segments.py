@@ -73,8 +73,8 @@ def calibrated_start(n_pilot: float, previous: tuple[float, float] | None) -> fl
 
 def needed_n_frame(n_frame: int, steps: list[dict], capped: bool, d_thr: float) -> float:
     """The N_frame a decided segment needed, for :func:`calibrated_start`: its final N_frame, or,
-    when the cap stopped its loop above d_thr, the cap times the doublings it still lacked at
-    least (:func:`doublings_ahead` over its last two steps; one after a single step).
+    when the cap (n_frame_max, §5.2.3) stopped its loop above d_thr, the cap times the doublings it
+    still lacked at least (:func:`doublings_ahead` over its last two steps; ours, not the paper's).
 
     Why: a capped segment's final N_frame understates its need. Carried over as it is, halved, it
     started ROOM's next segments one rung below the cap at a 160,000 cap, though the previous
@@ -84,6 +84,7 @@ def needed_n_frame(n_frame: int, steps: list[dict], capped: bool, d_thr: float) 
     if not capped or not steps:
         return float(n_frame)
     now = (int(steps[-1]["n_frame"]), steps[-1]["d_aqm"] / 100.0)
+    # one step: no fall to extrapolate, and doublings_ahead's own rule for that gives one doubling
     before = (int(steps[-2]["n_frame"]), steps[-2]["d_aqm"] / 100.0) if len(steps) > 1 else now
     return float(n_frame) * 2.0 ** doublings_ahead(before, now, d_thr)
 
