@@ -332,9 +332,11 @@ class SegmentRun:
                                    spatial_filter=self.config.spatial_filter, with_direct=True)
         state, direct = self.scene.pose_frame(k), lit.direct
         job = self.job
-        images = [render_frame(state, self.elements, half, width=job.width, height=job.height, spp=job.spp,
-                               seed=self.config.seed, frame=k, max_depth=job.reflection_depth,
-                               area_samples=job.area_samples).beauty for half in lit.irradiance]
+        # both halves along one set of camera paths: the bits of two renders at the cost of one
+        img = render_frame(state, self.elements, lit.irradiance[0], width=job.width, height=job.height, spp=job.spp,
+                           seed=self.config.seed, frame=k, max_depth=job.reflection_depth,
+                           area_samples=job.area_samples, also_maps=lit.irradiance[1:])
+        images = [img.beauty, img.also_beauty(0)]
         adaptation = mesh_adaptation(state, self.elements, direct + 0.5 * (lit.irradiance[0] + lit.irradiance[1]),
                                      job.width / job.height)
         params = ToneMapping(**job.tonemap)
@@ -384,7 +386,7 @@ class SegmentRun:
             fmax_steps = []
         else:
             place, fmax_steps = fmax_loop(place.start, place.fmax, job.last, p_me_of, p_thr=cfg.p_thr,
-                                          step=cfg.fmax_step, cap=cfg.fmax_cap)
+                                          step=cfg.fmax_step, cap=cfg.fmax_cap, widen_only=cfg.fmax_pays)
         t_fmax = time.perf_counter()
 
         # Step 3: N_frame doubled while d_AQM > d_thr; at each N_frame, F_max first steps back while

@@ -27,6 +27,7 @@ class CameraHits:
         self.cell, self.indirect = tri, None
         if sh.lookup is not None:
             self.cell, self.indirect = sh.lookup(tri, u, v)
+        self.also_indirect = [lookup(tri, u, v)[1] for lookup in sh.also]
         self.t = t.astype(np.float32)
         self.u, self.v = u.astype(np.float32), v.astype(np.float32)
         self._normals, self._corners = sh.normals, sh.corners

@@ -8,6 +8,7 @@ and glossy hits continue, up to ``max_depth`` reflections. workers/composite.py 
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from typing import Sequence
 
 import numpy as np
 
@@ -36,24 +37,36 @@ class FrameImage:
     albedo: np.ndarray
     alpha: np.ndarray
     rays: dict = field(default_factory=dict)
+    also_indirect: list = field(default_factory=list)  # indirect layers of ``also_maps``, same paths
+
+    def also_beauty(self, i: int) -> np.ndarray:
+        """The beauty layer ``also_maps[i]`` gives: the bits of a render with that map alone."""
+        return self.direct + self.also_indirect[i]
 
 
 def render_frame(state: FrameState, elements: ElementMesh | None, irradiance: np.ndarray | None, *, width: int,
                  height: int, spp: int, seed: int, frame: int, max_depth: int = 4,
                  area_samples: int = 2, caster: RayCaster | None = None,
-                 chunk_rays: int = CHUNK_RAYS) -> FrameImage:
+                 chunk_rays: int = CHUNK_RAYS, also_maps: Sequence[np.ndarray] = ()) -> FrameImage:
     """Render one frame; ``irradiance`` (V, 3) is the indirect map (None: no indirect light).
 
+    ``also_maps``: more (V, 3) maps whose indirect layers come from the same camera paths
+    (``FrameImage.also_indirect``): the paths never depend on the map, so each layer has the bits
+    of its own render at the cost of one more map lookup a hit (the AQM's I1, I2 of §5.2.3).
     ``chunk_rays`` camera samples are traced together (memory bound); pixels do not depend on it."""
+    if also_maps and irradiance is None:
+        raise ValueError("also_maps needs a first map")
     caster = caster or caster_for(state)
-    sh = ShadingTables(state, elements, irradiance, caster, area_samples)
+    sh = ShadingTables(state, elements, irradiance, caster, area_samples, also_maps)
     key = frame_key(seed, frame)
     n_pixels = width * height
-    layers = np.zeros((3, n_pixels, 3), np.float32)  # direct, indirect, albedo: contiguous planes
+    n_layers = 3 + len(also_maps)
+    # direct, indirect, albedo, then the indirect layers of also_maps: contiguous planes
+    layers = np.zeros((n_layers, n_pixels, 3), np.float32)
     alpha = np.zeros(n_pixels, np.float32)
     rays = dict.fromkeys(RAY_KINDS, 0)
     chunk_pixels = max(1, chunk_rays // spp)
-    samples = None if spp == 1 else np.empty((3, chunk_pixels * spp, 3), np.float32)
+    samples = None if spp == 1 else np.empty((n_layers, chunk_pixels * spp, 3), np.float32)
     for lo in range(0, n_pixels, chunk_pixels):
         hi = min(n_pixels, lo + chunk_pixels)
         counter = np.arange(lo * spp, hi * spp, dtype=np.int64)
@@ -64,11 +77,11 @@ def render_frame(state: FrameState, elements: ElementMesh | None, irradiance: np
             out = samples[:, :len(counter)]
             out.fill(0)
             cover = trace_samples(state, sh, key, counter, spp, width, height, max_depth, rays, out)
-            sample_means(out.reshape(3, hi - lo, spp, 3), layers[:, lo:hi])
+            sample_means(out.reshape(n_layers, hi - lo, spp, 3), layers[:, lo:hi])
             alpha[lo:hi] = cover.reshape(hi - lo, spp).mean(axis=1)
     shape = (height, width, 3)
-    direct, indirect, albedo = (layers[i].reshape(shape) for i in range(3))
-    return FrameImage(direct + indirect, direct, indirect, albedo, alpha.reshape(shape[:2]), rays)
+    direct, indirect, albedo, *also = (layers[i].reshape(shape) for i in range(n_layers))
+    return FrameImage(direct + indirect, direct, indirect, albedo, alpha.reshape(shape[:2]), rays, also)
 
 
 def sample_means(samples: np.ndarray, out: np.ndarray) -> None:
@@ -83,8 +96,8 @@ def sample_means(samples: np.ndarray, out: np.ndarray) -> None:
 
 def trace_samples(state: FrameState, sh: ShadingTables, key: int, counter: np.ndarray, spp: int, width: int,
                   height: int, max_depth: int, rays: dict[str, int], out: np.ndarray) -> np.ndarray:
-    """Add direct, indirect and albedo of the camera samples ``counter`` into ``out`` (3, n, 3),
-    zero on entry; returns their coverage (n,)."""
+    """Add direct, indirect and albedo (and the indirect layers of ``sh.also``) of the camera
+    samples ``counter`` into ``out`` (L, n, 3), zero on entry; returns their coverage (n,)."""
     n = len(counter)
     cover = np.zeros(n, np.float32)
     cam = state.camera  # jittered camera rays (random dimensions 0 and 1), kernels/camera.cl
@@ -117,7 +130,7 @@ def trace_samples(state: FrameState, sh: ShadingTables, key: int, counter: np.nd
         # This depth's layers: ``out`` itself while rays and samples correspond one to one,
         # else scattered into it once
         direct_out = path is None and throughput is None
-        acc = out if direct_out else np.zeros((3, len(tri), 3), np.float32)
+        acc = out if direct_out else np.zeros((out.shape[0], len(tri), 3), np.float32)
         if depth == 0:
             acc[2] = rho
             _put(cover, path, 1.0)
@@ -146,6 +159,8 @@ def trace_samples(state: FrameState, sh: ShadingTables, key: int, counter: np.nd
             acc[0] += scale * e_direct
             if sh.element_irradiance is not None:
                 acc[1] += scale * hits.indirect
+                for j, also in enumerate(hits.also_indirect):
+                    acc[3 + j] += scale * also
             if active is None:
                 if not direct_out:
                     _put_layers(out, path, acc if throughput is None else acc * throughput[None])
@@ -188,7 +203,7 @@ def trace_samples(state: FrameState, sh: ShadingTables, key: int, counter: np.nd
 
 
 def _put_layers(target: np.ndarray, idx, value) -> None:
-    """target[:, idx] += value for layers (3, n, 3); idx None means all samples in order."""
+    """target[:, idx] += value for layers (L, n, 3); idx None means all samples in order."""
     if idx is None:
         target += value
     else:

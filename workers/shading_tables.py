@@ -21,7 +21,7 @@ class ShadingTables:
     albedo, emission, normal; the lights, the emitters' sampling table and the map."""
 
     def __init__(self, state: FrameState, elements: ElementMesh | None, irradiance, caster: RayCaster,
-                 area_samples: int):
+                 area_samples: int, also_maps=()):
         mats = state.materials
         tri_mat = state.triangle_material.astype(np.int64)
         self.kind = np.array([KIND[m.kind] for m in mats], np.int8)[tri_mat]
@@ -47,12 +47,13 @@ class ShadingTables:
         self.elements = elements
         self.element_irradiance = None  # (E, 3, 3) float32 [E0, E1 - E0, E2 - E0]: one gather a hit
         if irradiance is not None:
-            e = np.asarray(irradiance, np.float64)[elements.element_vertices]
-            self.element_irradiance = np.stack([e[:, 0], e[:, 1] - e[:, 0], e[:, 2] - e[:, 0]],
-                                               axis=1).astype(np.float32)
+            self.element_irradiance = _element_table(elements, irradiance)
         # Element and map irradiance of every hit, on PoCL (kernels/surface.cl)
         self.lookup = (LookupCL(elements.triangle_n, elements.triangle_offset[:-1], self.element_irradiance)
                        if elements is not None else None)
+        # more maps seen along the same paths (workers/camera_paths.py render_frame's also_maps)
+        self.also = [LookupCL(elements.triangle_n, elements.triangle_offset[:-1], _element_table(elements, m))
+                     for m in also_maps]
         self.area_samples = area_samples if len(state.emissive_triangles) else 0
         if self.area_samples:
             tris = state.emissive_triangles.astype(np.int64)
@@ -66,3 +67,9 @@ class ShadingTables:
             self.area_cdf[-1] = 1.0
             self.area_pdf = power / power.sum() / caster.triangle_area[self.area_tris]  # per area
             self.area_corners = state.vertices.astype(np.float32)[state.faces[self.area_tris]]
+
+
+def _element_table(elements: ElementMesh, irradiance) -> np.ndarray:
+    """(E, 3, 3) float32 [E0, E1 - E0, E2 - E0] of a (V, 3) vertex map: one gather a hit."""
+    e = np.asarray(irradiance, np.float64)[elements.element_vertices]
+    return np.stack([e[:, 0], e[:, 1] - e[:, 0], e[:, 2] - e[:, 0]], axis=1).astype(np.float32)

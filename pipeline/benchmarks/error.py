@@ -69,6 +69,8 @@ EVENTS = {"room": ("corner_spot", (-2.0, 0.0, 1.5)), "cornell": ("ceiling_lamp",
 # Kernels that run on stored photons only (windows, gather, filter): not the reference's
 RECONSTRUCTION_KERNELS = ("temporal", "gather", "filter")
 REFERENCE_BATCH = 250_000  # photons traced per call into a reference map (bounded worker memory)
+# The methods compared; per-frame rendering is the baseline every ratio is taken against
+METHODS = ("per-frame", "fixed", "adaptive", "guided")
 
 
 @dataclass(frozen=True)
@@ -84,6 +86,7 @@ class Plan:
     spp: int = 2
     reference_factor: int = 50
     aqm_every: int = 1
+    methods: tuple[str, ...] = METHODS  # a subset (with per-frame) shortens a run to what is compared
 
     @property
     def event(self) -> int:
@@ -477,10 +480,10 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, config:
             ev.floor_flicker = np.asarray(floor["per_frame"]["flicker"])
             specs = [("per-frame", dict(n_photons=n, fmax=0, temporal="off", config=config)) for n in plan.budgets]
             specs += [(m, dict(n_photons=n, fmax=plan.fmax, temporal=m, config=config))
-                      for m in ("fixed", "adaptive") for n in plan.budgets]
+                      for m in ("fixed", "adaptive") if m in plan.methods for n in plan.budgets]
             specs += [("guided", dict(n_photons=None, fmax=None, temporal="adaptive",
                                       config=config.replace(d_thr=d, n_frame_max=max(plan.budgets))))
-                      for d in plan.d_thr]
+                      for d in plan.d_thr if "guided" in plan.methods]
             # Warm-up, not timed: the workers' first render builds kernels and caches the first run would pay
             run_method(client, path, tmp / "warm-up", plan, **{**specs[0][1], "method": "warm-up"})
             runs = []

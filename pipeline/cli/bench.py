@@ -126,17 +126,19 @@ def bench_render(scene, frames, resolution, spp, workers, n_photons, fmax, skip_
               help="Reference photons a frame as a multiple of the largest budget (at least 50).")
 @click.option("--aqm-every", type=int, default=None, help="d_AQM on every n-th frame (and the change's).")
 @click.option("--workers", type=int, default=2, show_default=True)
+@click.option("--methods", default=None, help="Methods to run, comma-separated: per-frame (always), fixed, "
+              "adaptive, guided (default: all).")
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
               help="Folder of error.json, error.png and error.svg (default: bench-error-SCENE).")
 @click.option("--config", "config_file", type=click.Path(dir_okay=False), default=None,
               help="JSON object of RenderConfig fields (pipeline/config.py) for every run but the reference.")
 def bench_error(scene, quick, frames, budgets, fmax, d_thr, resolution, spp, reference_factor, aqm_every, workers,
-                out_dir, config_file):
+                methods, out_dir, config_file):
     """Run time against error vs a converged per-frame reference: per-frame, fixed and adaptive windows at
     several budgets, the guided coordinator at several d_thr (default: ROOM)."""
     from pathlib import Path
 
-    from pipeline.benchmarks.error import FULL, QUICK, Plan, run
+    from pipeline.benchmarks.error import FULL, METHODS, QUICK, Plan, run
     from pipeline.config import RenderConfig, load_config
     from pipeline.errors import LoomError
     from pipeline.render import parse_resolution
@@ -161,6 +163,12 @@ def bench_error(scene, quick, frames, budgets, fmax, d_thr, resolution, spp, ref
         raise LoomError(f"cannot read the list: {err}", field="--frames/--budgets/--d-thr") from None
     if fmax is not None:
         changes["fmax"] = fmax
+    if methods:
+        chosen = {m.strip() for m in methods.split(",") if m.strip()} | {"per-frame"}
+        if chosen - set(METHODS):
+            raise LoomError(f"unknown method(s) {', '.join(sorted(chosen - set(METHODS)))}; choose from "
+                            f"{', '.join(METHODS)}", field="--methods")
+        changes["methods"] = tuple(m for m in METHODS if m in chosen)
     if aqm_every is not None:
         if aqm_every < 1:
             raise LoomError(f"must be >= 1, got {aqm_every}", field="--aqm-every")

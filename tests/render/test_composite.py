@@ -161,3 +161,26 @@ def test_sample_means_are_the_bits_of_numpys_mean(spp):
     out = np.full((3, 500, 3), np.nan, np.float32)
     sample_means(samples, out)
     np.testing.assert_array_equal(out, samples.mean(axis=2))
+
+
+@pytest.mark.parametrize("spp", [1, 4])
+def test_maps_rendered_along_one_set_of_paths_have_the_bits_of_their_own_renders(tmp_path, spp):
+    # The AQM's I1, I2 (pipeline/coordinator.py d_aqm) share camera paths: each layer must be the
+    # render of its map alone, through metal and glossy bounces too (paths scattered back into samples)
+    from pipeline.scene.builtin import write_builtin
+
+    scene = Scene.load(write_builtin("room", tmp_path / "room.glb"))  # diffuse, glossy and metal surfaces
+    state, elements = scene.pose_frame(1), ElementMesh.build(scene)
+    rng = np.random.default_rng(5)
+    maps = [rng.uniform(0.0, 2.0, (elements.n_vertices, 3)) for _ in range(3)]
+    args = dict(width=W, height=H, spp=spp, seed=3, frame=1)
+    alone = [render_frame(state, elements, m, **args) for m in maps]
+    shared = render_frame(state, elements, maps[0], also_maps=maps[1:], **args)
+    assert shared.rays == alone[0].rays and shared.rays["reflection"] > 0
+    assert np.array_equal(shared.beauty, alone[0].beauty) and np.array_equal(shared.indirect, alone[0].indirect)
+    for i, one in enumerate(alone[1:]):
+        assert np.array_equal(shared.also_indirect[i], one.indirect)
+        assert np.array_equal(shared.also_beauty(i), one.beauty)
+    assert not np.array_equal(alone[1].indirect, alone[2].indirect)  # the maps do show
+    with pytest.raises(ValueError):
+        render_frame(state, elements, None, also_maps=maps[1:], **args)
