@@ -54,6 +54,7 @@ def render_frame(state: FrameState, elements: ElementMesh | None, irradiance: np
     (``FrameImage.also_indirect``): the paths never depend on the map, so each layer has the bits
     of its own render at the cost of one more map lookup a hit (the AQM's I1, I2 of §5.2.3).
     ``chunk_rays`` camera samples are traced together (memory bound); pixels do not depend on it."""
+    also_maps = list(also_maps)  # a list of maps or the rows of a (M, V, 3) stack
     if also_maps and irradiance is None:
         raise ValueError("also_maps needs a first map")
     caster = caster or caster_for(state)

@@ -22,7 +22,10 @@ def threshold_elevation(m: np.ndarray, slope: float, b: float = MASKING_B) -> np
 
     With Q = s, k1 (k2 |m|)^s = |m|^s for any W, so Te = [1 + |m|^(s b)]^(1/b) (module docstring).
     """
-    return (1.0 + np.abs(m) ** (slope * b)) ** (1.0 / b)
+    base = 1.0 + np.abs(m) ** (slope * b)
+    if b == 4.0:  # Daly's b: two square roots, 2 ms of a power's 5 on an AQM band, to the last bit or two
+        return np.sqrt(np.sqrt(base, out=base), out=base)
+    return base ** (1.0 / b)
 
 
 def mutual_masking(bands_a: np.ndarray, bands_b: np.ndarray) -> np.ndarray:

@@ -175,7 +175,7 @@ def test_maps_rendered_along_one_set_of_paths_have_the_bits_of_their_own_renders
     maps = [rng.uniform(0.0, 2.0, (elements.n_vertices, 3)) for _ in range(3)]
     args = dict(width=W, height=H, spp=spp, seed=3, frame=1)
     alone = [render_frame(state, elements, m, **args) for m in maps]
-    shared = render_frame(state, elements, maps[0], also_maps=maps[1:], **args)
+    shared = render_frame(state, elements, maps[0], also_maps=np.stack(maps[1:]), **args)  # rows of a stack
     assert shared.rays == alone[0].rays and shared.rays["reflection"] > 0
     assert np.array_equal(shared.beauty, alone[0].beauty) and np.array_equal(shared.indirect, alone[0].indirect)
     for i, one in enumerate(alone[1:]):
