@@ -252,19 +252,29 @@ class SegmentRun:
 
     # --- Step 1 ------------------------------------------------------------------------------
     def pilot(self, place: Placement) -> dict:
+        """Step 1's probe, traced here in memory, never stored: its photons are the first
+        ``pilot_photons`` of frame K's own stream (counter-based), so the frame's batches hold them
+        anyway. Stored, it was one more batch at every K and one more wave of tasks a segment (the
+        twenty-second session's README section); read back from the store when K happened to be
+        traced, E would depend on what else ran first."""
+        from kernels.record_layout import DIRECT_BIT, ELEMENT_MASK
+        from workers.photons import trace_batch
         from workers.reconstruct import vertex_moments
 
         n_probe = self.config.pilot_photons
-        self.shoot({place.k: n_probe})
-        records = self.store.read_frame(place.k - 1, batches=range(self.store.prefix_for(place.k - 1, n_probe)))
-        sel = ~records.direct
-        s, q = vertex_moments(records.element[sel], records.b1[sel], records.b2[sel], records.energy[sel],
+        t0 = time.perf_counter()
+        batch = trace_batch(self.scene.pose_frame(place.k), self.elements, n_photons=n_probe, photon_start=0,
+                            seed=self.config.seed, frame=place.k, max_depth=self.config.photon_depth)
+        indirect = (batch.key & DIRECT_BIT) == 0
+        s, q = vertex_moments(batch.key[indirect] & np.uint32(ELEMENT_MASK), batch.bary[indirect, 0],
+                              batch.bary[indirect, 1], batch.energy[indirect],
                               self.elements.element_vertices, self.elements.n_vertices)
+        self.times["shoot_s"] += time.perf_counter() - t0
         e0 = energy_error(s, q)
-        n_pilot = pilot_n_frame(records.photons_emitted, e0, self.config.e_max, place.fmax)
-        progress(f"segment {self._index}: pilot at K {place.k}: E {e0:.3f} with {records.photons_emitted:,} "
+        n_pilot = pilot_n_frame(n_probe, e0, self.config.e_max, place.fmax)
+        progress(f"segment {self._index}: pilot at K {place.k}: E {e0:.3f} with {n_probe:,} "
                  f"photons -> N_frame {n_pilot:,.0f} (Eq. 2, F_max {place.fmax})")
-        return {"frame": place.k, "n_probe": int(records.photons_emitted), "e_probe": e0,
+        return {"frame": place.k, "n_probe": int(n_probe), "e_probe": e0,
                 "e_target": self.config.e_max * float(np.sqrt(place.fmax + 1)),
                 "n_pilot": n_pilot if np.isfinite(n_pilot) else None}
 
