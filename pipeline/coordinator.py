@@ -257,7 +257,6 @@ class SegmentRun:
         anyway. Stored, it was one more batch at every K and one more wave of tasks a segment (the
         twenty-second session's README section); read back from the store when K happened to be
         traced, E would depend on what else ran first."""
-        from kernels.record_layout import DIRECT_BIT, ELEMENT_MASK
         from workers.photons import trace_batch
         from workers.reconstruct import vertex_moments
 
@@ -265,10 +264,7 @@ class SegmentRun:
         t0 = time.perf_counter()
         batch = trace_batch(self.scene.pose_frame(place.k), self.elements, n_photons=n_probe, photon_start=0,
                             seed=self.config.seed, frame=place.k, max_depth=self.config.photon_depth)
-        indirect = (batch.key & DIRECT_BIT) == 0
-        s, q = vertex_moments(batch.key[indirect] & np.uint32(ELEMENT_MASK), batch.bary[indirect, 0],
-                              batch.bary[indirect, 1], batch.energy[indirect],
-                              self.elements.element_vertices, self.elements.n_vertices)
+        s, q = vertex_moments(*batch.indirect(), self.elements.element_vertices, self.elements.n_vertices)
         self.times["shoot_s"] += time.perf_counter() - t0
         e0 = energy_error(s, q)
         n_pilot = pilot_n_frame(n_probe, e0, self.config.e_max, place.fmax)

@@ -28,6 +28,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from kernels.emit import AREA, EmitCL, emit_reference
+from kernels.record_layout import DIRECT_BIT, ELEMENT_MASK
 from kernels.scatter import KIND_CODE, Hits, ScatterCL, SceneTables, scatter_reference
 from pipeline.scene import ElementMesh, FrameState
 from pipeline.scene.shading import SurfaceShading
@@ -50,6 +51,13 @@ class PhotonBatch:
     photon_start: int
     rays_cast: int = 0
     stats: dict = field(default_factory=dict)
+
+    def indirect(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """(element, b1, b2, energy) of the records that are not a light's first hit, decoded as
+        kernels/record_layout.py lays the key out: what a map made straight from a batch, with no
+        store, sums (the pilot of pipeline/coordinator.py, the benchmark's reference)."""
+        keep = (self.key & DIRECT_BIT) == 0
+        return self.key[keep] & np.uint32(ELEMENT_MASK), self.bary[keep, 0], self.bary[keep, 1], self.energy[keep]
 
 
 def scene_tables(state: FrameState, elements: ElementMesh, caster: RayCaster) -> SceneTables:
@@ -110,7 +118,7 @@ def trace_batch(state: FrameState, elements: ElementMesh, *, n_photons: int, pho
         energy = np.concatenate([p[2] for p in parts])
     else:
         key_out, bary, energy = np.empty(0, np.uint32), np.empty((0, 2), np.uint16), np.empty((0, 3), np.float32)
-    direct = int(np.count_nonzero(key_out >> np.uint32(31)))
+    direct = int(np.count_nonzero(key_out & DIRECT_BIT))
     return PhotonBatch(key_out, bary, energy, n_photons, photon_start, caster.rays_cast - rays_before,
                        {"records": len(key_out), "direct": direct, "capped": capped[0]})
 

@@ -142,9 +142,7 @@ def reference_map(*, scene_path: str, scene_hash: str, element_size: float, fram
         n = min(REFERENCE_BATCH, n_photons - start)
         b = trace_batch(state, elements, n_photons=n, photon_start=start, seed=seed, frame=stream,
                         max_depth=max_depth)
-        ind = (b.key >> np.uint32(31)) == 0
-        total += vertex_irradiance(b.key[ind] & np.uint32(0x3FFFFFFF), b.bary[ind, 0], b.bary[ind, 1],
-                                   b.energy[ind], elements, areas, 1)
+        total += vertex_irradiance(*b.indirect(), elements, areas, 1)
     return total / n_photons
 
 
