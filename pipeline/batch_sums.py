@@ -1,24 +1,27 @@
-"""What the temporal gather reads of a photon batch: its element sums, made once.
+"""What the temporal gather reads of a photon batch: its element sums, made once, stored sparse.
 
 A batch's *summary* is the indirect records' element sums split by photon parity, (E, 2, 3, 4)
-(kernels/gather.element_sums_cl, docs/estimators.md §1.2-1.3), followed by its direct records'
-vertex flux, (V, 3) (their element sums scattered to the vertices, as the gather scatters the
-indirect ones: kernels/gather.corners_to_vertices): everything Steps 3-5 of §5.2 read of the
-records. The shoot task makes it while the sorted records are in memory and the store keeps it
-beside them (``PhotonStore.write_batch(summarise=...)``) when it is smaller than the records
-(:func:`summariser`), so a reconstruction reads about 0.4 MB of sums a ROOM batch of 40,000
-photons instead of 1.8 MB of records to unpack and sum, and two workers whose windows reach the
-same frames no longer both sum them. A batch without a usable summary (a store written before
-summaries, a batch too small for one, a damaged one) is summed from its records by
-:func:`batch_summary`, the same function, so the bits do not depend on which path ran.
+(kernels/gather.element_sums_cl, docs/estimators.md §1.2-1.3), and its direct records' vertex
+flux, (V, 3) (their element sums scattered to the vertices, as the gather scatters the indirect
+ones: kernels/gather.corners_to_vertices): everything Steps 3-5 of §5.2 read of the records, so
+the photon store keeps it for every batch and the records only on request (pipeline/store). The
+shoot task makes it while the sorted records are in memory (:func:`summariser`).
 
-Stored in float32 (:func:`stored_form`), with sqrt(Q) in Q's slot: the sums are made in float64
-and rounded once per batch (relative 6e-8, below the float32 records' own rounding), and the
-square root keeps Q, a sum of squared energies, inside float32's range wherever the energies are
-(a light 1e30 times as bright squares to 1e60; tests/stress/test_scale.py). Half the bytes of
-float64: on the build machines every new page of a written file costs CPU (README "Where the
-I/O row's time goes"), and the ROOM summary fell from 842 to 421 KB a batch. A frame's sums are
-then added in float64 (:class:`FrameSums`).
+Stored in float32, with sqrt(Q) in Q's slot: the sums are made in float64 and rounded once per
+batch (relative 6e-8, below the float32 records' own rounding), and the square root keeps Q, a
+sum of squared energies, inside float32's range wherever the energies are (a light 1e30 times as
+bright squares to 1e60; tests/stress/test_scale.py). A frame's sums are then added in float64
+(:class:`FrameSums`).
+
+Sparse: only the elements and vertices a batch hit are stored, each with its index, as u32 words
+(:func:`encode`)::
+
+    E, V, n_e, n_v | element ids (n_e) | their 24 sums (n_e x 2 x 3 x 4 float32 bits)
+                   | vertex ids (n_v)  | their direct flux (n_v x 3 float32 bits)
+
+A small batch on a fine mesh (ATRIUM's 43,000 elements) stores the elements it hit, not 4.2 MB of
+mostly zero sums; a large batch pays 4 bytes an element over the dense form. The reader scatters
+them into zeros (:func:`decode`): the same bits as the dense sums.
 
 One parity split for every use: the unsplit sums of a batch are its even plus its odd sums, and a
 frame's sums are its batches' sums added in batch order.
@@ -33,8 +36,8 @@ import numpy as np
 
 from kernels.gather import corners_to_vertices, element_sums_cl
 
+from .errors import LoomError
 from .stage_clock import StageClock
-from .store.records import RECORD_BYTES
 
 if TYPE_CHECKING:
     from .scene import ElementMesh
@@ -42,50 +45,67 @@ if TYPE_CHECKING:
     from .store.records import FrameRecords
 
 SLOTS = 2 * 3 * 4  # parity x corner x (R, G, B, Q) values per element
+HEADER = 4  # E, V, n_e, n_v
 
 
 def batch_summary(records: FrameRecords, elements: ElementMesh) -> np.ndarray:
-    """The flat float32 summary of one batch's records, as stored (module docstring)."""
+    """The u32 words of one batch's summary, as stored (module docstring)."""
     sums = element_sums_cl([records], kind="indirect", split_parity=True)[0]
     # The direct flux from element sums, not per record (workers/reconstruct.records_vertex_flux):
     # the same sum to rounding, over E x 3 corners; a million-record batch took 20 ms the other way
     direct = element_sums_cl([records], kind="direct")[0, :, 0, :, :3]
     flux = corners_to_vertices(direct, elements.element_vertices, elements.n_vertices)
-    return stored_form(np.concatenate([sums.reshape(-1), flux.reshape(-1)]), elements)
+    return encode(sums, flux)
 
 
-def stored_form(summary: np.ndarray, elements: ElementMesh) -> np.ndarray:
-    """A float64 summary (sums with Q, docs/estimators.md §1.3, then the direct flux) as stored:
-    float32 with sqrt(Q)."""
-    out = np.array(summary, np.float64)
-    q = out[:elements.n_elements * SLOTS].reshape(-1, 4)[:, 3]  # a view: Q of every (element, parity, corner)
+def encode(sums: np.ndarray, flux: np.ndarray) -> np.ndarray:
+    """u32 words of float64 sums (E, 2, 3, 4) with Q (docs/estimators.md §1.3) and direct flux
+    (V, 3): float32, sqrt(Q) in Q's slot, the rows that are not all zero with their indices."""
+    rows = np.array(sums, np.float64).reshape(sums.shape[0], SLOTS)
+    q = rows.reshape(-1, 4)[:, 3]  # a view: Q of every (element, parity, corner)
     np.sqrt(q, out=q)
-    return out.astype(np.float32)
+    rows, flux = rows.astype(np.float32), np.asarray(flux, np.float64).astype(np.float32)
+    hit_e, hit_v = np.flatnonzero(rows.any(axis=1)), np.flatnonzero(flux.any(axis=1))
+    head = np.array([rows.shape[0], flux.shape[0], hit_e.size, hit_v.size], np.uint32)
+    return np.concatenate([head, hit_e.astype(np.uint32), rows[hit_e].reshape(-1).view(np.uint32),
+                           hit_v.astype(np.uint32), flux[hit_v].reshape(-1).view(np.uint32)])
 
 
-def working_form(stored: np.ndarray, elements: ElementMesh) -> tuple[np.ndarray, np.ndarray]:
-    """(sums (E, 2, 3, 4), direct flux (V, 3)), float64, of a stored summary: Q squared back.
-    A float64 summary (a store written before float32 ones) is first rounded as a new one is."""
-    if stored.dtype != np.float32:
-        stored = stored_form(stored, elements)
-    n_sums = elements.n_elements * SLOTS
-    sums = stored[:n_sums].astype(np.float64).reshape(elements.n_elements, 2, 3, 4)
+def decode(words: np.ndarray, elements: ElementMesh) -> tuple[np.ndarray, np.ndarray]:
+    """(sums (E, 2, 3, 4), direct flux (V, 3)), float64, of a summary's words: Q squared back.
+    ValueError when the words do not describe a summary on ``elements``."""
+    words = np.asarray(words, np.uint32)
+    if words.size < HEADER:
+        raise ValueError("summary shorter than its header")
+    n_el, n_vx, n_e, n_v = (int(w) for w in words[:HEADER])
+    if (n_el, n_vx) != (elements.n_elements, elements.n_vertices):
+        raise ValueError(f"summary of {n_el} elements and {n_vx} vertices, the mesh has {elements.n_elements} "
+                         f"and {elements.n_vertices}")
+    if words.size != HEADER + n_e * (1 + SLOTS) + n_v * 4:
+        raise ValueError(f"summary of {words.size} words does not hold {n_e} elements and {n_v} vertices")
+    at = HEADER
+    hit_e = words[at:at + n_e]
+    at += n_e
+    rows = words[at:at + n_e * SLOTS].view(np.float32).reshape(n_e, SLOTS)
+    at += n_e * SLOTS
+    hit_v = words[at:at + n_v]
+    at += n_v
+    values = words[at:].view(np.float32).reshape(n_v, 3)
+    if (n_e and hit_e.max() >= n_el) or (n_v and hit_v.max() >= n_vx) or not (
+            np.isfinite(rows).all() and np.isfinite(values).all()):
+        raise ValueError("summary index out of range or value not finite")
+    sums = np.zeros((n_el, SLOTS), np.float64)
+    sums[hit_e] = rows
+    sums = sums.reshape(n_el, 2, 3, 4)
     sums[..., 3] *= sums[..., 3]
-    return sums, stored[n_sums:].astype(np.float64).reshape(elements.n_vertices, 3)
+    flux = np.zeros((n_vx, 3), np.float64)
+    flux[hit_v] = values
+    return sums, flux
 
 
-def summary_size(elements: ElementMesh) -> int:
-    """Values in a batch's summary on ``elements``: the split indirect sums, then the direct flux."""
-    return elements.n_elements * SLOTS + 3 * elements.n_vertices
-
-
-def summariser(elements: ElementMesh) -> Callable[[FrameRecords], np.ndarray | None]:
-    """``write_batch``'s ``summarise`` for batches bucketed on ``elements``: the batch's summary
-    when it is smaller than its records (20 bytes each), else None. A fine mesh and a small batch
-    (ATRIUM's 43,000 elements: 4.2 MB of sums against 2.6 MB for 130,000 records) would store more
-    than the records and read slower than summing them, which the reader then does."""
-    size = summary_size(elements) * 4
-    return lambda records: batch_summary(records, elements) if size <= RECORD_BYTES * len(records) else None
+def summariser(elements: ElementMesh) -> Callable[[FrameRecords], np.ndarray]:
+    """``write_batch``'s ``summarise`` for batches bucketed on ``elements``."""
+    return lambda records: batch_summary(records, elements)
 
 
 @dataclass
@@ -124,7 +144,8 @@ class FrameSums:
             elements: ElementMesh, *, times: dict[str, float] | None = None) -> SummedFrame:
         """The sums of ``frame_index``'s first ``n_batches`` batches (None: every done batch),
         split by parity (``n_parity`` 2) or not (1); ``times`` gets ``read_s`` (summaries or
-        records read) and ``frame_sums_s`` (records summed where no summary was stored)."""
+        records read) and ``frame_sums_s`` (records summed: kinds other than indirect, or a
+        damaged summary in a store that keeps records)."""
         src = store.source_frame(frame_index)
         chosen = store.done_batches(src) if n_batches is None else list(range(n_batches))
         if not chosen:
@@ -150,7 +171,7 @@ class FrameSums:
         clock = StageClock(times)
         if kind == "indirect":
             entry = self._summary(store, src, batch, elements, int(info["photons_emitted"]), clock)
-        else:  # no summary holds other kinds (benchmarks and tests ask for them)
+        else:  # no summary holds other kinds (benchmarks and tests ask for them, with records)
             records = store.read_frame(src, batches=[batch])
             clock.lap("read_s")
             entry = SummedFrame(element_sums_cl([records], kind=kind, split_parity=True)[0], None,
@@ -164,18 +185,24 @@ class FrameSums:
 
     @staticmethod
     def _summary(store, src: int, batch: int, elements, photons_emitted: int, clock: StageClock) -> SummedFrame:
-        """A batch's indirect sums and direct flux: its stored summary, else summed from its records."""
-        summary = store.read_summary(src, batch)
-        if summary is not None and summary.size != summary_size(elements):
-            summary = None  # made on another element mesh: the store's identity check missed it
-        if summary is None:
-            records = store.read_frame(src, batches=[batch])
-            clock.lap("read_s")
-            summary = batch_summary(records, elements)
-            clock.lap("frame_sums_s")
-        else:
-            clock.lap("read_s")
-        return SummedFrame(*working_form(summary, elements), photons_emitted)
+        """A batch's indirect sums and direct flux: its stored summary; if that is damaged, summed
+        from its records where the store keeps them."""
+        found = store.read_summary(src, batch)
+        if found is not None:
+            try:
+                parts = decode(found, elements)
+                clock.lap("read_s")
+                return SummedFrame(*parts, photons_emitted)
+            except ValueError:
+                pass  # made on another element mesh, or damaged past its digest: the records decide
+        if not store.keep_records:
+            raise LoomError(f"frame {src} batch {batch}: batch sums missing or damaged and no hit records kept; "
+                            "delete the photon store to trace its photons again", path=store.url)
+        records = store.read_frame(src, batches=[batch])
+        clock.lap("read_s")
+        parts = decode(batch_summary(records, elements), elements)
+        clock.lap("frame_sums_s")
+        return SummedFrame(*parts, photons_emitted)
 
     def _put(self, key, entry: SummedFrame) -> None:
         old = self._entries.pop(key, None)

@@ -161,6 +161,7 @@ class SegmentRun:
         self.store = PhotonStore.open(job.store_url, mode="r+", scene_hash=job.scene_hash,
                                       config_hash=self.config.photon_hash(job.element_size), seed=self.config.seed)
         self.times = {"shoot_s": 0.0, "aqm_s": 0.0, "temporal_s": 0.0}
+        self.io_bytes: dict[str, int] = {}  # what the tasks read and wrote (store.counting_io)
         self.batches_traced = 0
         self._index = None  # the segment being decided, for progress lines
         self._windows_at_k: dict = {}  # Fig. 5 at K of the segment being decided (its last d_AQM step)
@@ -184,9 +185,12 @@ class SegmentRun:
         return sorted(self.client.scheduler_info().get("workers", {})) if self.client is not None else []
 
     def add_times(self, result: dict, keys: Iterable[str]) -> None:
-        """Sum a task's own timings (seconds of work, whichever worker did it) into this segment's."""
+        """Sum a task's own timings (seconds of work, whichever worker did it) into this segment's,
+        and its byte counts (keys ending ``_bytes``) into ``io_bytes``."""
         for k in keys:
-            if k in result:
+            if k.endswith("_bytes") and k in result:
+                self.io_bytes[k] = self.io_bytes.get(k, 0) + int(result[k])
+            elif k in result:
                 self.times[f"task_{k}"] = self.times.get(f"task_{k}", 0.0) + float(result[k])
 
     # --- photons ---------------------------------------------------------------------------
@@ -215,7 +219,8 @@ class SegmentRun:
             results = run_tasks(self.client, shoot_task, calls, desc="shoot", progress=False,
                                 group=group_sizes(len(calls), len(self.workers()), SHOOT_GROUP))
         for r in results.values():
-            self.add_times(r, ("pose_s", "trace_s", "write_s", "sums_s"))
+            self.add_times({**r, **{f"shoot_{k}": r[k] for k in ("read_bytes", "write_bytes") if k in r}},
+                           ("pose_s", "trace_s", "write_s", "sums_s", "shoot_read_bytes", "shoot_write_bytes"))
         self.batches_traced += len(calls)
         self.times["shoot_s"] += time.perf_counter() - t0
 
@@ -651,6 +656,7 @@ def segment_task(job: dict, index: int, force: bool = False) -> dict:
         rec.status = "done"
         rec.times_s.update({"frames_s": time.perf_counter() - t0, "reconstruct_s": t1 - t0,
                             "composite_s": time.perf_counter() - t1, **{k: round(v, 4) for k, v in run.times.items()}})
+        rec.io_bytes = dict(run.io_bytes)
         write_record(job.out_dir, rec)
         return {"record": rec.to_dict(), "rays": {str(f): r["rays"] for f, r in written.items()},
                 "batches": run.batches_traced,

@@ -25,6 +25,8 @@ from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
+import numpy as np
+
 from .cluster import connect
 from .config import RenderConfig, stable_digest
 from .errors import LoomError
@@ -85,10 +87,11 @@ def prepare_job(scene_path: str | Path, *, frames: str | None, out_dir: str | Pa
                 settings: RenderSettings = RenderSettings(), n_photons: int | None = None,
                 store_url: str | None = None, camera: str | None = None,
                 config: RenderConfig = RenderConfig(), temporal: str = "adaptive", fmax: int | None = None,
-                light: str = "auto") -> Job:
+                light: str = "auto", keep_records: bool = False) -> Job:
     """Check every input (one-line LoomErrors, before anything is written), then create the output
-    folder, the photon store and its illumination arrays (only the client creates arrays: zarr 3
-    has no locks) and return the coordinator's Job (pipeline/coordinator.py)."""
+    folder, the photon store (with the raw hit records if ``keep_records``) and its illumination
+    arrays (only the client creates arrays: zarr 3 has no locks) and return the coordinator's Job
+    (pipeline/coordinator.py)."""
     from workers.scene_cache import keep_scene
 
     from .coordinator import Job
@@ -113,7 +116,7 @@ def prepare_job(scene_path: str | Path, *, frames: str | None, out_dir: str | Pa
             raise LoomError("--photons auto collects photons adaptively (§5.2); use --photons N for "
                             f"--temporal {temporal}", field="--temporal")
 
-    _create_outputs(out, store_url, p)
+    _create_outputs(out, store_url, p, keep_records)
     photon_hash = config.photon_hash(p.elements.element_size)
     look = dict(scene_hash=scene.scene_hash, camera=cam_name, seed=config.seed, photon_hash=photon_hash,
                 width=settings.width, height=settings.height, spp=settings.spp,
@@ -141,7 +144,7 @@ def prepare_job(scene_path: str | Path, *, frames: str | None, out_dir: str | Pa
                single_state=len(set(p.sources[f] for f in p.frames)) == 1 and guided)
 
 
-def _create_outputs(out: Path, store_url: str, p) -> None:
+def _create_outputs(out: Path, store_url: str, p, keep_records: bool) -> None:
     """The output folder, the photon store and its illumination arrays; an OSError (``--out`` under
     /proc, a full disk) is a one-line LoomError, and what this call made is removed again."""
     import shutil
@@ -154,7 +157,7 @@ def _create_outputs(out: Path, store_url: str, p) -> None:
     made = [path for path in (out, store_path if local_store else None) if path is not None and not path.exists()]
     try:
         out.mkdir(parents=True, exist_ok=True)
-        open_store(p, store_url)
+        open_store(p, store_url, keep_records=keep_records)
         IlluminationMaps.create(store_url, n_frames=p.scene.timeline.frames, n_vertices=p.elements.n_vertices)
     except OSError as err:
         for path in reversed(made):
@@ -168,7 +171,7 @@ def render(scene_path: str | Path, *, frames: str | None, out_dir: str | Path,
            config: RenderConfig = RenderConfig(), scheduler: str = "local", workers: int | None = None,
            progress: bool = True, temporal: str = "adaptive", fmax: int | None = None,
            segment: int | None = None, echo: Callable[[str], None] | None = None, performance_report: str | None = None,
-           light: str = "auto") -> dict:
+           light: str = "auto", keep_records: bool = False) -> dict:
     """Render ``frames`` of a scene into ``out_dir``; returns the report (also ``report.json``).
 
     ``n_photons`` None (``--photons auto``): the segment coordinator chooses N_frame and F_max per
@@ -176,6 +179,7 @@ def render(scene_path: str | Path, *, frames: str | None, out_dir: str | Path,
     keeps them fixed for every frame (``--photons N --fmax F``), with ``temporal`` adaptive, fixed
     or off. ``segment`` redoes one segment and the frames that depend on it. ``echo`` gets progress
     lines (and the Dask dashboard link); ``performance_report`` an HTML file for Dask's report.
+    ``keep_records`` also stores every photon hit (a render reads only the counts and sums).
     """
     from .coordinator import coordinate, reprocess
 
@@ -208,7 +212,7 @@ def render(scene_path: str | Path, *, frames: str | None, out_dir: str | Path,
         with connect(scheduler, workers, performance_report=performance_report, echo=echo) as client:
             job = prepare_job(scene_path, frames=frames, out_dir=out_dir, settings=settings, n_photons=n_photons,
                               store_url=store_url, camera=camera, config=config, temporal=temporal, fmax=fmax,
-                              light=light)
+                              light=light, keep_records=keep_records)
             if segment is not None:
                 report_segment(*reprocess(job, client, segment))
                 from .segment_records import read_records
@@ -250,7 +254,8 @@ def finish(job: Job, records: list[SegmentRecord], *, rays: dict, batches: int, 
         "photons": "auto" if job.n_photons is None else job.n_photons,
         "segments": [{"index": r.index, "frames": [r.start, r.end], "k": r.k, "fmax": r.fmax,
                       "n_frame": r.n_frame, "d_aqm": r.d_aqm, "capped": r.capped} for r in records],
-        "store": job.store_url, "video": str(video), "render_hash": job.render_hash,
+        "store": job.store_url, "store_size": store_size(job.store_url), "video": str(video),
+        "render_hash": job.render_hash,
         "photon_batches_traced": batches, "times_s": {},
         "rays": {k: sum(r[k] for r in rays.values()) for k in RAY_KINDS},
         "rays_per_frame": {str(f): rays[f] for f in sorted(rays)},
@@ -279,6 +284,31 @@ def finish(job: Job, records: list[SegmentRecord], *, rays: dict, batches: int, 
     write_report(out, parts)
     _remove_leftovers(out, job.store_url)
     return report
+
+
+def store_size(store_url: str) -> dict:
+    """The photon store's bytes on disk by part (pipeline/store disk_usage; None for a remote
+    store), the photons its batches hold and the bytes a photon costs: the render's last lines and
+    the report say them."""
+    from .store import PhotonStore, disk_usage
+
+    store = PhotonStore.open(store_url)
+    traced = np.unique(store.source_frames())
+    photons = int(store.emitted()[traced].sum())
+    parts = disk_usage(store_url)
+    return {"photons": photons, "keep_records": store.keep_records, "bytes": parts,
+            "bytes_per_photon": None if parts is None or not photons else
+            (parts["photons"] + parts["records"]) / photons}
+
+
+def store_size_line(size: dict) -> str:
+    """One line of :func:`store_size`: what the store holds and what a photon costs."""
+    parts = size["bytes"]
+    if parts is None or not size["photons"]:
+        return f"photon store: {size['photons']:,} photons"
+    kept = f", hit records {parts['records'] / 1e6:,.1f} MB" if size["keep_records"] else " (no hit records)"
+    return (f"photon store {(parts['photons'] + parts['records']) / 1e6:,.1f} MB for {size['photons']:,} photons, "
+            f"{size['bytes_per_photon']:.2f} bytes a photon{kept}; illumination maps {parts['maps'] / 1e6:,.1f} MB")
 
 
 def _skipped(job, scene, rays: dict | None, segments_done: list) -> dict:

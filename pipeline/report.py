@@ -265,21 +265,27 @@ def _fig6_plot(out: Path, records: list[SegmentRecord], config: dict) -> str:
 
 def _costs(report: dict, records: list[SegmentRecord]) -> str:
     from .benchmarks.render import ROWS, stage_table
+    from .render import store_size_line
 
     selection = set(report.get("frames", []))
-    head = ["", "frames"] + [f"{row} (s/frame)" for row in ROWS]
+    head = ["", "frames"] + [f"{row} (s/frame)" for row in ROWS] + ["read (MB/frame)", "written (MB/frame)"]
     rows = []
     for label, recs in [(f"segment {r.index}", [r]) for r in records] + [("all", records)]:
         n = sum(1 for r in recs for f in range(r.start, r.end + 1) if f in selection)
         if not n:
-            rows.append([label, 0] + ["-"] * len(ROWS))
+            rows.append([label, 0] + ["-"] * (len(ROWS) + 2))
             continue
-        wall = stage_table(recs)["wall"]
-        rows.append([label, n] + [f"{wall[row] / n:.4f}" for row in ROWS])
+        table = stage_table(recs)
+        rows.append([label, n] + [f"{table['wall'][row] / n:.4f}" for row in ROWS]
+                    + [f"{table['bytes'][k] / n / 1e6:.3f}" for k in ("read", "written")])
+    size = report.get("store_size")
     note = ("<p class=\"muted\">Wall-clock seconds of each stage, as the segment records hold them from the "
             "run that did the segment, divided by its frames (stage split as in <code>loom bench render</code>). "
             "Steps 1-3 of segment i + 1 run in segment i's task (§5.2) and their photon tracing and AQM count "
-            "there; a segment redone in part (frames found done) shows what that run spent.</p>")
+            "there; a segment redone in part (frames found done) shows what that run spent. The I/O row's bytes: "
+            "the photon store's per-batch counts and sums (and hit records, if kept) its tasks wrote and read, and "
+            "the illumination maps written.</p>"
+            + ("" if size is None else f"<p>{html.escape(store_size_line(size))}.</p>"))
     return _table(head, rows, left=1, cls="table2") + note + _img(_per_frame_plot(report, records), "frame-plot",
                                                                  "Per frame: compositing seconds, photons traced "
                                                                  "and mean collection window")

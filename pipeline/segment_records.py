@@ -47,6 +47,9 @@ class SegmentRecord:
     windows_at_k: dict = field(default_factory=dict)  # Fig. 5 at K's last d_AQM (coordinator.window_histogram)
     frames: dict = field(default_factory=dict)  # str(frame) -> {adaptation, digest, filtered, window}
     times_s: dict = field(default_factory=dict)
+    # bytes its tasks read and wrote through the store, by task kind (pipeline/store counting_io):
+    # like the times, they depend on which worker's caches held what
+    io_bytes: dict = field(default_factory=dict)
 
     def targets(self) -> dict[int, int]:
         """Photons each frame of the segment traces (pipeline/segments.photon_targets)."""
@@ -64,9 +67,10 @@ class SegmentRecord:
         return asdict(self)
 
     def without_times(self) -> dict:
-        """The record as data, minus what a clock decides (for determinism checks)."""
+        """The record as data, minus what a clock or a worker's caches decide (for determinism checks)."""
         d = self.to_dict()
         d.pop("times_s")
+        d.pop("io_bytes")
         return d
 
     @classmethod

@@ -53,13 +53,14 @@ def plan(scene: Scene, frames_spec: str | None, n_photons: int, config: RenderCo
     return ShootPlan(scene, elements, frames, sources, config, n_photons)
 
 
-def open_store(p: ShootPlan, url: str) -> PhotonStore:
-    """Create (or reopen, refusing another scene or config) the run's store and record sharing."""
+def open_store(p: ShootPlan, url: str, *, keep_records: bool) -> PhotonStore:
+    """Create (or reopen, refusing another scene, config or ``keep_records``) the run's store and
+    record sharing."""
     tl = p.scene.timeline
     store = PhotonStore.create(
         url, n_frames=tl.frames, n_elements=p.elements.n_elements, frame_numbers=tl.all_frames(),
         scene_hash=p.scene.scene_hash, config_hash=p.config.photon_hash(p.elements.element_size),
-        seed=p.config.seed)
+        seed=p.config.seed, keep_records=keep_records)
     for f in p.frames:
         src = p.sources[f]
         if src != f and store.source_frame(f - 1) != src - 1:
@@ -92,9 +93,10 @@ def tasks(p: ShootPlan, store: PhotonStore, url: str) -> list[tuple[str, dict]]:
 
 def shoot(scene_path: str, *, frames: str | None, n_photons: int, store_url: str,
           config: RenderConfig = RenderConfig(), scheduler: str = "local", workers: int | None = None,
-          progress: bool = True, light: str = "auto") -> dict:
+          progress: bool = True, light: str = "auto", keep_records: bool = False) -> dict:
     """Trace every requested frame's photons into the store; returns a summary of the run.
-    ``light`` none refuses a file without light instead of lighting it by default."""
+    ``light`` none refuses a file without light instead of lighting it by default;
+    ``keep_records`` stores the raw hit records beside the counts and sums."""
     from workers.photons import shoot_task
 
     scene = Scene.load(scene_path, light=light)
@@ -104,7 +106,7 @@ def shoot(scene_path: str, *, frames: str | None, n_photons: int, store_url: str
     # The cluster is up before the store is created: a scheduler that cannot start or be reached
     # leaves no empty store behind
     with connect(scheduler, workers) as client:
-        store = open_store(p, store_url)
+        store = open_store(p, store_url, keep_records=keep_records)
         todo = tasks(p, store, store_url)
         results = run_tasks(client, shoot_task, todo, desc="shoot", progress=progress) if todo else {}
     remove_partials(store_url)  # every batch is written: what killed writers left can go

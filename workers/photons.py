@@ -165,14 +165,15 @@ def _range_window(state: FrameState, table, emitter: np.ndarray, dist: np.ndarra
 def shoot_task(*, store_url: str, scene_path: str, scene_hash: str, element_size: float,
                frame: int, frame_index: int, batch: int, n_photons: int, photon_start: int,
                seed: int, max_depth: int) -> dict:
-    """Dask task: trace (frame, batch) and write it to the photon store; skip it if done.
+    """Dask task: trace (frame, batch) and write its counts and sums (and its records, if the store
+    keeps them) to the photon store; skip it if done.
 
     Plain arguments in, a small dict of counters out; runs the same with or without a cluster.
     """
     import time
 
     from pipeline.batch_sums import summariser
-    from pipeline.store import PhotonStore
+    from pipeline.store import PhotonStore, counting_io
 
     from .scene_cache import load_elements, load_scene
 
@@ -195,9 +196,11 @@ def shoot_task(*, store_url: str, scene_path: str, scene_hash: str, element_size
         summed[0] += time.perf_counter() - t
         return out
 
-    store.write_batch(frame_index, batch, key=result.key, bary=result.bary, energy=result.energy,
-                      photons_emitted=n_photons, photon_start=photon_start, summarise=summarise)
+    with counting_io() as io:
+        store.write_batch(frame_index, batch, key=result.key, bary=result.bary, energy=result.energy,
+                          photons_emitted=n_photons, photon_start=photon_start, summarise=summarise)
     t3 = time.perf_counter()
     return {"frame": frame, "batch": batch, "skipped": False, "photons": n_photons,
             "records": len(result.key), "rays": result.rays_cast, "capped": result.stats["capped"],
-            "pose_s": t1 - t0, "trace_s": t2 - t1, "write_s": t3 - t2 - summed[0], "sums_s": summed[0]}
+            "pose_s": t1 - t0, "trace_s": t2 - t1, "write_s": t3 - t2 - summed[0], "sums_s": summed[0],
+            "write_bytes": io["write_bytes"], "read_bytes": io["read_bytes"]}

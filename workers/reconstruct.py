@@ -249,7 +249,7 @@ def reconstruct_task(*, store_url: str, scene_path: str, scene_hash: str, camera
     import time
 
     from pipeline.config import RenderConfig
-    from pipeline.store import PhotonStore
+    from pipeline.store import PhotonStore, counting_io
     from pipeline.store.illumination import IlluminationMaps
     from pipeline.temporal import illumination_maps
 
@@ -264,22 +264,23 @@ def reconstruct_task(*, store_url: str, scene_path: str, scene_hash: str, camera
     use = np.asarray(batches, np.int64)
     out = {}
     times = {"setup_s": time.perf_counter() - t0, "adapt_s": 0.0, "map_write_s": 0.0}
-    # The direct estimate comes from the records the gather holds (no second read of them)
-    for lit in illumination_maps(store, elements, scene, [f - 1 for f in frames], mode=mode, fmax=fmax, config=cfg,
-                                 spatial_filter=cfg.spatial_filter, batches=use, chunk=len(frames),
-                                 with_direct=True, times=times):
-        f = lit.frame_index + 1
-        t1 = time.perf_counter()
-        geometry = frame_geometry(scene, elements, f)  # posed once, by the gather
-        indirect, direct = lit.irradiance, lit.direct
-        adaptation = mesh_adaptation(geometry.state, elements, indirect + direct, aspect, geometry)
-        t2 = time.perf_counter()
-        maps.write_frame(lit.frame_index, indirect=indirect, direct=direct, adaptation=adaptation)
-        times["adapt_s"] += t2 - t1
-        times["map_write_s"] += time.perf_counter() - t2
-        out[str(f)] = {"adaptation": adaptation, "digest": map_digest(indirect),
-                       "photons": store.photons_in(lit.frame_index, int(use[lit.frame_index])),
-                       "filtered": 0 if lit.rings is None else int(np.count_nonzero(lit.rings)),
-                       "window": float(np.mean(lit.back.astype(np.int64) + lit.fwd + 1))}
+    # The direct estimate comes from the batch sums the gather holds (no second read of them)
+    with counting_io() as io:  # the sums and counts read, the maps written
+        for lit in illumination_maps(store, elements, scene, [f - 1 for f in frames], mode=mode, fmax=fmax,
+                                     config=cfg, spatial_filter=cfg.spatial_filter, batches=use,
+                                     chunk=len(frames), with_direct=True, times=times):
+            f = lit.frame_index + 1
+            t1 = time.perf_counter()
+            geometry = frame_geometry(scene, elements, f)  # posed once, by the gather
+            indirect, direct = lit.irradiance, lit.direct
+            adaptation = mesh_adaptation(geometry.state, elements, indirect + direct, aspect, geometry)
+            t2 = time.perf_counter()
+            maps.write_frame(lit.frame_index, indirect=indirect, direct=direct, adaptation=adaptation)
+            times["adapt_s"] += t2 - t1
+            times["map_write_s"] += time.perf_counter() - t2
+            out[str(f)] = {"adaptation": adaptation, "digest": map_digest(indirect),
+                           "photons": store.photons_in(lit.frame_index, int(use[lit.frame_index])),
+                           "filtered": 0 if lit.rings is None else int(np.count_nonzero(lit.rings)),
+                           "window": float(np.mean(lit.back.astype(np.int64) + lit.fwd + 1))}
     return {"frames": out, "seconds": time.perf_counter() - t0,
-            "times": {f"reconstruct_{k}": v for k, v in times.items()}}
+            "times": {f"reconstruct_{k}": v for k, v in {**times, **io}.items()}}

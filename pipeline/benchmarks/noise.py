@@ -126,7 +126,7 @@ def run(photons: Iterable[int] = (10_000, 20_000, 40_000, 80_000), *, fmax: int 
         for n in sorted(photons):
             t0 = time.perf_counter()
             shoot(str(path), frames=f"{K - half}-{K + half}", n_photons=int(n), store_url=url, config=config,
-                  scheduler=scheduler, workers=workers, progress=False)
+                  scheduler=scheduler, workers=workers, progress=False, keep_records=True)  # direct from records
             pstore = PhotonStore.open(url)
             if pstore.photons_emitted(index) != n:
                 raise LoomError(f"holds {pstore.photons_emitted(index):,} photons for frame {K}, more than "

@@ -85,7 +85,18 @@ def stage_table(records: Iterable[SegmentRecord]) -> dict:
             "ray tracing": composite_core}
     for d in (wall, core):
         d["total indirect"] = sum(d[k] for k in ("photon tracing", "AQM", "temporal processing", "I/O"))
-    return {"wall": wall, "core": core, "times": t}
+    return {"wall": wall, "core": core, "times": t, "bytes": io_bytes(records)}
+
+
+def io_bytes(records: Iterable[SegmentRecord]) -> dict[str, int]:
+    """Bytes the I/O row moved (the segment records' ``io_bytes``, pipeline/store counting_io):
+    ``written`` by the shoot tasks (counts, sums, records if kept) and the reconstructions (maps),
+    ``read`` by both (the previous batch's counts; the sums and counts the windows reach)."""
+    out = {"read": 0, "written": 0}
+    for r in records:
+        for k, v in r.io_bytes.items():
+            out["read" if k.endswith("read_bytes") else "written"] += int(v)
+    return out
 
 
 def run_render(scene: Path, out: Path, *, frames: str | None, width: int, height: int, spp: int, workers: int,
@@ -103,10 +114,13 @@ def run_render(scene: Path, out: Path, *, frames: str | None, width: int, height
     segments_wall = sum(r.times_s.get("decide_s", r.times_s.get("init_s", 0.0)) + r.times_s.get("frames_s", 0.0)
                         for r in records)
     return {"wall_s": wall, "segments_wall_s": segments_wall, "frames": len(report["rendered"]),
-            "segments": report["segments"], "table": table, "report_times": report["times_s"]}
+            "segments": report["segments"], "table": table, "report_times": report["times_s"],
+            "store_size": report["store_size"]}
 
 
 def _print_table(echo: Callable[[str], None], title: str, run: dict) -> None:
+    from pipeline.render import store_size_line
+
     n = max(run["frames"], 1)
     wall, core = run["table"]["wall"], run["table"]["core"]
     total = wall["total indirect"] + wall["ray tracing"]
@@ -117,6 +131,9 @@ def _print_table(echo: Callable[[str], None], title: str, run: dict) -> None:
     echo(f"  {'stage':<22}{'s/frame':>10}{'share':>9}{'core s/frame':>14}")
     for row in ROWS:
         echo(f"  {row:<22}{wall[row] / n:>10.4f}{100 * wall[row] / total if total else 0:>8.1f}%{core[row] / n:>14.4f}")
+    moved = run["table"]["bytes"]
+    echo(f"  I/O: {moved['read'] / n / 1e6:.3f} MB read and {moved['written'] / n / 1e6:.3f} MB written a frame; "
+         + store_size_line(run["store_size"]))
 
 
 def _warm_up() -> None:

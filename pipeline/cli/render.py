@@ -15,6 +15,8 @@ from .scene import CAMERA_HELP, LIGHT_HELP
 
 _PHOTON_DEPTH = _RenderConfig().photon_depth
 _PHOTON_DEPTH_HELP = "Safety cap on photon hits (Russian roulette ends paths; pipeline/config.py)."
+_KEEP_HELP = ("Also store every photon hit (20 bytes each, the paper's record) for re-estimation and research; "
+              "a render reads only the per-batch counts and sums it always stores.")
 # What a click decorator takes and gives back: a function or a command
 _F = TypeVar("_F", bound=Callable[..., Any])
 
@@ -36,10 +38,11 @@ def scheduler_options(f: _F) -> _F:
 @click.option("--seed", type=int, default=0, show_default=True)
 @click.option("--element-size", type=float, default=None, help="Element edge bound (default: the scene's).")
 @click.option("--photon-depth", type=int, default=_PHOTON_DEPTH, show_default=True, help=_PHOTON_DEPTH_HELP)
+@click.option("--keep-records", is_flag=True, help=_KEEP_HELP)
 @click.option("--quiet", is_flag=True, help="No progress bar.")
 @click.option("--light", type=click.Choice(["auto", "none"]), default="auto", show_default=True, help=LIGHT_HELP)
 @scheduler_options
-def shoot_command(scene_file, frames, photons, store_url, seed, element_size, photon_depth, quiet,
+def shoot_command(scene_file, frames, photons, store_url, seed, element_size, photon_depth, keep_records, quiet,
                   light, scheduler, workers) -> None:
     """Trace photons for every frame of SCENE_FILE into a photon store (resumable)."""
     from pipeline.config import RenderConfig
@@ -47,7 +50,7 @@ def shoot_command(scene_file, frames, photons, store_url, seed, element_size, ph
 
     config = RenderConfig(seed=seed, element_size=element_size, photon_depth=photon_depth)
     summary = shoot(scene_file, frames=frames, n_photons=photons, store_url=store_url, config=config,
-                    scheduler=scheduler, workers=workers, progress=not quiet, light=light)
+                    scheduler=scheduler, workers=workers, progress=not quiet, light=light, keep_records=keep_records)
     click.echo(
         f"shot {summary['frames']} frames ({summary['traced_frames']} traced, {summary['shared_frames']} "
         f"sharing a traced frame's photons): {summary['tasks']} batches run, {summary['skipped']} already "
@@ -85,6 +88,7 @@ def job_options(f: _F) -> _F:
                      show_default=True, help="Temporal photon collection with --photons N: Condition (1) windows "
                      "(§5.1), always +-F_max/2 (§6), or each frame's own photons."),
         click.option("--store", "store_url", default=None, help="Photon store (default: OUT/photons.zarr)."),
+        click.option("--keep-records", is_flag=True, help=_KEEP_HELP),
         click.option("--camera", default=None, help=CAMERA_HELP),
         click.option("--seed", type=int, default=0, show_default=True),
         click.option("--reflection-depth", type=int, default=4, show_default=True,
@@ -108,7 +112,8 @@ def job_options(f: _F) -> _F:
 
 
 def job_arguments(scene_file: str, frames: str | None, out_dir: str, resolution: str, spp: int, photons: int | None,
-                  fmax: int | None, temporal: str, store_url: str | None, camera: str | None, seed: int,
+                  fmax: int | None, temporal: str, store_url: str | None, keep_records: bool, camera: str | None,
+                  seed: int,
                   reflection_depth: int, photon_depth: int, d_thr: float | None, config_file: str | None,
                   light: str = "auto", tonemap: str = "filmic", exposure: float = 0.0) -> dict:
     """The keyword arguments of pipeline.render.prepare_job / render from the job options."""
@@ -120,7 +125,8 @@ def job_arguments(scene_file: str, frames: str | None, out_dir: str, resolution:
     fields = load_config(config_file) if config_file else {}
     fields.update(seed=seed, photon_depth=photon_depth, **({} if d_thr is None else {"d_thr": d_thr}))
     return dict(scene_path=scene_file, frames=frames, out_dir=out_dir, n_photons=photons, fmax=fmax,
-                temporal=temporal, store_url=store_url, camera=camera, config=RenderConfig.from_dict(fields),
+                temporal=temporal, store_url=store_url, keep_records=keep_records, camera=camera,
+                config=RenderConfig.from_dict(fields),
                 light=light,
                 settings=RenderSettings(width=width, height=height, spp=spp, reflection_depth=reflection_depth,
                                         tonemap=ToneMapping(operator=tonemap, exposure=exposure)))
@@ -153,6 +159,9 @@ def render_command(segment, quiet, verbose, performance_report, scheduler, worke
                f"{t['total_s']:.1f} s (photons {t['shoot_s']:.1f}, AQM {t['aqm_s']:.1f}, temporal "
                f"{t['temporal_s']:.1f}, composite {t['composite_s']:.1f}, video {t['video_s']:.1f}); "
                f"{len(report['segments'])} segment(s)")
+    from pipeline.render import store_size_line
+
+    click.echo(store_size_line(report["store_size"]))
     click.echo(f"frames: {out_dir}/beauty.####.exr, .png  video: {report['video']}  "
                f"report: {out_dir}/report.json  segments: loom segments {out_dir}")
     click.echo(f"report: {out_dir}/report.html")

@@ -92,7 +92,17 @@ Modules: ``records`` (the record, validation, total order; pure NumPy), ``photon
 """
 from __future__ import annotations
 
-from .photon_store import BATCH_FIELDS, DONE_MAGIC, FORMAT, FORMAT_VERSION, RECORD_CHUNK, PhotonStore, remove_partials
+from .photon_store import (
+    BATCH_FIELDS,
+    DONE_MAGIC,
+    FORMAT,
+    FORMAT_VERSION,
+    RECORD_CHUNK,
+    PhotonStore,
+    counting_io,
+    disk_usage,
+    remove_partials,
+)
 from .records import (
                            BARY_SCALE,
                            CATEGORIES,
@@ -107,7 +117,8 @@ from .records import (
                            sort_records,
 )
 
-__all__ = ["remove_partials", "BARY_SCALE", "BATCH_FIELDS", "CATEGORIES", "DIRECT_BIT", "DONE_MAGIC", "ELEMENT_BITS",
+__all__ = ["counting_io", "disk_usage", "remove_partials",
+           "BARY_SCALE", "BATCH_FIELDS", "CATEGORIES", "DIRECT_BIT", "DONE_MAGIC", "ELEMENT_BITS",
            "ELEMENT_MASK", "FORMAT", "FORMAT_VERSION", "PARITY_BIT", "RECORD_BYTES",
            "RECORD_CHUNK", "FrameRecords", "PhotonStore", "pack_key", "records_digest",
            "sort_records"]

@@ -1,15 +1,18 @@
 """PhotonStore: the zarr v3 group of a run (layout and guarantees in ``pipeline.store``)."""
 from __future__ import annotations
 
+import hashlib
 import json
 import logging
 import os
 import re
+import threading
 import time
 import urllib.parse
 import urllib.request
 from collections import OrderedDict
-from collections.abc import Callable, Iterable
+from collections.abc import Callable, Iterable, Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass, replace
 from pathlib import Path
 
@@ -42,15 +45,16 @@ from .records import (
 
 log = logging.getLogger(__name__)
 FORMAT = "photonloom.photons"
-FORMAT_VERSION = 3  # 3: SHA-256 digest, raw done markers, lz4 counts; 2: BLAKE2b, zstd tables;
-# 1: key/bary/energy/offsets arrays
+FORMAT_VERSION = 4  # 4: every batch's sums, records only on request; 3: records always, sums optional;
+# 2: BLAKE2b, zstd tables; 1: key/bary/energy/offsets arrays
 BATCH_FIELDS = ("done_magic", "photon_start", "photons_emitted", "n_records", "digest")
 DONE_MAGIC = 0x4C4F4F4D  # "LOOM": the batch chunk is written last, so its presence means done
 RECORD_CHUNK = 1 << 20  # records per chunk of the per-batch arrays (20 MiB raw)
 RECORD_CACHE_BYTES = 192 << 20  # decoded frames an open_shared instance keeps (LRU, read-only)
-# Header of a batch summary object by the type of its values (see write_batch): "LOOMSUM4" float32,
-# "LOOMSUM1" float64 (what older stores hold; still read)
-SUMMARY_MAGIC = {np.dtype("<f8"): b"LOOMSUM1", np.dtype("<f4"): b"LOOMSUM4"}
+# Header of a batch summary object: the magic, then (u64 each) the batch digest, the word count and
+# the first 64 bits of SHA-256 over the words (what verify_batch checks); then the words, lz4 + shuffle
+SUMMARY_MAGIC = b"LOOMSUM5"
+SUMMARY_HEAD = len(SUMMARY_MAGIC) + 24
 LISTING_MARGIN_NS = 100_000_000  # a done-table listing is reused once the directory is 0.1 s old
 # Chunk keys with "." (c.f.b.0): all chunks of an array in its one directory. A new directory
 # costs about 1 ms on ext4 (a block and a journal entry) against 0.1 ms for a new file, and "/" keys
@@ -92,6 +96,11 @@ def table_codec() -> BloscCodec:
     return BloscCodec(**BATCH_CODEC)
 
 
+def _words_digest(data: bytes) -> int:
+    """The first 64 bits of SHA-256 over a summary's words: what tells a damaged summary."""
+    return int.from_bytes(hashlib.sha256(data).digest()[:8], "little")
+
+
 def _encode_rows(block: np.ndarray) -> bytes:
     """A chunk of 4-byte values (u32 or f32) as zarr's BloscCodec(**BATCH_CODEC) encodes it."""
     block = np.ascontiguousarray(block, block.dtype.newbyteorder("<"))
@@ -104,6 +113,32 @@ def _decode(data: bytes, dtype, count: int) -> np.ndarray:
     if out.shape[0] != count:
         raise ValueError(f"chunk holds {out.shape[0]} values, expected {count}")
     return out
+
+
+_IO = threading.local()  # this thread's byte counts while inside counting_io()
+
+
+@contextmanager
+def counting_io() -> Iterator[dict[str, int]]:
+    """Bytes this thread reads and writes through photon stores and illumination maps (their
+    objects, as stored) inside the block, as ``{"read_bytes", "write_bytes"}``: what a task
+    reports as its I/O. Dask runs tasks in threads, so the count is per thread; nested blocks
+    add to the outer one."""
+    outer = getattr(_IO, "counts", None)
+    _IO.counts = mine = {"read_bytes": 0, "write_bytes": 0}
+    try:
+        yield mine
+    finally:
+        _IO.counts = outer
+        if outer is not None:
+            for k, v in mine.items():
+                outer[k] += v
+
+
+def _counted(kind: str, n: int) -> None:
+    counts = getattr(_IO, "counts", None)
+    if counts is not None:
+        counts[kind] += n
 
 
 class _Raw:
@@ -125,6 +160,7 @@ class _Raw:
                         out.append(fh.read())
                 except FileNotFoundError:
                     out.append(None)
+            _counted("read_bytes", sum(len(d) for d in out if d is not None))
             return out
 
         async def fetch():
@@ -132,11 +168,14 @@ class _Raw:
             got = await asyncio.gather(*(self.store.get(k, prototype=default_buffer_prototype())
                                          for k in keys))
             return [None if g is None else g.to_bytes() for g in got]
-        return sync(fetch())
+        out = sync(fetch())
+        _counted("read_bytes", sum(len(d) for d in out if d is not None))
+        return out
 
     def set_many(self, items: list[tuple[str, bytes]], *, write_once: Iterable[str] = ()) -> None:
         """Write every (key, bytes); on a LocalStore the keys of ``write_once`` (objects nothing
         in a render reads back) go past the page cache (pipeline/store/direct_write.py)."""
+        _counted("write_bytes", sum(len(v) for _, v in items))
         if self.root is not None:
             direct = frozenset(write_once)
             for key, data in items:
@@ -200,7 +239,7 @@ class _Prepared:
     batch: int
     records: SortedBatch
     row: np.ndarray  # u64 (5,) in BATCH_FIELDS order
-    summary: np.ndarray | None = None  # little-endian f4 or f8, stored with the records (write_batch's summarise)
+    summary: np.ndarray | None = None  # little-endian u32 words (write_batch's summarise)
 
 
 def make_store(url: str | os.PathLike[str], read_only: bool) -> LocalStore | FsspecStore:
@@ -262,8 +301,14 @@ def _check_identity(attrs: dict, expected: dict, where: str) -> None:
     if attrs.get("format") != FORMAT:
         raise LoomError("is a zarr group but not a photon store (no format attribute)", path=where)
     if attrs.get("format_version") != FORMAT_VERSION:
-        raise LoomError(f"store format version {attrs.get('format_version')!r}, this photonloom "
-                        f"reads version {FORMAT_VERSION}", path=where)
+        raise LoomError(f"photon store of format version {attrs.get('format_version')!r}; this photonloom reads "
+                        f"version {FORMAT_VERSION}: delete it (its photons are traced again) or render into "
+                        "another --out", path=where)
+    want = expected.get("keep_records")
+    if want is not None and attrs.get("keep_records") != want:
+        raise LoomError(("keeps hit records: render it again with --keep-records, or into another --out" if
+                         attrs.get("keep_records") else "holds no hit records (made without --keep-records): "
+                         "render into another --out to keep them"), path=where, field="keep_records")
     for name, want in expected.items():
         if want is not None and attrs.get(name) != want:
             raise LoomError(f"store was made with {name}={attrs.get(name)!r}, not {want!r}; "
@@ -283,6 +328,7 @@ class PhotonStore:
         self.scene_hash: str = attrs["scene_hash"]
         self.config_hash: str = attrs["config_hash"]
         self.seed: int = attrs["seed"]
+        self.keep_records: bool = bool(attrs["keep_records"])  # raw hit records beside the sums
         try:
             self._batch, self._counts, self._source = (root[n] for n in ("batch", "counts", "source"))
         except KeyError as err:
@@ -310,10 +356,13 @@ class PhotonStore:
     # --- making and opening ---------------------------------------------------------------
     @classmethod
     def create(cls, url: str | os.PathLike[str], *, n_frames: int, n_elements: int, frame_numbers: Iterable[int],
-               scene_hash: str, config_hash: str, seed: int, max_batches: int = 16) -> PhotonStore:
+               scene_hash: str, config_hash: str, seed: int, keep_records: bool,
+               max_batches: int = 16) -> PhotonStore:
         """Make the group and every fixed-size array; on an existing identical store, open it.
 
         Only the coordinator calls this. A store made with other identity attributes is refused.
+        ``keep_records``: store every batch's raw hit records (20 bytes each) beside its sums, for
+        re-estimation and research; without them a batch is its counts and sums alone.
         """
         where = os.fspath(url)
         n_frames = as_int(n_frames, "n_frames", where, 1)
@@ -326,7 +375,9 @@ class PhotonStore:
         for name, value in (("scene_hash", scene_hash), ("config_hash", config_hash)):
             if not isinstance(value, str) or not value:
                 raise LoomError(f"{name} must be a non-empty string", path=where)
-        identity = dict(scene_hash=scene_hash, config_hash=config_hash, seed=seed,
+        if not isinstance(keep_records, bool):
+            raise TypeError(f"keep_records must be a bool, not {keep_records!r}")  # a caller's bug
+        identity = dict(scene_hash=scene_hash, config_hash=config_hash, seed=seed, keep_records=keep_records,
                         n_frames=n_frames, n_elements=n_elements, frame_numbers=frame_numbers,
                         max_batches=max_batches)
         try:
@@ -377,7 +428,7 @@ class PhotonStore:
 
     @classmethod
     def open(cls, url: str | os.PathLike[str], *, scene_hash: str | None = None, config_hash: str | None = None,
-             seed: int | None = None, mode: str = "r") -> PhotonStore:
+             seed: int | None = None, keep_records: bool | None = None, mode: str = "r") -> PhotonStore:
         """Open an existing store, refusing one made with another scene, config or seed."""
         where = os.fspath(url)
         if mode not in ("r", "r+"):
@@ -390,7 +441,7 @@ class PhotonStore:
         if root is None:
             raise LoomError("no photon store here", path=where)
         _check_identity(dict(root.attrs), dict(scene_hash=scene_hash, config_hash=config_hash,
-                                               seed=seed), where)
+                                               seed=seed, keep_records=keep_records), where)
         if not root.attrs.get("complete"):
             raise LoomError("photon store creation was interrupted; run create again", path=where)
         return cls(root, where, mode)
@@ -584,15 +635,17 @@ class PhotonStore:
 
     def write_batch(self, frame_index: int, batch: int, *, key: npt.ArrayLike, bary: npt.ArrayLike,
                     energy: npt.ArrayLike, photons_emitted: int, photon_start: int,
-                    summarise: Callable[[FrameRecords], np.ndarray | None] | None = None) -> bool:
+                    summarise: Callable[[FrameRecords], np.ndarray] | None = None) -> bool:
         """Sort and write one batch, done marker last. Returns False if it was already done.
 
         Rerunning a batch rewrites identical bytes; a done batch is only compared by digest and
         a different one is refused (non-deterministic tracer). Batch b needs b-1 done.
-        ``summarise``: float32 or float64 values derived from the sorted records (as
-        :meth:`read_frame` gives them back), stored beside them, in their type, before the done
-        marker (:meth:`read_summary`); None stores no summary.
+        ``summarise``: u32 words derived from the sorted records (as :meth:`read_frame` gives them
+        back), stored before the done marker (:meth:`read_summary`): what a render reads of the
+        batch. Only a store that keeps records may go without.
         """
+        if summarise is None and not self.keep_records:
+            raise ValueError("a store without records needs the batch's summary (summarise)")  # a caller's bug
         prepared = self._prepare(frame_index, batch, key, bary, energy, photons_emitted,
                                  photon_start)
         done = self.batch_info(prepared.frame, prepared.batch)
@@ -606,13 +659,10 @@ class PhotonStore:
             mine = FrameRecords.merge(prepared.frame, prepared.frame, (prepared.batch,),
                                       [unpack_records(prepared.records.packed(), self.n_elements)],
                                       self.n_elements, int(prepared.row[2]))
-            summary = summarise(mine)
-            if summary is not None:
-                summary = np.asarray(summary)
-                stored = summary.dtype.newbyteorder("<")
-                if stored not in SUMMARY_MAGIC:
-                    raise TypeError(f"a batch summary holds float32 or float64 values, not {summary.dtype}")
-                prepared = replace(prepared, summary=np.ascontiguousarray(summary, stored))
+            summary = np.asarray(summarise(mine))
+            if summary.dtype != np.uint32 or summary.ndim != 1:
+                raise TypeError(f"a batch summary is 1-D u32 words, not {summary.dtype} {summary.shape}")
+            prepared = replace(prepared, summary=np.ascontiguousarray(summary, "<u4"))
         self._write_payload(prepared)
         self._mark_done(prepared)
         return True
@@ -645,35 +695,37 @@ class PhotonStore:
         return _Prepared(f, b, records, row)
 
     def _write_payload(self, p: _Prepared) -> None:
-        """Records and running counts of one batch; everything but the done marker.
+        """Running counts, summary and (if the store keeps them) records of one batch: everything
+        but the done marker.
 
         The records are one (5, n) u32 zarr array at ``frames/<f>/<b>``, its metadata and chunks
         written as whole objects (no zarr call): identical bytes on a rerun, written over
         identical objects, and nothing is ever deleted, so a duplicate task cannot expose a done
         batch with missing chunks. zarr reads the array as any other.
         """
-        base, rec = f"frames/{p.frame}/{p.batch}", p.records
-        n = len(rec)
-        rows = max(1, min(n, RECORD_CHUNK))
-        block = rec.packed()
-        running = rec.counts
+        running = p.records.counts
         if p.batch > 0:
             running = running + self._count_chunks([(p.frame, p.batch - 1)])[0]
         if running.size and running.max() > np.iinfo(np.uint32).max:
             raise LoomError("per-element hit count overflows u32", path=self.url)
-        items = [(f"{base}/c.0.{i}", _encode_rows(self._chunk(block, i * rows, rows)))
-                 for i in range(max(1, -(-n // rows)))]
-        # Only the records' chunks skip the page cache: a render reads the batch's summary, not
-        # its records, when it has one; without one the reconstruction will read them back soon
-        bulk = [k for k, _ in items] if p.summary is not None else []
-        items.append((f"{base}/zarr.json", _batch_metadata(n, rows)))
-        if p.batch == 0:  # the frame's group, as zarr writes it (bytes equal to require_group's)
-            items.append((f"frames/{p.frame}/zarr.json", _GROUP_METADATA))
+        items, bulk = [], []
+        if self.keep_records:
+            base, n = f"frames/{p.frame}/{p.batch}", len(p.records)
+            rows = max(1, min(n, RECORD_CHUNK))
+            block = p.records.packed()
+            items = [(f"{base}/c.0.{i}", _encode_rows(self._chunk(block, i * rows, rows)))
+                     for i in range(max(1, -(-n // rows)))]
+            # Only the records' chunks skip the page cache: a render reads the batch's summary
+            bulk = [k for k, _ in items]
+            items.append((f"{base}/zarr.json", _batch_metadata(n, rows)))
+            if p.batch == 0:  # the frame's group, as zarr writes it (bytes equal to require_group's)
+                items.append((f"frames/{p.frame}/zarr.json", _GROUP_METADATA))
         items.append((self._count_key(p.frame, p.batch), _encode_rows(running.astype(np.uint32))))
         if p.summary is not None:
-            items.append((self._summary_key(p.frame, p.batch), SUMMARY_MAGIC[p.summary.dtype] + np.array(
-                [int(p.row[4]), p.summary.size], "<u8").tobytes() + numcodecs.blosc.compress(
-                p.summary.tobytes(), b"lz4", 5, numcodecs.blosc.SHUFFLE, 0, p.summary.itemsize)))
+            words = p.summary.tobytes()
+            items.append((self._summary_key(p.frame, p.batch), SUMMARY_MAGIC + np.array(
+                [int(p.row[4]), p.summary.size, _words_digest(words)], "<u8").tobytes() + numcodecs.blosc.compress(
+                words, b"lz4", 5, numcodecs.blosc.SHUFFLE, 0, 4)))
         self._raw.set_many(items, write_once=bulk)
 
     @staticmethod
@@ -681,10 +733,9 @@ class PhotonStore:
         return f"summaries/c.{frame}.{batch}"
 
     def read_summary(self, frame_index: int, batch: int) -> np.ndarray | None:
-        """The summary a done batch's writer stored (``write_batch(summarise=...)``), float32 or
-        float64 as written, or None when there is none, it belongs to other records (digest) or
-        it is damaged (a warning): the caller then derives it from the records, which stay the
-        store's truth."""
+        """The u32 words of the summary a done batch's writer stored
+        (``write_batch(summarise=...)``), or None when the batch is not done, has none, or its
+        summary belongs to other records (digest) or is damaged (its own digest; a warning)."""
         f = self.source_frame(frame_index)
         info = self.batch_info(f, batch)
         if info is None:
@@ -692,19 +743,19 @@ class PhotonStore:
         (data,) = self._raw.get_many([self._summary_key(f, int(batch))])
         if data is None:
             return None
-        kind, magic = next(((t, m) for t, m in SUMMARY_MAGIC.items() if data.startswith(m)), (None, b""))
-        head = len(magic) + 16  # the magic, the digest and the value count
-        try:
-            digest, n = (int(v) for v in np.frombuffer(data[len(magic):head], "<u8"))
-            values = np.frombuffer(numcodecs.blosc.decompress(data[head:]), kind) \
-                if kind is not None and digest == info["digest"] else None
-        except (ValueError, RuntimeError):
-            values = None
-        if values is None or values.size != n or not np.isfinite(values).all():
-            log.warning("%s: frame %d batch %d: damaged or foreign batch summary ignored (the records are "
-                        "summed instead)", self.url, f, int(batch))
+        words = None
+        if data.startswith(SUMMARY_MAGIC) and len(data) >= SUMMARY_HEAD:
+            digest, n, check = (int(v) for v in np.frombuffer(data[len(SUMMARY_MAGIC):SUMMARY_HEAD], "<u8"))
+            try:
+                raw = numcodecs.blosc.decompress(data[SUMMARY_HEAD:])
+            except (ValueError, RuntimeError):
+                raw = b""
+            if digest == info["digest"] and len(raw) == 4 * n and _words_digest(raw) == check:
+                words = np.frombuffer(raw, "<u4")
+        if words is None:
+            log.warning("%s: frame %d batch %d: damaged or foreign batch summary ignored", self.url, f, int(batch))
             return None
-        return values
+        return words
 
     @staticmethod
     def _count_key(frame: int, batch: int) -> str:
@@ -759,8 +810,15 @@ class PhotonStore:
         self._source_cache = None
 
     # --- reading --------------------------------------------------------------------------
+    def _records_kept(self) -> None:
+        if not self.keep_records:
+            raise LoomError("holds no hit records (made without --keep-records): render with --keep-records "
+                            "to read them", path=self.url)
+
     def read_frame(self, frame_index: int, *, batches: Iterable[int] | None = None) -> FrameRecords:
-        """All records of a frame's done batches (or of ``batches``), sorted by element."""
+        """All records of a frame's done batches (or of ``batches``), sorted by element; only a
+        store that keeps records has them."""
+        self._records_kept()
         f = self._frame(frame_index)
         g = int(self._sources()[f])
         done = self.done_batches(g)
@@ -804,11 +862,17 @@ class PhotonStore:
             self._records_bytes -= sum(v.nbytes for v in vars(old).values() if isinstance(v, np.ndarray))
 
     def verify_batch(self, frame_index: int, batch: int) -> bool:
-        """Re-read a done batch and check its records against the digest in its done marker."""
+        """Re-read a done batch and check it: its summary (if any) against its own digest and the
+        batch's, and its records (if kept) against the digest in its done marker."""
         info = self.batch_info(frame_index, batch)
         if info is None:
             return False
         f = self.source_frame(frame_index)
+        has_summary = self._raw.get_many([self._summary_key(f, int(batch))])[0] is not None
+        if (has_summary or not self.keep_records) and self.read_summary(f, batch) is None:
+            return False
+        if not self.keep_records:
+            return True
         rows = self._read_rows(f, int(batch), info["n_records"])
         return records_digest(rows, info["photon_start"], info["photons_emitted"]) == info["digest"]
 
@@ -884,3 +948,19 @@ def remove_partials(url: str) -> int:
         tmp.unlink(missing_ok=True)
         removed += 1
     return removed
+
+
+def disk_usage(url: str) -> dict[str, int] | None:
+    """Bytes on disk of a local store by part: ``photons`` (done markers, counts, sums, sharing
+    table), ``records`` (hit records, kept on request) and ``maps`` (illumination/); None for a
+    remote store, whose size its object store tells."""
+    root = local_path(url)
+    if root is None or not root.is_dir():
+        return None
+    parts = {"photons": 0, "records": 0, "maps": 0}
+    for path in root.rglob("*"):
+        if path.is_file():
+            top = path.relative_to(root).parts[0]
+            parts["records" if top == "frames" else "maps" if top == "illumination" else "photons"] += \
+                path.stat().st_size
+    return parts

@@ -31,14 +31,14 @@ def reference(scenes, tmp_path_factory):
     """An uninterrupted synchronous shoot of cornell frames 1-12."""
     url = str(tmp_path_factory.mktemp("ref") / "ref.zarr")
     shoot(scenes["cornell"], frames="1-12", n_photons=6000, store_url=url, scheduler="synchronous",
-          progress=False)
+          progress=False, keep_records=True)
     return url
 
 
 def test_camera_only_frames_share_one_photon_set(scenes, tmp_path):
     url = str(tmp_path / "s.zarr")
     summary = shoot(scenes["static"], frames=None, n_photons=4000, store_url=url,
-                    scheduler="synchronous", progress=False)
+                    scheduler="synchronous", progress=False, keep_records=True)
     assert summary["traced_frames"] == 1 and summary["tasks"] == 1
     store = PhotonStore.open(url)
     assert [store.source_frame(f) for f in range(store.n_frames)] == [0] * store.n_frames
@@ -49,11 +49,11 @@ def test_camera_only_frames_share_one_photon_set(scenes, tmp_path):
 def test_more_photons_append_a_batch_without_touching_the_first(scenes, reference, tmp_path):
     url = str(tmp_path / "grow.zarr")
     shoot(scenes["cornell"], frames="1-12", n_photons=6000, store_url=url, scheduler="synchronous",
-          progress=False)
+          progress=False, keep_records=True)
     assert store_fingerprint(url) == store_fingerprint(reference)
     before = PhotonStore.open(url).read_frame(3, batches=[0])
     summary = shoot(scenes["cornell"], frames="4", n_photons=12000, store_url=url,
-                    scheduler="synchronous", progress=False)
+                    scheduler="synchronous", progress=False, keep_records=True)
     assert summary["tasks"] == 1 and summary["photons"] == 6000
     store = PhotonStore.open(url)
     assert store.done_batches(3) == [0, 1] and store.photons_emitted(3) == 12000
@@ -64,7 +64,7 @@ def test_more_photons_append_a_batch_without_touching_the_first(scenes, referenc
 
 def test_rerun_skips_done_batches(scenes, reference):
     summary = shoot(scenes["cornell"], frames="1-12", n_photons=6000, store_url=reference,
-                    scheduler="synchronous", progress=False)
+                    scheduler="synchronous", progress=False, keep_records=True)
     assert summary["tasks"] == 0
 
 
@@ -135,7 +135,7 @@ def test_unwritable_store_path(scenes, tmp_path):
 def test_file_url_store(scenes, reference, tmp_path):
     url = "file://" + str(tmp_path / "url.zarr")
     shoot(scenes["cornell"], frames="1-12", n_photons=6000, store_url=url, scheduler="synchronous",
-          progress=False)
+          progress=False, keep_records=True)
     assert store_fingerprint(url) == store_fingerprint(reference)
 
 
@@ -143,7 +143,7 @@ def test_photons_fill_the_room_frames(scenes, tmp_path):
     """A ROOM frame's records land on many elements and the count table agrees with the records."""
     url = str(tmp_path / "room.zarr")
     shoot(scenes["room"], frames="60", n_photons=5000, store_url=url, scheduler="synchronous",
-          progress=False)
+          progress=False, keep_records=True)
     store = PhotonStore.open(url)
     recs = store.read_frame(59)
     counts = store.counts("all", frames=[59])[0]

@@ -28,10 +28,11 @@ def _render(scene, out, frames="1-3", **kw):
 
 @pytest.fixture(scope="module")
 def rendered(tmp_path_factory):
-    """Three frames of a plane under a point light, with a panning camera."""
+    """Three frames of a plane under a point light, with a panning camera; the hit records kept
+    (test_store_holds_each_frames_maps_from_its_own_photons reads them)."""
     tmp = tmp_path_factory.mktemp("render")
     scene = plane_scene(tmp / "plane.glb", frames=3)
-    report = _render(scene, tmp / "out")
+    report = _render(scene, tmp / "out", keep_records=True)
     return scene, tmp / "out", report
 
 

@@ -11,7 +11,7 @@ import numpy as np
 
 from pipeline.store import PhotonStore, pack_key
 
-IDENTITY = dict(scene_hash="scene-abc", config_hash="cfg-123", seed=7)
+IDENTITY = dict(scene_hash="scene-abc", config_hash="cfg-123", seed=7, keep_records=True)  # the tests read records
 
 
 def make_batch(frame: int, batch: int, n: int, n_elements: int, *, photon_start: int = 0,

@@ -65,14 +65,14 @@ def test_refused_direct_write_leaves_nothing_and_the_object_is_written_plainly(t
 
 
 def test_store_batches_read_back_the_same_with_and_without_a_summary(tmp_path):
-    """Record chunks of a batch with a summary go past the page cache, those of a batch without
-    one do not; both read back exactly as written, and no temporary file stays behind."""
+    """Record chunks go past the page cache (a render reads the batch's sums, never its records),
+    with or without a summary; both read back exactly as written, and no temporary file stays behind."""
     rng = np.random.default_rng(5)
     n_el = 64
     store = PhotonStore.create(tmp_path / "s.zarr", n_frames=2, n_elements=n_el, frame_numbers=[1, 2],
-                               scene_hash="s", config_hash="c", seed=0)
+                               scene_hash="s", config_hash="c", seed=0, keep_records=True)
     written = {}
-    for f, summarise in ((0, lambda records: np.arange(7.0)), (1, None)):
+    for f, summarise in ((0, lambda records: np.arange(7, dtype=np.uint32)), (1, None)):
         n = 5000
         key = (rng.integers(0, n_el, n).astype(np.uint32)
                | (rng.integers(0, 2, n).astype(np.uint32) << np.uint32(30)))
@@ -81,14 +81,14 @@ def test_store_batches_read_back_the_same_with_and_without_a_summary(tmp_path):
         assert store.write_batch(f, 0, key=key, bary=bary, energy=energy, photons_emitted=2 * n, photon_start=0,
                                  summarise=summarise)
         written[f] = (key, bary, energy)
-    # Past the page cache: none of frame 0's record pages are cached, all of frame 1's are (on a
-    # disk file system; tmpfs keeps every file in memory)
-    chunk0, chunk1 = (tmp_path / "s.zarr" / "frames" / f / "0" / "c.0.0" for f in ("0", "1"))
-    on_tmpfs = _file_system(tmp_path) == "tmpfs"
-    assert cached_pages(chunk1) == -(-os.path.getsize(chunk1) // mmap.PAGESIZE)
-    if not on_tmpfs:
-        assert cached_pages(chunk0) == 0
-    assert np.array_equal(store.read_summary(0, 0), np.arange(7.0))
+    # Past the page cache: none of the record pages are cached (on a disk file system; tmpfs
+    # keeps every file in memory), while the counts chunk written beside them is
+    chunks = [tmp_path / "s.zarr" / "frames" / f / "0" / "c.0.0" for f in ("0", "1")]
+    counts = tmp_path / "s.zarr" / "counts" / "c.1.0.0.0"
+    assert cached_pages(counts) == -(-os.path.getsize(counts) // mmap.PAGESIZE)
+    if _file_system(tmp_path) != "tmpfs":
+        assert [cached_pages(c) for c in chunks] == [0, 0]
+    assert np.array_equal(store.read_summary(0, 0), np.arange(7))
     assert store.read_summary(1, 0) is None
     reopened = PhotonStore.open(tmp_path / "s.zarr")
     for f, (key, bary, energy) in written.items():

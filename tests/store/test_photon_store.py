@@ -48,7 +48,7 @@ def test01_record_is_20_bytes_and_described(store):
     assert RECORD_BYTES == 20
     attrs = dict(zarr.open_group(store.url, mode="r").attrs)
     assert attrs["record_layout"]["record_bytes"] == 20
-    assert attrs["format_version"] == 3 and attrs["frame_numbers"] == [101, 102, 103, 104]
+    assert attrs["format_version"] == 4 and attrs["frame_numbers"] == [101, 102, 103, 104]
     assert {k: attrs[k] for k in IDENTITY} == IDENTITY
 
 
@@ -413,3 +413,16 @@ def test26_an_open_store_sees_batches_written_by_others(store):
     assert reader.done_batches(0) == [0, 1]
     write_frame(store.url, 1, [300], N_ELEMENTS)  # ... until the directory changes
     assert reader.done_batches(1) == [0] and reader.photons_in(1, 1) == 150
+
+
+def test_keep_records_is_part_of_a_stores_identity(tmp_path):
+    """A store made with records is not resumed without them, nor one without records with them:
+    the refusal says which flag to give or to render elsewhere."""
+    with_records = create(tmp_path / "with")
+    without = create(tmp_path / "without", keep_records=False)
+    assert with_records.keep_records and not without.keep_records
+    with pytest.raises(LoomError, match="keeps hit records: render it again with --keep-records"):
+        create(tmp_path / "with", keep_records=False)
+    with pytest.raises(LoomError, match="holds no hit records.*render into another --out"):
+        PhotonStore.open(tmp_path / "without", keep_records=True)
+    assert PhotonStore.open(tmp_path / "without").keep_records is False

@@ -73,7 +73,8 @@ def test_1e8_photons_accumulate_without_drift(tmp_path):
     path = _scene(tmp_path / "tile.glb")
     out = tmp_path / "out"
     render(path, frames="1", out_dir=out, n_photons=N, temporal="off", config=RenderConfig(spatial_filter=False),
-           settings=RenderSettings(width=16, height=12, spp=1), scheduler="synchronous", progress=False)
+           settings=RenderSettings(width=16, height=12, spp=1), scheduler="synchronous", progress=False,
+           keep_records=True)
     scene = Scene.load(path)
     elements = ElementMesh.build(scene)
     areas = elements.vertex_areas(scene.pose_frame(1)).astype(np.longdouble)

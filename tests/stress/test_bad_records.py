@@ -40,18 +40,19 @@ def _damage(url: str, frame_index: int, values) -> None:
         rows[2:5, DAMAGED[-1]] = 0
     arr[...] = rows
     # The batch's stored sums were made from the undamaged records (pipeline/batch_sums.py): remove
-    # them, as a store written without summaries has none, so the render sums the damaged records.
+    # them, as damage might, so the render sums the damaged records it keeps.
     (Path(url) / "summaries" / f"c.{frame_index}.0").unlink(missing_ok=True)
 
 
 def _run(tmp, name, values):
     scene = lit_room(tmp / "room.glb", frames=FRAMES)
     url = str(tmp / f"{name}.zarr")
-    shoot(str(scene), frames=f"1-{FRAMES}", n_photons=N, store_url=url, scheduler="synchronous", progress=False)
+    shoot(str(scene), frames=f"1-{FRAMES}", n_photons=N, store_url=url, scheduler="synchronous", progress=False,
+          keep_records=True)
     _damage(url, 1, values)
     out = tmp / name
     render(scene, frames=f"1-{FRAMES}", out_dir=out, n_photons=N, store_url=url, scheduler="synchronous",
-           settings=RenderSettings(width=40, height=30, spp=1), progress=False, temporal="adaptive", fmax=4)
+           keep_records=True, settings=RenderSettings(width=40, height=30, spp=1), progress=False, temporal="adaptive", fmax=4)
     return url, [read_exr(frame_paths(out, f)[0])[0] for f in range(1, FRAMES + 1)]
 
 

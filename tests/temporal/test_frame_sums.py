@@ -1,8 +1,8 @@
 """pipeline/batch_sums: a batch's sums (indirect element sums split by parity, direct vertex flux)
-are stored by its writer and read instead of its records, with the bits of summing the records;
-a frame's sums are its batches' sums added in batch order; each batch is read once per process;
-a rewritten store never serves stale sums; a missing, foreign or damaged summary falls back to
-the records."""
+are stored sparse by its writer and read instead of its records, with the bits of summing the
+records; a frame's sums are its batches' sums added in batch order; each batch is read once per
+process; a rewritten store never serves stale sums; a damaged summary falls back to the records
+where they are kept and is refused in one line where they are not."""
 from __future__ import annotations
 
 import logging
@@ -14,41 +14,43 @@ import numpy as np
 import pytest
 
 from kernels.gather import corners_to_vertices, element_sums_cl
-from pipeline.batch_sums import FrameSums, batch_summary, stored_form, summariser, working_form
+from pipeline.batch_sums import HEADER, SLOTS, FrameSums, batch_summary, decode, encode, summariser
+from pipeline.errors import LoomError
 from pipeline.store import PhotonStore
 from tests.store.photonstore_helpers import IDENTITY, make_batch, write_frame
 from workers.reconstruct import records_vertex_flux
 
 N_ELEMENTS, N_VERTICES = 40, 30
+NO_RECORDS = dict(IDENTITY, keep_records=False)
 
 
-def _elements(seed=3):
+def _elements(seed=3, n_elements=N_ELEMENTS):
     rng = np.random.default_rng(seed)
-    ev = np.stack([rng.choice(N_VERTICES, 3, replace=False) for _ in range(N_ELEMENTS)]).astype(np.int32)
-    return SimpleNamespace(element_vertices=ev, n_vertices=N_VERTICES, n_elements=N_ELEMENTS)
+    ev = np.stack([rng.choice(N_VERTICES, 3, replace=False) for _ in range(n_elements)]).astype(np.int32)
+    return SimpleNamespace(element_vertices=ev, n_vertices=N_VERTICES, n_elements=n_elements)
 
 
 def _float64_summary(records):
-    """A batch's summary as float64 values, before the store's rounding (older stores hold these)."""
-    return np.concatenate([element_sums_cl([records], kind="indirect", split_parity=True)[0].reshape(-1),
-                           corners_to_vertices(element_sums_cl([records], kind="direct")[0, :, 0, :, :3],
-                                               _elements().element_vertices, N_VERTICES).reshape(-1)])
+    """A batch's sums (E, 2, 3, 4) and direct flux (V, 3) in float64, before the store's rounding."""
+    return (element_sums_cl([records], kind="indirect", split_parity=True)[0],
+            corners_to_vertices(element_sums_cl([records], kind="direct")[0, :, 0, :, :3],
+                                _elements().element_vertices, N_VERTICES))
 
 
-def _store(tmp_path, sizes, *, summarise=False, name="p.zarr"):
-    """A store with one frame of batches ``sizes``, written with or without batch summaries
-    (``summarise`` True: the shoot task's summariser; a function: that one)."""
+def _store(tmp_path, sizes, *, keep_records=True, name="p.zarr", elements=N_ELEMENTS):
+    """A store with one frame of batches ``sizes``, each with the shoot task's summary; with the
+    raw records or without."""
     url = str(tmp_path / name)
     shutil.rmtree(url, ignore_errors=True)
-    PhotonStore.create(url, n_frames=2, n_elements=N_ELEMENTS, frame_numbers=[1, 2], **IDENTITY)
-    store = PhotonStore.open(url, mode="r+", **IDENTITY)
+    identity = IDENTITY if keep_records else NO_RECORDS
+    PhotonStore.create(url, n_frames=2, n_elements=elements, frame_numbers=[1, 2], **identity)
+    store = PhotonStore.open(url, mode="r+", **identity)
     start = 0
     for b, n in enumerate(sizes):
-        batch = make_batch(0, b, n, N_ELEMENTS, photon_start=start)
-        how = summarise if callable(summarise) else summariser(_elements()) if summarise else None
-        store.write_batch(0, b, **batch, summarise=how)
+        batch = make_batch(0, b, n, elements, photon_start=start)
+        store.write_batch(0, b, **batch, summarise=summariser(_elements(n_elements=elements)))
         start += batch["photons_emitted"]
-    return PhotonStore.open(url, mode="r", **IDENTITY)
+    return PhotonStore.open(url, mode="r", **identity)
 
 
 def _want(store, n_batches, n_parity):
@@ -57,9 +59,13 @@ def _want(store, n_batches, n_parity):
     parts = [store.read_frame(0, batches=[b]) for b in range(n_batches)]
     split, flux = [], []
     for r in parts:
-        sums, f = working_form(stored_form(_float64_summary(r), _elements()), _elements())
-        split.append(sums)
-        flux.append(f)
+        sums, f = _float64_summary(r)
+        stored = sums.copy()
+        stored[..., 3] = np.sqrt(stored[..., 3])
+        stored = stored.astype(np.float32).astype(np.float64)
+        stored[..., 3] *= stored[..., 3]
+        split.append(stored)
+        flux.append(f.astype(np.float32).astype(np.float64))
     sums = [s if n_parity == 2 else s[:, :1] + s[:, 1:] for s in split]
     total = sums[0].copy()
     for s in sums[1:]:
@@ -70,19 +76,19 @@ def _want(store, n_batches, n_parity):
     return total, total_flux
 
 
-@pytest.mark.parametrize("stored", [False, True], ids=["from records", "stored"])
+@pytest.mark.parametrize("keep_records", [False, True], ids=["sums only", "with records"])
 @pytest.mark.parametrize("n_parity", [1, 2])
-def test_frame_sums_add_batches_in_order_with_the_records_bits(tmp_path, stored, n_parity):
-    store, cache = _store(tmp_path, [700, 900, 500], summarise=stored), FrameSums(1 << 24)
+def test_frame_sums_add_batches_in_order_with_the_records_bits(tmp_path, keep_records, n_parity):
+    store, cache = _store(tmp_path, [700, 900, 500], keep_records=keep_records), FrameSums(1 << 24)
     times: dict = {}
     got = cache.get(store, 0, 3, "indirect", n_parity, _elements(), times=times)
-    sums, flux = _want(store, 3, n_parity)
+    sums, flux = _want(_store(tmp_path, [700, 900, 500], name="records.zarr"), 3, n_parity)
     assert got.sums.shape == (N_ELEMENTS, n_parity, 3, 4)
     assert got.sums.tobytes() == sums.tobytes()
     assert got.direct_flux.tobytes() == flux.tobytes()
     assert got.photons_emitted == store.photons_emitted(0)
-    # stored summaries are read, never summed again; without them the records are summed once
-    assert ("frame_sums_s" in times) != stored and "read_s" in times
+    # stored summaries are read, never summed again
+    assert "frame_sums_s" not in times and "read_s" in times
     again: dict = {}
     cache.get(store, 0, 3, "indirect", 3 - n_parity, _elements(), times=again)
     assert again == {}  # the other parity split comes from the same entries
@@ -99,53 +105,92 @@ def test_the_direct_flux_is_the_per_record_sum(tmp_path):
 
 
 def test_the_stored_summary_is_the_records_summary(tmp_path):
-    store = _store(tmp_path, [700], summarise=True)
+    store = _store(tmp_path, [700])
     stored = store.read_summary(0, 0)
     assert stored.tobytes() == batch_summary(store.read_frame(0, batches=[0]), _elements()).tobytes()
-    assert _store(tmp_path, [700], name="bare.zarr").read_summary(0, 0) is None
+    assert _store(tmp_path, [700], keep_records=False, name="bare.zarr").read_summary(0, 0).tobytes() == \
+        stored.tobytes()
+
+
+def test_a_store_without_records_writes_none_and_refuses_to_read_them(tmp_path):
+    store = _store(tmp_path, [700, 300], keep_records=False)
+    assert not (Path(store.url) / "frames").exists() or not any((Path(store.url) / "frames").rglob("c.*"))
+    assert store.verify_batch(0, 0) and store.verify_batch(0, 1)
+    with pytest.raises(LoomError, match="holds no hit records.*--keep-records"):
+        store.read_frame(0)
+    with pytest.raises(LoomError, match="holds no hit records"):
+        FrameSums(1 << 24).get(store, 0, 1, "all", 1, _elements())  # other kinds need the records
+    # a writer without a summary is a caller's bug there: the sums are all the store keeps
+    writer = PhotonStore.open(store.url, mode="r+")
+    with pytest.raises(ValueError, match="needs the batch's summary"):
+        writer.write_batch(0, 2, **make_batch(0, 2, 100, N_ELEMENTS, photon_start=writer.photons_emitted(0)))
+
+
+def test_sparse_sums_hold_only_what_a_batch_hit():
+    """A batch on 2 of 40 elements stores 2 rows and their ids; decode gives the dense sums back,
+    zeros elsewhere, to the bit (Q through its square root)."""
+    rng = np.random.default_rng(4)
+    sums = np.zeros((N_ELEMENTS, 2, 3, 4))
+    sums[[3, 17]] = rng.random((2, 2, 3, 4))
+    flux = np.zeros((N_VERTICES, 3))
+    flux[[0, 5, 29]] = rng.random((3, 3))
+    words = encode(sums, flux)
+    assert words.dtype == np.uint32 and words.size == HEADER + 2 * (1 + SLOTS) + 3 * 4
+    got_sums, got_flux = decode(words, _elements())
+    stored = sums.copy()
+    stored[..., 3] = np.sqrt(stored[..., 3])
+    stored = stored.astype(np.float32).astype(np.float64)
+    stored[..., 3] *= stored[..., 3]
+    assert got_sums.tobytes() == stored.tobytes()
+    assert got_flux.tobytes() == flux.astype(np.float32).astype(np.float64).tobytes()
+    other = SimpleNamespace(element_vertices=None, n_vertices=N_VERTICES, n_elements=N_ELEMENTS + 1)
+    with pytest.raises(ValueError, match="the mesh has"):
+        decode(words, other)
+    with pytest.raises(ValueError, match="does not hold"):
+        decode(words[:-1], _elements())
+
+
+def test_a_small_batch_on_a_fine_mesh_stores_fewer_bytes_than_dense_sums(tmp_path):
+    """4,000 elements, 300 records: the sparse sums take a fraction of the dense 4,000 x 24 floats."""
+    store = _store(tmp_path, [300], keep_records=False, elements=4000)
+    size = (Path(store.url) / "summaries" / "c.0.0").stat().st_size
+    assert size < 4000 * SLOTS * 4 / 10
 
 
 def _summary_file(store) -> Path:
     return Path(store.url) / "summaries" / "c.0.0"
 
 
-@pytest.mark.parametrize("damage", ["nan", "truncated", "foreign"])
-def test_a_damaged_or_foreign_summary_falls_back_to_the_records(tmp_path, damage, caplog):
-    store = _store(tmp_path, [800], summarise=True)
+@pytest.mark.parametrize("damage", ["flipped", "truncated", "foreign"])
+@pytest.mark.parametrize("keep_records", [True, False], ids=["with records", "sums only"])
+def test_a_damaged_or_foreign_summary_falls_back_to_the_records_or_is_refused(tmp_path, damage, keep_records,
+                                                                               caplog):
+    store = _store(tmp_path, [800], keep_records=keep_records)
     path = _summary_file(store)
     data = bytearray(path.read_bytes())
-    if damage == "nan":  # a summary whose values decode to NaN
-        import numcodecs.blosc as blosc
-
-        head = 8 + 16
-        values = np.frombuffer(blosc.decompress(bytes(data[head:])), "<f4").copy()
-        values[5] = np.nan
-        data[head:] = blosc.compress(values.tobytes(), b"lz4", 5, blosc.SHUFFLE, 0, 4)
+    if damage == "flipped":  # a bit of the compressed words: the summary's own digest no longer matches
+        data[-3] ^= 0x10
     elif damage == "truncated":
         data = data[:len(data) // 2]
-    else:  # another batch's summary: the digest in its header does not match
+    else:  # another batch's summary: the batch digest in its header does not match
         data[8] ^= 0xFF
     path.write_bytes(bytes(data))
     with caplog.at_level(logging.WARNING, logger="pipeline.store.photon_store"):
         assert store.read_summary(0, 0) is None
     assert "damaged or foreign batch summary ignored" in caplog.text
+    assert not store.verify_batch(0, 0)
     times: dict = {}
+    if not keep_records:
+        with pytest.raises(LoomError, match="batch sums missing or damaged and no hit records kept"):
+            FrameSums(1 << 24).get(store, 0, 1, "indirect", 2, _elements(), times=times)
+        return
     got = FrameSums(1 << 24).get(store, 0, 1, "indirect", 2, _elements(), times=times)
     assert "frame_sums_s" in times and np.isfinite(got.sums).all()
     assert got.sums.tobytes() == _want(store, 1, 2)[0].tobytes()
 
 
-def test_a_summary_larger_than_its_records_is_not_stored(tmp_path):
-    """40 elements and 30 vertices: 4,200 bytes of float32 sums, stored for 210 records (4,200 bytes) and more."""
-    store = _store(tmp_path, [209, 210], summarise=True)
-    assert store.read_summary(0, 0) is None and store.read_summary(0, 1) is not None
-    sums, flux = _want(store, 2, 2)
-    got = FrameSums(1 << 24).get(store, 0, 2, "indirect", 2, _elements())
-    assert got.sums.tobytes() == sums.tobytes() and got.direct_flux.tobytes() == flux.tobytes()
-
-
 def test_other_kinds_are_summed_from_the_records(tmp_path):
-    store = _store(tmp_path, [600], summarise=True)
+    store = _store(tmp_path, [600])
     got = FrameSums(1 << 24).get(store, 0, 1, "all", 1, _elements())
     split = element_sums_cl([store.read_frame(0, batches=[0])], kind="all", split_parity=True)[0]
     assert got.sums.tobytes() == (split[:, :1] + split[:, 1:]).tobytes() and got.direct_flux is None
@@ -153,8 +198,8 @@ def test_other_kinds_are_summed_from_the_records(tmp_path):
 
 def test_a_rewritten_store_is_not_served_stale_sums(tmp_path):
     cache = FrameSums(1 << 24)
-    first = cache.get(_store(tmp_path, [700], summarise=True), 0, 1, "indirect", 1, _elements()).sums.copy()
-    second = cache.get(_store(tmp_path, [701], summarise=True), 0, 1, "indirect", 1, _elements()).sums
+    first = cache.get(_store(tmp_path, [700]), 0, 1, "indirect", 1, _elements()).sums.copy()
+    second = cache.get(_store(tmp_path, [701]), 0, 1, "indirect", 1, _elements()).sums
     assert not np.array_equal(first, second)  # same url, new photons
 
 
@@ -182,27 +227,8 @@ def test_the_stored_form_keeps_sums_and_q_to_float32_rounding_at_any_brightness(
     rgb = rng.random((N_ELEMENTS, 2, 3, 3)) * scale
     sums = np.concatenate([rgb, (rgb.sum(axis=-1, keepdims=True) * scale) * 0.3], axis=-1)  # Q ~ energy^2
     flux = rng.random((N_VERTICES, 3)) * scale
-    stored = stored_form(np.concatenate([sums.reshape(-1), flux.reshape(-1)]), el)
-    assert stored.dtype == np.float32 and np.isfinite(stored).all()
-    got_sums, got_flux = working_form(stored, el)
+    words = encode(sums, flux)
+    assert np.isfinite(words.view(np.float32)).all()
+    got_sums, got_flux = decode(words, el)
     np.testing.assert_allclose(got_sums, sums, rtol=2.5e-7, atol=0)
     np.testing.assert_allclose(got_flux, flux, rtol=1.2e-7, atol=0)
-    # A float64 summary of an older store is rounded the same way on reading
-    old = np.concatenate([sums.reshape(-1), flux.reshape(-1)])
-    assert all(a.tobytes() == b.tobytes() for a, b in zip(working_form(old, el), (got_sums, got_flux)))
-
-
-def test_a_float64_summary_of_an_older_store_reads_as_a_float32_one(tmp_path):
-    """Stores written before float32 summaries hold float64 ones ("LOOMSUM1"): read, rounded as
-    new ones are, and the frame's sums carry the same bits as from a new store."""
-    new = _store(tmp_path, [700, 900], summarise=True, name="new.zarr")
-    old = _store(tmp_path, [700, 900], summarise=_float64_summary, name="old.zarr")
-    el = _elements()
-    assert _summary_file(old).read_bytes()[:8] == b"LOOMSUM1"
-    assert old.read_summary(0, 0).dtype == np.float64
-    times: dict = {}
-    got_old = FrameSums(1 << 24).get(old, 0, 2, "indirect", 2, el, times=times)
-    got_new = FrameSums(1 << 24).get(new, 0, 2, "indirect", 2, el)
-    assert "frame_sums_s" not in times  # read, not summed again
-    assert got_old.sums.tobytes() == got_new.sums.tobytes()
-    assert got_old.direct_flux.tobytes() == got_new.direct_flux.tobytes()

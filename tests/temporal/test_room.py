@@ -40,9 +40,9 @@ class Room:
         self.scene = Scene.load(path)
         self.mesh = ElementMesh.build(self.scene)
         shoot(str(path), frames=f"{K2 - 15}-{K2 + 15}", n_photons=N_FRAME, store_url=str(root / "p.zarr"),
-              config=RenderConfig(), scheduler="synchronous", progress=False)
+              config=RenderConfig(), scheduler="synchronous", progress=False, keep_records=True)
         shoot(str(path), frames=str(K2), n_photons=reference_photons, store_url=str(root / "ref.zarr"),
-              config=RenderConfig(seed=1), scheduler="synchronous", progress=False)
+              config=RenderConfig(seed=1), scheduler="synchronous", progress=False, keep_records=True)
         self.store = PhotonStore.open(str(root / "p.zarr"))
         ref = PhotonStore.open(str(root / "ref.zarr"))
         self.state = self.scene.pose_frame(K2)
