@@ -52,7 +52,8 @@ def _run(tmp, name, values):
     _damage(url, 1, values)
     out = tmp / name
     render(scene, frames=f"1-{FRAMES}", out_dir=out, n_photons=N, store_url=url, scheduler="synchronous",
-           keep_records=True, settings=RenderSettings(width=40, height=30, spp=1), progress=False, temporal="adaptive", fmax=4)
+           keep_records=True, settings=RenderSettings(width=40, height=30, spp=1), progress=False,
+           temporal="adaptive", fmax=4)
     return url, [read_exr(frame_paths(out, f)[0])[0] for f in range(1, FRAMES + 1)]
 
 
