@@ -1,7 +1,14 @@
-"""The photon store: every photon hit of a run, on zarr v3, written once per (frame, batch).
+"""The photon store: what a render reads of every photon batch, on zarr v3, written once per (frame, batch).
 
 Photons are the only state of a run that costs tracing; everything downstream (temporal windows,
-illumination maps, frames) is recomputed from them and the config (docs/conventions.md §5).
+illumination maps, frames) is recomputed from what the store keeps of them and the config
+(docs/conventions.md §5). Every stage reads a batch through two things: its per-element hit
+counts (Condition (1), p_me, the step test) and its *sums*, the sufficient statistics of the
+gather (per element, corner and parity the indirect energy sums and sums of squares, and the
+direct flux per vertex; pipeline/batch_sums.py, sparse where a batch hits few elements). The
+store keeps those for every batch; the raw hit records only when made with ``keep_records``
+(``loom render --keep-records``), for re-estimation and research: a default ROOM render's
+store is about 1 byte a photon where its records took 40.
 
 Record (docs/estimators.md §1.1), exactly ``RECORD_BYTES`` = 20 bytes uncompressed, stored struct-of-arrays::
 
@@ -11,15 +18,15 @@ Record (docs/estimators.md §1.1), exactly ``RECORD_BYTES`` = 20 bytes uncompres
 
 On disk the records of a batch are one (5, n) u32 array, rows key, b1 | b2 << 16 and the bits
 of energy R, G, B (struct-of-arrays in one chunk), blosc lz4 + byte shuffle: a ROOM frame at
-40,000 photons (125,000 records) takes about 14.1 bytes a record (zstd-3 took 12 but cost 4x the
-time to write and 5x to read; the windows of about three reconstruction tasks reach every batch).
+40,000 photons (125,000 records) takes about 14.1 bytes a record.
 
-On disk (``F`` frames, ``B`` = max_batches, ``E`` elements), format version 3 (a store of another
-version is refused with a one-line error: version 2 had BLAKE2b digests and zstd tables)::
+On disk (``F`` frames, ``B`` = max_batches, ``E`` elements), format version 4 (a store of another
+version is refused with a one-line error saying to delete it or render elsewhere)::
 
     run.zarr/
       zarr.json          group; attributes: format, format_version, scene_hash, config_hash, seed,
-                         n_frames, n_elements, frame_numbers, max_batches, record_layout, complete
+                         keep_records, n_frames, n_elements, frame_numbers, max_batches,
+                         record_layout, complete
       batch/             (F, B, 5) u64, chunk (1, 1, 5) uncompressed (40 bytes), keys "c.f.b.0":
                          [DONE_MAGIC, photon_start, photons_emitted, n_records, digest]; a chunk
                          exists <=> the batch is done
@@ -27,18 +34,17 @@ version is refused with a one-line error: version 2 had BLAKE2b digests and zstd
                          hits of batches 0..b (running sum) per category indirect-even,
                          indirect-odd, direct-even, direct-odd
       source/            (F,) i32, one chunk, -1 or the frame whose photons frame f reuses
-      frames/<f>/        group per frame, made by the coordinator
+      summaries/c.f.b    not a zarr array: the batch's sums as u32 words (pipeline/batch_sums.py),
+                         derived by its writer from the sorted records (``write_batch(summarise=...)``)
+                         and written before the done marker: "LOOMSUM5", the batch digest, the word
+                         count and the words' own digest (u64 each), then blosc lz4 + shuffle. A
+                         summary whose digests do not match is ignored with a warning
+                         (:meth:`PhotonStore.read_summary`): the reader sums the records instead
+                         where the store keeps them, and refuses in one line where it does not
+      frames/<f>/        only with keep_records: group per frame
         <b>              (5, n) u32 array, chunk (5, 2^20), keys "c.0.i", made by the writer of
                          (f, b) and by nobody else; records sorted by element (an element's
                          records are contiguous: the reader recovers the offsets from the keys)
-      summaries/c.f.b    not a zarr array: the batch's summary, float32 or float64 values its
-                         writer derived from the sorted records (``write_batch(summarise=...)``;
-                         the shoot task stores the gather's batch sums, pipeline/batch_sums.py),
-                         written with the records before the done marker: "LOOMSUM4" (float32)
-                         or "LOOMSUM1" (float64), the batch digest and the value count (u64 each),
-                         then blosc lz4 + shuffle. Optional and derived:
-                         a reader that finds none, or one whose digest or values are wrong
-                         (:meth:`PhotonStore.read_summary` warns), recomputes it from the records.
 
 Why this layout. Record counts per batch are unknown until traced and vary 2x per doubling
 (§5.2.3), so each batch gets its own exactly-sized array, created by its writer at
@@ -58,13 +64,14 @@ table is one chunk read per frame (300 x 45,000 in well under a second) rather t
 a reconstruction chunk reads only the rows its windows can reach (pipeline/temporal.py).
 
 Digest. The done marker's digest is the first 64 bits of SHA-256 over the batch's packed rows (as
-on disk, uncompressed) and (photon_start, photons_emitted): what :meth:`PhotonStore.verify_batch`
-checks the records against and what a rewrite of a done batch is compared by. SHA-256 runs in
+on disk, uncompressed) and (photon_start, photons_emitted), computed whether or not the records
+are kept: what a rewrite of a done batch is compared by, what ties a summary to its batch, and
+what :meth:`PhotonStore.verify_batch` checks kept records against. SHA-256 runs in
 hardware on current x86 and ARM cores (1.5 ms for a ROOM batch of 125,000 records).
 
 Atomicity and idempotence. LocalStore writes every chunk as temp file + rename, and so does the
 store's own writer (record arrays, counts, done markers, illumination maps), so a chunk is whole or
-absent. A writer writes records and counts first and the ``batch`` chunk last, in a second write:
+absent. A writer writes counts, sums and records first and the ``batch`` chunk last, in a second write:
 that chunk is the done marker, so a killed writer leaves a batch that is not done, which a rerun
 rewrites. Records are sorted into a total order (element, key, b1, b2, energy bits), so the bytes
 do not depend on input order, and a rerun writes identical bytes over identical chunks (existing
@@ -86,6 +93,10 @@ recently used out first, their arrays read-only: reconstruction chunks next to e
 the same F_max frames, and the second one on a worker decodes none of them again.
 
 Illumination maps (``illumination/``, pipeline/store/illumination.py) live in the same group.
+
+I/O. Every object the store and the maps read or write passes one place (``_Raw``), which adds
+its bytes to the calling thread's count inside :func:`counting_io`: the shoot and reconstruction
+tasks report what they moved, and Table 2 says it per frame (pipeline/benchmarks/render.py).
 
 Modules: ``records`` (the record, validation, total order; pure NumPy), ``photon_store`` (zarr),
 ``illumination`` (the per-frame maps).

@@ -304,15 +304,15 @@ def _check_identity(attrs: dict, expected: dict, where: str) -> None:
         raise LoomError(f"photon store of format version {attrs.get('format_version')!r}; this photonloom reads "
                         f"version {FORMAT_VERSION}: delete it (its photons are traced again) or render into "
                         "another --out", path=where)
-    want = expected.get("keep_records")
-    if want is not None and attrs.get("keep_records") != want:
-        raise LoomError(("keeps hit records: render it again with --keep-records, or into another --out" if
-                         attrs.get("keep_records") else "holds no hit records (made without --keep-records): "
-                         "render into another --out to keep them"), path=where, field="keep_records")
     for name, want in expected.items():
-        if want is not None and attrs.get(name) != want:
+        if want is not None and attrs.get(name) != want and name != "keep_records":
             raise LoomError(f"store was made with {name}={attrs.get(name)!r}, not {want!r}; "
                             "never mixed: use another store path", path=where, field=name)
+    want = expected.get("keep_records")
+    if want is not None and attrs.get("keep_records") != want:
+        raise LoomError(("keeps hit records: give --keep-records to go on with it, or use another --out or --store"
+                         if attrs.get("keep_records") else "holds no hit records (made without --keep-records): "
+                         "use another --out or --store to keep them"), path=where, field="keep_records")
 
 
 class PhotonStore:
@@ -392,7 +392,7 @@ class PhotonStore:
                     format=FORMAT, format_version=FORMAT_VERSION, complete=False, **identity,
                     record_layout=cls._layout_description(), count_categories=list(CATEGORIES),
                     batch_fields=list(BATCH_FIELDS)))
-            cls._make_arrays(root, n_frames, n_elements, max_batches)
+            cls._make_arrays(root, n_frames, n_elements, max_batches, keep_records)
             root.attrs.update({"complete": True})  # last: writers refuse incomplete stores
         except OSError as err:
             raise LoomError(f"cannot create photon store: {err.strerror or err}", path=where) from None
@@ -410,7 +410,7 @@ class PhotonStore:
                 "batch_array": "frames/<f>/<b>: (5, n) u32, rows key, b1 | b2 << 16, energy R, G, B bits"}
 
     @staticmethod
-    def _make_arrays(root: zarr.Group, n_frames: int, n_elements: int, max_batches: int) -> None:
+    def _make_arrays(root: zarr.Group, n_frames: int, n_elements: int, max_batches: int, keep_records: bool) -> None:
         # batch and counts chunks are written (and read) by the store itself: the done marker
         # uncompressed (40 bytes), the running counts with the record arrays' lz4
         root.create_array("batch", shape=(n_frames, max_batches, len(BATCH_FIELDS)),
@@ -424,7 +424,8 @@ class PhotonStore:
                           fill_value=-1, overwrite=True, compressors=records_codec())
         # frames/<f> groups are written with a frame's first batch (_write_payload): making all of
         # them here cost 13 ms a frame, 20 minutes before the first photon of a 100,000-frame timeline
-        root.require_group("frames")
+        if keep_records:
+            root.require_group("frames")
 
     @classmethod
     def open(cls, url: str | os.PathLike[str], *, scene_hash: str | None = None, config_hash: str | None = None,

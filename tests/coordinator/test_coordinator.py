@@ -111,6 +111,18 @@ def test_cluster_gives_the_same_records_and_frames(room, reference):
     assert _frames(out) == _frames(reference)
 
 
+def test_keeping_the_hit_records_changes_no_decision_and_no_bit(room, reference):
+    """--keep-records stores the records beside the counts and sums a render reads: the same
+    segment records and frames as the default store of counts and sums alone."""
+    tmp, scene, config = room
+    out = tmp / "records"
+    _loom(*_render_args(scene, out, config, "--scheduler", "synchronous", "--keep-records"))
+    assert _records(out) == _records(reference)
+    assert _frames(out) == _frames(reference)
+    assert any((out / "photons.zarr" / "frames").rglob("c.0.0"))
+    assert not (reference / "photons.zarr" / "frames").exists()
+
+
 def test_a_killed_render_resumes_to_the_same_result(room, reference):
     tmp, scene, config = room
     out = tmp / "killed"

@@ -28,11 +28,10 @@ def _render(scene, out, frames="1-3", **kw):
 
 @pytest.fixture(scope="module")
 def rendered(tmp_path_factory):
-    """Three frames of a plane under a point light, with a panning camera; the hit records kept
-    (test_store_holds_each_frames_maps_from_its_own_photons reads them)."""
+    """Three frames of a plane under a point light, with a panning camera."""
     tmp = tmp_path_factory.mktemp("render")
     scene = plane_scene(tmp / "plane.glb", frames=3)
-    report = _render(scene, tmp / "out", keep_records=True)
+    report = _render(scene, tmp / "out")
     return scene, tmp / "out", report
 
 
@@ -127,9 +126,14 @@ def test_store_holds_each_frames_maps_from_its_own_photons(rendered):
     from pipeline.store.illumination import IlluminationMaps
     from workers.reconstruct import vertex_irradiance
 
-    scene_path, out, report = rendered
+    scene_path, out, _ = rendered
+    kept = out.parent / "kept"  # the same render with its hit records, to sum them here
+    _render(scene_path, kept, keep_records=True)
     scene = Scene.load(scene_path)
     elements = ElementMesh.build(scene)
+    assert IlluminationMaps.open(kept / "photons.zarr").read(1, "direct").tobytes() == \
+        IlluminationMaps.open(out / "photons.zarr").read(1, "direct").tobytes()
+    out = kept
     maps = IlluminationMaps.open(out / "photons.zarr")
     assert maps.n_vertices == elements.n_vertices and np.all(maps.adaptation()[:3] > 0)
     records = PhotonStore.open(out / "photons.zarr").read_frame(1)

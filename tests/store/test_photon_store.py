@@ -421,8 +421,8 @@ def test_keep_records_is_part_of_a_stores_identity(tmp_path):
     with_records = create(tmp_path / "with")
     without = create(tmp_path / "without", keep_records=False)
     assert with_records.keep_records and not without.keep_records
-    with pytest.raises(LoomError, match="keeps hit records: render it again with --keep-records"):
+    with pytest.raises(LoomError, match="keeps hit records: give --keep-records to go on with it"):
         create(tmp_path / "with", keep_records=False)
-    with pytest.raises(LoomError, match="holds no hit records.*render into another --out"):
+    with pytest.raises(LoomError, match="holds no hit records.*use another --out or --store"):
         PhotonStore.open(tmp_path / "without", keep_records=True)
     assert PhotonStore.open(tmp_path / "without").keep_records is False
