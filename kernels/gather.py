@@ -70,10 +70,14 @@ def _concat_frames(frames):
     if not frames:
         raise ValueError("no frames of records to gather")
     n_elements = len(frames[0].offsets) - 1
-    key = np.concatenate([np.asarray(r.key, np.uint32) for r in frames])
-    b1 = np.concatenate([np.asarray(r.b1, np.uint16) for r in frames])
-    b2 = np.concatenate([np.asarray(r.b2, np.uint16) for r in frames])
-    energy = np.concatenate([np.asarray(r.energy, np.float32).reshape(-1, 3) for r in frames])
+
+    def joined(arrays):  # one frame's arrays as they are: a batch summary gathers one (no copy)
+        arrays = list(arrays)
+        return np.ascontiguousarray(arrays[0]) if len(arrays) == 1 else np.concatenate(arrays)
+    key = joined(np.asarray(r.key, np.uint32) for r in frames)
+    b1 = joined(np.asarray(r.b1, np.uint16) for r in frames)
+    b2 = joined(np.asarray(r.b2, np.uint16) for r in frames)
+    energy = joined(np.asarray(r.energy, np.float32).reshape(-1, 3) for r in frames)
     parts, base = [np.zeros(1, np.int64)], 0
     for r in frames:
         off = np.asarray(r.offsets, np.int64)

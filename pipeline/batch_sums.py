@@ -38,18 +38,19 @@ from kernels.gather import corners_to_vertices, element_sums_cl
 
 from .errors import LoomError
 from .stage_clock import StageClock
+from .store.records import FrameRecords, element_grouped
 
 if TYPE_CHECKING:
     from .scene import ElementMesh
     from .store import PhotonStore
-    from .store.records import FrameRecords
 
 SLOTS = 2 * 3 * 4  # parity x corner x (R, G, B, Q) values per element
 HEADER = 4  # E, V, n_e, n_v
 
 
 def batch_summary(records: FrameRecords, elements: ElementMesh) -> np.ndarray:
-    """The u32 words of one batch's summary, as stored (module docstring)."""
+    """The u32 words of the summary of one batch's records grouped by element, as stored (module
+    docstring)."""
     sums = element_sums_cl([records], kind="indirect", split_parity=True)[0]
     # The direct flux from element sums, not per record (workers/reconstruct.records_vertex_flux):
     # the same sum to rounding, over E x 3 corners; a million-record batch took 20 ms the other way
@@ -103,9 +104,17 @@ def decode(words: np.ndarray, elements: ElementMesh) -> tuple[np.ndarray, np.nda
     return sums, flux
 
 
-def summariser(elements: ElementMesh) -> Callable[[FrameRecords], np.ndarray]:
-    """``write_batch``'s ``summarise`` for batches bucketed on ``elements``."""
-    return lambda records: batch_summary(records, elements)
+def summariser(elements: ElementMesh) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
+    """``write_batch``'s ``summarise`` for batches bucketed on ``elements``: the batch's records
+    (key, bary, energy as the tracer gave them) grouped by element, each element's in that order
+    (pipeline/store/records.element_grouped), and summed. The tracer's order is deterministic
+    (workers/photons.py), so the sums are; a damaged summary re-made from kept records, which are
+    stored in the total order, agrees with it to float32 rounding, not always to the bit."""
+    def summarise(key: np.ndarray, bary: np.ndarray, energy: np.ndarray) -> np.ndarray:
+        grouped = FrameRecords.merge(0, 0, (0,), [element_grouped(key, bary, energy, elements.n_elements)],
+                                     elements.n_elements, 1)
+        return batch_summary(grouped, elements)
+    return summarise
 
 
 @dataclass

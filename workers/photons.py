@@ -190,9 +190,9 @@ def shoot_task(*, store_url: str, scene_path: str, scene_hash: str, element_size
     t2 = time.perf_counter()
     summed, summary = [0.0], summariser(elements)
 
-    def summarise(records):  # the gather's batch sums, made while the sorted records are in memory
+    def summarise(*records):  # the gather's batch sums, made while the records are in memory
         t = time.perf_counter()
-        out = summary(records)
+        out = summary(*records)
         summed[0] += time.perf_counter() - t
         return out
 

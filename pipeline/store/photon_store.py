@@ -13,7 +13,7 @@ import urllib.request
 from collections import OrderedDict
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numcodecs.blosc
@@ -37,8 +37,10 @@ from .records import (
     FrameRecords,
     SortedBatch,
     as_int,
-    prepare_records,
+    category_counts,
+    check_records,
     records_digest,
+    sorted_batch,
     unpack_records,
     valid_records,
 )
@@ -233,13 +235,15 @@ def _write_object(path: str, data: bytes, direct: bool) -> None:
 
 @dataclass(frozen=True)
 class _Prepared:
-    """A batch ready to write: where, its sorted records, and ``row``, its done marker."""
+    """A batch ready to write: where, its sorted records (None unless kept), its hit counts,
+    ``row``, its done marker, and its summary."""
 
     frame: int
     batch: int
-    records: SortedBatch
+    records: SortedBatch | None
+    counts: np.ndarray  # u64 (4, n_elements), this batch only
     row: np.ndarray  # u64 (5,) in BATCH_FIELDS order
-    summary: np.ndarray | None = None  # little-endian u32 words (write_batch's summarise)
+    summary: np.ndarray | None  # little-endian u32 words (write_batch's summarise)
 
 
 def make_store(url: str | os.PathLike[str], read_only: bool) -> LocalStore | FsspecStore:
@@ -636,19 +640,19 @@ class PhotonStore:
 
     def write_batch(self, frame_index: int, batch: int, *, key: npt.ArrayLike, bary: npt.ArrayLike,
                     energy: npt.ArrayLike, photons_emitted: int, photon_start: int,
-                    summarise: Callable[[FrameRecords], np.ndarray] | None = None) -> bool:
-        """Sort and write one batch, done marker last. Returns False if it was already done.
+                    summarise: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None) -> bool:
+        """Write one batch, done marker last. Returns False if it was already done.
 
         Rerunning a batch rewrites identical bytes; a done batch is only compared by digest and
         a different one is refused (non-deterministic tracer). Batch b needs b-1 done.
-        ``summarise``: u32 words derived from the sorted records (as :meth:`read_frame` gives them
-        back), stored before the done marker (:meth:`read_summary`): what a render reads of the
-        batch. Only a store that keeps records may go without.
+        ``summarise``: u32 words derived from the batch's checked (key, bary, energy) in the order
+        given (pipeline/batch_sums.py summariser), stored before the done marker
+        (:meth:`read_summary`): what a render reads of the batch. Only a store that keeps records
+        may go without; only such a store sorts them into the total order.
         """
         if summarise is None and not self.keep_records:
             raise ValueError("a store without records needs the batch's summary (summarise)")  # a caller's bug
-        prepared = self._prepare(frame_index, batch, key, bary, energy, photons_emitted,
-                                 photon_start)
+        prepared = self._prepare(frame_index, batch, key, bary, energy, photons_emitted, photon_start, summarise)
         done = self.batch_info(prepared.frame, prepared.batch)
         if done is not None:
             if np.array_equal(np.array(list(done.values()), dtype=np.uint64), prepared.row):
@@ -656,21 +660,15 @@ class PhotonStore:
             raise LoomError("is already done with different photons (digest, count or range "
                             "differ): the tracer is not deterministic", path=self.url,
                             field=f"frame {prepared.frame} batch {prepared.batch}")
-        if summarise is not None:
-            mine = FrameRecords.merge(prepared.frame, prepared.frame, (prepared.batch,),
-                                      [unpack_records(prepared.records.packed(), self.n_elements)],
-                                      self.n_elements, int(prepared.row[2]))
-            summary = np.asarray(summarise(mine))
-            if summary.dtype != np.uint32 or summary.ndim != 1:
-                raise TypeError(f"a batch summary is 1-D u32 words, not {summary.dtype} {summary.shape}")
-            prepared = replace(prepared, summary=np.ascontiguousarray(summary, "<u4"))
         self._write_payload(prepared)
         self._mark_done(prepared)
         return True
 
-    def _prepare(self, frame_index, batch, key, bary, energy, photons_emitted,
-                 photon_start) -> _Prepared:
-        """Validate and sort a batch (reads only the previous batch's done marker)."""
+    def _prepare(self, frame_index, batch, key, bary, energy, photons_emitted, photon_start,
+                 summarise) -> _Prepared:
+        """Validate a batch, make its counts and summary, and sort its records if they are kept
+        (reads only the previous batch's done marker). The done marker's digest is of the sorted
+        records where they are kept, else of the summary and counts: what the batch stores."""
         self._writable()
         f, b = self._frame(frame_index), as_int(batch, "batch", self.url, 0, self.max_batches)
         where = f"{self.url}: frame {f} batch {b}"
@@ -678,7 +676,7 @@ class PhotonStore:
         if src != f:
             raise LoomError(f"frame {f} shares the photons of frame {src}; write to {src}",
                             path=where)
-        records = prepare_records(key, bary, energy, self.n_elements, where)
+        key, bary, energy = check_records(key, bary, energy, self.n_elements, where)
         emitted = as_int(photons_emitted, "photons_emitted", where, 1)
         start = as_int(photon_start, "photon_start", where, 0)
         expected_start = 0
@@ -691,9 +689,18 @@ class PhotonStore:
         if start != expected_start:
             raise LoomError(f"photon_start {start} is not contiguous: the previous batch ends at "
                             f"{expected_start}", path=where)
-        row = np.array([DONE_MAGIC, start, emitted, len(records),
-                        records.digest(start, emitted)], dtype=np.uint64)
-        return _Prepared(f, b, records, row)
+        summary = None
+        if summarise is not None:
+            summary = np.asarray(summarise(key, bary, energy))
+            if summary.dtype != np.uint32 or summary.ndim != 1:
+                raise TypeError(f"a batch summary is 1-D u32 words, not {summary.dtype} {summary.shape}")
+            summary = np.ascontiguousarray(summary, "<u4")
+        records = sorted_batch(key, bary, energy, self.n_elements) if self.keep_records else None
+        counts = records.counts if records is not None else category_counts(key, self.n_elements)
+        digest = records.digest(start, emitted) if records is not None else \
+            records_digest(np.concatenate([summary, counts.astype("<u8").view("<u4").reshape(-1)]), start, emitted)
+        row = np.array([DONE_MAGIC, start, emitted, key.shape[0], digest], dtype=np.uint64)
+        return _Prepared(f, b, records, counts, row, summary)
 
     def _write_payload(self, p: _Prepared) -> None:
         """Running counts, summary and (if the store keeps them) records of one batch: everything
@@ -704,7 +711,7 @@ class PhotonStore:
         identical objects, and nothing is ever deleted, so a duplicate task cannot expose a done
         batch with missing chunks. zarr reads the array as any other.
         """
-        running = p.records.counts
+        running = p.counts
         if p.batch > 0:
             running = running + self._count_chunks([(p.frame, p.batch - 1)])[0]
         if running.size and running.max() > np.iinfo(np.uint32).max:

@@ -232,20 +232,57 @@ def sort_records_reference(key: np.ndarray, bary: np.ndarray, energy: np.ndarray
                        key >> np.uint32(ELEMENT_BITS), key & np.uint32(ELEMENT_MASK)))
 
 
-def prepare_records(key: npt.ArrayLike, bary: npt.ArrayLike, energy: npt.ArrayLike, n_elements: int,
-                    where: str) -> SortedBatch:
-    """Validate one batch's arrays, sort them and count hits per element and category."""
+def check_records(key: npt.ArrayLike, bary: npt.ArrayLike, energy: npt.ArrayLike, n_elements: int,
+                  where: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(key, bary, energy) of one batch as u32, u16 and f32 arrays, or a one-line LoomError:
+    lengths agree, element ids exist, energies are finite and >= 0 (float32 energies checked on
+    their bits, one comparison a value, as :func:`valid_records` does)."""
     key = as_array(key, "key", (), np.uint32, where)
     bary = as_array(bary, "bary", (2,), np.uint16, where)
-    energy = as_array(energy, "energy", (3,), np.float32, where)
+    energy = np.asarray(energy)
+    if energy.dtype == np.float32 and energy.ndim == 2 and energy.shape[1:] == (3,) and (
+            not energy.size or energy.view(np.uint32).max() < _INF_BITS):
+        energy = np.ascontiguousarray(energy)
+    else:
+        energy = as_array(energy, "energy", (3,), np.float32, where)
     n = key.shape[0]
     if bary.shape[0] != n or energy.shape[0] != n:
         raise LoomError(f"record arrays differ in length: key {n}, bary {bary.shape[0]}, "
                         f"energy {energy.shape[0]}", path=where)
-    element = key & np.uint32(ELEMENT_MASK)
-    if n and int(element.max()) >= n_elements:
-        raise LoomError(f"element id {int(element.max())} >= n_elements {n_elements}", path=where)
+    if n and int((key & np.uint32(ELEMENT_MASK)).max()) >= n_elements:
+        raise LoomError(f"element id {int((key & np.uint32(ELEMENT_MASK)).max())} >= n_elements {n_elements}",
+                        path=where)
+    return key, bary, energy
 
+
+def category_counts(key: np.ndarray, n_elements: int) -> np.ndarray:
+    """u64 (4, n_elements): hits per category (CATEGORIES order) and element; order-free."""
+    # element << 2 | category is the key rotated left by 2 (sort_records' group): one bincount
+    group = (key << np.uint32(2)) | (key >> np.uint32(ELEMENT_BITS))
+    counts = np.bincount(group, minlength=len(CATEGORIES) * n_elements)
+    return np.ascontiguousarray(counts.reshape(n_elements, len(CATEGORIES)).T, np.uint64)
+
+
+def element_grouped(key: np.ndarray, bary: np.ndarray, energy: np.ndarray,
+                    n_elements: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+    """(key, bary, energy, offsets) grouped by element, each element's records in input order: the
+    order a batch's sums are added in (pipeline/batch_sums.py). A counting sort per 16-bit digit of
+    the element id (one pass below 65,536 elements), a fraction of the total order's cost; the
+    tracer's output order is itself deterministic (workers/photons.py), so the sums are too."""
+    element = key & np.uint32(ELEMENT_MASK)
+    n = key.shape[0]
+    top = int(element.max()) if n else 0
+    order = _lsd_order([(element >> np.uint32(s)).astype(np.uint16) for s in range(0, max(1, top.bit_length()), 16)]
+                       ) if n else np.empty(0, np.int64)
+    offsets = np.zeros(n_elements + 1, np.int64)
+    np.cumsum(np.bincount(element, minlength=n_elements), out=offsets[1:])
+    return np.take(key, order), np.take(bary, order, axis=0), np.take(energy, order, axis=0), offsets
+
+
+def sorted_batch(key: np.ndarray, bary: np.ndarray, energy: np.ndarray, n_elements: int) -> SortedBatch:
+    """Checked arrays (:func:`check_records`) sorted into the total order, packed as on disk, with
+    their per-element tables."""
+    n = key.shape[0]
     # Sort into the total order, straight into the packed rows, then count per element and category
     order = sort_records(key, bary, energy)
     rows = np.empty((5, n), np.uint32)
@@ -255,11 +292,7 @@ def prepare_records(key: npt.ArrayLike, bary: npt.ArrayLike, energy: npt.ArrayLi
     bits = energy.view(np.uint32)
     for c in range(3):  # a column at a time: 3x faster than taking rows and transposing them
         np.take(bits[:, c], order, out=rows[2 + c])
-    key = rows[0]
-    element = key & np.uint32(ELEMENT_MASK)
-    category = (key >> np.uint32(ELEMENT_BITS)).astype(np.intp)
-    counts = np.bincount(category * n_elements + element, minlength=len(CATEGORIES) * n_elements)
-    counts = counts.reshape(len(CATEGORIES), n_elements).astype(np.uint64)
+    counts = category_counts(rows[0], n_elements)
     offsets = np.zeros(n_elements + 1, dtype=np.int64)
     np.cumsum(counts.sum(axis=0), out=offsets[1:])
     return SortedBatch(rows, offsets, counts)

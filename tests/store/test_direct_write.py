@@ -72,7 +72,7 @@ def test_store_batches_read_back_the_same_with_and_without_a_summary(tmp_path):
     store = PhotonStore.create(tmp_path / "s.zarr", n_frames=2, n_elements=n_el, frame_numbers=[1, 2],
                                scene_hash="s", config_hash="c", seed=0, keep_records=True)
     written = {}
-    for f, summarise in ((0, lambda records: np.arange(7, dtype=np.uint32)), (1, None)):
+    for f, summarise in ((0, lambda *records: np.arange(7, dtype=np.uint32)), (1, None)):
         n = 5000
         key = (rng.integers(0, n_el, n).astype(np.uint32)
                | (rng.integers(0, 2, n).astype(np.uint32) << np.uint32(30)))

@@ -129,7 +129,7 @@ def test07_crash_before_done_marker(tmp_path):
     crashed._write_payload(crashed._prepare(3, 1, **{"key": second["key"], "bary": second["bary"],
                                                      "energy": second["energy"],
                                                      "photons_emitted": 1000,
-                                                     "photon_start": 1000}))
+                                                     "photon_start": 1000, "summarise": None}))
     assert (tmp_path / "crashed/frames/3/1/c.0.0").exists()
     assert not crashed.is_done(3, 1) and crashed.done_batches(3) == [0]
     assert len(crashed.read_frame(3)) == 2000 and crashed.photons_emitted(3) == 1000

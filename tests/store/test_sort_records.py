@@ -7,7 +7,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.store.records import ELEMENT_BITS, sort_records, sort_records_reference
+from pipeline.store.records import (
+    ELEMENT_BITS,
+    ELEMENT_MASK,
+    category_counts,
+    element_grouped,
+    pack_key,
+    sort_records,
+    sort_records_reference,
+)
 
 
 def _batch(n, n_elements, seed, *, bary_levels=65536, energy_levels=None):
@@ -47,3 +55,22 @@ def test_the_order_does_not_depend_on_the_input_order():
     b = sort_records(key[shuffle], bary[shuffle], energy[shuffle])
     for x in (key, bary, energy):
         assert np.array_equal(x[a], x[shuffle][b])
+
+
+@pytest.mark.parametrize("n_elements", [1, 5300, 70_000])
+def test_element_grouping_keeps_the_writers_order_within_an_element(n_elements):
+    """element_grouped (a radix sort on the element id's 16-bit digits) is numpy's stable argsort of
+    the element ids; category_counts is the per-(category, element) bincount."""
+    rng = np.random.default_rng(n_elements)
+    n = 50_000
+    key = pack_key(rng.integers(0, n_elements, n), rng.integers(0, 1 << 20, n), rng.random(n) < 0.3)
+    bary = rng.integers(0, 65535, (n, 2)).astype(np.uint16)
+    energy = rng.random((n, 3)).astype(np.float32)
+    element = key & np.uint32(ELEMENT_MASK)
+    order = np.argsort(element, kind="stable")
+    k, b, e, offsets = element_grouped(key, bary, energy, n_elements)
+    assert np.array_equal(k, key[order]) and np.array_equal(b, bary[order]) and np.array_equal(e, energy[order])
+    assert np.array_equal(np.diff(offsets), np.bincount(element, minlength=n_elements))
+    want = np.zeros((4, n_elements), np.uint64)
+    np.add.at(want, ((key >> np.uint32(30)).astype(np.intp), element.astype(np.intp)), 1)
+    assert np.array_equal(category_counts(key, n_elements), want)
