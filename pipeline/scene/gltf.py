@@ -13,7 +13,7 @@ import json
 import os
 import stat
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -62,6 +62,7 @@ class GltfDocument:
     gltf: pygltflib.GLTF2
     buffers: list[bytes]
     digest: str  # sha256 of the JSON text and every buffer: identifies the scene content
+    tree: dict = field(default_factory=dict, repr=False)  # the parsed JSON, for what pygltflib drops (node.weights)
 
     def error(self, message: str, field: str | None = None) -> SceneError:
         return SceneError(message, path=str(self.path), field=field)
@@ -210,7 +211,7 @@ def read_gltf(path: str | Path) -> GltfDocument:
     digest = hashlib.sha256(json_bytes)
     for buf in buffers:
         digest.update(hashlib.sha256(buf).digest())
-    return GltfDocument(path=path, gltf=gltf, buffers=buffers, digest=digest.hexdigest())
+    return GltfDocument(path=path, gltf=gltf, buffers=buffers, digest=digest.hexdigest(), tree=tree)
 
 
 def _split_glb(raw: bytes, path: Path) -> tuple[bytes, bytes | None]:
