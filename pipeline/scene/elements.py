@@ -125,7 +125,9 @@ class ElementMesh:
         tri_n = np.minimum(wanted, MAX_SPLIT).astype(np.int64)
         total = int((tri_n ** 2).sum())
         if not total <= MAX_ELEMENTS or (asked > MAX_ELEMENTS and capped.mean() > 0.5):
-            raise SceneError(f"element_size {size:g} gives {asked:.0f} elements, more than {MAX_ELEMENTS}",
+            raise SceneError(f"element_size {size:g} gives {asked:.0f} elements, more than {MAX_ELEMENTS} (the posed "
+                             f"scene's triangles are up to {float(edges.max()):.3g} long; --element-size or "
+                             "scenes.extras.photonloom.element_size sets a coarser one)",
                              path=str(scene.path), field="element_size")
         if capped.any():
             log.warning("%s: %d triangle(s) longer than %d x element_size %g are split %d x %d (elements up to "

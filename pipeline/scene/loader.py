@@ -124,12 +124,12 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
     )
     if camera_node is None:  # --camera auto, or the file has no perspective camera
         scene.framing = frame_animation(scene)
-    if element_size is None:
-        scene.element_size = _default_element_size(doc, scene)
         if camera != AUTO:
             notices.insert(0, f"the file has no perspective camera: rendering with the auto camera from azimuth "
                               f"{AZIMUTH:g} deg, elevation {ELEVATION:g} deg, yfov {YFOV_DEG:g} deg, framing the "
                               "whole animation (--camera auto chooses it for any file)")
+    if element_size is None:
+        scene.element_size = _default_element_size(doc, scene)
     for n in notices:
         if (str(doc.path), n) not in _noticed:
             _noticed.add((str(doc.path), n))
