@@ -144,7 +144,7 @@ def animated_morph_cube(path: Path, *, interpolation: str = "LINEAR", times=(0.0
         b.add_node("floor", b.add_mesh("floor", floor, np.array([0, 2, 1, 0, 3, 2]), material=grey))
         b.add_node("lamp", light=b.add_point_light("lamp", (1, 1, 1), 40.0 * s * s), translation=(2 * s, 5 * s, 4 * s))
         cam = b.add_camera("cam", yfov=0.8, znear=0.01 * s)
-        b.add_node("cam", camera=cam, translation=(2.5 * s, 2.5 * s, 5 * s), rotation=_look_rotation(2.5, 2.5, 5))
+        b.add_node("cam", camera=cam, translation=(3.5 * s, 4 * s, 8 * s), rotation=_look_rotation(3.5, 3, 8))
     return b.write(path)
 
 
