@@ -50,3 +50,24 @@ def test_animated_morph_cube_grows_in_the_frames(tmp_path):
     rows1, cols1 = np.nonzero(blue[1])
     assert rows1.min() <= rows0.min() - 3  # the top rises
     assert cols1.max() >= cols0.max() + 3  # the +X side swells
+
+
+def test_element_size_option_of_loom_render(tmp_path):
+    """AnimatedMorphCube-like (node scaled 100x) renders with its default element size, and
+    ``--element-size`` sets it (refusing one too fine in one line, writing nothing)."""
+    import json
+
+    from click.testing import CliRunner
+
+    from pipeline.cli import main
+
+    scene = animated_morph_cube(tmp_path / "cube.glb")
+    common = ["render", str(scene), "--frames", "1-2", "--photons", "2000", "--resolution", "16x12", "--spp", "1",
+              "--scheduler", "synchronous", "--quiet"]
+    ok = CliRunner().invoke(main, [*common, "--out", str(tmp_path / "o"), "--element-size", "0.25"])
+    assert ok.exit_code == 0, ok.output
+    assert json.loads((tmp_path / "o" / "report.json").read_text())["settings"]["job"]["element_size"] == 0.25
+    fine = CliRunner().invoke(main, [*common, "--out", str(tmp_path / "f"), "--element-size", "1e-5"])
+    assert fine.exit_code == 2 and len(fine.output.strip().splitlines()) == 1
+    assert f"{scene}: element_size: element_size 1e-05 gives" in fine.output and "--element-size" in fine.output
+    assert not (tmp_path / "f").exists()
