@@ -252,3 +252,12 @@ def test_weight_channel_of_the_wrong_width_is_refused(tmp_path):
     path = b.write(tmp_path / "w.glb")
     with pytest.raises(SceneError, match=r"animations\[0\].samplers\[0\].output: output must be scalars, 2 per key"):
         Scene.load(path)
+
+
+def test_frames_beyond_a_morph_timeline_name_the_file(tmp_path):
+    scene, _, _ = _one_target_morph(tmp_path)
+    out = CliRunner().invoke(main, ["render", str(scene.path), "--out", str(tmp_path / "o"), "--frames", "1-40",
+                                    "--scheduler", "synchronous"])
+    assert out.exit_code == 2 and not (tmp_path / "o").exists()
+    assert out.output.strip() == (f"loom: error: {scene.path}: frames: frame 40 is outside the timeline 1-31 "
+                                  "(31 frame(s) at 30 fps, 1 s)")
