@@ -21,6 +21,7 @@ from .sky import UP, direction_from
 
 if TYPE_CHECKING:
     from .scene import Scene
+    from .timeline import Timeline
 
 AZIMUTH = 30.0
 ELEVATION = 20.0
@@ -29,7 +30,7 @@ MARGIN = 1.05
 AUTO = "auto"  # the --camera value, and the camera's name
 
 
-def sample_frames(timeline, n: int) -> list[int]:
+def sample_frames(timeline: "Timeline", n: int) -> list[int]:
     """At most ``n`` frames of ``timeline`` spread evenly from its first to its last."""
     return sorted({round(x) for x in np.linspace(timeline.first, timeline.last, min(timeline.frames, n))})
 

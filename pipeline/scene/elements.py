@@ -20,7 +20,7 @@ face within 45 degrees of each other (so a box corner keeps separate floor and w
 vertex lighting does not bleed round corners). Positions are kept in instance-local coordinates
 and posed on demand; nothing is stored per frame.
 
-A deforming instance (a skin or morph targets, pipeline/scene/deform.py) keeps the same elements,
+A deforming instance (a skin or morph targets, pipeline/scene/animation.py) keeps the same elements,
 built on its rest (bind) shape: each of its vertices remembers one source triangle and its lattice
 weights there, and is posed as that point of the posed source triangle, so the elements stay on the
 surface the rays hit and only their positions move.

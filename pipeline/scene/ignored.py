@@ -1,6 +1,6 @@
 """What a glTF file holds that photonloom does not render, each with the reason (``loom info``).
 
-Skins and morph targets are rendered (pipeline/scene/deform.py; ``loom info`` lists what deforms
+Skins and morph targets are rendered (pipeline/scene/animation.py; ``loom info`` lists what deforms
 on its ``deforms`` line). Extensions outside the ones
 implemented are ignored with the core glTF data they extend, or refused by the loader when the
 file lists them in ``extensionsRequired``. Only the default scene is rendered, and only

@@ -11,11 +11,10 @@ import logging
 
 import numpy as np
 
-from .animation import INTERPOLATIONS, PATHS, Sampler
+from .animation import INTERPOLATIONS, PATHS, Deformation, Sampler, Skin, normalise_weights
 from .camera import CameraDef
 from .default_camera import AUTO, AZIMUTH, ELEVATION, YFOV_DEG, animation_bounds, frame_animation, sample_frames
 from .default_lights import default_sky, default_sun
-from .deform import Deformation, Skin, normalise_weights
 from .gltf import GltfDocument
 from .lights import light_def_from_gltf
 from .materials import DEFAULT_MATERIAL, material_from_gltf

@@ -19,10 +19,9 @@ from pathlib import Path
 
 import numpy as np
 
-from .animation import Sampler, trs_matrix
+from .animation import Deformation, Sampler, joint_matrices, pose_vertices, trs_matrix
 from .camera import Camera, CameraDef
 from .default_camera import AUTO, Framing
-from .deform import Deformation, joint_matrices, pose_vertices
 from .gltf import GltfDocument, read_gltf
 from .lights import Light, LightDef
 from .materials import Material
@@ -69,7 +68,7 @@ class MeshInstance:
     material: int  # index into Scene.materials
     source_faces: np.ndarray  # (F,) int64: index of each kept triangle in the primitive
     attributes: VertexAttributes | None = None  # NORMAL, TEXCOORD_n, COLOR_0 (vertex_attributes.py)
-    deformation: Deformation | None = None  # a skin and/or morph targets (deform.py): posed per vertex
+    deformation: Deformation | None = None  # a skin and/or morph targets (animation.py): posed per vertex
 
 
 @dataclass
@@ -184,7 +183,7 @@ class Scene:
     def deformed_vertices(self, inst: MeshInstance, world: np.ndarray, t: float, *, normals: bool = True
                           ) -> tuple[np.ndarray, np.ndarray | None]:
         """World positions (V, 3) and unit normals (None without NORMAL, or when ``normals`` is
-        False) of a deforming instance at ``t``, ``world`` being :meth:`world_matrices` (deform.py)."""
+        False) of a deforming instance at ``t``, ``world`` being :meth:`world_matrices` (animation.py)."""
         a = inst.attributes
         base_normals = a.normals if a is not None and normals else None
         return pose_vertices(inst.vertices, base_normals, inst.deformation,

@@ -72,7 +72,7 @@ def describe(scene: Scene, element_size: float | None = None) -> list[str]:
 
 def deforms_line(scene: Scene) -> str:
     """What is posed per vertex: skinned and morphed primitives, their joints, targets and whether
-    their pose changes over the timeline (pipeline/scene/deform.py)."""
+    their pose changes over the timeline (pipeline/scene/animation.py)."""
     parts = []
     for inst in scene.deforming:
         d = inst.deformation
