@@ -179,7 +179,7 @@ def transform_normals(normals: np.ndarray, linear: np.ndarray) -> np.ndarray:
 
 def normalise_weights(weights: np.ndarray) -> np.ndarray:
     """Skin weights with each row scaled to sum 1 (glTF §3.7.3.1 asks for it; exporters round);
-    all-zero rows stay zero (the loader refuses them)."""
+    all-zero rows stay zero (such a vertex follows its node, see :func:`pose_vertices`)."""
     total = weights.sum(axis=1, keepdims=True)
     return np.divide(weights, total, out=np.zeros_like(weights), where=total > 0)
 
@@ -202,5 +202,8 @@ def pose_vertices(base: np.ndarray, normals: np.ndarray | None, deformation: Def
         points = local @ node_world[:3, :3].T + node_world[:3, 3]
         return points, None if local_n is None else transform_normals(local_n, node_world[:3, :3])
     blended = blend(d.joints, d.weights, joint_matrices(joint_world, d.skin.inverse_bind))
+    unbound = d.weights.sum(axis=1) == 0  # no joint holds it: it stays where its node puts it
+    if unbound.any():
+        blended[unbound] = node_world
     points = skin_points(local, blended)
     return points, None if local_n is None else transform_normals(local_n, blended[:, :3, :3])

@@ -357,7 +357,7 @@ def _read_instances(doc, nodes, order, default_material, warnings, skins):
                 raise doc.error(f"refers to missing material {material}", f + ".material")
             attributes = read_vertex_attributes(doc, prim.attributes, len(verts), f)
             deformation = _read_deformation(doc, i, node.mesh, prim, f, len(verts),
-                                             None if skin is None else skins[skin])
+                                             None if skin is None else skins[skin], warnings)
             instances.append(MeshInstance(
                 index=len(instances), node=i, mesh=node.mesh, primitive=p,
                 name=f"{node.name}/{mesh.name or f'mesh{node.mesh}'}[{p}]",
@@ -405,7 +405,7 @@ def _read_skins(doc, order) -> list[Skin]:
 
 
 def _read_deformation(doc, node: int, mesh: int, prim, f: str, n_vertices: int,
-                      skin: Skin | None) -> Deformation | None:
+                      skin: Skin | None, warnings: list[str]) -> Deformation | None:
     """The skin binding (JOINTS_n/WEIGHTS_n, every set) and morph targets of one primitive, checked;
     None when the primitive is rigid."""
     g = doc.gltf
@@ -473,15 +473,19 @@ def _read_deformation(doc, node: int, mesh: int, prim, f: str, n_vertices: int,
                             f + ".attributes")
         joints = np.concatenate([j for j, _ in sets], axis=1)
         raw = np.concatenate([w for _, w in sets], axis=1)
-        unbound = np.flatnonzero(raw.sum(axis=1) <= 0)
-        if len(unbound):
-            raise doc.error(f"vertex {int(unbound[0])} has all skin weights zero ({len(unbound)} such vertices)",
-                            f + ".attributes.WEIGHTS_0")
+        unbound = int((raw.sum(axis=1) <= 0).sum())
+        if unbound:  # exporters leave unweighted vertices so; a renderer that skins them collapses them
+            warnings.append(f"{f}: {unbound} vertex(es) have all skin weights zero: they follow the node "
+                            f"{_node_name(doc, node)!r} unskinned")
         weights = normalise_weights(raw)
     if skin is None and positions is None and normals is None:
         return None
     return Deformation(target_positions=positions, target_normals=normals, default_weights=weights0,
                        skin=skin, joints=joints, weights=weights)
+
+
+def _node_name(doc, node: int) -> str:
+    return doc.gltf.nodes[node].name or f"node{node}"
 
 
 def _with_textures(doc: GltfDocument, materials: list) -> list:

@@ -261,3 +261,18 @@ def test_frames_beyond_a_morph_timeline_name_the_file(tmp_path):
     assert out.exit_code == 2 and not (tmp_path / "o").exists()
     assert out.output.strip() == (f"loom: error: {scene.path}: frames: frame 40 is outside the timeline 1-31 "
                                   "(31 frame(s) at 30 fps, 1 s)")
+
+
+def test_unweighted_vertices_follow_their_node(tmp_path):
+    """Joint at (0, 0, 2), no inverse bind matrices (identity): bound vertices move by the joint,
+    the unweighted one stays where the mesh node (at (5, 0, 0)) puts it, with a warning."""
+    b = GltfBuilder()
+    mesh = b.add_mesh("tri", np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]], float), np.array([0, 1, 2]))
+    b.bind_skin(mesh, 0, np.zeros((3, 4), int), np.array([[1, 0, 0, 0], [1, 0, 0, 0], [0, 0, 0, 0]], float))
+    joint = b.add_node("joint", translation=(0, 0, 2))
+    b.add_node("tri", mesh, translation=(5, 0, 0), skin=b.add_skin([joint]))
+    b.add_node("lamp", light=b.add_point_light("lamp", (1, 1, 1), 10.0), translation=(0, 3, 0))
+    scene = Scene.load(b.write(tmp_path / "tri.glb"))
+    np.testing.assert_allclose(scene.pose(0.0).vertices, [[0, 0, 2], [1, 0, 2], [5, 1, 0]], atol=1e-6)
+    assert scene.warnings == ["meshes[0].primitives[0]: 1 vertex(es) have all skin weights zero: they follow "
+                              "the node 'tri' unskinned"]
