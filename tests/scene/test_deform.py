@@ -276,3 +276,32 @@ def test_unweighted_vertices_follow_their_node(tmp_path):
     np.testing.assert_allclose(scene.pose(0.0).vertices, [[0, 0, 2], [1, 0, 2], [5, 1, 0]], atol=1e-6)
     assert scene.warnings == ["meshes[0].primitives[0]: 1 vertex(es) have all skin weights zero: they follow "
                               "the node 'tri' unskinned"]
+
+
+def _sparse_target_scene(tmp_path, indices=(3,)):
+    """The one-target tetrahedron with its target as a sparse accessor without a bufferView (zeros
+    but for the listed vertices), as Blender writes shape keys."""
+    from pygltflib import Accessor, AccessorSparseIndices, AccessorSparseValues, Sparse
+
+    b = GltfBuilder()
+    pos = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    mesh = b.add_mesh("tet", pos, np.array([0, 2, 1, 0, 1, 3, 0, 3, 2, 1, 2, 3]))
+    views = [b.gltf.accessors[b.add_accessor(data)].bufferView for data in
+             (np.array(indices, np.uint16), np.tile([0, 0.5, 0], (len(indices), 1)).astype(np.float32))]
+    b.gltf.accessors.append(Accessor(count=4, componentType=5126, type="VEC3", sparse=Sparse(
+        count=len(indices), indices=AccessorSparseIndices(bufferView=views[0], componentType=5123),
+        values=AccessorSparseValues(bufferView=views[1]))))
+    b.gltf.meshes[mesh].primitives[0].targets = [{"POSITION": len(b.gltf.accessors) - 1}]
+    b.gltf.meshes[mesh].weights = [1.0]
+    b.add_node("tet", mesh)
+    b.add_node("lamp", light=b.add_point_light("lamp", (1, 1, 1), 10.0), translation=(0, 3, 0))
+    return b.write(tmp_path / "sparse.glb"), pos
+
+
+def test_sparse_morph_target(tmp_path):
+    path, pos = _sparse_target_scene(tmp_path)
+    np.testing.assert_allclose(Scene.load(path).pose(0.0).vertices, pos + np.array([[0, 0, 0]] * 3 + [[0, 0.5, 0]]),
+                               atol=1e-6)
+    bad, _ = _sparse_target_scene(tmp_path, indices=(3, 2))
+    with pytest.raises(SceneError, match=r"accessors\[\d+\].sparse.indices: indices must increase strictly"):
+        Scene.load(bad)
