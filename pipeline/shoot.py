@@ -43,7 +43,14 @@ def check_store_location(url: str) -> None:
 def plan(scene: Scene, frames_spec: str | None, n_photons: int, config: RenderConfig) -> ShootPlan:
     if not isinstance(n_photons, int) or n_photons <= 0:
         raise LoomError(f"must be a positive number of photons per frame, got {n_photons}", field="--photons")
-    frames = scene.timeline.select(frames_spec)
+    try:
+        frames = scene.timeline.select(frames_spec)
+    except LoomError as err:  # name the file and where its timeline comes from
+        tl = scene.timeline
+        span = f"{tl.frames} frame(s) at {tl.fps:g} fps, {tl.duration:g} s"
+        if not scene.channels:
+            span += "; the file has no animation"
+        raise LoomError(f"{err.reason} ({span})", path=str(scene.path), field=err.field) from None
     elements = ElementMesh.build(scene, config.element_size)
     keys = scene.frame_state_keys
     first_with_key: dict[str, int] = {}

@@ -105,6 +105,9 @@ def job_options(f: _F) -> _F:
                      "eye's adaptation, or Ward's visibility-matching operator (pipeline/tonemap.py)."),
         click.option("--exposure", type=float, default=0.0, show_default=True,
                      help="Exposure offset in EV (x 2^EV) on top of the operator's own."),
+        click.option("--element-size", type=float, default=None,
+                     help="Element edge bound in world units (default: the scene's extras, else 1/50 of the "
+                          "diagonal of the posed scene's bounds over the timeline; `loom info` shows it)."),
     ]
     for option in reversed(options):
         f = option(f)
@@ -115,7 +118,8 @@ def job_arguments(scene_file: str, frames: str | None, out_dir: str, resolution:
                   fmax: int | None, temporal: str, store_url: str | None, keep_records: bool, camera: str | None,
                   seed: int,
                   reflection_depth: int, photon_depth: int, d_thr: float | None, config_file: str | None,
-                  light: str = "auto", tonemap: str = "filmic", exposure: float = 0.0) -> dict:
+                  light: str = "auto", tonemap: str = "filmic", exposure: float = 0.0,
+                  element_size: float | None = None) -> dict:
     """The keyword arguments of pipeline.render.prepare_job / render from the job options."""
     from pipeline.config import RenderConfig, load_config
     from pipeline.render import RenderSettings, parse_resolution
@@ -123,7 +127,8 @@ def job_arguments(scene_file: str, frames: str | None, out_dir: str, resolution:
 
     width, height = parse_resolution(resolution)
     fields = load_config(config_file) if config_file else {}
-    fields.update(seed=seed, photon_depth=photon_depth, **({} if d_thr is None else {"d_thr": d_thr}))
+    fields.update(seed=seed, photon_depth=photon_depth, **({} if d_thr is None else {"d_thr": d_thr}),
+                  **({} if element_size is None else {"element_size": element_size}))
     return dict(scene_path=scene_file, frames=frames, out_dir=out_dir, n_photons=photons, fmax=fmax,
                 temporal=temporal, store_url=store_url, keep_records=keep_records, camera=camera,
                 config=RenderConfig.from_dict(fields),

@@ -1,7 +1,20 @@
-"""glTF animation samplers: STEP, LINEAR (slerp for rotations) and CUBICSPLINE, clamped outside keys.
+"""glTF animation: samplers (STEP, LINEAR with slerp for rotations, CUBICSPLINE, clamped outside
+keys) and the skins and morph targets they pose, as pure functions over arrays.
 
 Interpolation follows the glTF 2.0 specification, Appendix C ("Animation Sampler Interpolation
 Modes"). Quaternions are (x, y, z, w) as glTF stores them.
+
+Morph targets (glTF 2.0 §3.7.2.2 "Morph Targets"): a target holds displacements of POSITION and
+NORMAL; the morphed attribute is ``base + sum_k w_k * target_k``, with the weights from the node's
+animated ``weights`` channel, else ``node.weights``, else ``mesh.weights``, else zeros.
+
+Skins (glTF 2.0 §3.7.3 "Skins"): each vertex is moved by up to 4 x (number of JOINTS_n/WEIGHTS_n
+sets) joints, ``p' = sum_i w_i * jointMatrix_i * p`` with ``jointMatrix_i = globalTransform(joint_i)
+* inverseBindMatrix_i`` taken straight to world space (the spec's ``inverse(globalTransform(meshNode))``
+factor cancels against the mesh node's own transform, which "MUST be ignored" for a skinned mesh).
+Normals move by the inverse transpose of the blended matrix (§3.7.3.3), here its cofactor matrix
+times the sign of its determinant (the same direction, defined even where the matrix is singular).
+Morphing comes first, then skinning (§3.7.2.2).
 """
 from __future__ import annotations
 
@@ -10,7 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 INTERPOLATIONS = ("LINEAR", "STEP", "CUBICSPLINE")
-PATHS = ("translation", "rotation", "scale")
+PATHS = ("translation", "rotation", "scale")  # node paths; "weights" drives morph targets
 
 
 @dataclass(frozen=True)
@@ -101,3 +114,96 @@ def trs_matrix(t: np.ndarray, r: np.ndarray, s: np.ndarray) -> np.ndarray:
     m[:3, :3] = quaternion_matrix(r) * np.asarray(s, dtype=np.float64)[None, :]
     m[:3, 3] = t
     return m
+
+
+# --- skins and morph targets ---------------------------------------------------------------------
+
+@dataclass(frozen=True, eq=False)
+class Skin:
+    """A glTF skin: its joints (node indices) and their inverse bind matrices (J, 4, 4), row-major."""
+
+    index: int
+    joints: tuple[int, ...]
+    inverse_bind: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class Deformation:
+    """How one mesh instance deforms: morph targets, a skin, or both (one row per POSITION)."""
+
+    target_positions: np.ndarray | None = None  # (K, V, 3) float64 displacements
+    target_normals: np.ndarray | None = None  # (K, V, 3) float64 displacements
+    default_weights: np.ndarray | None = None  # (K,) node.weights, else mesh.weights, else zeros
+    skin: Skin | None = None
+    joints: np.ndarray | None = None  # (V, S) int64 into skin.joints, S = 4 x the JOINTS_n sets
+    weights: np.ndarray | None = None  # (V, S) float64, rows normalised to sum 1 (or all zero)
+
+    @property
+    def n_targets(self) -> int:
+        return 0 if self.default_weights is None else len(self.default_weights)
+
+
+def morph(base: np.ndarray, targets: np.ndarray | None, weights: np.ndarray) -> np.ndarray:
+    """(V, 3) ``base + sum_k weights[k] * targets[k]`` (glTF 2.0 §3.7.2.2); ``base`` when no targets."""
+    if targets is None or not len(weights):
+        return np.asarray(base, np.float64)
+    return np.asarray(base, np.float64) + np.tensordot(np.asarray(weights, np.float64), targets, axes=1)
+
+
+def joint_matrices(joint_world: np.ndarray, inverse_bind: np.ndarray) -> np.ndarray:
+    """(J, 4, 4) ``globalTransform(joint_j) @ inverseBindMatrix_j``: bind space to world (glTF §3.7.3)."""
+    return np.einsum("jab,jbc->jac", joint_world, inverse_bind)
+
+
+def blend(joints: np.ndarray, weights: np.ndarray, matrices: np.ndarray) -> np.ndarray:
+    """(V, 4, 4) per-vertex skinning matrix ``sum_i weights[v, i] * matrices[joints[v, i]]``."""
+    return np.einsum("vs,vsab->vab", weights, matrices[joints])
+
+
+def skin_points(points: np.ndarray, blended: np.ndarray) -> np.ndarray:
+    """(V, 3) world positions of bind-space ``points`` under per-vertex matrices ``blended`` (V, 4, 4)."""
+    return np.einsum("vab,vb->va", blended[:, :3, :3], points) + blended[:, :3, 3]
+
+
+def transform_normals(normals: np.ndarray, linear: np.ndarray) -> np.ndarray:
+    """(V, 3) unit normals carried by the inverse transpose of ``linear`` ((V, 3, 3) or (3, 3)):
+    the cofactor matrix times sign(det), renormalised; zero where a normal or matrix vanishes."""
+    m = np.broadcast_to(linear, (len(normals), 3, 3))
+    c0, c1, c2 = m[:, :, 0], m[:, :, 1], m[:, :, 2]
+    cofactor = np.stack([np.cross(c1, c2), np.cross(c2, c0), np.cross(c0, c1)], axis=2)
+    det = np.einsum("vi,vi->v", c0, cofactor[:, :, 0])
+    n = np.einsum("vab,vb->va", cofactor, normals) * np.where(det < 0, -1.0, 1.0)[:, None]
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.divide(n, length, out=np.zeros_like(n), where=length > 1e-12)
+
+
+def normalise_weights(weights: np.ndarray) -> np.ndarray:
+    """Skin weights with each row scaled to sum 1 (glTF §3.7.3.1 asks for it; exporters round);
+    all-zero rows stay zero (such a vertex follows its node, see :func:`pose_vertices`)."""
+    total = weights.sum(axis=1, keepdims=True)
+    return np.divide(weights, total, out=np.zeros_like(weights), where=total > 0)
+
+
+def pose_vertices(base: np.ndarray, normals: np.ndarray | None, deformation: Deformation,
+                  morph_weights: np.ndarray | None, node_world: np.ndarray,
+                  joint_world: np.ndarray | None) -> tuple[np.ndarray, np.ndarray | None]:
+    """World positions (V, 3) and unit normals (V, 3) or None of one deforming instance.
+
+    ``morph_weights`` (K,) are the instance's weights at this instant; ``node_world`` is its node's
+    world matrix (used only without a skin); ``joint_world`` (J, 4, 4) its skin's joints' world
+    matrices."""
+    d = deformation
+    w = morph_weights if morph_weights is not None else np.zeros(0)
+    local = morph(base, d.target_positions, w)
+    local_n = None
+    if normals is not None:
+        local_n = morph(normals, d.target_normals, w)
+    if d.skin is None:
+        points = local @ node_world[:3, :3].T + node_world[:3, 3]
+        return points, None if local_n is None else transform_normals(local_n, node_world[:3, :3])
+    blended = blend(d.joints, d.weights, joint_matrices(joint_world, d.skin.inverse_bind))
+    unbound = d.weights.sum(axis=1) == 0  # no joint holds it: it stays where its node puts it
+    if unbound.any():
+        blended[unbound] = node_world
+    points = skin_points(local, blended)
+    return points, None if local_n is None else transform_normals(local_n, blended[:, :3, :3])

@@ -21,6 +21,7 @@ from .sky import UP, direction_from
 
 if TYPE_CHECKING:
     from .scene import Scene
+    from .timeline import Timeline
 
 AZIMUTH = 30.0
 ELEVATION = 20.0
@@ -29,20 +30,30 @@ MARGIN = 1.05
 AUTO = "auto"  # the --camera value, and the camera's name
 
 
-def animation_bounds(scene: "Scene") -> tuple[np.ndarray, np.ndarray]:
-    """(lo, hi) world bounds of every instance's vertices over all frames of the timeline; each
-    distinct instance matrix is applied once (standing instances cost one transform)."""
+def sample_frames(timeline: "Timeline", n: int) -> list[int]:
+    """At most ``n`` frames of ``timeline`` spread evenly from its first to its last."""
+    return sorted({round(x) for x in np.linspace(timeline.first, timeline.last, min(timeline.frames, n))})
+
+
+def animation_bounds(scene: "Scene", frames: list[int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+    """(lo, hi) world bounds of every instance's posed vertices over ``frames`` (default: every
+    frame of the timeline); each distinct instance matrix of a rigid instance is applied once
+    (standing instances cost one transform), a skinned or morphed one is posed at every frame."""
     lo, hi = np.full(3, np.inf), np.full(3, -np.inf)
     seen: set[tuple[int, bytes]] = set()
-    for frame in scene.timeline.all_frames():
-        world = scene.world_matrices(scene.timeline.time(frame))
+    for frame in scene.timeline.all_frames() if frames is None else frames:
+        t = scene.timeline.time(frame)
+        world = scene.world_matrices(t)
         for inst in scene.instances:
-            m = world[inst.node]
-            mark = (inst.index, m.tobytes())
-            if mark in seen:
-                continue
-            seen.add(mark)
-            v = inst.vertices @ m[:3, :3].T + m[:3, 3]
+            if inst.deformation is not None:
+                v = scene.deformed_vertices(inst, world, t, normals=False)[0]
+            else:
+                m = world[inst.node]
+                mark = (inst.index, m.tobytes())
+                if mark in seen:
+                    continue
+                seen.add(mark)
+                v = inst.vertices @ m[:3, :3].T + m[:3, 3]
             lo, hi = np.minimum(lo, v.min(0)), np.maximum(hi, v.max(0))
     return lo, hi
 

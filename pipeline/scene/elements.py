@@ -19,6 +19,11 @@ Vertices are shared between elements of one instance when they coincide and thei
 face within 45 degrees of each other (so a box corner keeps separate floor and wall vertices and
 vertex lighting does not bleed round corners). Positions are kept in instance-local coordinates
 and posed on demand; nothing is stored per frame.
+
+A deforming instance (a skin or morph targets, pipeline/scene/animation.py) keeps the same elements,
+built on its rest (bind) shape: each of its vertices remembers one source triangle and its lattice
+weights there, and is posed as that point of the posed source triangle, so the elements stay on the
+surface the rays hit and only their positions move.
 """
 from __future__ import annotations
 
@@ -78,6 +83,8 @@ class ElementMesh:
     local_areas: np.ndarray  # (E,) float64 areas in instance-local coordinates
     instance_elements: np.ndarray  # (I+1,) int64 element range of each instance
     triangle_source_face: np.ndarray  # (F,) int64 index of each source triangle in its glTF primitive
+    vertex_triangle: np.ndarray | None = None  # (V,) int64 a global source triangle holding the vertex
+    vertex_lattice: np.ndarray | None = None  # (V, 2) float64 its weights of corners 1 and 2 there
 
     @property
     def n_elements(self) -> int:
@@ -118,7 +125,9 @@ class ElementMesh:
         tri_n = np.minimum(wanted, MAX_SPLIT).astype(np.int64)
         total = int((tri_n ** 2).sum())
         if not total <= MAX_ELEMENTS or (asked > MAX_ELEMENTS and capped.mean() > 0.5):
-            raise SceneError(f"element_size {size:g} gives {asked:.0f} elements, more than {MAX_ELEMENTS}",
+            raise SceneError(f"element_size {size:g} gives {asked:.0f} elements, more than {MAX_ELEMENTS} (the posed "
+                             f"scene's triangles are up to {float(edges.max()):.3g} long; --element-size or "
+                             "scenes.extras.photonloom.element_size sets a coarser one)",
                              path=str(scene.path), field="element_size")
         if capped.any():
             log.warning("%s: %d triangle(s) longer than %d x element_size %g are split %d x %d (elements up to "
@@ -132,6 +141,7 @@ class ElementMesh:
 
         occ_pos = []  # per lattice-point occurrence: local position
         occ_tri = []  # its source triangle
+        occ_lattice = []  # its weights of the triangle's corners 1 and 2
         elem_occ = np.empty((total, 3), dtype=np.int64)  # element corners as occurrence indices
         occ_count = 0
         for n in np.unique(tri_n):
@@ -145,12 +155,14 @@ class ElementMesh:
             n_pts = len(pts)
             occ_pos.append(pos.reshape(-1, 3))
             occ_tri.append(np.repeat(tris, n_pts))
+            occ_lattice.append(np.tile(np.stack([wa, wb], axis=1), (len(tris), 1)))
             base = occ_count + np.arange(len(tris)) * n_pts  # (m,)
             rows = offsets[tris][:, None] + np.arange(n * n)[None, :]  # (m, n*n)
             elem_occ[rows.ravel()] = (base[:, None, None] + cells[None, :, :]).reshape(-1, 3)
             occ_count += len(tris) * n_pts
         occ_pos = np.concatenate(occ_pos)
         occ_tri = np.concatenate(occ_tri)
+        occ_lattice = np.concatenate(occ_lattice)
 
         occ_vertex = _share_vertices(occ_pos, tri_inst[occ_tri], _local_normals(local_corners)[occ_tri],
                                      scene)
@@ -159,6 +171,10 @@ class ElementMesh:
         vertex_local[occ_vertex] = occ_pos
         vertex_instance = np.empty(n_vertices, dtype=np.int32)
         vertex_instance[occ_vertex] = tri_inst[occ_tri]
+        vertex_triangle = np.empty(n_vertices, dtype=np.int64)
+        vertex_triangle[occ_vertex] = occ_tri
+        vertex_lattice = np.empty((n_vertices, 2))
+        vertex_lattice[occ_vertex] = occ_lattice
         element_vertices = occ_vertex[elem_occ].astype(np.int32)
         element_triangle = np.repeat(np.arange(len(tri_n)), tri_n ** 2).astype(np.int32)
         element_instance = tri_inst[element_triangle].astype(np.int32)
@@ -167,7 +183,8 @@ class ElementMesh:
         inst_elems = np.searchsorted(element_instance, np.arange(len(scene.instances) + 1))
         return cls(size, tri_n.astype(np.int32), offsets, element_vertices, element_instance,
                    element_triangle, vertex_local, vertex_instance, local_areas, inst_elems,
-                   np.concatenate([inst.source_faces for inst in scene.instances]))
+                   np.concatenate([inst.source_faces for inst in scene.instances]), vertex_triangle,
+                   vertex_lattice)
 
     # --- queries ----------------------------------------------------------------------------------
 
@@ -180,9 +197,18 @@ class ElementMesh:
         return locate_in_triangles(self.triangle_n, self.triangle_offset, triangle, u, v)
 
     def vertex_positions(self, state: FrameState) -> np.ndarray:
-        """(V, 3) world positions of the shared vertices in a posed frame."""
+        """(V, 3) world positions of the shared vertices in a posed frame: the instance's matrix
+        applied to the local position, or, for a deforming instance, the vertex's lattice point on
+        its posed source triangle (module docstring)."""
         m = state.instance_matrices[self.vertex_instance]
-        return np.einsum("vij,vj->vi", m[:, :3, :3], self.vertex_local) + m[:, :3, 3]
+        out = np.einsum("vij,vj->vi", m[:, :3, :3], self.vertex_local) + m[:, :3, 3]
+        deformed = getattr(state, "deformed_instances", ())
+        if deformed:
+            rows = np.flatnonzero(np.isin(self.vertex_instance, deformed))
+            c = state.vertices.astype(np.float64)[state.faces[self.vertex_triangle[rows]]]  # (n, 3, 3)
+            wa, wb = self.vertex_lattice[rows, :1], self.vertex_lattice[rows, 1:]
+            out[rows] = c[:, 0] + wa * (c[:, 1] - c[:, 0]) + wb * (c[:, 2] - c[:, 0])
+        return out
 
     def element_positions(self, state: FrameState) -> np.ndarray:
         """(E, 3, 3) world corners of every element in a posed frame."""
@@ -191,10 +217,16 @@ class ElementMesh:
     def areas(self, state: FrameState) -> np.ndarray:
         """(E,) world areas in a posed frame: local areas times s^2 where the instance's
         transform is a similarity (rotation, translation, uniform scale s), recomputed otherwise
-        (non-uniform or animated non-uniform scale)."""
+        (non-uniform or animated non-uniform scale, or a deforming instance)."""
         out = np.empty(self.n_elements)
+        deformed = set(getattr(state, "deformed_instances", ()))
+        posed = self.vertex_positions(state) if deformed else None
         for i, m in enumerate(state.instance_matrices):
             lo, hi = self.instance_elements[i], self.instance_elements[i + 1]
+            if i in deformed:  # a skin or morph: the areas of the posed elements
+                p = posed[self.element_vertices[lo:hi]]
+                out[lo:hi] = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
+                continue
             lin = m[:3, :3]
             gram = lin.T @ lin
             s2 = np.trace(gram) / 3.0

@@ -13,7 +13,7 @@ import json
 import os
 import stat
 import struct
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -40,7 +40,7 @@ TYPE_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9
 
 # What a scene file may claim (README "Input limits and hostile input"). A buffer may not exceed a
 # GLB's own uint32 length; an accessor without a bufferView is zeros that no byte backs, so its
-# size is capped on its own (it is only meaningful with sparse data, which we refuse).
+# size is capped on its own (it is only meaningful with sparse data).
 MAX_BUFFER_BYTES = (1 << 32) - 1
 MAX_UNBACKED_ACCESSOR_BYTES = 1 << 28
 # Buffer and image URIs must stay inside the scene's folder unless this is set to 1 (an explicit
@@ -62,6 +62,7 @@ class GltfDocument:
     gltf: pygltflib.GLTF2
     buffers: list[bytes]
     digest: str  # sha256 of the JSON text and every buffer: identifies the scene content
+    tree: dict = field(default_factory=dict, repr=False)  # the parsed JSON, for what pygltflib drops (node.weights)
 
     def error(self, message: str, field: str | None = None) -> SceneError:
         return SceneError(message, path=str(self.path), field=field)
@@ -71,7 +72,8 @@ class GltfDocument:
         """Accessor ``index`` as an array of shape (count,) or (count, width), bounds-checked.
 
         Normalized integer accessors are mapped to [0, 1] or [-1, 1] as the spec's
-        "normalized" rules (§3.11) say. Sparse accessors are refused. ``types`` and
+        "normalized" rules (§3.11) say. Sparse accessors (§3.6.2.3, exporters write morph targets
+        so) replace the listed elements of the base (its bufferView, or zeros). ``types`` and
         ``components`` restrict what the use allows (indices: unsigned SCALAR). Every size is
         checked against the bytes that back it before anything is allocated.
         """
@@ -80,8 +82,6 @@ class GltfDocument:
         if not _is_int(index) or not 0 <= index < len(g.accessors):
             raise self.error(f"refers to a missing accessor {index}", field)
         acc = g.accessors[index]
-        if acc.sparse is not None:
-            raise self.error("sparse accessors are not supported", where)
         dtype = COMPONENT_DTYPES.get(acc.componentType) if _is_int(acc.componentType) else None
         width = TYPE_WIDTH.get(acc.type) if isinstance(acc.type, str) else None
         if dtype is None or width is None:
@@ -103,10 +103,36 @@ class GltfDocument:
             out = np.zeros((count, width), dtype=dtype)
         else:
             out = self._read_view(acc.bufferView, offset, dtype, width, count, where)
+        if acc.sparse is not None:
+            self._substitute_sparse(acc.sparse, out, dtype, width, where + ".sparse")
         if acc.normalized and np.issubdtype(dtype, np.integer):
             info = np.iinfo(dtype)
             out = np.maximum(out.astype(np.float64) / info.max, -1.0)
         return out[:, 0] if width == 1 else out
+
+    def _substitute_sparse(self, sparse, out: np.ndarray, dtype, width: int, where: str) -> None:
+        """Write a sparse accessor's values over ``out`` (count, width) at its indices (glTF 2.0
+        §3.6.2.3: strictly increasing unsigned indices below the accessor's count)."""
+        def get(obj, name):
+            return obj.get(name) if isinstance(obj, dict) else getattr(obj, name, None)
+
+        n = _integer(get(sparse, "count"), 1, self, where + ".count")
+        if n > len(out):
+            raise self.error(f"count {n} exceeds the accessor's {len(out)} elements", where + ".count")
+        indices, values = get(sparse, "indices"), get(sparse, "values")
+        if indices is None or values is None:
+            raise self.error("needs indices and values", where)
+        component = get(indices, "componentType")
+        if component not in (5121, 5123, 5125):
+            raise self.error(f"componentType {component} must be an unsigned byte, short or int",
+                             where + ".indices.componentType")
+        offset = _integer(get(indices, "byteOffset"), 0, self, where + ".indices.byteOffset", default=0)
+        idx = self._read_view(get(indices, "bufferView"), offset, COMPONENT_DTYPES[component], 1, n,
+                              where + ".indices")[:, 0].astype(np.int64)
+        if np.any(np.diff(idx) <= 0) or idx[-1] >= len(out):
+            raise self.error(f"indices must increase strictly and stay below {len(out)}", where + ".indices")
+        offset = _integer(get(values, "byteOffset"), 0, self, where + ".values.byteOffset", default=0)
+        out[idx] = self._read_view(get(values, "bufferView"), offset, dtype, width, n, where + ".values")
 
     def _read_view(self, view_index, offset, dtype, width, count, where) -> np.ndarray:
         g = self.gltf
@@ -210,7 +236,7 @@ def read_gltf(path: str | Path) -> GltfDocument:
     digest = hashlib.sha256(json_bytes)
     for buf in buffers:
         digest.update(hashlib.sha256(buf).digest())
-    return GltfDocument(path=path, gltf=gltf, buffers=buffers, digest=digest.hexdigest())
+    return GltfDocument(path=path, gltf=gltf, buffers=buffers, digest=digest.hexdigest(), tree=tree)
 
 
 def _split_glb(raw: bytes, path: Path) -> tuple[bytes, bytes | None]:

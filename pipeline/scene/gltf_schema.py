@@ -61,7 +61,7 @@ SCHEMA = {
                         "pbrMetallicRoughness": {"baseColorFactor": _NUMS, "metallicFactor": NUM,
                                                  "roughnessFactor": NUM, "baseColorTexture": {"index": INDEX}},
                         "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": NUM}}}),
-    "skins": _list({"joints": _list(INDEX)}),
+    "skins": _list({"joints": _list(INDEX), "inverseBindMatrices": INDEX, "skeleton": INDEX}),
 }
 
 

@@ -1,7 +1,7 @@
 """What a glTF file holds that photonloom does not render, each with the reason (``loom info``).
 
-Skins and morph targets are not refused (exported scenes often carry unused ones, see
-pipeline/scene/loader.py): their meshes are shown in the rest pose. Extensions outside the ones
+Skins and morph targets are rendered (pipeline/scene/animation.py; ``loom info`` lists what deforms
+on its ``deforms`` line). Extensions outside the ones
 implemented are ignored with the core glTF data they extend, or refused by the loader when the
 file lists them in ``extensionsRequired``. Only the default scene is rendered, and only
 perspective cameras can be chosen.
@@ -20,7 +20,7 @@ _REASONS = (
     ("KHR_draco_", "the uncompressed fallback data is read"),
     ("EXT_meshopt_", "the uncompressed fallback data is read"),
     ("EXT_mesh_gpu_instancing", "only the node itself is drawn, not its instances"),
-    ("KHR_animation_pointer", "only node translation, rotation and scale are animated"),
+    ("KHR_animation_pointer", "only node translation, rotation, scale and morph weights are animated"),
     ("KHR_xmp", "metadata does not change the picture"),
 )
 
@@ -29,16 +29,6 @@ def ignored(scene: Scene) -> list[str]:
     """One line per kind of thing the file holds and the render leaves out, with the reason."""
     g = scene.document.gltf
     lines = []
-    skinned = [i for i in scene.order if g.nodes[i].skin is not None]
-    if skinned:
-        lines.append(f"{len(g.skins)} skin(s) on {len(skinned)} node(s): skinning is not implemented, "
-                     "meshes are shown in their rest pose")
-    morphed = sorted({(inst.mesh, inst.primitive) for inst in scene.instances
-                      if g.meshes[inst.mesh].primitives[inst.primitive].targets})
-    weights = sum(ch.target is not None and ch.target.path == "weights" for a in g.animations for ch in a.channels)
-    if morphed or weights:
-        lines.append(f"morph targets on {len(morphed)} primitive(s), {weights} weight channel(s): morphing is "
-                     "not implemented, the rest shape is used")
     for name in sorted(_extensions(g) - SUPPORTED_REQUIRED_EXTENSIONS):
         reason = next((why for prefix, why in _REASONS if name.startswith(prefix)), "the core glTF data is used")
         lines.append(f"extension {name}: not implemented, {reason}")

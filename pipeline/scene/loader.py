@@ -1,8 +1,9 @@
 """Build a :class:`~pipeline.scene.scene.Scene` from a parsed glTF document, validating as it goes.
 
-Every refusal is a one-line :class:`SceneError` naming the file and the glTF field. Skins and morph
-targets are not supported: they are ignored with a warning and the rest pose is used (documented in
-the README), because many exported scenes carry an unused skin and refusing them would be harsh.
+Every refusal is a one-line :class:`SceneError` naming the file and the glTF field. Skins
+(``JOINTS_n``/``WEIGHTS_n``, inverse bind matrices) and morph targets (POSITION and NORMAL
+displacements, default and animated weights) are read here into each instance's
+:class:`~pipeline.scene.deform.Deformation`; the scene poses them per frame.
 """
 from __future__ import annotations
 
@@ -10,9 +11,9 @@ import logging
 
 import numpy as np
 
-from .animation import INTERPOLATIONS, PATHS, Sampler
+from .animation import INTERPOLATIONS, PATHS, Deformation, Sampler, Skin, normalise_weights
 from .camera import CameraDef
-from .default_camera import AUTO, AZIMUTH, ELEVATION, YFOV_DEG, frame_animation
+from .default_camera import AUTO, AZIMUTH, ELEVATION, YFOV_DEG, animation_bounds, frame_animation, sample_frames
 from .default_lights import default_sky, default_sun
 from .gltf import GltfDocument
 from .lights import light_def_from_gltf
@@ -35,6 +36,11 @@ _INDEX_COMPONENTS = (5121, 5123, 5125)  # indices are UNSIGNED_BYTE, UNSIGNED_SH
 _MODE_NAMES = {0: "POINTS", 1: "LINES", 2: "LINE_LOOP", 3: "LINE_STRIP"}
 # Triangles whose area is below this fraction of the squared bounding-box diagonal are "zero-area".
 _ZERO_AREA = 1e-14
+# Frames whose posed bounds give the default element size (evenly spread over the timeline)
+ELEMENT_SIZE_FRAMES = 256
+# JOINTS_n are unsigned bytes or shorts, WEIGHTS_n floats or normalized unsigned bytes or shorts (§3.7.3.1)
+_JOINT_COMPONENTS = (5121, 5123)
+_WEIGHT_COMPONENTS = (5126, 5121, 5123)
 
 
 def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | None = None,
@@ -78,7 +84,8 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
                                  float(p.zfar) if p.zfar else None,
                                  float(p.aspectRatio) if p.aspectRatio else None))
 
-    instances, dropped = _read_instances(doc, nodes, order, default_material, warnings)
+    skins = _read_skins(doc, order)
+    instances, dropped = _read_instances(doc, nodes, order, default_material, warnings, skins)
     _texcoord_warnings(materials, instances, warnings)
     if not instances:
         raise doc.error("the scene has no triangle meshes", "meshes")
@@ -100,10 +107,7 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
     element_size = extras.get("element_size")
     if element_size is not None and not _is_number(element_size):
         raise doc.error(f"element_size {element_size!r} must be a number", "scenes.extras.photonloom.element_size")
-    if element_size is None:
-        allv = np.concatenate([inst.vertices for inst in instances])
-        element_size = float(np.linalg.norm(allv.max(0) - allv.min(0))) * DEFAULT_ELEMENT_FRACTION
-    if not float(element_size) > 0:
+    if element_size is not None and not float(element_size) > 0:
         raise doc.error(f"element_size {element_size} must be positive", "scenes.extras.photonloom.element_size")
 
     if dropped:
@@ -114,7 +118,7 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
         path=doc.path, document=doc, nodes=nodes, order=order, instances=instances,
         materials=materials, light_defs=light_defs, cameras=cameras, channels=channels,
         timeline=Timeline(fps=fps, frames=int(n_frames)), camera_node=camera_node,
-        element_size=float(element_size), dropped_triangles=dropped, warnings=warnings, notices=notices,
+        element_size=float(element_size or 0.0), dropped_triangles=dropped, warnings=warnings, notices=notices,
         default_lights=(default_sun(),) if unlit else (), sky=default_sky() if unlit else None,
     )
     if camera_node is None:  # --camera auto, or the file has no perspective camera
@@ -123,11 +127,30 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
             notices.insert(0, f"the file has no perspective camera: rendering with the auto camera from azimuth "
                               f"{AZIMUTH:g} deg, elevation {ELEVATION:g} deg, yfov {YFOV_DEG:g} deg, framing the "
                               "whole animation (--camera auto chooses it for any file)")
+    if element_size is None:
+        scene.element_size = _default_element_size(doc, scene)
     for n in notices:
         if (str(doc.path), n) not in _noticed:
             _noticed.add((str(doc.path), n))
             notices_log.info("%s: %s", doc.path, n)
     return scene
+
+
+def _default_element_size(doc, scene: Scene) -> float:
+    """DEFAULT_ELEMENT_FRACTION of the diagonal of the world-space bounds of every mesh, posed
+    (node matrices, skins, morphs) at up to ELEMENT_SIZE_FRAMES frames spread over the timeline: what
+    the camera and the photons see, not the vertices as the file stores them."""
+    if scene.framing is not None:
+        lo, hi = scene.framing.lo, scene.framing.hi
+    else:
+        lo, hi = animation_bounds(scene, sample_frames(scene.timeline, ELEMENT_SIZE_FRAMES))
+    with np.errstate(over="ignore", invalid="ignore"):
+        size = float(np.linalg.norm(hi - lo)) * DEFAULT_ELEMENT_FRACTION
+    if not (np.isfinite(size) and size > 0):
+        raise doc.error(f"the posed meshes span {lo.tolist()}..{hi.tolist()} in world space, which gives no "
+                        "default element size; state one (scenes.extras.photonloom.element_size or "
+                        "--element-size)", "nodes")
+    return size
 
 
 def _is_number(value) -> bool:
@@ -286,26 +309,23 @@ def _triangles(mode: int, idx: np.ndarray) -> np.ndarray:
     return np.stack([np.full(len(k), idx[0]), idx[k], idx[k + 1]], axis=1)
 
 
-def _read_instances(doc, nodes, order, default_material, warnings):
+def _read_instances(doc, nodes, order, default_material, warnings, skins):
     g = doc.gltf
     instances: list[MeshInstance] = []
     dropped = 0
-    warned_skin = False
     for i in order:
         node = nodes[i]
         if node.mesh is None:
             continue
-        if g.nodes[i].skin is not None and not warned_skin:
-            warnings.append("skins are not supported: meshes are shown in their rest pose")
-            warned_skin = True
+        skin = g.nodes[i].skin
+        if skin is not None and not 0 <= skin < len(skins):
+            raise doc.error(f"refers to missing skin {skin}", f"nodes[{i}].skin")
         mesh = g.meshes[node.mesh]
         for p, prim in enumerate(mesh.primitives):
             f = f"meshes[{node.mesh}].primitives[{p}]"
             mode = 4 if prim.mode is None else prim.mode
             if mode not in _TRIANGLE_MODES:
                 raise doc.error(f"mode {_MODE_NAMES.get(mode, mode)} is not supported (triangles only)", f + ".mode")
-            if prim.targets:
-                warnings.append(f"{f}: morph targets are not supported: the rest shape is used")
             pos_index = getattr(prim.attributes, "POSITION", None)
             if pos_index is None:
                 raise doc.error("has no POSITION attribute", f + ".attributes")
@@ -336,13 +356,136 @@ def _read_instances(doc, nodes, order, default_material, warnings):
             if not 0 <= material < len(g.materials) and material != default_material:
                 raise doc.error(f"refers to missing material {material}", f + ".material")
             attributes = read_vertex_attributes(doc, prim.attributes, len(verts), f)
+            deformation = _read_deformation(doc, i, node.mesh, prim, f, len(verts),
+                                             None if skin is None else skins[skin], warnings)
             instances.append(MeshInstance(
                 index=len(instances), node=i, mesh=node.mesh, primitive=p,
                 name=f"{node.name}/{mesh.name or f'mesh{node.mesh}'}[{p}]",
                 vertices=verts, faces=faces[keep], material=material, source_faces=source[keep],
-                attributes=None if attributes.empty else attributes,
+                attributes=None if attributes.empty else attributes, deformation=deformation,
             ))
     return instances, dropped
+
+
+def _read_skins(doc, order) -> list[Skin]:
+    """The file's skins (glTF 2.0 §3.7.3): joints that are nodes of the rendered scene, and their
+    inverse bind matrices (MAT4 floats, column-major; identity when absent)."""
+    g = doc.gltf
+    reachable = set(order)
+    skins = []
+    for s, raw in enumerate(g.skins):
+        f = f"skins[{s}]"
+        joints = list(raw.joints or [])
+        if not joints:
+            raise doc.error("has no joints", f + ".joints")
+        for j in joints:
+            if not 0 <= j < len(g.nodes):
+                raise doc.error(f"joint {j} is not a node", f + ".joints")
+        if len(set(joints)) != len(joints):
+            raise doc.error("lists a joint twice", f + ".joints")
+        if raw.inverseBindMatrices is None:
+            ibm = np.tile(np.eye(4), (len(joints), 1, 1))
+        else:
+            data = np.asarray(doc.accessor(raw.inverseBindMatrices, f + ".inverseBindMatrices", types=("MAT4",),
+                                           components=(5126,)), dtype=np.float64)
+            if len(data) < len(joints):
+                raise doc.error(f"has {len(data)} matrices for {len(joints)} joints", f + ".inverseBindMatrices")
+            if not np.all(np.isfinite(data)):
+                raise doc.error("holds NaN or Inf", f + ".inverseBindMatrices")
+            ibm = data[:len(joints)].reshape(-1, 4, 4).transpose(0, 2, 1)  # column-major
+        skins.append(Skin(s, tuple(int(j) for j in joints), ibm))
+    used = {n.skin for n in (g.nodes[i] for i in order) if n.skin is not None and n.mesh is not None}
+    for s in sorted(used):
+        if not 0 <= s < len(skins):
+            continue  # the node's own check names it
+        outside = [j for j in skins[s].joints if j not in reachable]
+        if outside:
+            raise doc.error(f"joint node {outside[0]} is not in the rendered scene", f"skins[{s}].joints")
+    return skins
+
+
+def _read_deformation(doc, node: int, mesh: int, prim, f: str, n_vertices: int,
+                      skin: Skin | None, warnings: list[str]) -> Deformation | None:
+    """The skin binding (JOINTS_n/WEIGHTS_n, every set) and morph targets of one primitive, checked;
+    None when the primitive is rigid."""
+    g = doc.gltf
+
+    def vec3(index, where):
+        data = np.asarray(doc.accessor(index, where, types=("VEC3",)), dtype=np.float64)
+        if len(data) != n_vertices:
+            raise doc.error(f"has {len(data)} entries for {n_vertices} positions", where)
+        if not np.all(np.isfinite(data)):
+            raise doc.error(f"entry {int(np.flatnonzero(~np.isfinite(data).all(1))[0])} is NaN or Inf", where)
+        return data
+
+    targets = [t if isinstance(t, dict) else vars(t) for t in (prim.targets or [])]
+    counts = {len(q.targets or []) for q in g.meshes[mesh].primitives}
+    if len(counts) > 1:  # glTF 2.0 §3.7.2.2: all primitives have the same number of targets
+        raise doc.error(f"its primitives have different numbers of morph targets ({sorted(counts)})",
+                        f"meshes[{mesh}].primitives")
+    positions = normals = weights0 = None
+    if targets:
+        k = len(targets)
+        positions, normals = np.zeros((k, n_vertices, 3)), np.zeros((k, n_vertices, 3))
+        has_p = has_n = False
+        for t, target in enumerate(targets):
+            if target.get("POSITION") is not None:
+                positions[t] = vec3(target["POSITION"], f"{f}.targets[{t}].POSITION")
+                has_p = True
+            if target.get("NORMAL") is not None:
+                normals[t] = vec3(target["NORMAL"], f"{f}.targets[{t}].NORMAL")
+                has_n = True
+        positions, normals = (positions if has_p else None), (normals if has_n else None)
+        weights0, where = np.zeros(k), None
+        node_weights = doc.tree.get("nodes", [{}] * len(g.nodes))[node].get("weights")  # not in pygltflib
+        if node_weights is not None:
+            weights0, where = node_weights, f"nodes[{node}].weights"
+        elif doc.tree.get("meshes", [{}] * len(g.meshes))[mesh].get("weights") is not None:
+            weights0, where = doc.tree["meshes"][mesh]["weights"], f"meshes[{mesh}].weights"
+        weights0 = np.asarray(weights0, dtype=np.float64)
+        if len(weights0) != k:
+            raise doc.error(f"has {len(weights0)} weights for the {k} morph targets of {f}", where)
+
+    joints = weights = None
+    if skin is not None:
+        sets = []
+        n = 0
+        while getattr(prim.attributes, f"JOINTS_{n}", None) is not None:
+            jw, ww = f"{f}.attributes.JOINTS_{n}", f"{f}.attributes.WEIGHTS_{n}"
+            if getattr(prim.attributes, f"WEIGHTS_{n}", None) is None:
+                raise doc.error(f"JOINTS_{n} has no WEIGHTS_{n}", f + ".attributes")
+            j = np.asarray(doc.accessor(getattr(prim.attributes, f"JOINTS_{n}"), jw, types=("VEC4",),
+                                        components=_JOINT_COMPONENTS), dtype=np.int64)
+            w = np.asarray(doc.accessor(getattr(prim.attributes, f"WEIGHTS_{n}"), ww, types=("VEC4",),
+                                        components=_WEIGHT_COMPONENTS), dtype=np.float64)
+            for data, where in ((j, jw), (w, ww)):
+                if len(data) != n_vertices:
+                    raise doc.error(f"has {len(data)} entries for {n_vertices} positions", where)
+            if j.max(initial=0) >= len(skin.joints):
+                raise doc.error(f"joint {int(j.max())} is out of range for the {len(skin.joints)} joints of "
+                                f"skins[{skin.index}]", jw)
+            if not np.all(np.isfinite(w)) or w.min(initial=0.0) < 0:
+                raise doc.error("weights must be finite and non-negative", ww)
+            sets.append((j, w))
+            n += 1
+        if not sets:
+            raise doc.error(f"the node has skins[{skin.index}] but the primitive has no JOINTS_0/WEIGHTS_0",
+                            f + ".attributes")
+        joints = np.concatenate([j for j, _ in sets], axis=1)
+        raw = np.concatenate([w for _, w in sets], axis=1)
+        unbound = int((raw.sum(axis=1) <= 0).sum())
+        if unbound:  # exporters leave unweighted vertices so; a renderer that skins them collapses them
+            warnings.append(f"{f}: {unbound} vertex(es) have all skin weights zero: they follow the node "
+                            f"{_node_name(doc, node)!r} unskinned")
+        weights = normalise_weights(raw)
+    if skin is None and positions is None and normals is None:
+        return None
+    return Deformation(target_positions=positions, target_normals=normals, default_weights=weights0,
+                       skin=skin, joints=joints, weights=weights)
+
+
+def _node_name(doc, node: int) -> str:
+    return doc.gltf.nodes[node].name or f"node{node}"
 
 
 def _with_textures(doc: GltfDocument, materials: list) -> list:
@@ -375,14 +518,19 @@ def _read_channels(doc, nodes, warnings) -> dict[int, dict[str, Sampler]]:
             target = ch.target
             if target is None or target.path not in PATHS + ("weights",):
                 raise doc.error(f"target path {getattr(target, 'path', None)!r} is not supported", f + ".target.path")
-            if target.path == "weights":
-                warnings.append(f"{f}: morph weight animation is not supported: ignored")
-                continue
             if target.node is None:  # allowed by the spec (extensions may target other things)
                 continue
             if not 0 <= target.node < len(nodes):
                 raise doc.error(f"targets missing node {target.node}", f + ".target.node")
-            if nodes[target.node].matrix is not None:
+            n_targets = None
+            if target.path == "weights":  # one value per morph target of the node's mesh (§3.11)
+                mesh = nodes[target.node].mesh
+                n_targets = len(g.meshes[mesh].primitives[0].targets or []) if mesh is not None else 0
+                if not n_targets:
+                    warnings.append(f"{f}: animates the morph weights of node {target.node}, whose mesh has no "
+                                    "morph targets: ignored")
+                    continue
+            elif nodes[target.node].matrix is not None:
                 raise doc.error("targets a node defined by a matrix (glTF requires TRS)", f + ".target.node")
             if ch.sampler is None or not 0 <= ch.sampler < len(anim.samplers):
                 raise doc.error(f"refers to missing sampler {ch.sampler}", f + ".sampler")
@@ -395,6 +543,12 @@ def _read_channels(doc, nodes, warnings) -> dict[int, dict[str, Sampler]]:
                                dtype=np.float64).ravel()
             values = np.asarray(doc.accessor(s.output, sf + ".output"), dtype=np.float64)
             width = 4 if target.path == "rotation" else 3
+            if n_targets is not None:  # scalars, n_targets per key (x 3 for CUBICSPLINE)
+                width = n_targets
+                if values.ndim != 1 or len(values) % n_targets:
+                    raise doc.error(f"output must be scalars, {n_targets} per key (the node's morph targets), "
+                                    f"got {len(values)}", sf + ".output")
+                values = values.reshape(-1, n_targets)
             if values.ndim != 2 or values.shape[1] != width:
                 raise doc.error(f"output must be {width}-vectors for {target.path}", sf + ".output")
             if not (np.all(np.isfinite(times)) and np.all(np.isfinite(values))):
@@ -435,5 +589,10 @@ def _choose_camera(doc, nodes, order, cameras, name):
     for i in candidates:
         if name in (nodes[i].name, cameras[nodes[i].camera].name):
             return i
+    for i in order:  # an orthographic camera is listed (cameras[c] is None) but cannot render
+        c = nodes[i].camera
+        if c is not None and cameras[c] is None and name in (nodes[i].name, doc.gltf.cameras[c].name):
+            raise doc.error(f"camera {name!r} is orthographic: only perspective cameras are supported "
+                            "(--camera auto frames the scene with a perspective camera)", f"cameras[{c}]")
     names = ", ".join(sorted({cameras[nodes[i].camera].name for i in candidates} | {AUTO}))
     raise doc.error(f"no camera named {name!r} (cameras: {names})", "cameras")

@@ -19,7 +19,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .animation import Sampler, trs_matrix
+from .animation import Deformation, Sampler, joint_matrices, pose_vertices, trs_matrix
 from .camera import Camera, CameraDef
 from .default_camera import AUTO, Framing
 from .gltf import GltfDocument, read_gltf
@@ -68,6 +68,7 @@ class MeshInstance:
     material: int  # index into Scene.materials
     source_faces: np.ndarray  # (F,) int64: index of each kept triangle in the primitive
     attributes: VertexAttributes | None = None  # NORMAL, TEXCOORD_n, COLOR_0 (vertex_attributes.py)
+    deformation: Deformation | None = None  # a skin and/or morph targets (animation.py): posed per vertex
 
 
 @dataclass
@@ -89,6 +90,9 @@ class FrameState:
     corner_normals: np.ndarray | None = None  # (F, 3, 3) float32 world vertex normals (shading.py)
     corners: CornerAttributes | None = None  # texture coordinates and colours per corner (shading.py)
     sky: Sky | None = None  # the uniform sky emitter (pipeline/scene/sky.py), if the scene has one
+    # Instances posed per vertex (skins, morph targets): their world vertices are in ``vertices``,
+    # ``instance_matrices`` does not place them (ElementMesh.vertex_positions reads them from there)
+    deformed_instances: tuple[int, ...] = ()
 
 
 @dataclass
@@ -163,10 +167,45 @@ class Scene:
                                 d / norm if norm > 0 else np.array([0.0, 0.0, -1.0])))
         return lights + list(self.default_lights)
 
-    def _state_key(self, world: np.ndarray, lights: list[Light]) -> str:
+    def morph_weights(self, inst: MeshInstance, t: float) -> np.ndarray | None:
+        """(K,) morph weights of a deforming instance at ``t``: its node's animated ``weights``,
+        else the node's or mesh's default weights (glTF 2.0 §3.7.2.2); None without targets."""
+        d = inst.deformation
+        if d is None or not d.n_targets:
+            return None
+        sampler = self.channels.get(inst.node, {}).get("weights")
+        return d.default_weights if sampler is None else sampler.evaluate(t)
+
+    def _joint_world(self, inst: MeshInstance, world: np.ndarray) -> np.ndarray | None:
+        d = inst.deformation
+        return None if d is None or d.skin is None else world[list(d.skin.joints)]
+
+    def deformed_vertices(self, inst: MeshInstance, world: np.ndarray, t: float, *, normals: bool = True
+                          ) -> tuple[np.ndarray, np.ndarray | None]:
+        """World positions (V, 3) and unit normals (None without NORMAL, or when ``normals`` is
+        False) of a deforming instance at ``t``, ``world`` being :meth:`world_matrices` (animation.py)."""
+        a = inst.attributes
+        base_normals = a.normals if a is not None and normals else None
+        return pose_vertices(inst.vertices, base_normals, inst.deformation,
+                             self.morph_weights(inst, t), world[inst.node], self._joint_world(inst, world))
+
+    @property
+    def deforming(self) -> list[MeshInstance]:
+        """Instances with a skin or morph targets, posed per vertex."""
+        return [inst for inst in self.instances if inst.deformation is not None]
+
+    def _state_key(self, world: np.ndarray, lights: list[Light], t: float) -> str:
         h = hashlib.sha256(self.document.digest.encode())  # keys of different scenes never collide
         for inst in self.instances:
             h.update(np.round(world[inst.node], _STATE_DECIMALS).tobytes())
+            if inst.deformation is not None:  # a skin's or a morph's pose is geometry too
+                weights = self.morph_weights(inst, t)
+                if weights is not None:
+                    h.update(np.round(weights, _STATE_DECIMALS).tobytes())
+                joints = self._joint_world(inst, world)
+                if joints is not None:
+                    h.update(np.round(joint_matrices(joints, inst.deformation.skin.inverse_bind),
+                                      _STATE_DECIMALS).tobytes())
         for light in lights:
             h.update(np.round(light.state(), _STATE_DECIMALS).tobytes())
         if self.sky is not None:
@@ -175,8 +214,9 @@ class Scene:
 
     def state_key(self, frame: int) -> str:
         """Key equal for frames whose geometry and lights are equal (camera-only motion)."""
-        world = self.world_matrices(self.timeline.time(frame))
-        return self._state_key(world, self._lights_at(world))
+        t = self.timeline.time(frame)
+        world = self.world_matrices(t)
+        return self._state_key(world, self._lights_at(world), t)
 
     def pose(self, t: float, *, frame: int | None = None) -> FrameState:
         """Evaluate the animation at ``t`` seconds: world-space triangles, lights and camera."""
@@ -184,6 +224,12 @@ class Scene:
         lights = self._lights_at(world)
         inst_mats = np.stack([world[inst.node] for inst in self.instances])
         verts = [(inst.vertices @ m[:3, :3].T + m[:3, 3]) for inst, m in zip(self.instances, inst_mats)]
+        corner_normals = world_corner_normals(self.instances, inst_mats)
+        first_face = np.cumsum([0] + [len(inst.faces) for inst in self.instances])
+        for inst in self.deforming:
+            verts[inst.index], normals = self.deformed_vertices(inst, world, t)
+            if normals is not None and corner_normals is not None:
+                corner_normals[first_face[inst.index]:first_face[inst.index + 1]] = normals[inst.faces]
         offsets = np.cumsum([0] + [len(v) for v in verts])
         faces = np.concatenate([inst.faces + off for inst, off in zip(self.instances, offsets)])
         tri_inst = np.concatenate(
@@ -211,10 +257,11 @@ class Scene:
             emissive_triangles=np.flatnonzero(emissive_mats[tri_mat]).astype(np.int32),
             camera=cam,
             instance_matrices=inst_mats,
-            state_key=self._state_key(world, lights),
-            corner_normals=world_corner_normals(self.instances, inst_mats),
+            state_key=self._state_key(world, lights, t),
+            corner_normals=corner_normals,
             corners=self.corner_attributes,
             sky=self.sky,
+            deformed_instances=tuple(inst.index for inst in self.deforming),
         )
 
     def pose_frame(self, frame: int) -> FrameState:
@@ -258,7 +305,7 @@ class Scene:
         if self.camera_node is None:
             return False
         node = self.camera_node
-        moving = set(self.channels)
+        moving = {n for n, ch in self.channels.items() if set(ch) - {"weights"}}  # morph weights move no node
         while node is not None:
             if node in moving:
                 return True

@@ -63,10 +63,31 @@ def describe(scene: Scene, element_size: float | None = None) -> list[str]:
             "area lights (emissive triangles)" if scene.has_area_lights else "no area lights",
         ]),
     ]
+    lines.append("deforms    " + deforms_line(scene))
     lines += surface_lines(scene)
     lines += [f"warning    {w}" for w in scene.warnings]
     lines += [f"ignored    {w}" for w in ignored(scene)]
     return lines
+
+
+def deforms_line(scene: Scene) -> str:
+    """What is posed per vertex: skinned and morphed primitives, their joints, targets and whether
+    their pose changes over the timeline (pipeline/scene/animation.py)."""
+    parts = []
+    for inst in scene.deforming:
+        d = inst.deformation
+        what = []
+        if d.skin is not None:
+            animated = sum(1 for j in d.skin.joints if set(scene.channels.get(j, {})) - {"weights"})
+            what.append(f"skin {d.skin.index} ({len(d.skin.joints)} joints, {animated} animated, up to "
+                        f"{d.joints.shape[1]} influences)")
+        if d.n_targets:
+            driven = "weights" in scene.channels.get(inst.node, {})
+            what.append(f"{d.n_targets} morph target(s), weights {'animated' if driven else 'fixed'}")
+        parts.append(f"{inst.name}: " + ", ".join(what))
+    if not parts:
+        return "nothing (rigid meshes only)"
+    return f"{len(parts)} of {len(scene.instances)} primitives posed per vertex: " + "; ".join(parts)
 
 
 # Texture slots of a glTF material that photonloom does not read yet (README "Textures")

@@ -261,7 +261,7 @@ def test_written_files_read_back(tmp_path, suffix, external):
 
 
 @pytest.mark.parametrize("bad_call, message", [
-    (lambda b: b.add_animation("a", 0, "weights", [0.0], [[1.0]]), "path"),
+    (lambda b: b.add_animation("a", 0, "pointer", [0.0], [[1.0]]), "path"),
     (lambda b: b.add_animation("a", 0, "translation", [0.0, 0.0], [[0, 0, 0]] * 2), "increasing"),
     (lambda b: b.add_spot_light("s", (1, 1, 1), 1.0, 0.5, 0.4), "inner < outer"),
     (lambda b: b.add_mesh("m", np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0]]), np.array([0, 1, 3])), "indices"),

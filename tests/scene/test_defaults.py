@@ -7,7 +7,6 @@ import logging
 import numpy as np
 import pytest
 from click.testing import CliRunner
-from pygltflib import Skin
 
 from pipeline.cli import main
 from pipeline.errors import SceneError
@@ -109,17 +108,19 @@ def test_loom_info_says_which_camera_and_lights(tmp_path):
 def test_loom_info_lists_what_it_ignores_and_why(tmp_path):
     b = basic_builder()
     g = b.gltf
-    g.skins.append(Skin(joints=[0]))
-    g.nodes[0].skin = 0
-    g.meshes[0].primitives[0].targets = [{"POSITION": b.add_accessor(np.zeros((4, 3), np.float32))}]
+    g.nodes[0].skin = b.add_skin([0])  # the floor is its own joint
+    b.bind_skin(0, 0, np.zeros((4, 4), int), np.tile([1.0, 0, 0, 0], (4, 1)))
+    b.add_morph_targets(0, 0, [np.zeros((4, 3))])
     g.extensionsUsed.append("KHR_materials_clearcoat")
     g.materials[0].extensions["KHR_materials_clearcoat"] = {"clearcoatFactor": 1.0}
     g.extensionsUsed.append("EXT_mesh_gpu_instancing")
     path = b.write(tmp_path / "extras.glb")
     out = CliRunner().invoke(main, ["info", str(path)]).output
     ignored = [line for line in out.splitlines() if line.startswith("ignored")]
-    assert any("1 skin(s) on 1 node(s): skinning is not implemented" in line for line in ignored)
-    assert any("morph targets on 1 primitive(s)" in line and "rest shape" in line for line in ignored)
+    assert not any("skin" in line or "morph" in line for line in ignored)  # both are rendered
+    assert [line for line in out.splitlines() if line.startswith("deforms")] == [
+        "deforms    1 of 1 primitives posed per vertex: floor/floor[0]: skin 0 (1 joints, 0 animated, up to 4 "
+        "influences), 1 morph target(s), weights fixed"]
     assert any("KHR_materials_clearcoat: not implemented, the core metallic-roughness factors" in line
                for line in ignored)
     assert any("EXT_mesh_gpu_instancing" in line for line in ignored)

@@ -39,6 +39,7 @@ from pygltflib import (
     Perspective,
     Primitive,
     Scene,
+    Skin,
 )
 
 from pipeline.scene.gltf import COMPONENT_DTYPES, TYPE_WIDTH
@@ -102,6 +103,7 @@ class GltfBuilder:
         self._blob = bytearray()
         self._lights: list[dict] = []
         self._animations_by_name: dict[str, int] = {}
+        self._node_weights: dict[int, list[float]] = {}  # node -> its default morph weights
 
     # -- raw data -------------------------------------------------------------------------------
 
@@ -239,6 +241,42 @@ class GltfBuilder:
         self.gltf.meshes[mesh].primitives.append(primitive)
         return len(self.gltf.meshes[mesh].primitives) - 1
 
+    def add_morph_targets(self, mesh: int, primitive: int, positions: Sequence[np.ndarray],
+                          normals: Sequence[np.ndarray] | None = None,
+                          weights: Sequence[float] | None = None) -> None:
+        """Morph targets of a primitive (glTF 2.0 §3.7.2.2): per target, (V, 3) POSITION
+        displacements and optionally NORMAL displacements; ``weights`` become ``mesh.weights``."""
+        prim = self.gltf.meshes[mesh].primitives[primitive]
+        prim.targets = []
+        for k, dp in enumerate(positions):
+            target = {"POSITION": self.add_accessor(np.asarray(dp, np.float32).reshape(-1, 3), with_bounds=True)}
+            if normals is not None:
+                target["NORMAL"] = self.add_accessor(np.asarray(normals[k], np.float32).reshape(-1, 3))
+            prim.targets.append(target)
+        if weights is not None:
+            self.gltf.meshes[mesh].weights = _floats(weights)
+
+    def add_skin(self, joints: Sequence[int], inverse_bind: np.ndarray | None = None, name: str | None = None) -> int:
+        """A skin over ``joints`` (node indices) with (J, 4, 4) row-major inverse bind matrices
+        (written column-major as glTF wants); returns the skin index."""
+        skin = Skin(joints=[int(j) for j in joints], name=name)
+        if inverse_bind is not None:
+            m = np.asarray(inverse_bind, np.float64).reshape(-1, 4, 4)
+            skin.inverseBindMatrices = self.add_accessor(m.transpose(0, 2, 1).reshape(-1, 16).astype(np.float32))
+        self.gltf.skins.append(skin)
+        return len(self.gltf.skins) - 1
+
+    def bind_skin(self, mesh: int, primitive: int, joints: np.ndarray, weights: np.ndarray) -> None:
+        """JOINTS_n / WEIGHTS_n of a primitive from (V, 4n) joint indices and weights (glTF §3.7.3.1)."""
+        joints = np.asarray(joints).reshape(len(joints), -1)
+        weights = np.asarray(weights, np.float32).reshape(len(weights), -1)
+        if joints.shape != weights.shape or joints.shape[1] % 4:
+            raise ValueError("joints and weights must both be (V, 4n)")
+        attributes = self.gltf.meshes[mesh].primitives[primitive].attributes
+        for n in range(joints.shape[1] // 4):
+            setattr(attributes, f"JOINTS_{n}", self.add_accessor(joints[:, 4 * n:4 * n + 4].astype(np.uint16)))
+            setattr(attributes, f"WEIGHTS_{n}", self.add_accessor(weights[:, 4 * n:4 * n + 4]))
+
     # -- textures -------------------------------------------------------------------------------
 
     def add_texture(self, pixels: np.ndarray, *, uri: str | None = None, wrap_s: int = 10497,
@@ -317,7 +355,8 @@ class GltfBuilder:
     def add_node(self, name: str, mesh: int | None = None, *, translation: Sequence[float] | None = None,
                  rotation: Sequence[float] | None = None, scale: Sequence[float] | None = None,
                  matrix: np.ndarray | Sequence[float] | None = None, children: Sequence[int] = (),
-                 camera: int | None = None, light: int | None = None) -> int:
+                 camera: int | None = None, light: int | None = None, skin: int | None = None,
+                 weights: Sequence[float] | None = None) -> int:
         """A node with either TRS (rotation an xyzw quaternion, normalised here) or a 4x4 matrix.
 
         ``matrix`` is given in the usual row-major mathematical layout (translation in the last
@@ -325,7 +364,9 @@ class GltfBuilder:
         """
         if matrix is not None and any(v is not None for v in (translation, rotation, scale)):
             raise ValueError(f"node {name!r}: give either matrix or translation/rotation/scale")
-        node = Node(name=name, mesh=mesh, camera=camera, children=[int(c) for c in children])
+        node = Node(name=name, mesh=mesh, camera=camera, children=[int(c) for c in children], skin=skin)
+        if weights is not None:
+            self._node_weights[len(self.gltf.nodes)] = _floats(weights)
         for child in node.children:
             if not 0 <= child < len(self.gltf.nodes):
                 raise ValueError(f"node {name!r}: child {child} does not exist yet")
@@ -353,22 +394,22 @@ class GltfBuilder:
 
     def add_animation(self, name: str, node: int, path: str, times: Sequence[float],
                       values: np.ndarray | Sequence, interpolation: str = "LINEAR") -> int:
-        """Animate ``node``'s translation, rotation or scale; returns the animation index.
+        """Animate ``node``'s translation, rotation, scale or morph ``weights``; returns the animation index.
 
         Channels added under the same ``name`` share one glTF animation. ``values`` has one row per
-        key (xyz, or xyzw for rotation); for CUBICSPLINE, three rows per key in the order
+        key (xyz, xyzw for rotation, one weight per morph target); for CUBICSPLINE, three rows per key in the order
         in-tangent, value, out-tangent (shape (keys, 3, width) or (3*keys, width)). Rotation values
         are normalised (tangents are not). Times must be finite and strictly increasing.
         """
-        if path not in _PATH_WIDTH:
-            raise ValueError(f"animation {name!r}: path must be one of {sorted(_PATH_WIDTH)}")
+        if path not in _PATH_WIDTH and path != "weights":
+            raise ValueError(f"animation {name!r}: path must be one of {sorted(_PATH_WIDTH) + ['weights']}")
         if interpolation not in _INTERPOLATIONS:
             raise ValueError(f"animation {name!r}: interpolation must be one of {_INTERPOLATIONS}")
         times = np.asarray(times, dtype=np.float32).reshape(-1)
         if times.size == 0 or not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
             raise ValueError(f"animation {name!r}: key times must be finite and strictly increasing")
-        width = _PATH_WIDTH[path]
         rows_per_key = 3 if interpolation == "CUBICSPLINE" else 1
+        width = _PATH_WIDTH[path] if path != "weights" else np.asarray(values).size // (times.size * rows_per_key)
         values = np.asarray(values, dtype=np.float64).reshape(times.size, rows_per_key, width)
         if path == "rotation":
             key_values = values[:, rows_per_key // 2, :]
@@ -377,7 +418,8 @@ class GltfBuilder:
                 raise ValueError(f"animation {name!r}: zero rotation quaternion")
             values[:, rows_per_key // 2, :] = key_values / norms
         input_accessor = self.add_accessor(times, with_bounds=True)
-        output_accessor = self.add_accessor(values.reshape(-1, width).astype(np.float32))
+        flat = values.reshape(-1) if path == "weights" else values.reshape(-1, width)  # weights: SCALAR
+        output_accessor = self.add_accessor(flat.astype(np.float32))
         index = self._animations_by_name.get(name)
         if index is None:
             self.gltf.animations.append(Animation(name=name))
@@ -425,7 +467,13 @@ class GltfBuilder:
         if gltf.buffers:
             gltf.buffers[0].uri = buffer_uri
         try:
-            return gltf.gltf_to_json(separators=(",", ":"), indent=None)
+            text = gltf.gltf_to_json(separators=(",", ":"), indent=None)
+            if self._node_weights:  # pygltflib's Node has no ``weights`` (glTF §5.25): written here
+                tree = json.loads(text)
+                for node, weights in self._node_weights.items():
+                    tree["nodes"][node]["weights"] = weights
+                text = json.dumps(tree, separators=(",", ":"))
+            return text
         finally:
             if gltf.buffers:
                 gltf.buffers[0].uri = None
