@@ -22,9 +22,6 @@ import numpy as np
 
 N_BANDS = 6  # 5 dom bands + base (Daly 1993)
 N_ORIENTATIONS = 6  # Daly's (1993) fan filters, 30 degrees apart
-# Masking slope per band, highest frequency first: 1.0 for the high bands, 0.8 for the two lowest dom
-# bands, 0.7 for the base (Daly's patent as quoted in HDR-VDP 1.x, docs/aqm.md §4).
-MASKING_SLOPE = (1.0, 1.0, 1.0, 0.8, 0.8, 0.7)
 
 
 def mesa(rho: np.ndarray, rho_h: float) -> np.ndarray:
