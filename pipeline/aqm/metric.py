@@ -28,7 +28,7 @@ from .csf import (
 )
 from .display import (
     ViewingConditions,
-    aqm_shape,
+    aqm_geometry,
     check_image,
     check_luminance,
     display_luminance,
@@ -99,10 +99,9 @@ def aqm_luminance(lum_a: npt.ArrayLike, lum_b: npt.ArrayLike, *, flow: npt.Array
         raise LoomError(f"must lie in [0, 1], got {pursuit_gain!r}", field="pursuit_gain")
 
     full = lum_a.shape
-    shape = aqm_shape(full, aqm_size)
     # Scaling the image and the viewing distance together keeps every visual angle (§6).
-    ppd = viewing.ppd * np.sqrt(shape[0] * shape[1] / (full[0] * full[1]))
-    i2 = (shape[0] / ppd) * (shape[1] / ppd)  # image area in deg^2, Daly's i^2
+    geometry = aqm_geometry(viewing, full, aqm_size)
+    shape, ppd, i2 = geometry.shape, geometry.ppd, geometry.image_area_deg2
     pad = int(round(PAD_FRACTION * max(shape)))
     lum_a, lum_b = _mirror(resample(lum_a, shape), pad), _mirror(resample(lum_b, shape), pad)
     work = lum_a.shape
@@ -112,6 +111,8 @@ def aqm_luminance(lum_a: npt.ArrayLike, lum_b: npt.ArrayLike, *, flow: npt.Array
     if flow is not None:
         v_r = retinal_velocity(_mirror(resample(_check_flow(flow, full, flow_name), shape), pad), pursuit_gain)
         stages.append((velocity_bank(work, ppd), velocity_coordinate(v_r)))
+    # Daly's accommodation term r_a takes the distance the eye is focused at, the real one: §6 scales the
+    # distance only "to preserve the same spatial frequencies", which the scaled ppd already does.
     stages.append((luminance_bank(work, ppd, i2, viewing.viewing_distance_m), luminance_coordinate(adaptation)))
 
     spectrum_a = _csf_spectrum(nonlinear_contrast(lum_a, adaptation), work, stages)
