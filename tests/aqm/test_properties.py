@@ -1,4 +1,4 @@
-"""Properties of human vision the AQM must reproduce (issue 6, "Tests")."""
+"""Properties of human vision the AQM must reproduce."""
 from __future__ import annotations
 
 import numpy as np
