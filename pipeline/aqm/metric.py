@@ -121,7 +121,7 @@ def aqm_luminance(lum_a: npt.ArrayLike, lum_b: npt.ArrayLike, *, flow: npt.Array
     # all of Daly's channels, and by linearity the channels of the difference are the difference of channels.
     elevation = mutual_masking(decompose(spectrum_a, work), decompose(spectrum_b, work))
     delta, band = decompose_channels(spectrum_b - spectrum_a, work)
-    probability = detection_probability(delta, elevation[band])[pad:pad + shape[0], pad:pad + shape[1]]
+    probability = detection_probability(delta, elevation, band=band)[pad:pad + shape[0], pad:pad + shape[1]]
     return AQMResult(map=probability, d_aqm=d_aqm(probability), ppd=float(ppd))
 
 

@@ -17,9 +17,19 @@ BETA = 3.5  # Daly 1993 psychometric slope
 P_THRESHOLD = 0.75  # 1 JND, see module docstring
 
 
-def detection_probability(delta: np.ndarray, elevation: np.ndarray, beta: float = BETA) -> np.ndarray:
-    """Per-pixel P from channel differences ``delta`` and elevations ``elevation``, both (channels, H, W)."""
-    summed = np.sum(np.abs(delta / elevation) ** beta, axis=0)
+def detection_probability(delta: np.ndarray, elevation: np.ndarray, beta: float = BETA,
+                          band: np.ndarray | None = None) -> np.ndarray:
+    """Per-pixel P from channel differences ``delta`` (channels, H, W) and elevations ``elevation``.
+
+    ``elevation`` has one map per channel, or one per radial band with ``band`` giving each channel's band.
+    """
+    summed = np.zeros(delta.shape[1:])
+    for c in range(delta.shape[0]):
+        x = np.abs(delta[c]) / elevation[c if band is None else band[c]]
+        if beta == 3.5:  # Daly's beta: x^3 sqrt(x), a third of the time of a power
+            summed += x * x * x * np.sqrt(x)
+        else:
+            summed += x**beta
     return -np.expm1(-summed)
 
 
