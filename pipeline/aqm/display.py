@@ -53,7 +53,7 @@ class ViewingConditions:
     peak_luminance: float = 100.0  # cd/m^2 of linear value 1.0
     black_level: float = 0.1  # cd/m^2 of linear value 0.0
     fill: str = "full_screen"  # one of FILLS
-    name: str = "default (standard_fhd geometry, 100 cd/m^2)"
+    name: str = "default (standard_fhd geometry)"
 
     def __post_init__(self) -> None:
         checks = {
@@ -86,7 +86,7 @@ class ViewingConditions:
         return pixels_per_degree(pitch, self.viewing_distance_m)
 
     @classmethod
-    def named(cls, name: str, **fields) -> ViewingConditions:
+    def named(cls, name: str, **fields: float | str | tuple[int, int]) -> ViewingConditions:
         """ColorVideoVDP's display ``name`` (pycvvdp display_models.json): size, resolution, distance,
         peak luminance and contrast (black = peak / contrast); ``fields`` override any of them."""
         if name not in DISPLAYS:
@@ -95,10 +95,13 @@ class ViewingConditions:
         base = {"display_width_m": width_from_diagonal(diagonal, resolution), "resolution": resolution,
                 "viewing_distance_m": distance, "peak_luminance": peak, "black_level": peak / contrast,
                 "name": name}
+        changed = sorted(k for k, v in fields.items() if k != "name" and base.get(k) != v and k != "fill")
+        if changed:
+            base["name"] = f"{name} with {', '.join(changed)} changed"
         return cls(**{**base, **fields})
 
     @classmethod
-    def for_ppd(cls, ppd: float, **fields) -> ViewingConditions:
+    def for_ppd(cls, ppd: float, **fields: float | str | tuple[int, int]) -> ViewingConditions:
         """Native-pixel conditions with the viewing distance chosen so the display has ``ppd`` pixels per degree."""
         base = cls(**{"fill": "native", "name": f"{ppd:g} px/deg", **fields})
         pixel = base.display_width_m / base.resolution[0]
