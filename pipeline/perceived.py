@@ -74,4 +74,4 @@ def camera_flow(scene: Scene, frame: int, width: int, height: int,
                                                 np.ascontiguousarray(dirs / lengths, np.float32))
     depth = np.where(tri >= 0, t.astype(np.float64) / lengths[:, 0], np.inf).reshape(height, width)
     return image_velocity(np.maximum(depth, 1e-6), here, yfov=yfov, fps=scene.timeline.fps,
-                          ppd=viewing_for(params).ppd, **neighbours)
+                          ppd=viewing_for(params).frame_ppd((height, width)), **neighbours)

@@ -1,14 +1,18 @@
-"""Radial band decomposition without orientation channels (cortex transform, Watson 1987; Daly 1993).
+"""Daly's (1993) cortex transform (Watson 1987): radial bands, and radial x orientation channels.
 
-§6 of the paper drops the orientation channels of Daly's 31-channel cortex transform; what is left is
-five radial "dom" bands and a base band (docs/aqm.md §3), in cycles per pixel: band k (k = 1..5) lies
-between mesa(rho; 2^-k) and mesa(rho; 2^-(k-1)), the base band below 1/32 cy/px.
+Radial frequency bands, in cycles per pixel: band k (k = 1..5) lies between mesa(rho; 2^-k) and
+mesa(rho; 2^-(k-1)) (Daly's "dom" filters d_k), the base band below 1/32 cy/px (docs/aqm.md §3). Each dom
+band is split into six orientations by Daly's fan filters fan_l(theta), raised cosines 30 deg wide about
+theta_l = -90 + 30 l deg: 5 x 6 + 1 = 31 channels, as in Daly's VDP. §6 of the paper drops orientation
+"in the visual masking" only, so detection uses the 31 channels and masking the six radial bands
+(masking.py).
 
-Daly's dom filters d_k sum to 1. With probability summation of exponent beta over bands (psychometric.py)
-a grating falling between two bands would then need up to 0.2 log units more contrast than one at a
-band centre, which contradicts the CSF the model is built on. We therefore use h_k = d_k^(1/beta):
-sum_k h_k(rho)^beta = 1 for every rho, so a grating of any frequency reaches the same summed response
-and its threshold is exactly 1/CSF [decision].
+The transfer functions are Daly's own, d_k fan_l (and the base band), which sum to 1. A grating between
+two channel centres then needs more contrast than one at a centre (probability summation of exponent
+beta over channels, psychometric.py; at most 2^(1 - 1/beta) = 1.64x, 0.21 log units, for a pure grating
+halfway between two orientations). Raising the filters to the power 1/beta would remove that ripple; on
+ModelFest it fits worse (RMS 0.377 against 0.230 log10 units; 0.199 against 0.166 with a free gain,
+docs/aqm.md §8), so the AQM keeps Daly's filters.
 """
 from __future__ import annotations
 
@@ -16,10 +20,8 @@ from functools import lru_cache
 
 import numpy as np
 
-N_BANDS = 6  # 5 dom bands + base (Daly 1993 without orientation, §6 of the paper)
-# Masking slope per band, highest frequency first: 1.0 for the high bands, 0.8 for the two lowest dom
-# bands, 0.7 for the base (Daly's patent as quoted in HDR-VDP 1.x, docs/aqm.md §4).
-MASKING_SLOPE = (1.0, 1.0, 1.0, 0.8, 0.8, 0.7)
+N_BANDS = 6  # 5 dom bands + base (Daly 1993)
+N_ORIENTATIONS = 6  # Daly's (1993) fan filters, 30 degrees apart
 
 
 def mesa(rho: np.ndarray, rho_h: float) -> np.ndarray:
@@ -52,9 +54,9 @@ def radial_frequency(shape: tuple[int, int]) -> np.ndarray:
 
 
 @lru_cache(maxsize=16)
-def band_filters(shape: tuple[int, int], beta: float) -> np.ndarray:
-    """Transfer functions h_k = d_k^(1/beta) of the bands for rfft2 spectra, shape (6, H, W//2 + 1)."""
-    h = dom_filters(radial_frequency(shape)) ** (1.0 / beta)
+def band_filters(shape: tuple[int, int]) -> np.ndarray:
+    """Daly's radial band filters d_k (and the base band) for rfft2 spectra, shape (6, H, W//2 + 1)."""
+    h = dom_filters(radial_frequency(shape))
     h.setflags(write=False)
     return h
 
@@ -72,6 +74,42 @@ def phase_uncertainty_filters(shape: tuple[int, int]) -> np.ndarray:
     return f
 
 
-def decompose(spectrum: np.ndarray, shape: tuple[int, int], beta: float) -> np.ndarray:
+def fan_filters(theta: np.ndarray) -> np.ndarray:
+    """Daly's (1993) fan filters at orientations ``theta`` (rad), shape (6, ...); they sum to 1.
+
+    fan_l = 0.5 [1 + cos(pi |theta - theta_l| / theta_tw)] for |theta - theta_l| <= theta_tw, else 0, with
+    theta_tw = 30 deg and theta_l = -90 + 30 l deg; orientation differences are taken modulo 180 deg.
+    """
+    tw = np.pi / N_ORIENTATIONS
+    centres = -np.pi / 2 + tw * np.arange(N_ORIENTATIONS)
+    delta = np.abs((theta[None] - centres.reshape((-1,) + (1,) * theta.ndim) + np.pi / 2) % np.pi - np.pi / 2)
+    return np.where(delta <= tw, 0.5 * (1.0 + np.cos(np.pi * np.minimum(delta / tw, 1.0))), 0.0)
+
+
+@lru_cache(maxsize=16)
+def channel_filters(shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Daly's transfer functions d_k fan_l of the 31 detection channels, and each one's radial band.
+
+    Returns (filters (31, H, W//2 + 1), band index (31,)): 5 dom bands x 6 orientations, then the base.
+    """
+    fy = np.fft.fftfreq(shape[0])[:, None]
+    fx = np.fft.rfftfreq(shape[1])[None, :]
+    theta = np.arctan2(fy, fx) * np.ones_like(fx)
+    dom = dom_filters(np.hypot(fx, fy))
+    fans = fan_filters(theta)
+    h = np.concatenate([(dom[:N_BANDS - 1, None] * fans[None]).reshape(-1, *theta.shape), dom[-1:]])
+    band = np.append(np.repeat(np.arange(N_BANDS - 1), N_ORIENTATIONS), N_BANDS - 1)
+    h.setflags(write=False)
+    band.setflags(write=False)
+    return h, band
+
+
+def decompose(spectrum: np.ndarray, shape: tuple[int, int]) -> np.ndarray:
     """Band images (6, H, W) of an rfft2 ``spectrum``, highest frequency first."""
-    return np.fft.irfft2(spectrum[None] * band_filters(shape, beta), s=shape)
+    return np.fft.irfft2(spectrum[None] * band_filters(shape), s=shape)
+
+
+def decompose_channels(spectrum: np.ndarray, shape: tuple[int, int]) -> tuple[np.ndarray, np.ndarray]:
+    """Channel images (31, H, W) of an rfft2 ``spectrum`` and each channel's radial band (channel_filters)."""
+    h, band = channel_filters(shape)
+    return np.fft.irfft2(spectrum[None] * h, s=shape), band

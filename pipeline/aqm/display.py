@@ -2,8 +2,9 @@
 
 The AQM works on the luminance a viewer sees on a stated display (Daly 1993 takes cd/m^2 as input),
 so a rendering's linear Rec.709 value 1.0 is mapped to the display's peak white and values above it
-are clipped, as a monitor does. Spatial frequencies need pixels per degree, derived here once from
-the display width, its horizontal resolution and the viewing distance (docs/aqm.md §6).
+are clipped, as a monitor does. Spatial frequencies need pixels per degree: of the display, of the
+frame as it is shown (full screen by default), and of the AQM's 256-pixel image (§6 of the paper),
+all derived here by pure functions (docs/aqm.md §6).
 """
 from __future__ import annotations
 
@@ -17,15 +18,33 @@ from kernels.colour import LUMA  # Rec. 709 / sRGB luminance weights (ITU-R BT.7
 
 from ..errors import LoomError
 
+INCH = 0.0254  # metres
+FILLS = ("full_screen", "native")
+
+
+def pixels_per_degree(pixel_m: float, distance_m: float) -> float:
+    """Pixels per degree at the centre of a screen of pixel pitch ``pixel_m`` seen from ``distance_m``:
+    1 / (2 atan(pitch / (2 d)) in degrees) (docs/aqm.md §6; ColorVideoVDP and FLIP use the same)."""
+    return 1.0 / math.degrees(2.0 * math.atan(pixel_m / (2.0 * distance_m)))
+
+
+def width_from_diagonal(diagonal_in: float, resolution: tuple[int, int]) -> float:
+    """Width in metres of a display of ``diagonal_in`` inches with square pixels."""
+    w, h = resolution
+    return diagonal_in * INCH * w / math.hypot(w, h)
+
 
 @dataclass(frozen=True)
 class ViewingConditions:
     """How the frames are watched; every frequency- and luminance-dependent stage derives from it.
 
-    Defaults: a 24-inch 16:9 LCD (0.531 m wide, 1920x1080 pixels) watched from 0.6 m, which gives
-    37.9 pixels per degree at the display's native resolution; peak white 100 cd/m^2 (the usual
-    reference white of an sRGB/Rec.709 monitor, docs/aqm.md §1 [decision]) and a black level of
-    0.1 cd/m^2 (a 1000:1 panel). A frame is assumed shown at one image pixel per display pixel.
+    Geometry: a display ``display_width_m`` wide with ``resolution`` pixels, seen from
+    ``viewing_distance_m``. ``fill`` says how a frame is shown on it: "full_screen" (the default, how an
+    animation is watched) scales the frame to fill the display with its aspect kept, "native" shows one
+    frame pixel per display pixel. The default display is ColorVideoVDP's "standard_fhd" geometry (a
+    24-inch 16:9 1920x1080 monitor from 0.6 m, 37.9 pixels per degree) with peak white 100 cd/m^2 (the
+    reference white of an sRGB/Rec.709 monitor, docs/aqm.md §1 [decision]) and black 0.1 cd/m^2 (1000:1);
+    :meth:`named` gives ColorVideoVDP's displays as they are defined there.
     """
 
     display_width_m: float = 0.531
@@ -33,6 +52,8 @@ class ViewingConditions:
     viewing_distance_m: float = 0.6
     peak_luminance: float = 100.0  # cd/m^2 of linear value 1.0
     black_level: float = 0.1  # cd/m^2 of linear value 0.0
+    fill: str = "full_screen"  # one of FILLS
+    name: str = "default (standard_fhd geometry)"
 
     def __post_init__(self) -> None:
         checks = {
@@ -41,6 +62,7 @@ class ViewingConditions:
             "viewing_distance_m": _finite(self.viewing_distance_m) and self.viewing_distance_m > 0,
             "peak_luminance": _finite(self.peak_luminance) and self.peak_luminance > 0,
             "black_level": _finite(self.black_level) and 0 <= self.black_level < self.peak_luminance,
+            "fill": self.fill in FILLS,
         }
         for name, ok in checks.items():
             if not ok:
@@ -48,17 +70,89 @@ class ViewingConditions:
 
     @property
     def ppd(self) -> float:
-        """Pixels per degree at the centre of the screen (exact form of docs/aqm.md §6)."""
-        pixel = self.display_width_m / self.resolution[0]
-        return 1.0 / math.degrees(2.0 * math.atan(pixel / (2.0 * self.viewing_distance_m)))
+        """Pixels per degree of the display's own pixels at the centre of the screen."""
+        return pixels_per_degree(self.display_width_m / self.resolution[0], self.viewing_distance_m)
+
+    def frame_scale(self, frame_shape: tuple[int, int]) -> float:
+        """Display pixels per frame pixel: the largest that fits the display full screen, 1 for native."""
+        if self.fill == "native":
+            return 1.0
+        h, w = frame_shape[:2]
+        return min(self.resolution[0] / w, self.resolution[1] / h)
+
+    def frame_ppd(self, frame_shape: tuple[int, int]) -> float:
+        """Pixels per degree of a frame of ``frame_shape`` (H, W) as it is shown."""
+        pitch = self.display_width_m / self.resolution[0] * self.frame_scale(frame_shape)
+        return pixels_per_degree(pitch, self.viewing_distance_m)
 
     @classmethod
-    def for_ppd(cls, ppd: float, **fields: float | tuple[int, int]) -> ViewingConditions:
-        """Conditions with the viewing distance chosen so the display has ``ppd`` pixels per degree."""
-        base = cls(**fields)
+    def named(cls, name: str, **fields: float | str | tuple[int, int]) -> ViewingConditions:
+        """ColorVideoVDP's display ``name`` (pycvvdp display_models.json): size, resolution, distance,
+        peak luminance and contrast (black = peak / contrast); ``fields`` override any of them."""
+        if name not in DISPLAYS:
+            raise LoomError(f"unknown display {name!r}; known: {', '.join(DISPLAYS)}", field="viewing.display")
+        diagonal, resolution, distance, peak, contrast = DISPLAYS[name]
+        base = {"display_width_m": width_from_diagonal(diagonal, resolution), "resolution": resolution,
+                "viewing_distance_m": distance, "peak_luminance": peak, "black_level": peak / contrast,
+                "name": name}
+        changed = sorted(k for k, v in fields.items() if k != "name" and base.get(k) != v and k != "fill")
+        if changed:
+            base["name"] = f"{name} with {', '.join(changed)} changed"
+        return cls(**{**base, **fields})
+
+    @classmethod
+    def for_ppd(cls, ppd: float, **fields: float | str | tuple[int, int]) -> ViewingConditions:
+        """Native-pixel conditions with the viewing distance chosen so the display has ``ppd`` pixels per degree."""
+        base = cls(**{"fill": "native", "name": f"{ppd:g} px/deg", **fields})
         pixel = base.display_width_m / base.resolution[0]
         distance = pixel / (2.0 * math.tan(math.radians(1.0 / ppd) / 2.0))
         return replace(base, viewing_distance_m=distance)
+
+
+# ColorVideoVDP's display models (Mantiuk et al. 2024, pycvvdp/vvdp_data/display_models.json):
+# name: (diagonal in inches, resolution, viewing distance in m, peak cd/m^2, contrast)
+DISPLAYS: dict[str, tuple[float, tuple[int, int], float, float, float]] = {
+    "standard_fhd": (24.0, (1920, 1080), 0.6, 200.0, 1000.0),
+    "standard_4k": (30.0, (3840, 2160), 0.7472, 200.0, 1000.0),
+}
+
+
+@dataclass(frozen=True)
+class AQMGeometry:
+    """Where the AQM looks (§6): a frame resampled to ``shape`` with the observer's distance scaled so
+    the visual angles stay those of the frame as shown."""
+
+    frame_shape: tuple[int, int]
+    frame_ppd: float  # pixels per degree of the frame as shown
+    shape: tuple[int, int]  # (H, W) the AQM works at
+    ppd: float  # pixels per degree of the AQM image
+    scaled_distance_m: float  # §6's observer distance: the AQM image's pixels, at the display's pitch, at ppd
+    image_area_deg2: float  # Daly's i^2: the image's area in square degrees
+
+    def describe(self, viewing: ViewingConditions) -> str:
+        """One line for a render's log and report."""
+        h, w = self.frame_shape
+        return (f"viewing {viewing.name}: {viewing.resolution[0]}x{viewing.resolution[1]} display "
+                f"{viewing.display_width_m:.3f} m wide at {viewing.viewing_distance_m:.2f} m, "
+                f"{viewing.peak_luminance:g} cd/m^2, {viewing.fill.replace('_', ' ')}; frame {w}x{h} at "
+                f"{self.frame_ppd:.1f} px/deg; AQM {self.shape[1]}x{self.shape[0]} at {self.ppd:.2f} px/deg "
+                f"(observer at {self.scaled_distance_m:.3f} m, §6)")
+
+
+def aqm_geometry(viewing: ViewingConditions, frame_shape: tuple[int, int], aqm_size: int) -> AQMGeometry:
+    """The AQM's image size and pixels per degree for frames of ``frame_shape`` (H, W) (§6).
+
+    The frame is resampled so its longer side is ``aqm_size`` (never enlarged); its pixels per degree
+    scale by the same factor, which is the paper's "proportionally reduce the distance of the observer":
+    the scaled distance is the one at which the AQM image, at the display's pixel pitch, has that ppd.
+    """
+    frame_shape = (int(frame_shape[0]), int(frame_shape[1]))
+    shape = aqm_shape(frame_shape, aqm_size)
+    frame_ppd = viewing.frame_ppd(frame_shape)
+    ppd = frame_ppd * math.sqrt(shape[0] * shape[1] / (frame_shape[0] * frame_shape[1]))
+    pitch = viewing.display_width_m / viewing.resolution[0]
+    scaled = pitch / (2.0 * math.tan(math.radians(1.0 / ppd) / 2.0))
+    return AQMGeometry(frame_shape, frame_ppd, shape, ppd, scaled, (shape[0] / ppd) * (shape[1] / ppd))
 
 
 def _finite(x) -> bool:

@@ -3,9 +3,10 @@
 Stages (one module each): display luminance and resampling to ``aqm_size`` with the viewing distance
 scaled so visual angles, hence spatial frequencies, are kept (display.py, §6) -> Daly's nonlinearity
 with local adaptation (nonlinearity.py) -> CSF with per-pixel adaptation luminance and retinal velocity
-(csf.py) -> six radial bands (bands.py) -> mutual masking (masking.py) -> psychometric function and
-probability summation (psychometric.py) -> M_AQM (per-pixel detection probability) and d_AQM (% of
-pixels with P > 0.75, i.e. above 1 JND).
+(csf.py) -> Daly's cortex transform (bands.py): the difference in 31 radial x orientation channels, each
+image in six radial bands for masking -> mutual masking without orientation (masking.py, §6) ->
+psychometric function and probability summation over the 31 channels (psychometric.py) -> M_AQM
+(per-pixel detection probability) and d_AQM (% of pixels with P > 0.75, i.e. above 1 JND).
 """
 from __future__ import annotations
 
@@ -15,7 +16,7 @@ import numpy as np
 import numpy.typing as npt
 
 from ..errors import LoomError
-from .bands import decompose
+from .bands import decompose, decompose_channels
 from .csf import (
     G_SP,
     luminance_bank,
@@ -27,7 +28,7 @@ from .csf import (
 )
 from .display import (
     ViewingConditions,
-    aqm_shape,
+    aqm_geometry,
     check_image,
     check_luminance,
     display_luminance,
@@ -36,7 +37,7 @@ from .display import (
 )
 from .masking import mutual_masking
 from .nonlinearity import local_adaptation, nonlinear_contrast
-from .psychometric import BETA, P_THRESHOLD, d_aqm, detection_probability
+from .psychometric import P_THRESHOLD, d_aqm, detection_probability
 
 AQM_SIZE = 256  # §6; RenderConfig.aqm_size
 # Every filter works by FFT, which treats the image as periodic: the left border would meet the right one
@@ -98,10 +99,9 @@ def aqm_luminance(lum_a: npt.ArrayLike, lum_b: npt.ArrayLike, *, flow: npt.Array
         raise LoomError(f"must lie in [0, 1], got {pursuit_gain!r}", field="pursuit_gain")
 
     full = lum_a.shape
-    shape = aqm_shape(full, aqm_size)
     # Scaling the image and the viewing distance together keeps every visual angle (§6).
-    ppd = viewing.ppd * np.sqrt(shape[0] * shape[1] / (full[0] * full[1]))
-    i2 = (shape[0] / ppd) * (shape[1] / ppd)  # image area in deg^2, Daly's i^2
+    geometry = aqm_geometry(viewing, full, aqm_size)
+    shape, ppd, i2 = geometry.shape, geometry.ppd, geometry.image_area_deg2
     pad = int(round(PAD_FRACTION * max(shape)))
     lum_a, lum_b = _mirror(resample(lum_a, shape), pad), _mirror(resample(lum_b, shape), pad)
     work = lum_a.shape
@@ -111,12 +111,17 @@ def aqm_luminance(lum_a: npt.ArrayLike, lum_b: npt.ArrayLike, *, flow: npt.Array
     if flow is not None:
         v_r = retinal_velocity(_mirror(resample(_check_flow(flow, full, flow_name), shape), pad), pursuit_gain)
         stages.append((velocity_bank(work, ppd), velocity_coordinate(v_r)))
+    # Daly's accommodation term r_a takes the distance the eye is focused at, the real one: §6 scales the
+    # distance only "to preserve the same spatial frequencies", which the scaled ppd already does.
     stages.append((luminance_bank(work, ppd, i2, viewing.viewing_distance_m), luminance_coordinate(adaptation)))
 
-    bands_a = _csf_bands(nonlinear_contrast(lum_a, adaptation), work, stages)
-    bands_b = _csf_bands(nonlinear_contrast(lum_b, adaptation), work, stages)
-    elevation = mutual_masking(bands_a, bands_b)
-    probability = detection_probability(bands_b - bands_a, elevation)[pad:pad + shape[0], pad:pad + shape[1]]
+    spectrum_a = _csf_spectrum(nonlinear_contrast(lum_a, adaptation), work, stages)
+    spectrum_b = _csf_spectrum(nonlinear_contrast(lum_b, adaptation), work, stages)
+    # Masking is computed on the radial bands, without orientation (§6 of the paper); detection uses
+    # all of Daly's channels, and by linearity the channels of the difference are the difference of channels.
+    elevation = mutual_masking(decompose(spectrum_a, work), decompose(spectrum_b, work))
+    delta, band = decompose_channels(spectrum_b - spectrum_a, work)
+    probability = detection_probability(delta, elevation, band=band)[pad:pad + shape[0], pad:pad + shape[1]]
     return AQMResult(map=probability, d_aqm=d_aqm(probability), ppd=float(ppd))
 
 
@@ -126,13 +131,13 @@ def _mirror(image: np.ndarray, pad: int) -> np.ndarray:
     return np.pad(image, widths, mode="symmetric")
 
 
-def _csf_bands(contrast: np.ndarray, shape: tuple[int, int], stages) -> np.ndarray:
-    """CSF-weighted band signals (6, H, W) in threshold units: each stage is a per-pixel filter bank."""
+def _csf_spectrum(contrast: np.ndarray, shape: tuple[int, int], stages) -> np.ndarray:
+    """rfft2 of the CSF-weighted contrast (threshold units): each stage is a per-pixel filter bank."""
     spectrum = np.fft.rfft2(contrast)
     for bank, coord in stages:
         filtered, image = space_variant_filter(spectrum, shape, bank, coord)
         spectrum = filtered if image is None else np.fft.rfft2(image)
-    return decompose(spectrum, shape, BETA)
+    return spectrum
 
 
 def _check_same_size(a: np.ndarray, b: np.ndarray, names) -> None:

@@ -1,7 +1,8 @@
-"""Psychometric function and probability summation over bands (Daly 1993, docs/aqm.md §5).
+"""Psychometric function and probability summation over channels (Daly 1993, docs/aqm.md §5).
 
-P_k = 1 - exp(-|dC_k / Te_k|^beta), beta = 3.5 (Daly's patent, HDR-VDP 1.x default); over the bands
-P = 1 - prod_k (1 - P_k) = 1 - exp(-sum_k |dC_k / Te_k|^beta).
+P_c = 1 - exp(-|dC_c / Te_c|^beta), beta = 3.5 (Daly's patent, HDR-VDP 1.x default), for each of the 31
+cortex channels c (Te_c: the masking elevation of c's radial band); over the channels
+P = 1 - prod_c (1 - P_c) = 1 - exp(-sum_c |dC_c / Te_c|^beta).
 
 Threshold: a pixel shows a visible difference when P > 0.75. That is the 1 JND level of the paper's
 d_AQM ("differences over one unit JND", §5.2.3): 0.75 is the classic 2AFC/75 % detection criterion
@@ -16,9 +17,19 @@ BETA = 3.5  # Daly 1993 psychometric slope
 P_THRESHOLD = 0.75  # 1 JND, see module docstring
 
 
-def detection_probability(delta: np.ndarray, elevation: np.ndarray, beta: float = BETA) -> np.ndarray:
-    """Per-pixel P from band differences ``delta`` and elevations ``elevation``, both (bands, H, W)."""
-    summed = np.sum(np.abs(delta / elevation) ** beta, axis=0)
+def detection_probability(delta: np.ndarray, elevation: np.ndarray, beta: float = BETA,
+                          band: np.ndarray | None = None) -> np.ndarray:
+    """Per-pixel P from channel differences ``delta`` (channels, H, W) and elevations ``elevation``.
+
+    ``elevation`` has one map per channel, or one per radial band with ``band`` giving each channel's band.
+    """
+    summed = np.zeros(delta.shape[1:])
+    for c in range(delta.shape[0]):
+        x = np.abs(delta[c]) / elevation[c if band is None else band[c]]
+        if beta == 3.5:  # Daly's beta: x^3 sqrt(x), a third of the time of a power
+            summed += x * x * x * np.sqrt(x)
+        else:
+            summed += x**beta
     return -np.expm1(-summed)
 
 

@@ -27,7 +27,7 @@ def _bench_pair(size: int, seed: int = 0):
     moved = np.eye(4)
     moved[0, 3] = -0.05  # camera moves 5 cm to the right per frame
     flow = image_velocity(depth, cam, following=moved, previous=np.linalg.inv(moved), yfov=np.radians(40),
-                          fps=25.0, ppd=ViewingConditions().ppd)
+                          fps=25.0, ppd=ViewingConditions().frame_ppd((size, size)))
     return np.repeat(a[..., None], 3, axis=2), np.repeat(b[..., None], 3, axis=2), flow
 
 

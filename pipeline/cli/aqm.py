@@ -10,7 +10,16 @@ from typing import Any, Callable, TypeVar
 import click
 import numpy as np
 
-from pipeline.aqm import AQM_SIZE, G_SP, ViewingConditions, aqm, pixels_per_frame_to_deg_per_s
+from pipeline.aqm import (
+    AQM_SIZE,
+    DISPLAYS,
+    G_SP,
+    ViewingConditions,
+    aqm,
+    aqm_geometry,
+    pixels_per_frame_to_deg_per_s,
+)
+from pipeline.aqm.display import FILLS
 from pipeline.aqm.visualize import difference_picture
 from pipeline.errors import LoomError
 
@@ -59,7 +68,9 @@ def write_png(path: str, rgb8: np.ndarray) -> None:
         raise LoomError(f"cannot write: {error}".replace("\n", " "), path=path, field="file")
 
 
-def _resolution(_ctx, _param, value: str) -> tuple[int, int]:
+def _resolution(_ctx, _param, value: str | None) -> tuple[int, int] | None:
+    if value is None:
+        return None
     try:
         w, h = (int(v) for v in value.lower().split("x"))
     except ValueError:
@@ -68,18 +79,23 @@ def _resolution(_ctx, _param, value: str) -> tuple[int, int]:
 
 
 def viewing_options(f: _F) -> _F:
-    """The ViewingConditions options of ``loom aqm``."""
+    """The ViewingConditions options of ``loom aqm``: a named display, or its size, resolution and distance."""
     options = [
-        click.option("--display-width", type=float, default=_DEFAULT.display_width_m, show_default=True,
-                     help="Display width in metres."),
-        click.option("--display-resolution", default="{}x{}".format(*_DEFAULT.resolution), show_default=True,
-                     callback=_resolution, help="Display resolution WIDTHxHEIGHT in pixels."),
-        click.option("--viewing-distance", type=float, default=_DEFAULT.viewing_distance_m, show_default=True,
-                     help="Viewing distance in metres."),
-        click.option("--peak-luminance", type=float, default=_DEFAULT.peak_luminance, show_default=True,
-                     help="cd/m^2 shown for linear value 1.0."),
-        click.option("--black-level", type=float, default=_DEFAULT.black_level, show_default=True,
-                     help="cd/m^2 shown for linear value 0.0."),
+        click.option("--display", type=click.Choice(sorted(DISPLAYS)), default=None,
+                     help="A named display (ColorVideoVDP's models); the options below override its fields. "
+                          "Default: standard_fhd geometry at 100 cd/m^2."),
+        click.option("--fill", type=click.Choice(FILLS), default=_DEFAULT.fill, show_default=True,
+                     help="How a frame is shown: scaled to fill the display, or one frame pixel per display pixel."),
+        click.option("--display-width", type=float, default=None,
+                     help=f"Display width in metres [default: {_DEFAULT.display_width_m}]."),
+        click.option("--display-resolution", default=None, callback=_resolution,
+                     help="Display resolution WIDTHxHEIGHT in pixels [default: {}x{}].".format(*_DEFAULT.resolution)),
+        click.option("--viewing-distance", type=float, default=None,
+                     help=f"Viewing distance in metres [default: {_DEFAULT.viewing_distance_m}]."),
+        click.option("--peak-luminance", type=float, default=None,
+                     help=f"cd/m^2 shown for linear value 1.0 [default: {_DEFAULT.peak_luminance:g}]."),
+        click.option("--black-level", type=float, default=None,
+                     help=f"cd/m^2 shown for linear value 0.0 [default: {_DEFAULT.black_level:g}]."),
         click.option("--aqm-size", type=int, default=AQM_SIZE, show_default=True,
                      help="Longer side of the images the AQM works on (§6)."),
     ]
@@ -88,10 +104,12 @@ def viewing_options(f: _F) -> _F:
     return f
 
 
-def _viewing(display_width, display_resolution, viewing_distance, peak_luminance, black_level):
-    return ViewingConditions(display_width_m=display_width, resolution=display_resolution,
-                             viewing_distance_m=viewing_distance, peak_luminance=peak_luminance,
-                             black_level=black_level)
+def _viewing(display, fill, display_width, display_resolution, viewing_distance, peak_luminance, black_level):
+    fields = {"display_width_m": display_width, "resolution": display_resolution,
+              "viewing_distance_m": viewing_distance, "peak_luminance": peak_luminance,
+              "black_level": black_level, "fill": fill}
+    fields = {k: v for k, v in fields.items() if v is not None}
+    return ViewingConditions.named(display, **fields) if display else ViewingConditions(**fields)
 
 
 @click.command("aqm")
@@ -106,10 +124,11 @@ def _viewing(display_width, display_resolution, viewing_distance, peak_luminance
 @viewing_options
 @click.option("--map", "map_path", type=click.Path(dir_okay=False), default=None,
               help="Write M_AQM as a PNG: red where a difference is visible, over a grey A (Fig. 3d).")
-def aqm_command(image_a, image_b, flow_path, flow_units, fps, pursuit_gain, display_width, display_resolution,
-                viewing_distance, peak_luminance, black_level, aqm_size, map_path):
+def aqm_command(image_a, image_b, flow_path, flow_units, fps, pursuit_gain, display, fill, display_width,
+                display_resolution, viewing_distance, peak_luminance, black_level, aqm_size, map_path):
     """Predict where a viewer sees a difference between linear-light frames IMAGE_A and IMAGE_B; print d_AQM."""
-    viewing = _viewing(display_width, display_resolution, viewing_distance, peak_luminance, black_level)
+    viewing = _viewing(display, fill, display_width, display_resolution, viewing_distance, peak_luminance,
+                       black_level)
     a = read_image(image_a)
     b = read_image(image_b)
     flow = None
@@ -118,10 +137,11 @@ def aqm_command(image_a, image_b, flow_path, flow_units, fps, pursuit_gain, disp
         if flow_units == "px/frame":
             if fps is None or not fps > 0:
                 raise LoomError("--flow-units px/frame needs a positive --fps", path=flow_path, field="fps")
-            flow = pixels_per_frame_to_deg_per_s(flow, fps, viewing.ppd)
+            flow = pixels_per_frame_to_deg_per_s(flow, fps, viewing.frame_ppd(a.shape[:2]))
     result = aqm(a, b, flow=flow, viewing=viewing, pursuit_gain=pursuit_gain, aqm_size=aqm_size,
                  names=(image_a, image_b), flow_name=flow_path or "flow")
     h, w = result.map.shape
+    click.echo(aqm_geometry(viewing, a.shape[:2], aqm_size).describe(viewing))
     click.echo(f"d_AQM = {result.d_aqm:.3f} % of {h * w} pixels above 1 JND (P > {result.threshold}); "
                f"AQM at {w}x{h}, {result.ppd:.2f} px/deg")
     if map_path is not None:

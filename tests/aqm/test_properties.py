@@ -1,4 +1,4 @@
-"""Properties of human vision the AQM must reproduce (issue 6, "Tests")."""
+"""Properties of human vision the AQM must reproduce."""
 from __future__ import annotations
 
 import numpy as np
@@ -9,6 +9,9 @@ from pipeline.aqm import ViewingConditions, aqm, aqm_luminance
 from pipeline.aqm.csf import daly_csf
 
 FREQUENCIES = (0.5, 1, 2, 4, 8, 16)
+# The noise properties are checked with the 256-pixel test frames shown pixel for pixel (37.9 px/deg); shown
+# full screen (the default) their per-pixel noise is 4x larger in visual angle and visible everywhere.
+NATIVE = ViewingConditions(fill="native")
 
 
 @pytest.fixture(scope="module")
@@ -34,7 +37,7 @@ def test_identical_images_give_zero(shaded_scene, speed):
 def test_metric_is_symmetric(noisy_pair, with_flow):
     a, b = noisy_pair
     flow = np.full(a.shape[:2] + (2,), 3.0) if with_flow else None
-    ab, ba = aqm(a, b, flow=flow), aqm(b, a, flow=flow)
+    ab, ba = aqm(a, b, flow=flow, viewing=NATIVE), aqm(b, a, flow=flow, viewing=NATIVE)
     assert 0 < ab.d_aqm < 100
     np.testing.assert_allclose(ab.map, ba.map, rtol=0, atol=1e-12)
     assert ab.d_aqm == ba.d_aqm
@@ -42,10 +45,11 @@ def test_metric_is_symmetric(noisy_pair, with_flow):
 
 @pytest.mark.parametrize("freq", FREQUENCIES)
 def test_grating_threshold_follows_inverse_csf(grating_thresholds, grating_viewing, freq):
-    """Contrast at P = 0.75 is 1/CSF within 0.1 log units (Daly 1993 CSF at 100 cd/m^2)."""
+    """Contrast at P = 0.75 is 1/CSF times (ln 4)^(1/beta) = 1.10 at a channel centre and at most
+    2^(1 - 1/beta) = 1.64x more between two bands (Daly's filters, bands.py): log10(c S) in [0.04, 0.26]."""
     area = (SIZE / grating_viewing.ppd) ** 2
     sensitivity = daly_csf(freq, 100.0, i2=area, distance_m=grating_viewing.viewing_distance_m)
-    assert abs(np.log10(grating_thresholds[freq] * sensitivity)) < 0.1
+    assert 0.035 < np.log10(grating_thresholds[freq] * sensitivity) < 0.26
 
 
 def test_peak_sensitivity_between_2_and_6_cpd(grating_thresholds):
@@ -76,8 +80,8 @@ def test_texture_masks_noise(amplitude):
     texture *= 0.5 / texture.mean()
     flat = np.full_like(texture, 0.5)
     noise = 1 + amplitude * rng.standard_normal(texture.shape)
-    d_flat = aqm(flat, flat * noise).d_aqm
-    d_texture = aqm(texture, texture * noise).d_aqm
+    d_flat = aqm(flat, flat * noise, viewing=NATIVE).d_aqm
+    d_texture = aqm(texture, texture * noise, viewing=NATIVE).d_aqm
     assert d_flat > 0
     assert d_texture < 0.5 * d_flat
 
@@ -120,7 +124,7 @@ def test_pursuit_gain_orders_visibility(moving_grating):
 @pytest.fixture(scope="module")
 def noise_d_aqm(shaded_scene):
     """d_AQM of two independent renderings (even/odd halves, §5.2.3) against samples per pixel."""
-    return {n: aqm(monte_carlo(shaded_scene, n, 10), monte_carlo(shaded_scene, n, 11)).d_aqm
+    return {n: aqm(monte_carlo(shaded_scene, n, 10), monte_carlo(shaded_scene, n, 11), viewing=NATIVE).d_aqm
             for n in (200, 400, 800)}
 
 
@@ -131,15 +135,15 @@ def test_more_samples_lower_d_aqm(noise_d_aqm, fewer, more):
 
 def test_viewing_farther_lowers_d_aqm(noisy_pair):
     """Pixel noise gets finer in degrees as the viewer steps back, above the CSF peak it fades."""
-    near = aqm(*noisy_pair, viewing=ViewingConditions(viewing_distance_m=0.4)).d_aqm
-    far = aqm(*noisy_pair, viewing=ViewingConditions(viewing_distance_m=1.5)).d_aqm
+    near = aqm(*noisy_pair, viewing=ViewingConditions(viewing_distance_m=0.4, fill="native")).d_aqm
+    far = aqm(*noisy_pair, viewing=ViewingConditions(viewing_distance_m=1.5, fill="native")).d_aqm
     assert far < near
 
 
 def test_image_borders_do_not_mask(shaded_scene):
     """Noise along the left border (next to the bright right edge) is as visible as inside the frame."""
     noisy = monte_carlo(shaded_scene, 200, seed=3)
-    visible = aqm(shaded_scene, noisy).visible
+    visible = aqm(shaded_scene, noisy, viewing=NATIVE).visible
     border, inside = visible[:, :8].mean(), visible[:, 8:64].mean()
     assert inside > 0.2
     assert border > 0.8 * inside

@@ -6,11 +6,10 @@ import pytest
 from aqm_data import SIZE, grating, threshold_contrast
 
 from pipeline.aqm import ViewingConditions
-from pipeline.aqm.bands import band_filters, dom_filters, radial_frequency
+from pipeline.aqm.bands import band_filters, channel_filters, dom_filters, radial_frequency
 from pipeline.aqm.csf import daly_csf, kelly_daly_csf, retinal_velocity, velocity_factor
 from pipeline.aqm.display import display_luminance, relative_luminance, resample
 from pipeline.aqm.nonlinearity import daly_response, nonlinear_contrast
-from pipeline.aqm.psychometric import BETA
 
 RHO = np.linspace(0.05, 30.0, 6000)
 
@@ -81,7 +80,15 @@ def test_bands_partition_sums_to_one():
     dom = dom_filters(rho)
     inside = rho < 0.5
     np.testing.assert_allclose(dom.sum(axis=0)[inside], 1.0, atol=1e-12)
-    np.testing.assert_allclose((band_filters((SIZE, SIZE), BETA) ** BETA).sum(axis=0)[inside], 1.0, atol=1e-12)
+    np.testing.assert_allclose(band_filters((SIZE, SIZE)).sum(axis=0)[inside], 1.0, atol=1e-12)
+
+
+def test_cortex_channels_partition_sums_to_one():
+    """Daly's 5 x 6 oriented channels and the base band add up to 1 at every frequency and orientation."""
+    filters, band = channel_filters((SIZE, SIZE))
+    assert filters.shape[0] == 31 and list(np.bincount(band)) == [6, 6, 6, 6, 6, 1]
+    inside = radial_frequency((SIZE, SIZE)) < 0.5
+    np.testing.assert_allclose(filters.sum(axis=0)[inside], 1.0, atol=1e-12)
 
 
 def test_resampling_keeps_visual_angle(grating_viewing):
