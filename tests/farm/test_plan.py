@@ -69,11 +69,12 @@ def test_plan_and_make_give_the_frames_of_loom_render(room):
 
 
 def test_fixed_settings_trace_in_shoot_targets_that_make_runs_side_by_side(room):
+    """The farm's store keeps its hit records (--keep-records), the reference's does not: the same bits."""
     tmp, scene, config, _ = room
     fixed = ["--photons", "3000", "--fmax", "6"]
     ref, out = tmp / "fixed-ref", tmp / "fixed-farm"
     _run(*LOOM, "render", scene, *_options(ref, config), *fixed, "--scheduler", "synchronous", "--quiet")
-    _run(*LOOM, "plan", scene, *_options(out, config), *fixed)
+    _run(*LOOM, "plan", scene, *_options(out, config), *fixed, "--keep-records")  # the farm keeps records
     rules = {line.split(":")[0]: line.split(":")[1].split() for line in (out / "Makefile").read_text().splitlines()
              if line.startswith(".farm/")}
     shoots = sorted(t for t in rules if "shoot-" in t)
@@ -84,6 +85,7 @@ def test_fixed_settings_trace_in_shoot_targets_that_make_runs_side_by_side(room)
     assert [r.without_times() for r in read_records(out)] == [r.without_times() for r in read_records(ref)]
     assert "already traced" in _run(*LOOM, "farm", "shoot", out, "0", "1").stdout
     assert "frames 76-80" in (out / ".farm" / "shoot-000-01.ok").read_text()
+    assert any((out / "photons.zarr" / "frames").rglob("c.0.0")) and not (ref / "photons.zarr" / "frames").exists()
 
 
 def test_a_killed_make_resumes_to_the_same_frames(room):
@@ -183,11 +185,9 @@ def test_a_recipe_with_another_runs_store_or_an_unwritable_one_is_one_line(room,
     swapped = _run(*LOOM, "farm", "decide", out, "0", check=False)
     assert swapped.returncode == 2 and len(swapped.stderr.strip().splitlines()) == 1
     assert "photons.zarr" in swapped.stderr and "scene" in swapped.stderr
-    # A store a worker cannot write into: its frames folder is a file
+    # A store a worker cannot write into: where its batch sums go is a file
     _run(*LOOM, "plan", scene, *_options(tmp_path / "third", config))
-    frames = tmp_path / "third" / "photons.zarr" / "frames"
-    shutil.rmtree(frames)
-    frames.write_text("not a folder")
+    (tmp_path / "third" / "photons.zarr" / "summaries").write_text("not a folder")
     broken = _run(*LOOM, "farm", "decide", tmp_path / "third", "0", check=False)
     assert broken.returncode == 2 and len(broken.stderr.strip().splitlines()) == 1, broken.stderr
     assert "photons.zarr" in broken.stderr and "cannot write" in broken.stderr

@@ -3,7 +3,7 @@
 Bench-only: needs PyTorch and ``cvvdp`` (PyPI), which stay out of the project's dependencies and tests.
 Run in a separate environment that has them and NumPy, from the repository root:
 
-    PYTHONPATH=. /path/to/venv/bin/python tools/judges/aqm_vs_cvvdp.py
+    PYTHONPATH=. /path/to/venv/bin/python -m pipeline.benchmarks.cvvdp_agreement
 
 Stimulus: a 320 x 240 frame (ROOM's default size), flat grey or a smooth random texture, multiplied by
 1 + a n(x, y), where n is unit-variance Gaussian noise drawn at the vertices of a grid of 8-pixel
@@ -18,6 +18,7 @@ stricter, 0.5 JOD. The amplitude a is bisected in log space for each criterion.
 from __future__ import annotations
 
 import math
+from collections.abc import Callable
 
 import numpy as np
 
@@ -55,7 +56,7 @@ def srgb(linear: np.ndarray) -> np.ndarray:
     return np.where(x <= 0.0031308, 12.92 * x, 1.055 * x ** (1 / 2.4) - 0.055)
 
 
-def bisect(visible, lo: float = 1e-3, hi: float = 0.5, steps: int = 12) -> float:
+def bisect(visible: Callable[[float], bool], lo: float = 1e-3, hi: float = 0.5, steps: int = 12) -> float:
     """Smallest amplitude in [lo, hi] that ``visible`` accepts (log bisection); nan if hi is not visible."""
     if not visible(hi):
         return math.nan
@@ -66,6 +67,7 @@ def bisect(visible, lo: float = 1e-3, hi: float = 0.5, steps: int = 12) -> float
 
 
 def main() -> None:
+    # Optional heavy dependencies of a bench-only environment (PyTorch, cvvdp): never the project's
     import pycvvdp
     import torch
 
