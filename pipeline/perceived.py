@@ -9,11 +9,13 @@ one (sensitivity rises with luminance) and never clips highlights, so it over-st
 """
 from __future__ import annotations
 
+from dataclasses import replace
 from typing import TYPE_CHECKING
 
 import numpy as np
 
 from .aqm import AQMResult, ViewingConditions, aqm
+from .aqm.display import DISPLAYS, aqm_geometry
 from .tonemap import ToneMapping, ward_scale
 
 if TYPE_CHECKING:
@@ -28,8 +30,20 @@ def display_values(rgb: np.ndarray, adaptation: float, params: ToneMapping = Ton
 
 
 def viewing_for(params: ToneMapping) -> ViewingConditions:
-    """The AQM's viewing conditions with the display white the tone mapping maps to."""
-    return ViewingConditions(peak_luminance=params.display_max)
+    """The AQM's viewing conditions: the named display's geometry (size, resolution, distance), the
+    frame shown on it as ``params.fill`` says, and the display white the tone mapping maps to, with
+    the display's contrast (docs/aqm.md §7)."""
+    named = ViewingConditions.named(params.display, fill=params.fill)
+    contrast = DISPLAYS[params.display][4]
+    return replace(named, peak_luminance=params.display_max, black_level=params.display_max / contrast,
+                   name=f"{params.display} (white {params.display_max:g} cd/m^2, the tone mapping's)")
+
+
+def viewing_line(params: ToneMapping, width: int, height: int, aqm_size: int) -> str:
+    """What the AQM assumes of the viewer, in one line: the display, its distance, and the pixels
+    per degree of a frame and of the AQM's image (§6): ``loom render`` prints it, the report shows it."""
+    view = viewing_for(params)
+    return aqm_geometry(view, (height, width), aqm_size).describe(view)
 
 
 def displayed_difference(rgb_a: np.ndarray, rgb_b: np.ndarray, adaptation: float, *,

@@ -213,6 +213,8 @@ def render(scene_path: str | Path, *, frames: str | None, out_dir: str | Path,
             job = prepare_job(scene_path, frames=frames, out_dir=out_dir, settings=settings, n_photons=n_photons,
                               store_url=store_url, camera=camera, config=config, temporal=temporal, fmax=fmax,
                               light=light, keep_records=keep_records)
+            if echo is not None:
+                echo(_viewing(job))
             if segment is not None:
                 report_segment(*reprocess(job, client, segment))
                 from .segment_records import read_records
@@ -254,6 +256,7 @@ def finish(job: Job, records: list[SegmentRecord], *, rays: dict, batches: int, 
         "photons": "auto" if job.n_photons is None else job.n_photons,
         "segments": [{"index": r.index, "frames": [r.start, r.end], "k": r.k, "fmax": r.fmax,
                       "n_frame": r.n_frame, "d_aqm": r.d_aqm, "capped": r.capped} for r in records],
+        "viewing": _viewing(job),
         "store": job.store_url, "store_size": store_size(job.store_url), "video": str(video),
         "render_hash": job.render_hash,
         "photon_batches_traced": batches, "times_s": {},
@@ -284,6 +287,13 @@ def finish(job: Job, records: list[SegmentRecord], *, rays: dict, batches: int, 
     write_report(out, parts)
     _remove_leftovers(out, job.store_url)
     return report
+
+
+def _viewing(job: Job) -> str:
+    """The viewing conditions the AQM judged the frames under, with their pixels per degree."""
+    from .perceived import viewing_line
+
+    return viewing_line(ToneMapping(**job.tonemap), job.width, job.height, RenderConfig.from_dict(job.config).aqm_size)
 
 
 def store_size(store_url: str) -> dict:

@@ -146,6 +146,11 @@ def _summary(report: dict, records: list[SegmentRecord]) -> str:
                            f"AQM {t.get('aqm_s', 0.0):.1f}, temporal {t.get('temporal_s', 0.0):.1f}, "
                            f"composite {t.get('composite_s', 0.0):.1f}, video {t.get('video_s', 0.0):.1f})")],
             ["rays", ", ".join(f"{k} {v:,}" for k, v in report.get("rays", {}).items())]]
+    if report.get("viewing"):
+        rows.append(["viewing (the AQM's, §6)", report["viewing"]])
+    if report.get("store_size"):
+        from .render import store_size_line
+        rows.append(["photon store", store_size_line(report["store_size"])])
     return _table(None, rows, left=2, cls="summary")
 
 

@@ -44,6 +44,7 @@ import numpy.typing as npt
 
 from kernels.colour import LUMA
 
+from .aqm.display import DISPLAYS, FILLS
 from .errors import ConfigError
 
 DELTA = 1e-4  # cd/m^2 floor inside the log-average (Ward 1994; avoids log 0)
@@ -59,11 +60,19 @@ class ToneMapping:
     tau: float = 0.4  # adaptation time constant in seconds (Pattanaik et al. 2000: 0.1-0.5 s)
     operator: str = "filmic"  # filmic | exposure | ward (module docstring)
     exposure: float = 0.0  # EV added to the operator's own exposure (a factor 2^EV)
+    # Where the frames are watched, for the AQM (§6, pipeline/perceived.py viewing_for): a display
+    # of ColorVideoVDP's (its size, resolution and distance) and how a frame fills it
+    display: str = "standard_fhd"
+    fill: str = "full_screen"
 
     def __post_init__(self) -> None:
         if self.operator not in OPERATORS:
             raise ConfigError(f"invalid value {self.operator!r}: must be one of {', '.join(OPERATORS)}",
                               field="tonemap")
+        for name, known in (("display", DISPLAYS), ("fill", FILLS)):
+            if getattr(self, name) not in known:
+                raise ConfigError(f"invalid value {getattr(self, name)!r}: must be one of {', '.join(known)}",
+                                  field=f"--{name}")
         if isinstance(self.exposure, bool) or not isinstance(self.exposure, (int, float)) \
                 or not -30.0 <= self.exposure <= 30.0:
             raise ConfigError(f"invalid value {self.exposure!r}: must be a number of EV in [-30, 30]",

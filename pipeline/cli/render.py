@@ -9,6 +9,7 @@ from typing import Any, Callable, TypeVar
 
 import click
 
+from pipeline.aqm.display import DISPLAYS as _DISPLAYS
 from pipeline.config import RenderConfig as _RenderConfig
 
 from .scene import CAMERA_HELP, LIGHT_HELP
@@ -105,6 +106,12 @@ def job_options(f: _F) -> _F:
                      "eye's adaptation, or Ward's visibility-matching operator (pipeline/tonemap.py)."),
         click.option("--exposure", type=float, default=0.0, show_default=True,
                      help="Exposure offset in EV (x 2^EV) on top of the operator's own."),
+        click.option("--display", type=click.Choice(sorted(_DISPLAYS)), default="standard_fhd", show_default=True,
+                     help="The display the AQM assumes the frames are watched on (ColorVideoVDP's models: size, "
+                          "resolution, viewing distance); loom render prints the pixels per degree it gives."),
+        click.option("--fill", type=click.Choice(["full_screen", "native"]), default="full_screen",
+                     show_default=True, help="How a frame is shown on --display: scaled to fill it, or one frame "
+                     "pixel per display pixel."),
         click.option("--element-size", type=float, default=None,
                      help="Element edge bound in world units (default: the scene's extras, else 1/50 of the "
                           "diagonal of the posed scene's bounds over the timeline; `loom info` shows it)."),
@@ -119,7 +126,7 @@ def job_arguments(scene_file: str, frames: str | None, out_dir: str, resolution:
                   seed: int,
                   reflection_depth: int, photon_depth: int, d_thr: float | None, config_file: str | None,
                   light: str = "auto", tonemap: str = "filmic", exposure: float = 0.0,
-                  element_size: float | None = None) -> dict:
+                  element_size: float | None = None, display: str = "standard_fhd", fill: str = "full_screen") -> dict:
     """The keyword arguments of pipeline.render.prepare_job / render from the job options."""
     from pipeline.config import RenderConfig, load_config
     from pipeline.render import RenderSettings, parse_resolution
@@ -134,7 +141,8 @@ def job_arguments(scene_file: str, frames: str | None, out_dir: str, resolution:
                 config=RenderConfig.from_dict(fields),
                 light=light,
                 settings=RenderSettings(width=width, height=height, spp=spp, reflection_depth=reflection_depth,
-                                        tonemap=ToneMapping(operator=tonemap, exposure=exposure)))
+                                        tonemap=ToneMapping(operator=tonemap, exposure=exposure, display=display,
+                                                            fill=fill)))
 
 
 @click.command("render")

@@ -109,3 +109,20 @@ def test_a_store_of_the_previous_format_is_refused_in_one_line(atrium):
     assert f"format version {FORMAT_VERSION - 1}" in lines[0] and "delete it" in lines[0]
     assert str(out / "photons.zarr") in lines[0]
     assert {p: p.stat().st_mtime_ns for p in out.rglob("*") if p.is_file()} == before  # nothing written
+
+
+def test_the_viewing_conditions_are_said_with_their_pixels_per_degree(atrium):
+    """loom render prints the display the AQM assumes and the pixels per degree it gives; the report
+    shows the same line; --display names another of ColorVideoVDP's displays."""
+    tmp, _, said = atrium
+    line = next(ln for ln in said["sums"].splitlines() if ln.startswith("viewing "))
+    assert "standard_fhd" in line and "full screen" in line and "frame 48x36 at" in line and "px/deg" in line
+    report = json.loads((tmp / "sums" / "report.json").read_text())
+    assert report["viewing"] == line
+    from pipeline.perceived import viewing_for
+    from pipeline.tonemap import ToneMapping
+    fhd, uhd = (viewing_for(ToneMapping(display=d)) for d in ("standard_fhd", "standard_4k"))
+    # full screen, a 48x36 frame is shown 30x magnified on either: 4k's larger screen at a
+    # longer distance gives fewer frame pixels per degree than the 24-inch fhd
+    assert uhd.frame_ppd((36, 48)) != fhd.frame_ppd((36, 48))
+    assert f"{fhd.frame_ppd((36, 48)):.1f} px/deg" in line
