@@ -468,15 +468,15 @@ class SegmentRun:
         return [f for f in range(rec.start, rec.end + 1) if f in sel]
 
     def reconstruct_calls(self, rec: SegmentRecord, targets: dict[int, int]) -> list[tuple[str, dict]]:
+        """One reconstruction task per chunk of :func:`frame_chunks` of the segment's frames."""
         job = self.job
         use = self.batches(targets).tolist()
-        frames = self.frames_of(rec)
-        return [(task_key(f"reconstruct-{job.decision_hash[:8]}-f{frames[i]:05d}", job.store_url), dict(
+        return [(task_key(f"reconstruct-{job.decision_hash[:8]}-f{chunk[0]:05d}", job.store_url), dict(
             store_url=job.store_url, scene_path=job.scene_path, scene_hash=job.scene_hash, camera=job.camera,
-            element_size=job.element_size, frames=frames[i:i + CHUNK_FRAMES], fmax=rec.fmax, mode=rec.temporal,
+            element_size=job.element_size, frames=chunk, fmax=rec.fmax, mode=rec.temporal,
             batches=use, config=job.config, aspect=job.width / job.height, max_depth=job.reflection_depth,
             area_samples=job.area_samples))
-            for i in range(0, len(frames), CHUNK_FRAMES)]
+            for chunk in frame_chunks(self.frames_of(rec))]
 
     def _took(self, result: dict) -> None:
         self.add_times(result.get("times", {}), result.get("times", {}).keys())
@@ -551,6 +551,19 @@ class SegmentRun:
         for _, results in completed(self.client, composites):
             written.update((int(r["frame"]), r) for r in results)
         return out, written
+
+
+def frame_chunks(frames: list[int], size: int = CHUNK_FRAMES) -> list[list[int]]:
+    """``frames`` (ascending) in chunks of at most ``size`` consecutive frame numbers, a new chunk
+    at every gap: a chunk's gather reads the photons of every frame from its first window's start
+    to its last one's end, and a frame list (``--frames 1,40,80``) traces only the frames it names."""
+    chunks: list[list[int]] = []
+    for f in frames:
+        if chunks and len(chunks[-1]) < size and f == chunks[-1][-1] + 1:
+            chunks[-1].append(f)
+        else:
+            chunks.append([f])
+    return chunks
 
 
 def window_histogram(back: np.ndarray, fwd: np.ndarray, fmax: int, counts: np.ndarray) -> dict:
