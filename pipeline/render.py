@@ -319,7 +319,8 @@ def _skipped(job, scene, rays: dict | None, segments_done: list) -> dict:
     store = PhotonStore.open(job.store_url)
     sources = {f: store.source_frame(f - 1) + 1 for f in job.selection}
     return skipped_work(job.selection, sources=sources, has_specular=scene.has_specular,
-                        has_area_lights=scene.has_area_lights, rays=rays, segments_done=segments_done)
+                        has_area_lights=scene.has_area_lights, rays=rays, segments_done=segments_done,
+                        has_sky=scene.sky is not None)
 
 
 def _remove_leftovers(out: Path, store_url: str) -> None:
