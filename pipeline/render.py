@@ -8,7 +8,7 @@ Afterwards ``preview.mp4`` and ``report.json``.
 
 Hashes. ``render_hash`` covers what pixels depend on besides their maps (scene, camera, seed,
 photon settings, resolution, spp, reflection depth, tone mapping); a frame's files carry a
-*frame hash* of it, its indirect map's digest and its smoothed adaptation, and are skipped on a
+*frame hash* of it, its indirect map's digest and its time-adapted adaptation, and are skipped on a
 rerun when that matches. ``decision_hash`` adds what the segment decisions read (the collection,
 filter and segment stages of RenderConfig, the frame range, --fmax, --photons): changing d_thr
 re-decides the segments and reuses every stored photon.
