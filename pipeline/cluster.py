@@ -75,7 +75,7 @@ LOCAL_DASK_CONFIG = {
 }
 
 
-def close_local(client, cluster, timeout: float = 10.0) -> None:
+def close_local(client: Any, cluster: Any, timeout: float = 10.0) -> None:
     """Close a LocalCluster so nothing of it outlives the run: with Dask's loggers in this process
     (the nannies') silenced, the nannies stop their workers first and this waits until the
     scheduler has none (a worker's heartbeat to a closed scheduler is what printed a

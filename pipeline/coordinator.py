@@ -322,8 +322,7 @@ class SegmentRun:
     def d_aqm(self, place: Placement, targets: dict[int, int], index: int, temporal: str) -> float:
         """d_AQM (percent) of I1(K) against I2(K) as the viewer sees them; the M_AQM picture is
         written beside the segment record."""
-        from workers.adaptation import visible_adaptation
-        from workers.camera_paths import render_frame
+        from workers.camera_paths import render_frame, visible_adaptation
 
         from .aqm.visualize import difference_picture
         from .images import write_png

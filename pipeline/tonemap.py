@@ -30,7 +30,7 @@ viewer sees" (§5); histogram methods are image-dependent and flicker.
 Adaptation: L_wa is the log-average (geometric mean) luminance of what the camera sees, the "key"
 of Ward (1994) and Reinhard et al. (2002): exp(mean log(DELTA + L)) over the pixels of a
 low-resolution pass of the frame's own camera rays against its illumination map
-(workers/adaptation.py), pixels that see nothing left out. Occluded surfaces never count, so a
+(workers/camera_paths.py visible_adaptation), pixels that see nothing left out. Occluded surfaces never count, so a
 box moving in front of a wall changes L_wa only by what it covers.
 Time course: the eye adapts to L_wa(t) exponentially (Durand & Dorsey, "Interactive tone mapping",
 EGWR 2000; Pattanaik et al., "Time-dependent visual adaptation for fast realistic image display",

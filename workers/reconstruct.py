@@ -182,8 +182,9 @@ def reconstruct_task(*, store_url: str, scene_path: str, scene_hash: str, camera
     """Dask task, Steps 4-5 of §5.2 for consecutive frames of one segment: the temporal gather of the
     indirect maps (Condition (1) windows up to F_max/2, pipeline/temporal.py), the adaptive spatial
     filter where too few photons were collected, each frame's direct estimate from its own photons
-    and its adaptation luminance L_wa from what its camera sees of the map it shows (workers/adaptation.py,
-    paths ``max_depth`` and ``area_samples`` as the composite's). Writes the maps; returns per frame
+    and its adaptation luminance L_wa from what its camera sees of the map it shows
+    (workers/camera_paths.py visible_adaptation; paths ``max_depth`` and ``area_samples`` as the
+    composite's). Writes the maps; returns per frame
     L_wa, a digest of the maps, the vertices filtered and the mean window length."""
     import time
 
@@ -192,7 +193,7 @@ def reconstruct_task(*, store_url: str, scene_path: str, scene_hash: str, camera
     from pipeline.store.illumination import IlluminationMaps
     from pipeline.temporal import illumination_maps
 
-    from .adaptation import visible_adaptation
+    from .camera_paths import visible_adaptation
     from .scene_cache import load_elements, load_scene
 
     t0 = time.perf_counter()

@@ -1,5 +1,5 @@
 """Eye adaptation from what the camera sees, over the eye's time course (pipeline/tonemap.py,
-workers/adaptation.py), end to end on real renders of a BoxAnimated-like scene."""
+workers/camera_paths.py visible_adaptation), end to end on real renders of a BoxAnimated-like scene."""
 from __future__ import annotations
 
 import numpy as np

@@ -203,7 +203,7 @@ def test_shared_store_caches_decoded_frames_read_only(room):
 
 
 def test_visible_adaptation_with_the_frames_geometry_is_the_same(room):
-    from workers.adaptation import visible_adaptation
+    from workers.camera_paths import visible_adaptation
     from workers.reconstruct import frame_geometry
 
     irr = next(illumination_maps(room.store, room.mesh, room.scene, [room.index])).irradiance
