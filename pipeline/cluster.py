@@ -75,6 +75,32 @@ LOCAL_DASK_CONFIG = {
 }
 
 
+def close_local(client: Any, cluster: Any, timeout: float = 10.0) -> None:
+    """Close a LocalCluster so nothing of it outlives the run: with Dask's loggers in this process
+    (the nannies') silenced, the nannies stop their workers first and this waits until the
+    scheduler has none (a worker's heartbeat to a closed scheduler is what printed a
+    CommClosedError traceback after a successful render), then the client closes before the cluster."""
+    import logging
+
+    loggers = [logging.getLogger(name) for name in ("distributed", "tornado", "asyncio")]
+    levels = [logger.level for logger in loggers]
+    for logger in loggers:
+        logger.setLevel(logging.CRITICAL)
+    try:
+        try:
+            cluster.scale(0)
+            deadline = time.monotonic() + timeout
+            while client.scheduler_info().get("workers") and time.monotonic() < deadline:
+                time.sleep(0.05)
+        except (OSError, TimeoutError, RuntimeError):  # a scheduler already gone has no workers left
+            pass
+        client.close()
+        cluster.close()
+    finally:
+        for logger, level in zip(loggers, levels):
+            logger.setLevel(level)
+
+
 def _restore_environ(saved: dict[str, str | None]) -> None:
     """Put the variables of ``saved`` back as they were (removing those that were unset)."""
     for key, value in saved.items():
@@ -168,8 +194,7 @@ def connect(scheduler: str = "local", workers: int | None = None, *, performance
                 with _reporting(client, performance_report, echo):
                     yield client
             finally:
-                client.close()
-                cluster.close()
+                close_local(client, cluster)
         finally:
             _restore_environ(saved)
         return

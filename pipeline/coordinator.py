@@ -322,8 +322,7 @@ class SegmentRun:
     def d_aqm(self, place: Placement, targets: dict[int, int], index: int, temporal: str) -> float:
         """d_AQM (percent) of I1(K) against I2(K) as the viewer sees them; the M_AQM picture is
         written beside the segment record."""
-        from workers.camera_paths import render_frame
-        from workers.reconstruct import mesh_adaptation
+        from workers.camera_paths import render_frame, visible_adaptation
 
         from .aqm.visualize import difference_picture
         from .images import write_png
@@ -340,16 +339,18 @@ class SegmentRun:
         # unfiltered halves differ by; judged unfiltered, the loop would trace for noise no frame shows.
         (lit,) = illumination_maps(self.store, self.elements, self.scene, [k - 1], mode=temporal,
                                    fmax=place.fmax, config=self.config, split_parity=True, batches=use,
-                                   spatial_filter=self.config.spatial_filter, with_direct=True)
-        state, direct = self.scene.pose_frame(k), lit.direct
+                                   spatial_filter=self.config.spatial_filter)
+        state = self.scene.pose_frame(k)
         job = self.job
         # both halves along one set of camera paths: the bits of two renders at the cost of one
         img = render_frame(state, self.elements, lit.irradiance[0], width=job.width, height=job.height, spp=job.spp,
                            seed=self.config.seed, frame=k, max_depth=job.reflection_depth,
                            area_samples=job.area_samples, also_maps=lit.irradiance[1:])
         images = [img.beauty, img.also_beauty(0)]
-        adaptation = mesh_adaptation(state, self.elements, direct + 0.5 * (lit.irradiance[0] + lit.irradiance[1]),
-                                     job.width / job.height)
+        # L_wa as the frame's own (reconstruct_task): what the camera sees of the halves' mean map
+        adaptation = visible_adaptation(state, self.elements, 0.5 * (lit.irradiance[0] + lit.irradiance[1]),
+                                        aspect=job.width / job.height, seed=self.config.seed,
+                                        max_depth=job.reflection_depth, area_samples=job.area_samples)
         params = ToneMapping(**job.tonemap)
         flow = camera_flow(self.scene, k, job.width, job.height, params)
         result = displayed_difference(images[0], images[1], adaptation, params=params,
@@ -466,14 +467,15 @@ class SegmentRun:
         return [f for f in range(rec.start, rec.end + 1) if f in sel]
 
     def reconstruct_calls(self, rec: SegmentRecord, targets: dict[int, int]) -> list[tuple[str, dict]]:
+        """One reconstruction task per chunk of :func:`frame_chunks` of the segment's frames."""
         job = self.job
         use = self.batches(targets).tolist()
-        frames = self.frames_of(rec)
-        return [(task_key(f"reconstruct-{job.decision_hash[:8]}-f{frames[i]:05d}", job.store_url), dict(
+        return [(task_key(f"reconstruct-{job.decision_hash[:8]}-f{chunk[0]:05d}", job.store_url), dict(
             store_url=job.store_url, scene_path=job.scene_path, scene_hash=job.scene_hash, camera=job.camera,
-            element_size=job.element_size, frames=frames[i:i + CHUNK_FRAMES], fmax=rec.fmax, mode=rec.temporal,
-            batches=use, config=job.config, aspect=job.width / job.height))
-            for i in range(0, len(frames), CHUNK_FRAMES)]
+            element_size=job.element_size, frames=chunk, fmax=rec.fmax, mode=rec.temporal,
+            batches=use, config=job.config, aspect=job.width / job.height, max_depth=job.reflection_depth,
+            area_samples=job.area_samples))
+            for chunk in frame_chunks(self.frames_of(rec))]
 
     def _took(self, result: dict) -> None:
         self.add_times(result.get("times", {}), result.get("times", {}).keys())
@@ -550,6 +552,19 @@ class SegmentRun:
         return out, written
 
 
+def frame_chunks(frames: list[int], size: int = CHUNK_FRAMES) -> list[list[int]]:
+    """``frames`` (ascending) in chunks of at most ``size`` consecutive frame numbers, a new chunk
+    at every gap: a chunk's gather reads the photons of every frame from its first window's start
+    to its last one's end, and a frame list (``--frames 1,40,80``) traces only the frames it names."""
+    chunks: list[list[int]] = []
+    for f in frames:
+        if chunks and len(chunks[-1]) < size and f == chunks[-1][-1] + 1:
+            chunks[-1].append(f)
+        else:
+            chunks.append([f])
+    return chunks
+
+
 def window_histogram(back: np.ndarray, fwd: np.ndarray, fmax: int, counts: np.ndarray) -> dict:
     """Fig. 5: how many elements collect 0..F_max/2 frames back and forward at K, over the elements
     some photon of the segment hit (``counts``: (frames, E) records; never-hit ones say nothing)."""
@@ -566,16 +581,17 @@ def frame_hash(render_hash: str, info: dict, adaptation: float) -> str:
 
 
 def smoothed_adaptation(job: Job, frames_info: dict[int, dict], upto: int) -> dict[int, float]:
-    """The exponential filter of pipeline/tonemap.py over the rendered frames up to ``upto``: it is
-    causal, so a segment's frames need only the adaptation of the frames before them."""
+    """The eye's adaptation L_a of each rendered frame up to ``upto``: the time course of
+    pipeline/tonemap.py (adapt_in_time) over the frames' own L_wa in the records, at the timeline's
+    times. It is causal, so a segment's frames need only the L_wa of the frames before them."""
     from workers.scene_cache import load_scene
 
-    from .tonemap import smooth_adaptation
+    from .tonemap import ToneMapping, adapt_in_time
 
     scene = load_scene(job.scene_path, job.scene_hash, job.camera)
     frames = [f for f in job.selection if f <= upto]
-    values = smooth_adaptation([frames_info[f]["adaptation"] for f in frames],
-                               [scene.timeline.time(f) for f in frames], job.tonemap["tau"])
+    values = adapt_in_time([frames_info[f]["adaptation"] for f in frames],
+                           [scene.timeline.time(f) for f in frames], ToneMapping(**job.tonemap))
     return dict(zip(frames, values.tolist()))
 
 

@@ -11,7 +11,7 @@ The targets follow the dependencies of §5.2 and of the coordinator (pipeline/co
     reconstruct-I-C   Steps 4-5 for chunk C (16 frames) of segment I; needs decide-I and
                       decide-(I+1): its windows reach the neighbours' photons
     frames-I-C        the composites of chunk C of segment I; needs every reconstruct before it,
-                      since the smoothed adaptation looks back over all earlier frames
+                      since the eye's adaptation looks back over all earlier frames
     done-I            segment I's record marked done, its frames' infos merged into it
     finish            the segment figure, preview.mp4 and report.json
 

@@ -8,7 +8,7 @@ Afterwards ``preview.mp4`` and ``report.json``.
 
 Hashes. ``render_hash`` covers what pixels depend on besides their maps (scene, camera, seed,
 photon settings, resolution, spp, reflection depth, tone mapping); a frame's files carry a
-*frame hash* of it, its indirect map's digest and its smoothed adaptation, and are skipped on a
+*frame hash* of it, its indirect map's digest and its time-adapted adaptation, and are skipped on a
 rerun when that matches. ``decision_hash`` adds what the segment decisions read (the collection,
 filter and segment stages of RenderConfig, the frame range, --fmax, --photons): changing d_thr
 re-decides the segments and reuses every stored photon.
@@ -329,7 +329,8 @@ def _skipped(job, scene, rays: dict | None, segments_done: list) -> dict:
     store = PhotonStore.open(job.store_url)
     sources = {f: store.source_frame(f - 1) + 1 for f in job.selection}
     return skipped_work(job.selection, sources=sources, has_specular=scene.has_specular,
-                        has_area_lights=scene.has_area_lights, rays=rays, segments_done=segments_done)
+                        has_area_lights=scene.has_area_lights, rays=rays, segments_done=segments_done,
+                        has_sky=scene.sky is not None)
 
 
 def _remove_leftovers(out: Path, store_url: str) -> None:

@@ -6,7 +6,8 @@ Work a production renderer should skip, and says it skipped:
   camera-only motion shares that frame's photons (pipeline/store, ``source_frame``);
 * reflection rays where no mirror or glossy surface is in view (the compositor casts them only
   from specular hits, workers/composite.py), and in every frame of a scene without one;
-* area-light sampling in a scene without emissive triangles;
+* area-light sampling in a scene without emissive triangles or a sky (a sky is sampled like an
+  area light, workers/area_lights.py, and its rays are counted as area rays);
 * segments a rerun found done (record current, every frame valid) and frames whose files carry
   their current frame hash (pipeline/coordinator.py ``segment_done``, ``composite_calls``).
 
@@ -23,11 +24,12 @@ DONE = "frame"
 
 
 def skipped_work(frames: Sequence[int], *, sources: dict[int, int], has_specular: bool, has_area_lights: bool,
-                 rays: dict[int, dict] | None, segments_done: list[dict]) -> dict:
+                 rays: dict[int, dict] | None, segments_done: list[dict], has_sky: bool = False) -> dict:
     """The skipped work of a render of ``frames``: ``sources`` maps each frame to the frame whose
     photons it uses, ``rays`` the ray counts per kind of the frames written by this run (frames
     absent were already done; None: written by other processes, a farm's recipes, so unknown),
-    ``segments_done`` the records ({index, frames}) a rerun skipped."""
+    ``segments_done`` the records ({index, frames}) a rerun skipped; ``has_sky``: the scene has a
+    sky emitter, sampled as an area light."""
     per_frame: dict[str, list[dict]] = {}
     for f in frames:
         items = []
@@ -40,10 +42,10 @@ def skipped_work(frames: Sequence[int], *, sources: dict[int, int], has_specular
             items.append({"what": REFLECTION, "why": "no mirror or glossy material in the scene"})
         elif seen is not None and seen.get("reflection", 0) == 0:
             items.append({"what": REFLECTION, "why": "no specular surface in view"})
-        if not has_area_lights:
-            items.append({"what": AREA, "why": "no emissive triangles in the scene"})
+        if not has_area_lights and not has_sky:
+            items.append({"what": AREA, "why": "no emissive triangles and no sky in the scene"})
         elif seen is not None and seen.get("area", 0) == 0:
-            items.append({"what": AREA, "why": "no diffuse surface in view takes area light"})
+            items.append({"what": AREA, "why": "no diffuse surface in view takes area or sky light"})
         if items:
             per_frame[str(f)] = items
     counts: dict[str, int] = {}

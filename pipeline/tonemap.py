@@ -1,7 +1,7 @@
 """Tone mapping with eye adaptation: linear frames to 8-bit sRGB (docs/estimators.md §2).
 
 Three operators (``ToneMapping.operator``, ``loom render --tonemap``), all driven by the same
-smoothed adaptation luminance L_a and shifted by ``exposure`` EV (a factor 2^EV):
+time-adapted luminance L_a and shifted by ``exposure`` EV (a factor 2^EV):
 
 * ``filmic`` (default): the frame exposed so that L_a lands on middle grey 0.18 (the "key" of
   Reinhard et al., SIGGRAPH 2002), then Narkowicz's fit of the ACES filmic curve
@@ -27,12 +27,21 @@ transfer function. Why Ward: one monotone scalar, no iteration, easy to smooth o
 maps visibility thresholds to visibility thresholds, the invariant behind "noise below what a
 viewer sees" (§5); histogram methods are image-dependent and flicker.
 
-Adaptation: L_wa is the log-average luminance of the frame's mesh-based lighting (direct estimate
-plus indirect map, §4) over the vertices the camera sees, computed per frame before compositing.
-Smoothing: a per-frame adaptation flickers (docs/estimators.md §2.2), so the adaptation level follows an
-exponential filter in time, L_a(t) = L_a(t-1) + (L_wa(t) - L_a(t-1)) (1 - exp(-dt / tau))
-(Pattanaik et al., SIGGRAPH 2000), run in log luminance (perceived brightness is roughly
-logarithmic, so a step up and a step down adapt alike) over the frames of one render.
+Adaptation: L_wa is the log-average (geometric mean) luminance of what the camera sees, the "key"
+of Ward (1994) and Reinhard et al. (2002): exp(mean log(DELTA + L)) over the pixels of a
+low-resolution pass of the frame's own camera rays against its illumination map
+(workers/camera_paths.py visible_adaptation), pixels that see nothing left out. Occluded surfaces never count, so a
+box moving in front of a wall changes L_wa only by what it covers.
+Time course: the eye adapts to L_wa(t) exponentially (Durand & Dorsey, "Interactive tone mapping",
+EGWR 2000; Pattanaik et al., "Time-dependent visual adaptation for fast realistic image display",
+SIGGRAPH 2000), in the discrete form of Krawczyk, Myszkowski & Seidel ("Perceptual effects in
+real-time tone mapping", SCCG 2005, §3.1):
+    L_a(t) = L_a(t-dt) + (L_wa(t) - L_a(t-dt)) (1 - exp(-dt / tau(L_a))),
+    tau(L_a) = sigma(L_a) tau_rod + (1 - sigma(L_a)) tau_cone,  sigma(Y) = 0.04 / (0.04 + Y),
+with tau_cone = 0.1 s, tau_rod = 0.4 s and Y in cd/m^2 (sigma is the rods' share of vision). dt is
+the time between the frames rendered (the timeline's fps; a frame list's gaps adapt further); the
+first frame rendered starts adapted. A frame's L_a reads only L_wa of frames up to itself, so any
+worker computes it from the per-frame values in the segment records.
 Units: one radiometric radiance unit is ``nits_per_unit`` cd/m^2 (1 by default, docs/conventions.md §1).
 """
 from __future__ import annotations
@@ -57,7 +66,8 @@ LOOK_FIELDS = ("operator", "exposure")  # what only the displayed look reads, ne
 class ToneMapping:
     display_max: float = 100.0  # Ld_max, display white in cd/m^2 (Ward 1994)
     nits_per_unit: float = 1.0  # cd/m^2 per radiometric radiance unit
-    tau: float = 0.4  # adaptation time constant in seconds (Pattanaik et al. 2000: 0.1-0.5 s)
+    tau_cone: float = 0.1  # cone adaptation time constant, s (Krawczyk et al. 2005, after Durand & Dorsey 2000)
+    tau_rod: float = 0.4  # rod adaptation time constant, s (same sources)
     operator: str = "filmic"  # filmic | exposure | ward (module docstring)
     exposure: float = 0.0  # EV added to the operator's own exposure (a factor 2^EV)
     # Where the frames are watched, for the AQM (§6, pipeline/perceived.py viewing_for): a display
@@ -80,8 +90,9 @@ class ToneMapping:
         for name in ("display_max", "nits_per_unit"):
             if not getattr(self, name) > 0:
                 raise ConfigError(f"invalid value {getattr(self, name)!r}: must be > 0", field=name)
-        if not self.tau >= 0:
-            raise ConfigError(f"invalid value {self.tau!r}: must be >= 0", field="tau")
+        for name in ("tau_cone", "tau_rod"):
+            if not getattr(self, name) >= 0:
+                raise ConfigError(f"invalid value {getattr(self, name)!r}: must be >= 0", field=name)
 
     def to_dict(self) -> dict[str, float | str]:
         return asdict(self)
@@ -108,22 +119,38 @@ def ward_scale(adaptation: float, display_max: float = 100.0) -> float:
     return (num / den) ** 2.5
 
 
-def smooth_adaptation(values: npt.ArrayLike, times: npt.ArrayLike, tau: float) -> np.ndarray:
-    """Exponential temporal filter of adaptation luminances in log space (module docstring).
+def rod_sensitivity(adaptation_nits: float) -> float:
+    """sigma(Y) = 0.04 / (0.04 + Y), Y in cd/m^2: the rods' share of vision (Krawczyk et al. 2005, §3.1)."""
+    return 0.04 / (0.04 + max(float(adaptation_nits), 0.0))
 
-    ``values`` per frame in render order, ``times`` in seconds; the first frame starts adapted.
+
+def adapt_in_time(values: npt.ArrayLike, times: npt.ArrayLike, params: ToneMapping = ToneMapping()) -> np.ndarray:
+    """The eye's adaptation luminance L_a at each frame (module docstring, "Time course").
+
+    ``values``: each frame's own L_wa (radiance units) in render order; ``times`` in seconds. The
+    first frame starts adapted; each later one moves towards its L_wa by 1 - exp(-dt / tau), tau
+    between the cones' and the rods' time constants by the rods' share at the current L_a.
     """
-    v = np.log(np.asarray(values, dtype=np.float64))
+    v = np.asarray(values, dtype=np.float64)
     t = np.asarray(times, dtype=np.float64)
     out = np.empty_like(v)
     for i in range(len(v)):
         if i == 0:
             out[i] = v[i]
             continue
+        sigma = rod_sensitivity(out[i - 1] * params.nits_per_unit)
+        tau = sigma * params.tau_rod + (1.0 - sigma) * params.tau_cone
         dt = abs(t[i] - t[i - 1])
-        alpha = 1.0 if tau == 0 else 1.0 - np.exp(-dt / tau)
+        alpha = 1.0 if tau == 0 else -np.expm1(-dt / tau)
         out[i] = out[i - 1] + (v[i] - out[i - 1]) * alpha
-    return np.exp(out)
+    return out
+
+
+def image_adaptation(rgb: np.ndarray, seen: np.ndarray) -> float:
+    """L_wa of an image: the log-average luminance (Ward 1994; Reinhard et al. 2002's key) of the
+    pixels ``seen`` (what a camera ray hit, or a sky it saw); DELTA when none is."""
+    lum = luminance(np.asarray(rgb).reshape(-1, 3))[np.asarray(seen).reshape(-1)]
+    return log_average(lum)
 
 
 def srgb_encode(x: np.ndarray) -> np.ndarray:

@@ -4,6 +4,12 @@
 depth the hits are shaded (emitters seen from the front, diffuse direct light with
 workers/punctual_lights.py and workers/area_lights.py plus the map, glossy highlights) and mirror
 and glossy hits continue, up to ``max_depth`` reflections. workers/composite.py sums it up.
+
+:func:`visible_adaptation` gives a frame's adaptation luminance L_wa (pipeline/tonemap.py) from what
+its camera sees: a low-resolution pass of these same paths, :data:`ADAPTATION_WIDTH` pixels across
+at one sample a pixel, then the log-average luminance of the pixels that saw something. Occluded
+surfaces do not count, and the samples are the same every frame (one fixed random key), so a scene
+whose light and view do not change gets the same L_wa however its objects move before the background.
 """
 from __future__ import annotations
 
@@ -217,3 +223,25 @@ def _put(target: np.ndarray, idx, value) -> None:
         target[...] = value
     else:
         target[idx] = value
+
+
+ADAPTATION_WIDTH = 64  # pixels across: ~3,000 camera rays, a few ms next to a frame's composite
+ADAPTATION_KEY_FRAME = 0  # the random key of every frame's pass (frames count from 1: never a frame's own)
+
+
+def adaptation_size(aspect: float, width: int = ADAPTATION_WIDTH) -> tuple[int, int]:
+    """(width, height) of the pass for an image of ``aspect`` = width / height."""
+    return width, max(1, int(round(width / float(aspect))))
+
+
+def visible_adaptation(state: FrameState, elements: ElementMesh, indirect: np.ndarray, *, aspect: float,
+                       seed: int, max_depth: int, area_samples: int, width: int = ADAPTATION_WIDTH) -> float:
+    """L_wa (radiance units) of the frame ``state`` lit by the indirect map ``indirect`` (V, 3), as
+    its camera sees it: pixels whose paths saw nothing (no geometry, no sky) are left out."""
+    from pipeline.tonemap import image_adaptation
+
+    w, h = adaptation_size(aspect, width)
+    img = render_frame(state, elements, indirect, width=w, height=h, spp=1, seed=seed,
+                       frame=ADAPTATION_KEY_FRAME, max_depth=max_depth, area_samples=area_samples)
+    seen = (img.alpha > 0) | (img.beauty.max(axis=-1) > 0)
+    return image_adaptation(img.beauty, seen)

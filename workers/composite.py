@@ -40,7 +40,7 @@ def composite_task(*, scene_path: str, scene_hash: str, camera: str | None, elem
                    out_dir: str, metadata: dict) -> dict:
     """Dask task: render one frame, tone-map it and write its EXR and PNG (atomically).
 
-    Plain arguments in (``adaptation`` is the coordinator's smoothed value for this frame), a
+    Plain arguments in (``adaptation`` is the eye's adaptation L_a at this frame, pipeline/tonemap.py), a
     small dict of timings and ray counts out.
     """
     import time

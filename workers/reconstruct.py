@@ -5,11 +5,10 @@ to the accumulator S of vertex v_k; the vertex irradiance is E_v = S_v / (N x A_
 emitted for the frame and A_v the area of v's hat basis function (a third of its elements' areas).
 Record energies are photon weights (flux x N, pipeline/store), so S / N is flux and E is W/m^2.
 Indirect hits (not the first hit from a light) give the indirect map the compositor reads; direct
-hits give a mesh-based direct estimate used only for eye adaptation (§4).
+hits give a mesh-based direct estimate (§4), kept beside it in the illumination store.
 
 :func:`vertex_irradiance` is the NumPy reference of the temporal gather (kernels/, issue 5) for a
 one-frame window: keep its signature and arithmetic (float64, np.bincount) as they are.
-:func:`mesh_adaptation` turns a frame's maps into its adaptation luminance (pipeline/tonemap.py);
 :func:`reconstruct_task` is the Dask task of Steps 4-5 for a chunk of a segment's frames.
 """
 from __future__ import annotations
@@ -20,11 +19,10 @@ from typing import TYPE_CHECKING
 import numpy as np
 import numpy.typing as npt
 
-from pipeline.scene.shading import mean_base_color, mean_emission
 from pipeline.store import BARY_SCALE
 
 if TYPE_CHECKING:
-    from pipeline.scene import ElementMesh, FrameState, Scene
+    from pipeline.scene import ElementMesh, Scene
     from pipeline.store import FrameRecords
 
 
@@ -153,66 +151,6 @@ def frame_geometry(scene: Scene, elements: ElementMesh, frame: int) -> FrameGeom
     return found
 
 
-_MATERIALS: dict = {}  # id(elements) -> (elements, materials, triangle_material, tables)
-
-
-def _material_tables(state, elements):
-    """Per-vertex albedo / pi and emission (V, 3) and the source triangle count, once per element
-    mesh and material assignment (they do not move with the animation)."""
-    entry = _MATERIALS.get(id(elements))
-    if (entry is not None and entry[0] is elements and entry[1] is state.materials
-            and np.array_equal(entry[2], state.triangle_material)
-            and np.array_equal(entry[3], state.triangle_instance)):
-        return entry[4]
-    inst_mat = np.zeros(len(state.instance_matrices), np.int64)
-    inst_mat[state.triangle_instance] = state.triangle_material
-    mat = inst_mat[elements.vertex_instance]
-    albedo = np.array([mean_base_color(m) for m in state.materials])[mat]  # textures: their mean
-    emission = np.array([mean_emission(m) for m in state.materials])[mat]
-    tables = (albedo / np.pi, emission, len(state.faces))
-    _MATERIALS.clear()
-    _MATERIALS[id(elements)] = (elements, state.materials, state.triangle_material.copy(),
-                                state.triangle_instance.copy(), tables)
-    return tables
-
-
-def mesh_adaptation(state: FrameState, elements: ElementMesh, irradiance: np.ndarray, aspect: float,
-                    geometry: FrameGeometry | None = None) -> float:
-    """Adaptation luminance of a frame from its mesh-based lighting (§4), in radiance units.
-
-    Radiance rho/pi x E (+ emission) is averaged over each source triangle (area-weighted over its
-    elements): at the paper's photon counts many single vertices hold no photon, and their zeros
-    would drag a log-average to its floor. Then the log-average (Ward 1994) over the elements
-    inside the camera's view frustum, each with its triangle's radiance and weight A / d^2 (the
-    solid angle it subtends). Occlusion is ignored: a mesh-level estimate, not the image.
-    """
-    from pipeline.tonemap import log_average, luminance
-
-    albedo_pi, emission, n_tri = _material_tables(state, elements)
-    vertex_radiance = luminance(albedo_pi * irradiance + emission)
-
-    # Per source triangle: area-weighted mean of its elements' radiance
-    area = elements.areas(state) if geometry is None else geometry.areas
-    tri = elements.element_triangle
-    element_radiance = vertex_radiance[elements.element_vertices].mean(axis=1)
-    tri_area = np.bincount(tri, weights=area, minlength=n_tri)
-    tri_sum = np.bincount(tri, weights=area * element_radiance, minlength=n_tri)
-    tri_radiance = np.divide(tri_sum, tri_area, out=np.zeros(n_tri), where=tri_area > 0)
-
-    # Elements in the view frustum, weighted by the solid angle they subtend
-    centre = elements.element_positions(state).mean(axis=1) if geometry is None else geometry.centres
-    cam = state.camera
-    local = (centre - cam.position) @ (cam.to_world[:3, :3] / np.linalg.norm(cam.to_world[:3, :3], axis=0))
-    depth = -local[:, 2]
-    tan_y = np.tan(cam.definition.yfov / 2.0)
-    seen = ((depth > 0) & (np.abs(local[:, 1]) <= tan_y * depth)
-            & (np.abs(local[:, 0]) <= tan_y * aspect * depth))
-    if not seen.any():
-        seen[:] = True  # nothing in view: adapt to the whole scene
-    weight = area[seen] / np.maximum((local[seen] ** 2).sum(axis=1), 1e-12)
-    return log_average(tri_radiance[tri[seen]], weight)
-
-
 def vertex_moments(element: npt.ArrayLike, b1: npt.ArrayLike, b2: npt.ArrayLike, energy: npt.ArrayLike,
                    element_vertices: npt.ArrayLike, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
     """(V,) luminance flux S_v = sum_j b_k(j) Y_j and its squared-weight sum Q_v = sum_j b_k(j)^2 Y_j^2
@@ -240,12 +178,14 @@ def map_digest(*maps: np.ndarray) -> str:
 
 def reconstruct_task(*, store_url: str, scene_path: str, scene_hash: str, camera: str | None,
                      element_size: float, frames: list[int], fmax: int, mode: str, batches: list[int],
-                     config: dict, aspect: float) -> dict:
+                     config: dict, aspect: float, max_depth: int, area_samples: int) -> dict:
     """Dask task, Steps 4-5 of §5.2 for consecutive frames of one segment: the temporal gather of the
     indirect maps (Condition (1) windows up to F_max/2, pipeline/temporal.py), the adaptive spatial
     filter where too few photons were collected, each frame's direct estimate from its own photons
-    and its adaptation luminance from the map it shows. Writes the maps; returns per frame the
-    adaptation, a digest of the maps, the vertices filtered and the mean window length."""
+    and its adaptation luminance L_wa from what its camera sees of the map it shows
+    (workers/camera_paths.py visible_adaptation; paths ``max_depth`` and ``area_samples`` as the
+    composite's). Writes the maps; returns per frame
+    L_wa, a digest of the maps, the vertices filtered and the mean window length."""
     import time
 
     from pipeline.config import RenderConfig
@@ -253,6 +193,7 @@ def reconstruct_task(*, store_url: str, scene_path: str, scene_hash: str, camera
     from pipeline.store.illumination import IlluminationMaps
     from pipeline.temporal import illumination_maps
 
+    from .camera_paths import visible_adaptation
     from .scene_cache import load_elements, load_scene
 
     t0 = time.perf_counter()
@@ -273,7 +214,8 @@ def reconstruct_task(*, store_url: str, scene_path: str, scene_hash: str, camera
             t1 = time.perf_counter()
             geometry = frame_geometry(scene, elements, f)  # posed once, by the gather
             indirect, direct = lit.irradiance, lit.direct
-            adaptation = mesh_adaptation(geometry.state, elements, indirect + direct, aspect, geometry)
+            adaptation = visible_adaptation(geometry.state, elements, indirect, aspect=aspect, seed=cfg.seed,
+                                            max_depth=max_depth, area_samples=area_samples)
             t2 = time.perf_counter()
             maps.write_frame(lit.frame_index, indirect=indirect, direct=direct, adaptation=adaptation)
             times["adapt_s"] += t2 - t1

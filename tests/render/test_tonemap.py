@@ -1,4 +1,4 @@
-"""Tone mapping (Ward 1994) and temporal adaptation (Pattanaik et al. 2000): closed forms."""
+"""Tone mapping (Ward 1994) and the eye's time course (Krawczyk et al. 2005, Durand & Dorsey 2000): closed forms."""
 from __future__ import annotations
 
 import numpy as np
@@ -9,9 +9,10 @@ from pipeline.tonemap import (
     KEY,
     ToneMapping,
     aces_filmic,
+    adapt_in_time,
     display_linear,
     log_average,
-    smooth_adaptation,
+    rod_sensitivity,
     srgb_encode,
     tonemap,
     ward_scale,
@@ -30,14 +31,21 @@ def test_log_average_is_geometric_mean_and_survives_zeros():
     assert np.isfinite(log_average(np.zeros(5))) and log_average(np.zeros(0)) > 0
 
 
-def test_smoothing_follows_a_step_exponentially_in_log_space():
-    t = np.arange(6) / 30.0
-    values = np.array([1.0, 1.0, 100.0, 100.0, 100.0, 100.0])
-    s = smooth_adaptation(values, t, tau=0.1)
-    a = 1 - np.exp(-(1 / 30) / 0.1)
-    assert s[1] == pytest.approx(1.0) and np.log10(s[2]) == pytest.approx(2 * a)
-    assert np.all(np.diff(s[1:]) > 0) and s[-1] < 100.0  # no jump, approaches the new level
-    np.testing.assert_allclose(smooth_adaptation(values, t, tau=0.0), values)  # tau 0: no smoothing
+def test_adaptation_follows_a_step_exponentially_with_the_cone_and_rod_time_constants():
+    t = np.arange(8) / 24.0
+    values = np.array([1.0, 1.0, 100.0, 100.0, 100.0, 100.0, 100.0, 100.0])
+    params = ToneMapping()
+    s = adapt_in_time(values, t, params)
+    sigma = rod_sensitivity(1.0)  # 0.04 / 1.04: at 1 cd/m^2 the cones adapt
+    tau = sigma * 0.4 + (1 - sigma) * 0.1
+    assert s[1] == 1.0 and s[2] == pytest.approx(1.0 + 99.0 * (1 - np.exp(-(1 / 24) / tau)))
+    assert np.all(np.diff(s[1:]) > 0) and s[-1] < 100.0  # no jump, a monotone approach to the new level
+    # in the dark the rods' slower constant dominates: a step from 0.001 cd/m^2 moves less in one frame
+    dark = adapt_in_time([0.001, 0.1], t[:2], params)
+    assert (dark[1] - 0.001) / 0.099 < (s[2] - 1.0) / 99.0
+    np.testing.assert_allclose(adapt_in_time(values, t, ToneMapping(tau_cone=0.0, tau_rod=0.0)), values)
+    assert np.array_equal(adapt_in_time(values[:4], t[:4], params), s[:4])  # causal: later frames change nothing
+    assert np.all(adapt_in_time(np.full(5, 0.3), t[:5], params) == 0.3)  # a still scene holds still
 
 
 def test_tonemap_is_monotone_srgb_8bit():

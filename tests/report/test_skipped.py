@@ -18,7 +18,7 @@ def test_each_kind_of_skip_names_its_reason():
     why = {f: {i["what"]: i["why"] for i in items} for f, items in s["per_frame"].items()}
     assert why["1"] == {"reflection rays": "no specular surface in view"}
     assert why["2"]["photons"].startswith("camera-only motion: shares frame 1")
-    assert why["2"]["area-light sampling"] == "no diffuse surface in view takes area light"
+    assert why["2"]["area-light sampling"] == "no diffuse surface in view takes area or sky light"
     assert why["3"] == {"frame": "already done: its files carry the current frame hash"}
     assert s["photon_sets"] == 2 and s["frames_skipping"] == {"reflection rays": 1, "photons": 1,
                                                              "area-light sampling": 1, "frame": 1}
@@ -46,3 +46,25 @@ def test_camera_only_motion_traces_one_photon_set_at_fixed_settings(tmp_path):
     assert "1" not in s["per_frame"] or all(i["what"] != "photons" for i in s["per_frame"]["1"])
     assert "skipped: photon sets traced: 1 for 12 frames (one set for the whole animation" in result.output
     assert (out / "report.html").is_file()
+
+
+def test_a_sky_is_sampled_like_an_area_light_and_is_not_called_skipped(tmp_path):
+    # the pure account: a sky without emissive triangles takes area rays
+    s = skipped_work([1], sources={1: 1}, has_specular=False, has_area_lights=False, rays={1: {"area": 40}},
+                     segments_done=[], has_sky=True)
+    assert "area-light sampling" not in {i["what"] for i in s["per_frame"]["1"]}
+    # end to end: a plane with no light of its own renders under the default sun and sky
+    from pipeline.render import RenderSettings, render
+    from pipeline.scene.builtin.gltf_builder import GltfBuilder
+    from tests.render.scenes import UP_FACES, camera, quad_y
+
+    b = GltfBuilder()
+    b.add_node("plane", b.add_mesh("plane", quad_y(2.0), UP_FACES, material=b.add_material("plane", (0.5,) * 3)))
+    camera(b, (0.0, 3.0, 0.0), (0.0, 0.0, 0.0))
+    b.set_scene_extras({"photonloom": {"element_size": 1.0}})
+    scene = b.write(tmp_path / "unlit.glb")
+    report = render(scene, frames="1", out_dir=tmp_path / "out", settings=RenderSettings(width=16, height=12, spp=1),
+                    n_photons=500, scheduler="synchronous", progress=False)
+    assert report["rays"]["area"] > 0
+    assert report["skipped_work"]["frames_skipping"].get("area-light sampling", 0) == 0
+    assert "frames with no area-light sampling: 0 of 1" in summary_lines(report["skipped_work"])

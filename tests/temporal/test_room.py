@@ -202,12 +202,14 @@ def test_shared_store_caches_decoded_frames_read_only(room):
         shared.record_cache_bytes = RECORD_CACHE_BYTES
 
 
-def test_mesh_adaptation_with_the_frames_geometry_is_the_same(room):
-    from workers.reconstruct import frame_geometry, mesh_adaptation
+def test_visible_adaptation_with_the_frames_geometry_is_the_same(room):
+    from workers.camera_paths import visible_adaptation
+    from workers.reconstruct import frame_geometry
 
     irr = next(illumination_maps(room.store, room.mesh, room.scene, [room.index])).irradiance
     geometry = frame_geometry(room.scene, room.mesh, K2)
     assert np.array_equal(geometry.vertex_areas, room.mesh.vertex_areas(room.state))
     assert frame_geometry(room.scene, room.mesh, K2) is geometry
-    assert mesh_adaptation(room.state, room.mesh, irr, 4 / 3) == mesh_adaptation(
-        geometry.state, room.mesh, irr, 4 / 3, geometry)
+    kw = dict(aspect=4 / 3, seed=1, max_depth=2, area_samples=1)
+    assert visible_adaptation(room.state, room.mesh, irr, **kw) == visible_adaptation(
+        geometry.state, room.mesh, irr, **kw) > 0
