@@ -10,7 +10,7 @@ from pipeline.benchmarks.render import stage_table
 
 
 def _record(**times):
-    return SimpleNamespace(times_s=times)  # stage_table reads only a record's times_s
+    return SimpleNamespace(times_s=times, io_bytes={})  # stage_table reads a record's times and bytes
 
 
 def test_rows_split_each_stage_by_core_time_and_add_up_to_the_wall_time():
@@ -39,3 +39,12 @@ def test_rows_split_each_stage_by_core_time_and_add_up_to_the_wall_time():
 def test_without_composites_the_temporal_clock_stands():
     wall = stage_table([_record(temporal_s=3.0, task_reconstruct_windows_s=2.0)])["wall"]
     assert wall["temporal processing"] == pytest.approx(3.0) and wall["ray tracing"] == 0.0
+
+
+def test_the_io_row_says_the_bytes_read_and_written():
+    """The bytes of the I/O row: what the shoot and reconstruction tasks read and wrote, summed
+    over the segment records (pipeline/store counting_io)."""
+    records = [SimpleNamespace(times_s={}, io_bytes={"shoot_write_bytes": 300, "shoot_read_bytes": 20,
+                                                     "reconstruct_read_bytes": 500, "reconstruct_write_bytes": 7}),
+               SimpleNamespace(times_s={}, io_bytes={"shoot_write_bytes": 100})]
+    assert stage_table(records)["bytes"] == {"read": 520, "written": 407}
