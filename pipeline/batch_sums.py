@@ -5,7 +5,7 @@ A batch's *summary* is the indirect records' element sums split by photon parity
 flux, (V, 3) (their element sums scattered to the vertices, as the gather scatters the indirect
 ones: kernels/gather.corners_to_vertices): everything Steps 3-5 of §5.2 read of the records, so
 the photon store keeps it for every batch and the records only on request (pipeline/store). The
-shoot task makes it while the sorted records are in memory (:func:`summariser`).
+shoot task makes it while the records are in memory (:func:`summariser`).
 
 Stored in float32, with sqrt(Q) in Q's slot: the sums are made in float64 and rounded once per
 batch (relative 6e-8, below the float32 records' own rounding), and the square root keeps Q, a
