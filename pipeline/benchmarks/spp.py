@@ -18,6 +18,15 @@ differs. Each image is compared with the 256-spp reference as the viewer sees it
 The reference's own sampling error is stated by a second 256-spp rendering with another seed
 (``--seed-check``): its FLIP and d_AQM against the reference are the floor of the table.
 
+A two-pass prototype of adaptive sampling is measured beside them at equal mean samples a pixel B
+(``--adaptive``, default 4 and 8): a first pass of B/2 samples a pixel, then 3B/2 more samples in the
+third of the pixels whose displayed value is most uncertain (:func:`displayed_spread`: the standard error
+of the samples' shown luma, largest in a 3x3 neighbourhood, so a clipped highlight needs nothing and a speckled rim or a stair-stepped
+silhouette does; :func:`allot_extra`). It is built from whole-frame renders with other seeds (the first
+pass as B/2 one-sample frames, the second as one frame of 3B/2 samples kept in the chosen pixels), so its
+CPU time is the first pass plus the chosen share of the second: what a compositor that traced only those
+pixels would spend, at the measured cost of a sample.
+
 Decision (:func:`smallest_invisible_spp`): the smallest spp from which every larger measured spp has
 d_AQM against the reference at most d_thr on every frame, i.e. the pixels' sampling error is no more
 visible than the photon noise the guided default accepts.
@@ -41,6 +50,8 @@ LUMA = np.asarray(colour.LUMA)  # Rec. 709 (kernels/colour.py)
 FRAMES = (68, 23)  # ROOM's segment centre K2 (§6, Table 1), and a frame of the first segment
 SPPS = (1, 2, 4, 8, 16)
 REFERENCE_SPP = 256
+ADAPTIVE_BUDGETS = (4, 8)  # mean samples a pixel of the two-pass prototype, compared with uniform spp
+ADAPTIVE_SHARE = 1.0 / 3.0  # share of pixels the second pass samples (fixed a priori, not fitted)
 
 
 def smallest_invisible_spp(rows: Sequence[dict], threshold: float, key: str = "d_aqm") -> int | None:
@@ -54,6 +65,40 @@ def smallest_invisible_spp(rows: Sequence[dict], threshold: float, key: str = "d
             break
         best = s
     return best
+
+
+def allot_extra(spread: np.ndarray, share: float) -> np.ndarray:
+    """Boolean mask of the ``share`` of pixels with the largest ``spread`` (ties: the earlier pixel in
+    row-major order first), the pixels a second pass gives more samples: deterministic for a given image."""
+    flat = np.asarray(spread, np.float64).ravel()
+    n = int(round(share * flat.size))
+    order = np.argsort(-flat, kind="stable")
+    mask = np.zeros(flat.size, bool)
+    mask[order[:n]] = True
+    return mask.reshape(np.shape(spread))
+
+
+def displayed_spread(samples: Sequence[np.ndarray], adaptation: float) -> np.ndarray:
+    """Per pixel, the largest standard error of a displayed value in its 3x3 neighbourhood, from the
+    first-pass samples (N, H, W, 3): the standard deviation of the samples' shown luma (:func:`shown`,
+    Rec. 709 weights) over sqrt(N). The neighbourhood catches an edge pixel whose few samples happened to
+    agree (4 samples of a half-covered pixel agree one time in 8), as Mitchell's refinement test looks at
+    a region's contrast, not one sample's (D. P. Mitchell, "Generating antialiased images at low sampling
+    densities", SIGGRAPH 1987)."""
+    y = np.stack([shown(s, adaptation) @ LUMA for s in samples])
+    err = y.std(axis=0, ddof=1) / np.sqrt(len(samples))
+    padded = np.pad(err, 1, mode="edge")
+    h, w = err.shape
+    return np.max([padded[i:i + h, j:j + w] for i in range(3) for j in range(3)], axis=0)
+
+
+def adaptive_image(first: Sequence[np.ndarray], extra: np.ndarray, extra_spp: int, mask: np.ndarray) -> np.ndarray:
+    """Pixel means of a two-pass image: the first pass's N samples (N, H, W, 3) everywhere, and in ``mask``
+    also ``extra_spp`` more samples whose mean is ``extra`` (H, W, 3), each sample weighted alike."""
+    n = len(first)
+    total = np.sum(first, axis=0)
+    both = (total + extra_spp * extra) / (n + extra_spp)
+    return np.where(mask[..., None], both, total / n)
 
 
 def shown(rgb: np.ndarray, adaptation: float) -> np.ndarray:
@@ -80,6 +125,7 @@ def flip_mean(test: np.ndarray, reference: np.ndarray, ppd: float) -> float:
 
 def run(frames: Iterable[int] = FRAMES, *, spps: Sequence[int] = SPPS, reference_spp: int = REFERENCE_SPP,
         photons: int = 160_000, fmax: int = 30, width: int = 320, height: int = 240, seed_check: bool = True,
+        adaptive: Sequence[int] = ADAPTIVE_BUDGETS,
         store: str | None = None, json_path: str | None = None,
         echo: Callable[[str], None] = click.echo) -> dict:
     from pipeline.config import RenderConfig
@@ -101,7 +147,7 @@ def run(frames: Iterable[int] = FRAMES, *, spps: Sequence[int] = SPPS, reference
     tmp = tempfile.TemporaryDirectory(prefix="bench-spp-") if store is None else None
     root = Path(tmp.name if tmp else store)
     root.mkdir(parents=True, exist_ok=True)
-    rows, floors = [], []
+    rows, floors, arows = [], [], []
     try:
         path = write_builtin("room", root / "room.glb")
         scene = Scene.load(path)
@@ -142,6 +188,22 @@ def run(frames: Iterable[int] = FRAMES, *, spps: Sequence[int] = SPPS, reference
             for spp in spps:
                 rows.append(measure(*composite(spp), spp))
                 echo(_row(rows[-1]))
+            for budget in adaptive:  # first pass budget/2 samples, then 3x that in the noisiest third
+                n0, share = max(2, budget // 2), ADAPTIVE_SHARE
+                extra_spp = int(round((budget - n0) / share))
+                first, cpu = [], 0.0
+                for i in range(n0):
+                    img, c, _ = composite(1, seed=config.seed + 1000 + i)
+                    first.append(img)
+                    cpu += c
+                extra, c, _ = composite(extra_spp, seed=config.seed + 2000)
+                mask = allot_extra(displayed_spread(first, adaptation), share)
+                cpu += c * float(mask.mean())  # the extra pass traced only in the chosen pixels
+                row = measure(adaptive_image(first, extra, extra_spp, mask), cpu, float("nan"),
+                              n0 + extra_spp * float(mask.mean()))
+                row["adaptive"] = f"{n0} + {extra_spp} in {100 * share:.0f} %"
+                arows.append(row)
+                echo(_row(row) + f" (adaptive: {row['adaptive']})")
             if seed_check:
                 other, cpu, wall = composite(reference_spp, seed=config.seed + 1)
                 floors.append(measure(other, cpu, wall, reference_spp))
@@ -152,10 +214,21 @@ def run(frames: Iterable[int] = FRAMES, *, spps: Sequence[int] = SPPS, reference
         echo("|---|---|---|---|---|---|---|")
         for r in rows + floors:
             echo(_row(r))
+        if arows:
+            echo("")
+            echo("| frame | samples a pixel (mean) | two-pass | FLIP mean | d_AQM | rel. RMS | CPU s (first pass + "
+                 "share of the second) | uniform spp at that mean: FLIP, d_AQM |")
+            echo("|---|---|---|---|---|---|---|---|")
+            uniform = {(r["frame"], r["spp"]): r for r in rows}
+            for r in arows:
+                u = uniform.get((r["frame"], int(round(r["spp"]))))
+                same = f"{u['flip']:.4f}, {u['d_aqm']:.2f} %" if u else "-"
+                echo(f"| {r['frame']} | {r['spp']:.2f} | {r['adaptive']} | {r['flip']:.4f} | {r['d_aqm']:.2f} % "
+                     f"| {100 * r['rel_rms']:.2f} % | {r['cpu_s']:.2f} | {same} |")
         choice = smallest_invisible_spp(rows, thr)
         echo(f"smallest spp from which d_AQM against {reference_spp} spp is at most d_thr = {thr:g} % on every "
              f"frame: {choice if choice is not None else 'none of ' + ', '.join(map(str, spps))}")
-        result = dict(rows=rows, reference_floor=floors, d_thr=thr, choice=choice, ppd=ppd, photons=photons,
+        result = dict(rows=rows, reference_floor=floors, adaptive=arows, d_thr=thr, choice=choice, ppd=ppd, photons=photons,
                       fmax=fmax, width=width, height=height, reference_spp=reference_spp)
         if json_path:
             import json
