@@ -19,13 +19,13 @@ The reference's own sampling error is stated by a second 256-spp rendering with 
 (``--seed-check``): its FLIP and d_AQM against the reference are the floor of the table.
 
 A two-pass prototype of adaptive sampling is measured beside them at equal mean samples a pixel B
-(``--adaptive``, default 4 and 8): a first pass of B/2 samples a pixel, then 3B/2 more samples in the
-third of the pixels whose displayed value is most uncertain (:func:`displayed_spread`: the standard error
-of the samples' shown luma, largest in a 3x3 neighbourhood, so a clipped highlight needs nothing and a speckled rim or a stair-stepped
-silhouette does; :func:`allot_extra`). It is built from whole-frame renders with other seeds (the first
-pass as B/2 one-sample frames, the second as one frame of 3B/2 samples kept in the chosen pixels), so its
-CPU time is the first pass plus the chosen share of the second: what a compositor that traced only those
-pixels would spend, at the measured cost of a sample.
+(``--adaptive``, default 4 and 8): a first pass of B/2 samples a pixel, then 3B/2 more samples in the third
+of the pixels whose displayed value is most uncertain (:func:`displayed_spread`: the standard error of the
+samples' shown luma, largest in a 3x3 neighbourhood, so a clipped highlight needs nothing and a speckled rim
+or a stair-stepped silhouette does; :func:`allot_extra`). It is built from whole-frame renders with other
+seeds (the first pass as B/2 one-sample frames, the second as one frame of 3B/2 samples kept in the chosen
+pixels), so its CPU time is the first pass plus the chosen share of the second: what a compositor that
+traced only those pixels would spend, at the measured cost of a sample.
 
 Decision (:func:`smallest_invisible_spp`): the smallest spp from which every larger measured spp has
 d_AQM against the reference at most d_thr on every frame, i.e. the pixels' sampling error is no more
@@ -228,8 +228,8 @@ def run(frames: Iterable[int] = FRAMES, *, spps: Sequence[int] = SPPS, reference
         choice = smallest_invisible_spp(rows, thr)
         echo(f"smallest spp from which d_AQM against {reference_spp} spp is at most d_thr = {thr:g} % on every "
              f"frame: {choice if choice is not None else 'none of ' + ', '.join(map(str, spps))}")
-        result = dict(rows=rows, reference_floor=floors, adaptive=arows, d_thr=thr, choice=choice, ppd=ppd, photons=photons,
-                      fmax=fmax, width=width, height=height, reference_spp=reference_spp)
+        result = dict(rows=rows, reference_floor=floors, adaptive=arows, d_thr=thr, choice=choice, ppd=ppd,
+                      photons=photons, fmax=fmax, width=width, height=height, reference_spp=reference_spp)
         if json_path:
             import json
 

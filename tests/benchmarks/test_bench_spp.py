@@ -5,8 +5,15 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.benchmarks.spp import (adaptive_image, allot_extra, displayed_spread, flip_mean, run, shown,
-                                   smallest_invisible_spp)
+from pipeline.benchmarks.spp import (
+    adaptive_image,
+    allot_extra,
+    displayed_spread,
+    flip_mean,
+    run,
+    shown,
+    smallest_invisible_spp,
+)
 
 
 def _rows(d: dict[int, list[float]]) -> list[dict]:
