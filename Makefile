@@ -30,12 +30,12 @@ test: setup
 test-all: setup
 	$(PY) -m pytest -m ''
 
-# The whole ROOM animation (135 frames) at 320x240, 2 spp; N_frame and F_max chosen per segment (§5.2).
+# The whole ROOM animation (135 frames) at 320x240, 8 spp (docs/sampling.md); N_frame and F_max chosen per segment (§5.2).
 demo: setup
 	@mkdir -p $(DEMO)
 	$(LOOM) scene room -o $(DEMO)/room.glb
 	$(LOOM) info $(DEMO)/room.glb
-	$(LOOM) render $(DEMO)/room.glb --out $(DEMO)/room --resolution 320x240 --spp 2
+	$(LOOM) render $(DEMO)/room.glb --out $(DEMO)/room --resolution 320x240 --spp 8
 	$(LOOM) segments $(DEMO)/room
 	@echo "frames: $(DEMO)/room/beauty.####.exr and .png; video: $(DEMO)/room/preview.mp4"
 	@echo "report: $(DEMO)/room/report.html (one file: open it in a browser)"

@@ -178,3 +178,40 @@ def bench_error(scene, quick, frames, budgets, fmax, d_thr, resolution, spp, ref
     plan = Plan(**{**plan.__dict__, **changes})
     config = RenderConfig.from_dict(load_config(config_file)) if config_file else RenderConfig()
     run(scene, plan, Path(out_dir or f"bench-error-{name}"), workers=workers, config=config)
+
+
+@bench.command("spp")
+@click.option("--frames", default="68,23", show_default=True, help="ROOM frames, comma-separated.")
+@click.option("--spp", "spps", default="1,2,4,8,16", show_default=True, help="Camera samples per pixel compared.")
+@click.option("--reference-spp", type=click.IntRange(1), default=256, show_default=True,
+              help="Samples per pixel of the converged reference.")
+@click.option("--photons", type=click.IntRange(1), default=160_000, show_default=True,
+              help="N_frame of the fixed indirect map.")
+@click.option("--fmax", type=click.IntRange(0), default=30, show_default=True, help="F_max of the map's windows.")
+@click.option("--resolution", default="320x240", show_default=True)
+@click.option("--seed-check/--no-seed-check", default=True, show_default=True,
+              help="Also compare a second reference (another seed) with the first: the table's floor.")
+@click.option("--adaptive", "adaptive", default="4,8", show_default=True,
+              help="Mean samples a pixel of the two-pass prototype, comma-separated (empty: none).")
+@click.option("--store", default=None, help="Directory to keep the scene and photons in (default: a temporary one).")
+@click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None, help="Also write the figures here.")
+def bench_spp(frames, spps, reference_spp, photons, fmax, resolution, seed_check, adaptive, store, json_path):
+    """FLIP and d_AQM of ROOM frames at 1-16 camera samples per pixel against a converged reference, the
+    indirect map fixed, and the compositing time per frame (docs/sampling.md)."""
+    from pipeline.benchmarks.spp import run
+    from pipeline.errors import LoomError
+    from pipeline.render import parse_resolution
+
+    width, height = parse_resolution(resolution)
+    try:
+        frame_list = tuple(int(f) for f in frames.split(",") if f.strip())
+        spp_list = tuple(int(s) for s in spps.split(",") if s.strip())
+        budgets = tuple(int(s) for s in adaptive.split(",") if s.strip())
+    except ValueError as err:
+        raise LoomError(f"cannot read the list: {err}", field="--frames/--spp") from None
+    if not frame_list or not spp_list or min(spp_list) < 1:
+        raise LoomError("give at least one frame and positive spp values", field="--frames/--spp")
+    if budgets and min(budgets) < 3:
+        raise LoomError("adaptive budgets start at 3 samples a pixel (2 in the first pass)", field="--adaptive")
+    run(frame_list, spps=spp_list, reference_spp=reference_spp, photons=photons, fmax=fmax, width=width,
+        height=height, seed_check=seed_check, adaptive=budgets, store=store, json_path=json_path, echo=click.echo)

@@ -78,7 +78,9 @@ def job_options(f: _F) -> _F:
         click.option("--frames", default=None, help="Farm range: 1-100, 1-100x2, 1,5,10-20 (default: all)."),
         click.option("--out", "out_dir", required=True, type=click.Path(), help="Output directory."),
         click.option("--resolution", default="640x480", show_default=True, help="WIDTHxHEIGHT in pixels."),
-        click.option("--spp", type=int, default=4, show_default=True, help="Jittered camera samples per pixel."),
+        click.option("--spp", type=int, default=8, show_default=True,
+                     help="Jittered camera samples per pixel (8: the pixels' error no more visible than the "
+                          "photon noise d_thr accepts, docs/sampling.md)."),
         click.option("--photons", default="auto", show_default=True, callback=_photons,
                      help="N_frame: auto (chosen per segment by the AQM, §5.2) or photons per frame for every "
                           "frame."),
