@@ -56,14 +56,6 @@ class RenderConfig:
                                       "unlike the frame, not centred (kernels/temporal.py; §5.1 leaves it open)")
     symmetric_windows: bool = _param(False, "collection", "cut both walks to the shorter one: no bias from a linear "
                                      "drift, more noise (off: the paper's asymmetric windows, §5.1)")
-    linear_windows: bool = _param(True, "collection", "a window's value is its linear fit at the frame, the slope "
-                                  "shrunk by its noise: no bias from a drift under an asymmetric window "
-                                  "(docs/estimators.md §1.6; off: the paper's pooled mean, §5.1)")
-    # Off: less error and flicker on ROOM, but fewer effective photons, which the AQM counts as
-    # noise (ATRIUM's K 51.6 -> 54.0 %, ROOM's adaptive runs +0.1 to +1.3 points; README "Tapered windows")
-    taper_windows: bool = _param(False, "collection", "frame g of an adaptive window weighs 1 - |g - f| / (F_max/2 + "
-                                 "1): nearer frames count more, so less bias from a curving light and smaller "
-                                 "jumps as windows slide (docs/estimators.md §1.7; off: every frame 1, §5.1)")
     indirect_counts: bool = _param(True, "collection", "Condition (1), the step test and p_me count the indirect "
                                    "hits, the photons of the map the windows collect (pipeline/temporal.py "
                                    "window_counts; off: every hit, direct included, as the per-frame tables of §4)")

@@ -79,13 +79,6 @@ def window_counts(store: PhotonStore, config: RenderConfig, frames: Iterable[int
     return store.counts(kind="indirect" if config.indirect_counts else "all", frames=frames, batches=batches)
 
 
-def window_taper(fmax: int, mode: str, config: RenderConfig) -> float:
-    """The gather's taper (kernels/gather.frame_sums_flux_cl): frame g of an adaptive window weighs
-    1 - |g - f| / (F_max/2 + 1) with ``config.taper_windows``, so every frame a window can reach
-    weighs more than 0; 0 (every frame 1) otherwise, and always for ``fixed`` windows (Fig. 3b)."""
-    return float(int(fmax) // 2 + 1) if mode == "adaptive" and config.taper_windows else 0.0
-
-
 def window_reach(fmax: int, mode: str, config: RenderConfig) -> int:
     """Frames of the count table either side of an output frame that its window can depend on:
     F_max/2 frames of walk plus the smoothing half-width of Condition (1)'s rates."""
@@ -167,7 +160,7 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
     store : PhotonStore (pipeline/store) of the scene's photons.
     elements : the ElementMesh the photons were bucketed on; ``scene`` poses frames (vertex areas).
     frames : store frame indices (0-based; default all).
-    mode : "adaptive" (Condition (1), §5.1; with ``config.linear_windows`` each window's linear fit
+    mode : "adaptive" (Condition (1), §5.1; each window's linear fit
         at the frame, docs/estimators.md §1.6), "fixed" (+-F_max/2 pooled, always, §6 Fig. 3b) or "off".
     fmax : F_max in frames (default ``config.fmax_initial``).
     kind : records gathered: "indirect" (the map the compositor reads), "direct" or "all".
@@ -227,8 +220,7 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
         clock.lap(None)  # FrameSums adds its own read_s and frame_sums_s
         flux = frame_sums_flux_cl([sums[g].sums for g in range(lo, hi)], n_emitted[lo:hi], back[part],
                                   fwd[part], f - lo, elements.element_vertices, elements.n_vertices,
-                                  linear=mode == "adaptive" and config.linear_windows,
-                                  taper=window_taper(fmax, mode, config))
+                                  linear=mode == "adaptive")
         areas = np.stack([frame_geometry(scene, elements, store.frame_numbers[g]).vertex_areas for g in f.tolist()])
         clock.lap("sums_s")
         own = [sums[g].direct_irradiance(a) if with_direct else None for g, a in zip(f.tolist(), areas)]
