@@ -60,15 +60,14 @@ inline double unlike(__global const uint *counts, __global const double *n_emitt
 // so noise alone keeps the centred one); where the walks cover min_extent frames they stay. So a
 // frame beside an abrupt change pools the frames on its own side of it. similar == 0, or no
 // placement inside the limits: at least half_lo back and half_hi forward (clipped likewise).
-// symmetric != 0: before that, both walks are cut to the shorter one, so a lighting drift linear
-// in time pools without bias. adaptive == 0: always +-F_max/2 (§6, Fig. 3b).
+// adaptive == 0: always +-F_max/2 (§6, Fig. 3b).
 __kernel void windows(__global const double *rate,      // (F, E) from smooth_rates
                       __global const uint *counts,      // (F, E) single-frame counts (adaptive only)
                       __global const double *n_emitted, // (F,)
                       __global const double *q,         // (F,) mean 1/N over smoothing frames
                       const int n_frames, const int n_elements, const int f0, const int n_out,
                       const int half_fmax, const int half_lo, const int half_hi,
-                      const double k2, const int adaptive, const int similar, const int symmetric,
+                      const double k2, const int adaptive, const int similar,
                       __global uchar *back, __global uchar *fwd) // (n_out, E)
 {
     const long gid = get_global_id(0);
@@ -90,10 +89,6 @@ __kernel void windows(__global const double *rate,      // (F, E) from smooth_ra
         while (w < max_fwd
                && condition1(mu, n_f, rate[(long)(f + w + 1) * n_elements + e], q[f + w + 1], k2))
             ++w;
-        if (symmetric) {
-            b = min(b, w);
-            w = b;
-        }
         const int need = half_lo + half_hi - b - w;
         int placed = 0;
         if (similar && need <= 0) {

@@ -32,11 +32,8 @@ of the guided run's. With the placement, J-1 takes
 [J-3, J-1] and J takes [J, J+2]. ``similar=False``, or where no placement fits the limits: at
 least ``(min_extent-1)//2`` back and the rest forward, each clipped to F_max/2 and the ends.
 
-``symmetric=True`` (``RenderConfig.symmetric_windows``, default off as in the paper, which lets the
-two walks end apart) cuts both walks to the shorter before the minimal extent: a window
-[f - b, f + w] pools the lighting of its centre f + (w - b)/2, so under a drift linear in time an
-asymmetric window is biased by the drift over (w - b)/2 frames, a symmetric one is not (README
-"Where the bias at K comes from" measures both on ROOM).
+The two walks end apart, as in the paper: an asymmetric window's drift bias is taken out by the
+linear windows of the gather (docs/estimators.md §1.6), not by cutting the longer walk.
 
 Different N_frame in neighbouring frames (N doubles per segment in §5.2.3). Counts are compared on
 frame f's photon budget: a count c_j is scaled by N_f / N_j (done as N_f * (c_j / N_j)). Under
@@ -109,7 +106,7 @@ def _extents(fmax: int, mode: str, min_extent: int) -> tuple[int, int, int, bool
 
 def windows_cl(counts: npt.ArrayLike, n_emitted: npt.ArrayLike, *, fmax: int, mode: str = "adaptive",
                k_sigma: float = 2.0, smoothing_frames: int = 3, min_extent: int = 3, similar: bool = True,
-               symmetric: bool = False, frames: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+               frames: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Windows of frames ``[f0, f1)`` (default all) on PoCL.
 
     Parameters
@@ -118,7 +115,6 @@ def windows_cl(counts: npt.ArrayLike, n_emitted: npt.ArrayLike, *, fmax: int, mo
     n_emitted : (F,) photons emitted per frame, N_frame.
     fmax : F_max, the segment length; each direction is limited to F_max // 2 frames.
     similar : where the minimal extent's extra frames go (module docstring).
-    symmetric : cut both walks to the shorter one (module docstring).
     frames : optional (f0, f1) range of output frames (indices into the table).
 
     Returns
@@ -148,8 +144,7 @@ def windows_cl(counts: npt.ArrayLike, n_emitted: npt.ArrayLike, *, fmax: int, mo
     kernel("temporal", "windows")(
         queue, (back.size,), None, d_rate, d_counts, d_n, d_q, np.int32(n_frames), np.int32(n_elements),
         np.int32(f0), np.int32(n_out), np.int32(half_fmax), np.int32(half_lo), np.int32(half_hi),
-        np.float64(float(k_sigma) * float(k_sigma)), np.int32(adaptive), np.int32(bool(similar)),
-        np.int32(bool(symmetric)), d_back, d_fwd)
+        np.float64(float(k_sigma) * float(k_sigma)), np.int32(adaptive), np.int32(bool(similar)), d_back, d_fwd)
     cl.enqueue_copy(queue, back, d_back)
     cl.enqueue_copy(queue, fwd, d_fwd)
     return back, fwd
@@ -171,7 +166,7 @@ def smoothed_rates_reference(counts: np.ndarray, n_emitted: np.ndarray, smoothin
 
 def windows_reference(counts: npt.ArrayLike, n_emitted: npt.ArrayLike, *, fmax: int, mode: str = "adaptive",
                       k_sigma: float = 2.0, smoothing_frames: int = 3, min_extent: int = 3, similar: bool = True,
-                      symmetric: bool = False, frames: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+                      frames: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """NumPy twin of :func:`windows_cl` (same arguments and results)."""
     counts, n_emitted, f0, f1 = _check(counts, n_emitted, fmax, mode, smoothing_frames, min_extent, frames)
     n_frames, n_elements = counts.shape
@@ -202,8 +197,6 @@ def windows_reference(counts: npt.ArrayLike, n_emitted: npt.ArrayLike, *, fmax: 
                 extent += alive
             walked.append(extent)
         b, w = walked
-        if symmetric:
-            b = w = np.minimum(b, w)
         span = half_lo + half_hi  # frames besides f the minimal extent needs
         placed = _place_similar(counts, n_emitted, f, b, w, span, max_back, max_fwd, k2) if similar \
             else np.full(n_elements, -1)

@@ -54,8 +54,6 @@ class RenderConfig:
     # frames, which the error benchmark sees as flicker (README, "Windows from the indirect hits")
     min_extent_similar: bool = _param(False, "collection", "the minimal extent's extra frames on the side(s) least "
                                       "unlike the frame, not centred (kernels/temporal.py; §5.1 leaves it open)")
-    symmetric_windows: bool = _param(False, "collection", "cut both walks to the shorter one: no bias from a linear "
-                                     "drift, more noise (off: the paper's asymmetric windows, §5.1)")
     indirect_counts: bool = _param(True, "collection", "Condition (1), the step test and p_me count the indirect "
                                    "hits, the photons of the map the windows collect (pipeline/temporal.py "
                                    "window_counts; off: every hit, direct included, as the per-frame tables of §4)")

@@ -286,11 +286,10 @@ class SegmentRun:
         use = self.batches(targets)
         counts = window_counts(self.store, self.config, batches=use)
         emitted = np.array([self.store.photons_in(f, int(use[f])) for f in range(self.store.n_frames)], np.float64)
-        # p_me counts how far Condition (1)'s walks reach each way, so not the symmetric cut of
-        # the collection (which would make the two shares one); a regional step stops a walk as
+        # p_me counts how far Condition (1)'s walks reach each way; a regional step stops a walk as
         # it stops the collection (pipeline/regional_steps.py)
         back, fwd = collection_windows(counts, emitted, [place.k - 1], mode="adaptive", fmax=place.fmax,
-                                       config=self.config.replace(symmetric_windows=False),
+                                       config=self.config,
                                        regions=step_regions(self.elements, self.config))
         hit = counts[place.start - 1:place.end].sum(axis=0) > 0
         pb, pf = p_me(back[0], fwd[0], place.fmax, hit)

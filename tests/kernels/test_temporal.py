@@ -60,8 +60,6 @@ class TestWindowsTwin(KernelTwinTests):
              **{f"{name}-{mode}-fmax{fmax}": (name, dict(mode=mode, fmax=fmax))
                 for name in ADVERSARIAL for mode in MODES for fmax in (0, 30, 500)},
              "random-adaptive-centred": ("random", dict(fmax=30, similar=False)),
-             "random-adaptive-symmetric": ("random", dict(fmax=30, symmetric=True)),
-             "random-adaptive-symmetric-centred": ("random", dict(fmax=7, symmetric=True, similar=False)),
              "random-adaptive-extent7-k3": ("random", dict(fmax=30, min_extent=7, k_sigma=3.0, frames=(0, 50))),
              "flicker-extent5": ("flicker", dict(fmax=12, smoothing_frames=1, min_extent=5))}
 
@@ -166,22 +164,6 @@ def test05d_a_small_difference_keeps_the_centred_extent():
     counts[11] = 160  # now the forward neighbour differs a lot (z^2 = 13.8): backward it goes
     back, fwd = both(counts, np.full(21, 1e4), fmax=30, smoothing_frames=1)
     assert (back[10, 0], fwd[10, 0]) == (2, 0)
-
-
-def test05c_symmetric_windows_cut_the_longer_walk():
-    # Lighting rises slowly (inside Condition (1)) until a jump at frame 26: frame 20's forward walk
-    # stops after 4 frames, its backward walk reaches F_max/2. Its window [5, 24] pools the light
-    # of frame 14.5, 5.5 frames early; cut to [16, 24] it pools frame 20's under a linear drift.
-    counts = (1000 + 2 * np.arange(41)).astype(np.uint32)[:, None]
-    counts[26:] += 2000
-    n = np.full(41, 1e4)
-    back, fwd = both(counts, n, fmax=30)
-    assert (back[20, 0], fwd[20, 0]) == (15, 4)
-    back_s, fwd_s = both(counts, n, fmax=30, symmetric=True)
-    assert (back_s[20, 0], fwd_s[20, 0]) == (4, 4)
-    assert (back_s == fwd_s)[3:23].all()  # away from the animation's start and the jump's minimal extents
-    pooled = lambda b, w: counts[20 - b:21 + w, 0].mean()  # noqa: E731
-    assert pooled(back_s[20, 0], fwd_s[20, 0]) == counts[20, 0] != pooled(back[20, 0], fwd[20, 0])
 
 
 def test06_counts_are_compared_on_a_common_photon_budget():
