@@ -49,11 +49,6 @@ class RenderConfig:
     k_sigma: float = _param(2.0, "collection", "k in mu - k sigma <= x <= mu + k sigma, §5.1 Eq. (1)", 0.0)
     smoothing_frames: int = _param(3, "collection", "frames averaged for mu and x, §5.1", 1, 255, odd=True)
     min_extent: int = _param(3, "collection", "minimal temporal extent in frames, §5.1", 1, 255)
-    # Off since the step test and linear windows: the step test already keeps a frame beside an
-    # abrupt change to its own side, and a side chosen from the counts flips between neighbouring
-    # frames, which the error benchmark sees as flicker (README, "Windows from the indirect hits")
-    min_extent_similar: bool = _param(False, "collection", "the minimal extent's extra frames on the side(s) least "
-                                      "unlike the frame, not centred (kernels/temporal.py; §5.1 leaves it open)")
     indirect_counts: bool = _param(True, "collection", "Condition (1), the step test and p_me count the indirect "
                                    "hits, the photons of the map the windows collect (pipeline/temporal.py "
                                    "window_counts; off: every hit, direct included, as the per-frame tables of §4)")

@@ -136,7 +136,7 @@ def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames: npt.Ar
                             f"{counts_from + counts.shape[0]}) given")
         b, w = windows_cl(counts[a - counts_from:z - counts_from], n_emitted[a:z], fmax=fmax, mode=mode,
                           k_sigma=config.k_sigma, smoothing_frames=config.smoothing_frames,
-                          min_extent=config.min_extent, similar=config.min_extent_similar, frames=(lo - a, hi - a))
+                          min_extent=config.min_extent, frames=(lo - a, hi - a))
         if steps:
             b, w = clamp_at_steps(b, w, np.arange(lo - a, hi - a), counts[a - counts_from:z - counts_from],
                                   n_emitted[a:z], regions, config.step_k, config.step_relative)
