@@ -49,9 +49,6 @@ class RenderConfig:
     k_sigma: float = _param(2.0, "collection", "k in mu - k sigma <= x <= mu + k sigma, §5.1 Eq. (1)", 0.0)
     smoothing_frames: int = _param(3, "collection", "frames averaged for mu and x, §5.1", 1, 255, odd=True)
     min_extent: int = _param(3, "collection", "minimal temporal extent in frames, §5.1", 1, 255)
-    indirect_counts: bool = _param(True, "collection", "Condition (1), the step test and p_me count the indirect "
-                                   "hits, the photons of the map the windows collect (pipeline/temporal.py "
-                                   "window_counts; off: every hit, direct included, as the per-frame tables of §4)")
     step_k: float = _param(6.0, "collection", "z of the regional step test: windows stop at an abrupt change "
                            "(pipeline/regional_steps.py)", 0.0)
     step_relative: float = _param(0.1, "collection", "smallest change of a cell's photon rate between two frames "

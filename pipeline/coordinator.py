@@ -284,7 +284,7 @@ class SegmentRun:
         from .temporal import collection_windows, step_regions, window_counts
 
         use = self.batches(targets)
-        counts = window_counts(self.store, self.config, batches=use)
+        counts = window_counts(self.store, batches=use)
         emitted = np.array([self.store.photons_in(f, int(use[f])) for f in range(self.store.n_frames)], np.float64)
         # p_me counts how far Condition (1)'s walks reach each way; a regional step stops a walk as
         # it stops the collection (pipeline/regional_steps.py)
@@ -354,7 +354,7 @@ class SegmentRun:
         flow = camera_flow(self.scene, k, job.width, job.height, params)
         result = displayed_difference(images[0], images[1], adaptation, params=params,
                                       aqm_size=self.config.aqm_size, flow=flow)
-        counts = window_counts(self.store, self.config, batches=use)[place.start - 1:place.end]
+        counts = window_counts(self.store, batches=use)[place.start - 1:place.end]
         self._windows_at_k = window_histogram(lit.back, lit.fwd, place.fmax, counts)
         picture = record_path(job.out_dir, index).with_suffix(".aqm.png")
         picture.parent.mkdir(parents=True, exist_ok=True)

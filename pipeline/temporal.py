@@ -64,10 +64,10 @@ def _runs(has_photons: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
 
 
-def window_counts(store: PhotonStore, config: RenderConfig, frames: Iterable[int] | None = None,
+def window_counts(store: PhotonStore, frames: Iterable[int] | None = None,
                   batches: npt.ArrayLike | None = None) -> np.ndarray:
     """(frames, E) hits per element that Condition (1), the step test and p_me read: the indirect
-    hits with ``config.indirect_counts``, the photons of the map the windows collect, else every hit.
+    hits, the photons of the map the windows collect.
 
     Why not every hit, as the per-frame tables of §4 count: a direct light's shadow edge sweeping
     over a moving object changes an element's direct hits tenfold in a frame while the indirect
@@ -75,8 +75,8 @@ def window_counts(store: PhotonStore, config: RenderConfig, frames: Iterable[int
     elements one frame of photons. On ROOM's frames 61-80 at 640,000 photons a frame, indirect
     counts gave relative L2 0.0234 against 0.0248 and error flicker 0.0151 against 0.0181 (20,000
     and 80,000 photons: the same direction), the Fig. 3 highlight and the lag after the light's
-    jump unchanged (README, "Windows from the indirect hits")."""
-    return store.counts(kind="indirect" if config.indirect_counts else "all", frames=frames, batches=batches)
+    jump unchanged (README, "Windows from the indirect hits"; on defaults, docs/defaults.md)."""
+    return store.counts(kind="indirect", frames=frames, batches=batches)
 
 
 def window_reach(fmax: int, mode: str, config: RenderConfig) -> int:
@@ -200,7 +200,7 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
     last = min(store.n_frames, int(frames.max()) + 1 + reach) if len(frames) else 0
     if mode == "adaptive":
         use = None if batches is None else store.shared_batches(batches)[first:last]
-        counts = window_counts(store, config, frames=range(first, last), batches=use)
+        counts = window_counts(store, frames=range(first, last), batches=use)
     else:  # the table's values are not read
         counts = np.zeros((last - first, store.n_elements), np.uint32)
     back, fwd = collection_windows(counts, n_emitted, frames, mode=mode, fmax=fmax, config=config,
