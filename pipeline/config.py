@@ -89,9 +89,6 @@ class RenderConfig:
     fmax_pays: bool = _param(False, "segments", "at each N_frame of Step 3, F_max steps back while its last growth "
                              "adds more squared bias than the variance it removes (pipeline/segments.py "
                              "fmax_that_pays; off: p_me alone, §5.2.2)")
-    predict_doublings: bool = _param(True, "segments", "Step 3 takes at once the doublings that d_AQM, falling "
-                                     "at most twice as fast (in log) as over its last doubling, cannot skip "
-                                     "(pipeline/segments.py doublings_ahead; off: one a step, §5.2.3)")
     aqm_size: int = _param(256, "segments", "AQM input size in pixels, §6", 16, 4096)
     # 1 turns it off: ROOM's guided run at the 160,000 cap then traces 3.5 M photons fewer, with
     # flicker 0.0185 -> 0.0191 and relative L2 0.0391 -> 0.0407 (README "Where the guided run's flicker")

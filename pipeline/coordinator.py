@@ -16,8 +16,7 @@ cannot deadlock); with ``--scheduler synchronous`` the same code runs them in-pr
    - Step 3 (§5.2.3): I1(K), I2(K) from the even and odd photons with adaptive collection,
      composited with the same camera samples and direct light, tone mapped as the final frame
      (pipeline/perceived.py); N_frame starts on a rung of the cap's halvings and doubles (one
-     batch more a frame) while d_AQM > d_thr, several doublings at once where d_AQM's fall so far
-     cannot reach d_thr sooner (segments.ladder_n_frame, doublings_ahead).
+     batch more a frame) while d_AQM > d_thr (segments.ladder_n_frame, next_n_frame).
    - Frames within F_max/2 of an animation end get ``end_photons`` x N_frame (§5.2).
 2. Steps 4-5 (§5.2.4-5) for the frames of segment i: reconstruction tasks of ``CHUNK_FRAMES``
    frames each (workers/reconstruct.reconstruct_task), then one composite task a frame.
@@ -423,8 +422,7 @@ class SegmentRun:
                     place = place_segment(place.start, ladder[-1], job.last)
             return self.d_aqm(place, {**prior, **{f: n_frame for f in place.frames}}, index, temporal)
 
-        n, n_steps, capped = doubling_loop(n, d_aqm_of, d_thr=cfg.d_thr, n_max=cfg.n_frame_max,
-                                           predict=cfg.predict_doublings)
+        n, n_steps, capped = doubling_loop(n, d_aqm_of, d_thr=cfg.d_thr, n_max=cfg.n_frame_max)
         t_n = time.perf_counter()
 
         # Frames next to an animation end: more photons for their missing neighbours (§5.2)
