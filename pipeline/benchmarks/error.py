@@ -13,7 +13,7 @@ timed whole (wall; CPU = this process plus every worker process), into a fresh o
 The reference is per-frame photon tracing with no temporal reuse, ``--reference-factor`` (>= 50) x the
 largest *budget* per frame, not x the largest N_frame the guided loop reaches nor x its cap. Why: 50x
 the default cap is 64,000,000 photons a frame, which on ROOM's quick plan (20 frames, 2 seeds) is
-2.56 G photons, about 25 minutes of tracing on the 2-core benchmark machine against about 2 minutes
+2.56 G photons, 25-35 minutes of tracing on the 2-core benchmark machine against about 2 minutes
 for the rest of the run; and a reference sized by the guided run's reach would depend on the outcome
 of the runs it judges (a config that climbs higher would be judged against another reference, and the
 cache in ``OUT/references/`` could not be shared between configs). So the reference is always >= 50x
