@@ -10,7 +10,7 @@ from pipeline.benchmarks.render import stage_table
 
 
 def _record(**times):
-    return SimpleNamespace(times_s=times)  # stage_table reads only a record's times_s
+    return SimpleNamespace(times_s=times, io_bytes={})  # stage_table reads a record's times_s and io_bytes
 
 
 def test_rows_split_each_stage_by_core_time_and_add_up_to_the_wall_time():
