@@ -106,29 +106,20 @@ inline void fit_at_frame(const double t[4], const double n, const double x1, con
 }
 
 // One walk over a window's frames [lo, hi), read as differences of consecutive prefix rows (each row
-// once), x = g - row: frame g weighs a = 1 - |x| / taper (a = 1 with taper 0, docs/estimators.md §1.7),
-// its sums by a and its Q by a^2. Accumulates the weighted window sum t, the sums' first moment s1, Q's
-// first two w1, w2, and with `cum_n` the photons' (divided by `per`, the parity split) n, x1, x2.
-inline void window_moments(__global const double *te, __global const double *cum_n, const long width,
-                           const int lo, const int hi, const int row, const double taper, const double per,
-                           double t[4], double s1[3], double *w1, double *w2, double *n, double *x1,
-                           double *x2)
+// once), x = g - row. Accumulates the sums' first moment s1 and Q's first two w1, w2.
+inline void window_moments(__global const double *te, const long width, const int lo, const int hi,
+                           const int row, double s1[3], double *w1, double *w2)
 {
     double prev[4];
     __global const double *a0 = te + (long)lo * width;
     for (int c = 0; c < 4; ++c) prev[c] = a0[c];
     for (int g = lo; g < hi; ++g) {
         const double x = (double)(g - row);
-        const double a = taper > 0.0 ? 1.0 - fabs(x) / taper : 1.0, aa = a * a;
         __global const double *b = te + (long)(g + 1) * width;
         double d[4];
         for (int c = 0; c < 4; ++c) { d[c] = b[c] - prev[c]; prev[c] = b[c]; }
-        for (int c = 0; c < 3; ++c) { t[c] += a * d[c]; s1[c] += a * x * d[c]; }
-        t[3] += aa * d[3]; *w1 += aa * x * d[3]; *w2 += aa * x * x * d[3];
-        if (cum_n) {
-            const double ng = a * ((cum_n[g + 1] - cum_n[g]) / per);
-            *n += ng; *x1 += ng * x; *x2 += ng * x * x;
-        }
+        for (int c = 0; c < 3; ++c) s1[c] += x * d[c];
+        *w1 += x * d[3]; *w2 += x * x * d[3];
     }
 }
 
@@ -139,26 +130,9 @@ inline void linear_window(__global const double *te, const long width, const int
                           const int row, const double n, const double x1, const double x2,
                           const double t[4], double u[4])
 {
-    double walked[4] = {0.0, 0.0, 0.0, 0.0}, s1[3] = {0.0, 0.0, 0.0}, w1 = 0.0, w2 = 0.0;
-    window_moments(te, 0, width, lo, hi, row, 0.0, 1.0, walked, s1, &w1, &w2, 0, 0, 0);
+    double s1[3] = {0.0, 0.0, 0.0}, w1 = 0.0, w2 = 0.0;
+    window_moments(te, width, lo, hi, row, s1, &w1, &w2);
     fit_at_frame(t, n, x1, x2, s1, w1, w2, u);
-}
-
-// A tapered window (docs/estimators.md §1.7): the weighted line at the frame (`linear`) or the weighted
-// pooled mean, everything from one walk.
-inline void tapered_window(__global const double *te, __global const double *cum_n, const long width,
-                           const int lo, const int hi, const int row, const double taper, const double per,
-                           const int linear, double u[4])
-{
-    double t[4] = {0.0, 0.0, 0.0, 0.0}, s1[3] = {0.0, 0.0, 0.0}, n = 0.0, x1 = 0.0, x2 = 0.0, w1 = 0.0,
-           w2 = 0.0;
-    window_moments(te, cum_n, width, lo, hi, row, taper, per, t, s1, &w1, &w2, &n, &x1, &x2);
-    if (linear) {
-        fit_at_frame(t, n, x1, x2, s1, w1, w2, u);
-    } else {
-        for (int c = 0; c < 3; ++c) u[c] = t[c] / n;
-        u[3] = t[3] / (n * n);
-    }
 }
 
 // Vertex flux of every output frame i (work item v; frames in order, so an element's rows are
@@ -168,15 +142,14 @@ inline void tapered_window(__global const double *te, __global const double *cum
 // (Q: / (sum_g N_g)^2), with N_g halved per parity. Output frame i is frame rows[i] of the
 // element-major prefix table (E, n_table_rows, n_parity, 12) of frame_sums_prefix_step (row 0 = 0,
 // row j+1 = sum of frames 0..j): a window sum is the difference of two rows. With `linear`, a corner
-// gives its linear-window estimate (linear_window) instead of the pooled mean; with `taper` > 0 every
-// window is tapered (tapered_window).
+// gives its linear-window estimate (linear_window) instead of the pooled mean.
 __kernel void vertex_window_flux(__global const double *table, __global const double *cum_n,
                                  __global const double *cum_gn, __global const double *cum_ggn,
                                  __global const uchar *back, __global const uchar *fwd, // (E, n_out)
                                  __global const int *rows, __global const long *voffsets,
                                  __global const int *slots, const int n_vertices,
                                  const int n_elements, const int n_parity, const int n_table_rows,
-                                 const int n_out, const int linear, const double taper,
+                                 const int n_out, const int linear,
                                  __global double *out)  // (V, n_out, n_parity, 4)
 {
     const int v = get_global_id(0);
@@ -195,12 +168,6 @@ __kernel void vertex_window_flux(__global const double *table, __global const do
                 const double np = cum_n[hi] - cum_n[lo];  // photons emitted in the window
                 const double inv_n = (double)n_parity / np;  // 1 / photons of one parity
                 __global const double *te = table + (long)e * n_table_rows * width + p * SLOTS + 4 * k;
-                if (taper > 0.0) {
-                    double u[4];
-                    tapered_window(te, cum_n, width, lo, hi, row, taper, (double)n_parity, linear, u);
-                    a0 += u[0]; a1 += u[1]; a2 += u[2]; a3 += u[3];
-                    continue;
-                }
                 double t[4];
                 for (int c = 0; c < 4; ++c) t[c] = te[hi * width + c] - te[lo * width + c];
                 // Linear windows: the photons' moments of x = g - row from prefix sums (exact: integer

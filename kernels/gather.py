@@ -182,7 +182,7 @@ def _check_windows(sums, n_emitted, back, fwd, rows):
 
 
 def _flux(d_table: cl.Buffer, n_emitted, back, fwd, rows, element_vertices, n_vertices: int, n_elements: int,
-          n_parity: int, linear: bool, taper: float) -> np.ndarray:
+          n_parity: int, linear: bool) -> np.ndarray:
     """Steps 2 and 3 from an element-major device prefix table (E, len(n_emitted) + 1, P, 12),
     all output frames in one launch."""
     ctx, queue = device_context()
@@ -202,14 +202,14 @@ def _flux(d_table: cl.Buffer, n_emitted, back, fwd, rows, element_vertices, n_ve
         _upload(ctx, back_t), _upload(ctx, fwd_t),
         _upload(ctx, rows.astype(np.int32)), _upload(ctx, voffsets), _upload(ctx, slots), np.int32(n_vertices),
         np.int32(n_elements), np.int32(n_parity), np.int32(len(n_emitted) + 1), np.int32(len(rows)),
-        np.int32(bool(linear)), np.float64(_check_taper(taper)), d_out)
+        np.int32(bool(linear)), d_out)
     cl.enqueue_copy(queue, out, d_out)
     return np.moveaxis(out, 0, 2)  # (n_out, P, V, 4), a view
 
 
 def frame_sums_flux_cl(frame_sums: Iterable[npt.ArrayLike], n_emitted: npt.ArrayLike, back: npt.ArrayLike,
                        fwd: npt.ArrayLike, rows: npt.ArrayLike, element_vertices: npt.ArrayLike,
-                       n_vertices: int, *, linear: bool = False, taper: float = 0.0) -> np.ndarray:
+                       n_vertices: int, *, linear: bool = False) -> np.ndarray:
     """Steps 2-3 on PoCL from per-frame element sums made earlier: what lets pipeline/temporal.py sum
     a frame's records once per worker, however many chunks' windows reach it. The prefix table is
     filled one launch a frame from the arrays where they lie (no host stacking or transposition),
@@ -224,8 +224,6 @@ def frame_sums_flux_cl(frame_sums: Iterable[npt.ArrayLike], n_emitted: npt.Array
     element_vertices : (E, 3) vertex ids; ``n_vertices`` V.
     linear : each element corner's value is its window's linear fit at the frame, the slope shrunk
         by its photon noise (docs/estimators.md §1.6), instead of the window's pooled mean.
-    taper : > 0: frame g of a window weighs 1 - |g - frame| / taper, its photons and sums by that and
-        its Q by the square (docs/estimators.md §1.7; the pipeline passes F_max/2 + 1); 0: every frame 1.
 
     Returns
     -------
@@ -254,16 +252,14 @@ def frame_sums_flux_cl(frame_sums: Iterable[npt.ArrayLike], n_emitted: npt.Array
              np.int32(n_elements), np.int32(n_parity), d_table)
     queue.finish()
     del held
-    return _flux(d_table, n_emitted, back, fwd, rows, element_vertices, n_vertices, n_elements, n_parity, linear,
-                 taper)
+    return _flux(d_table, n_emitted, back, fwd, rows, element_vertices, n_vertices, n_elements, n_parity, linear)
 
 
 def window_flux_reference(sums: npt.ArrayLike, n_emitted: npt.ArrayLike, back: npt.ArrayLike, fwd: npt.ArrayLike,
                           rows: npt.ArrayLike, element_vertices: npt.ArrayLike, n_vertices: int, *,
-                          linear: bool = False, taper: float = 0.0) -> np.ndarray:
+                          linear: bool = False) -> np.ndarray:
     """NumPy twin of :func:`frame_sums_flux_cl` (``sums`` (J, E, P, 3, 4): its ``frame_sums``
     stacked): window rows added directly, corners scattered with ``np.bincount``."""
-    taper = _check_taper(taper)
     sums, n_emitted, back, fwd, rows = _check_windows(sums, n_emitted, back, fwd, rows)
     n_rows, n_elements, n_parity = sums.shape[:3]
     ev = np.asarray(element_vertices, np.int64).reshape(n_elements, 3)
@@ -272,7 +268,7 @@ def window_flux_reference(sums: npt.ArrayLike, n_emitted: npt.ArrayLike, back: n
     for i, row in enumerate(rows):
         lo, hi = row - back[i].astype(np.int64), row + fwd[i].astype(np.int64) + 1
         total = np.zeros((n_elements, n_parity, 3, 4))
-        # photons; with ``linear`` also the weighted moments of x = g - row: photons' first and second,
+        # photons; with ``linear`` also the moments of x = g - row: photons' first and second,
         # the sums' first (RGB) and Q's first and second
         n, x1, x2 = (np.zeros(n_elements) for _ in range(3))
         s1 = np.zeros((n_elements, n_parity, 3, 3))
@@ -280,20 +276,14 @@ def window_flux_reference(sums: npt.ArrayLike, n_emitted: npt.ArrayLike, back: n
         for g in range(int(lo.min(initial=row)), int(hi.max(initial=row + 1))):
             inside = (lo <= g) & (g < hi)
             x = float(g - row)
-            if taper > 0:  # the frame's weight a, its Q's a^2
-                a = 1.0 - abs(x) / taper
-                total[inside, ..., :3] += a * sums[g, inside, ..., :3]
-                total[inside, ..., 3] += (a * a) * sums[g, inside, ..., 3]
-            else:
-                a = 1.0
-                total[inside] += sums[g, inside]
-            n[inside] += a * per_parity[g]
+            total[inside] += sums[g, inside]
+            n[inside] += per_parity[g]
             if linear:
-                x1[inside] += a * per_parity[g] * x
-                x2[inside] += a * per_parity[g] * x * x
-                s1[inside] += (a * x) * sums[g, inside, ..., :3]
-                q1[inside] += (a * a * x) * sums[g, inside, ..., 3]
-                q2[inside] += (a * a * x * x) * sums[g, inside, ..., 3]
+                x1[inside] += per_parity[g] * x
+                x2[inside] += per_parity[g] * x * x
+                s1[inside] += x * sums[g, inside, ..., :3]
+                q1[inside] += x * sums[g, inside, ..., 3]
+                q2[inside] += (x * x) * sums[g, inside, ..., 3]
         if linear:
             total = _linear_windows(total, n, x1, x2, s1, q1, q2)
         else:
@@ -312,14 +302,6 @@ def corners_to_vertices(corners: np.ndarray, element_vertices: np.ndarray, n_ver
     for c in range(corners.shape[-1]):
         out[:, c] = np.bincount(ev, weights=corners[:, :, c].reshape(-1), minlength=int(n_vertices))
     return out
-
-
-def _check_taper(taper: float) -> float:
-    """A taper is 0 (box windows) or a half-width > F_max/2 (every weight of a window positive)."""
-    taper = float(taper)
-    if not (taper == 0.0 or taper >= 1.0) or taper != taper:
-        raise ValueError(f"taper must be 0 or at least 1, got {taper}")
-    return taper
 
 
 def _linear_windows(total: np.ndarray, n: np.ndarray, x1: np.ndarray, x2: np.ndarray, s1: np.ndarray,

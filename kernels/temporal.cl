@@ -38,37 +38,17 @@ inline bool condition1(const double mu, const double n_f, const double rate_g, c
     return d * d <= k2 * var;
 }
 
-// How unlike frame f frame g is for element e: the squared z-score of r_g - r_f, r = c / N, under
-// one common rate (Poisson): (r_g - r_f)^2 N_f N_g / (c_f + c_g); 0 where neither frame has a hit.
-inline double unlike(__global const uint *counts, __global const double *n_emitted, const int n_elements,
-                     const int e, const int f, const int g)
-{
-    const uint c_f = counts[(long)f * n_elements + e];
-    const uint c_g = counts[(long)g * n_elements + e];
-    const double s = (double)c_f + (double)c_g;
-    if (s == 0.0) return 0.0;
-    const double d = (double)c_g / n_emitted[g] - (double)c_f / n_emitted[f];
-    return d * d * (n_emitted[f] * n_emitted[g]) / s;
-}
-
 // Window [f - back, f + fwd] of every (frame f in [f0, f0 + n_out), element e).
 // adaptive != 0: walk backward and forward independently while Condition (1) holds, at most
 // F_max/2 frames each way and to the animation's ends; then at least min_extent = half_lo +
-// half_hi + 1 frames. similar != 0: where the walks cover fewer, the missing frames are placed
-// (inside the limits) on the side(s) whose frames are least unlike f, summed z^2 of the added
-// frames, if that beats the most centred placement by more than k^2 (k of Eq. (1); a significant difference,
-// so noise alone keeps the centred one); where the walks cover min_extent frames they stay. So a
-// frame beside an abrupt change pools the frames on its own side of it. similar == 0, or no
-// placement inside the limits: at least half_lo back and half_hi forward (clipped likewise).
-// symmetric != 0: before that, both walks are cut to the shorter one, so a lighting drift linear
-// in time pools without bias. adaptive == 0: always +-F_max/2 (§6, Fig. 3b).
+// half_hi + 1 frames: at least half_lo back and half_hi forward (clipped likewise).
+// adaptive == 0: always +-F_max/2 (§6, Fig. 3b).
 __kernel void windows(__global const double *rate,      // (F, E) from smooth_rates
-                      __global const uint *counts,      // (F, E) single-frame counts (adaptive only)
                       __global const double *n_emitted, // (F,)
                       __global const double *q,         // (F,) mean 1/N over smoothing frames
                       const int n_frames, const int n_elements, const int f0, const int n_out,
                       const int half_fmax, const int half_lo, const int half_hi,
-                      const double k2, const int adaptive, const int similar, const int symmetric,
+                      const double k2, const int adaptive,
                       __global uchar *back, __global uchar *fwd) // (n_out, E)
 {
     const long gid = get_global_id(0);
@@ -90,45 +70,8 @@ __kernel void windows(__global const double *rate,      // (F, E) from smooth_ra
         while (w < max_fwd
                && condition1(mu, n_f, rate[(long)(f + w + 1) * n_elements + e], q[f + w + 1], k2))
             ++w;
-        if (symmetric) {
-            b = min(b, w);
-            w = b;
-        }
-        const int need = half_lo + half_hi - b - w;
-        int placed = 0;
-        if (similar && need <= 0) {
-            placed = 1;
-        } else if (similar) {
-            int best_b = -1, centre_b = -1, centre_skew = 0;
-            double best = 0.0, centre = 0.0;
-            for (int extra = 0; extra <= need; ++extra) {
-                const int nb = b + extra, nw = w + need - extra;
-                if (nb > max_back || nw > max_fwd) continue;
-                double cost = 0.0;
-                for (int j = b + 1; j <= nb; ++j) cost += unlike(counts, n_emitted, n_elements, e, f, f - j);
-                for (int j = w + 1; j <= nw; ++j) cost += unlike(counts, n_emitted, n_elements, e, f, f + j);
-                if (best_b < 0 || cost < best) {
-                    best_b = nb;
-                    best = cost;
-                }
-                const int skew = abs(nb - nw);
-                if (centre_b < 0 || skew < centre_skew) {
-                    centre_b = nb;
-                    centre = cost;
-                    centre_skew = skew;
-                }
-            }
-            if (centre_b >= 0) {
-                const int nb = centre - best > k2 ? best_b : centre_b;
-                w += need - (nb - b);
-                b = nb;
-                placed = 1;
-            }
-        }
-        if (!placed) {
-            b = max(b, min(half_lo, max_back));
-            w = max(w, min(half_hi, max_fwd));
-        }
+        b = max(b, min(half_lo, max_back));
+        w = max(w, min(half_hi, max_fwd));
     }
     back[gid] = (uchar)b;
     fwd[gid] = (uchar)w;

@@ -15,28 +15,13 @@ Condition (1), as implemented (paper symbols; ``s`` = ``smoothing_frames``, defa
 Walks run backward and forward from f independently and stop at the first failing frame, at
 F_max/2 frames and at the animation's ends. Afterwards at least ``min_extent`` frames are taken:
 the paper's minimal extent of 3 frames, justified by temporal masking (§5.1). The paper does not
-say where the extra frames lie. ``similar=True`` (``RenderConfig.min_extent_similar``, default off since the
-regional step test, pipeline/regional_steps.py, stops windows at abrupt changes itself):
-where the walks cover fewer than ``min_extent`` frames, the missing ones are placed on the side(s)
-least unlike f, by the summed z^2 of the added frames, z^2(g) = (r_g - r_f)^2 N_f N_g / (c_f + c_g)
-(r = c/N, the Poisson z-score of a common rate), but only if that beats the most centred placement
-by more than k^2 (k of Eq. (1)), so noise alone mostly keeps the centred one (choosing by similarity to f's own
-noisy count pulls the estimate towards that noise); where the walks already cover ``min_extent``
-frames they stay as walked. Cost where nothing jumps, ROOM's K_1 at 640,000 photons a frame
-against a 64,000,000-photon reference: rel L2 0.0205 against 0.0200 centred, d_AQM 2.95 % against
-2.94 % (0.0206 and 2.96 % ungated). Why: beside an abrupt change (a light switched at frame J)
-the 3-frame means put a third of the change into mu at J-1 and J, so both walks stop at once
-there, and a centred extent pooled frame J into J-1 and J-1 into J: a third of the wrong lighting
-for two frames, and a flicker the error benchmark (pipeline/benchmarks/error.py) measured as half
-of the guided run's. With the placement, J-1 takes
-[J-3, J-1] and J takes [J, J+2]. ``similar=False``, or where no placement fits the limits: at
-least ``(min_extent-1)//2`` back and the rest forward, each clipped to F_max/2 and the ends.
+say where the extra frames lie; they are centred: at least ``(min_extent-1)//2`` back and the rest
+forward, each clipped to F_max/2 and the ends. Beside an abrupt change the regional step test
+(pipeline/regional_steps.py) keeps a frame's window to its own side; placing the extra frames on
+the side least unlike the frame was tried and removed (docs/defaults.md, "min_extent_similar").
 
-``symmetric=True`` (``RenderConfig.symmetric_windows``, default off as in the paper, which lets the
-two walks end apart) cuts both walks to the shorter before the minimal extent: a window
-[f - b, f + w] pools the lighting of its centre f + (w - b)/2, so under a drift linear in time an
-asymmetric window is biased by the drift over (w - b)/2 frames, a symmetric one is not (README
-"Where the bias at K comes from" measures both on ROOM).
+The two walks end apart, as in the paper: an asymmetric window's drift bias is taken out by the
+linear windows of the gather (docs/estimators.md §1.6), not by cutting the longer walk.
 
 Different N_frame in neighbouring frames (N doubles per segment in §5.2.3). Counts are compared on
 frame f's photon budget: a count c_j is scaled by N_f / N_j (done as N_f * (c_j / N_j)). Under
@@ -108,8 +93,8 @@ def _extents(fmax: int, mode: str, min_extent: int) -> tuple[int, int, int, bool
 
 
 def windows_cl(counts: npt.ArrayLike, n_emitted: npt.ArrayLike, *, fmax: int, mode: str = "adaptive",
-               k_sigma: float = 2.0, smoothing_frames: int = 3, min_extent: int = 3, similar: bool = True,
-               symmetric: bool = False, frames: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+               k_sigma: float = 2.0, smoothing_frames: int = 3, min_extent: int = 3,
+               frames: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Windows of frames ``[f0, f1)`` (default all) on PoCL.
 
     Parameters
@@ -117,8 +102,6 @@ def windows_cl(counts: npt.ArrayLike, n_emitted: npt.ArrayLike, *, fmax: int, mo
     counts : (F, E) uint32 hit counts per frame and element (the store's count table).
     n_emitted : (F,) photons emitted per frame, N_frame.
     fmax : F_max, the segment length; each direction is limited to F_max // 2 frames.
-    similar : where the minimal extent's extra frames go (module docstring).
-    symmetric : cut both walks to the shorter one (module docstring).
     frames : optional (f0, f1) range of output frames (indices into the table).
 
     Returns
@@ -138,18 +121,17 @@ def windows_cl(counts: npt.ArrayLike, n_emitted: npt.ArrayLike, *, fmax: int, mo
     d_n = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=n_emitted)
     d_q = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=inverse_budget(n_emitted, smoothing_frames))
     d_rate = cl.Buffer(ctx, mf.READ_WRITE, size=8 * counts.size)
-    d_counts = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=counts if adaptive else np.zeros(1, np.uint32))
     if adaptive:
+        d_counts = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=counts)
         kernel("temporal", "smooth_rates")(
             queue, (counts.size,), None, d_counts, d_n, np.int32(n_frames), np.int32(n_elements),
             np.int32(smoothing_frames // 2), d_rate)
     d_back = cl.Buffer(ctx, mf.WRITE_ONLY, size=back.nbytes)
     d_fwd = cl.Buffer(ctx, mf.WRITE_ONLY, size=fwd.nbytes)
     kernel("temporal", "windows")(
-        queue, (back.size,), None, d_rate, d_counts, d_n, d_q, np.int32(n_frames), np.int32(n_elements),
+        queue, (back.size,), None, d_rate, d_n, d_q, np.int32(n_frames), np.int32(n_elements),
         np.int32(f0), np.int32(n_out), np.int32(half_fmax), np.int32(half_lo), np.int32(half_hi),
-        np.float64(float(k_sigma) * float(k_sigma)), np.int32(adaptive), np.int32(bool(similar)),
-        np.int32(bool(symmetric)), d_back, d_fwd)
+        np.float64(float(k_sigma) * float(k_sigma)), np.int32(adaptive), d_back, d_fwd)
     cl.enqueue_copy(queue, back, d_back)
     cl.enqueue_copy(queue, fwd, d_fwd)
     return back, fwd
@@ -170,8 +152,8 @@ def smoothed_rates_reference(counts: np.ndarray, n_emitted: np.ndarray, smoothin
 
 
 def windows_reference(counts: npt.ArrayLike, n_emitted: npt.ArrayLike, *, fmax: int, mode: str = "adaptive",
-                      k_sigma: float = 2.0, smoothing_frames: int = 3, min_extent: int = 3, similar: bool = True,
-                      symmetric: bool = False, frames: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+                      k_sigma: float = 2.0, smoothing_frames: int = 3, min_extent: int = 3,
+                      frames: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """NumPy twin of :func:`windows_cl` (same arguments and results)."""
     counts, n_emitted, f0, f1 = _check(counts, n_emitted, fmax, mode, smoothing_frames, min_extent, frames)
     n_frames, n_elements = counts.shape
@@ -202,50 +184,7 @@ def windows_reference(counts: npt.ArrayLike, n_emitted: npt.ArrayLike, *, fmax: 
                 extent += alive
             walked.append(extent)
         b, w = walked
-        if symmetric:
-            b = w = np.minimum(b, w)
-        span = half_lo + half_hi  # frames besides f the minimal extent needs
-        placed = _place_similar(counts, n_emitted, f, b, w, span, max_back, max_fwd, k2) if similar \
-            else np.full(n_elements, -1)
-        back[i] = np.where(placed >= 0, placed, np.maximum(b, min(half_lo, max_back)))
-        fwd[i] = np.where(placed >= 0, np.where(b + w >= span, w, span - placed),
-                          np.maximum(w, min(half_hi, max_fwd)))
+        back[i] = np.maximum(b, min(half_lo, max_back))
+        fwd[i] = np.maximum(w, min(half_hi, max_fwd))
     return back, fwd
 
-
-def _unlike(counts: np.ndarray, n_emitted: np.ndarray, e: int, f: int, g: int) -> float:
-    """z^2 of r_g - r_f of element e under one common rate (temporal.cl ``unlike``)."""
-    s = float(counts[f, e]) + float(counts[g, e])
-    if s == 0.0:
-        return 0.0
-    d = float(counts[g, e]) / n_emitted[g] - float(counts[f, e]) / n_emitted[f]
-    return d * d * (n_emitted[f] * n_emitted[g]) / s
-
-
-def _place_similar(counts: np.ndarray, n_emitted: np.ndarray, f: int, b: np.ndarray, w: np.ndarray, span: int,
-                   max_back: int, max_fwd: int, k2: float) -> np.ndarray:
-    """Per element, the back extent of the minimal extent's placement (module docstring): the walked
-    one where the walks cover ``span`` frames besides f, -1 where no placement fits the limits;
-    scalar loops in the kernel's order, so the sums round alike."""
-    out = np.where(b + w >= span, b, -1).astype(np.int64)
-    for e in np.flatnonzero(b + w < span):
-        b_e, w_e = int(b[e]), int(w[e])
-        need = span - b_e - w_e
-        best_b, centre_b, centre_skew, best, centre = -1, -1, 0, 0.0, 0.0
-        for more in range(need + 1):
-            nb, nw = b_e + more, w_e + need - more
-            if nb > max_back or nw > max_fwd:
-                continue
-            cost = 0.0
-            for j in range(b_e + 1, nb + 1):
-                cost += _unlike(counts, n_emitted, e, f, f - j)
-            for j in range(w_e + 1, nw + 1):
-                cost += _unlike(counts, n_emitted, e, f, f + j)
-            if best_b < 0 or cost < best:
-                best_b, best = nb, cost
-            skew = abs(nb - nw)
-            if centre_b < 0 or skew < centre_skew:
-                centre_b, centre, centre_skew = nb, cost, skew
-        if centre_b >= 0:
-            out[e] = best_b if centre - best > k2 else centre_b
-    return out

@@ -49,24 +49,6 @@ class RenderConfig:
     k_sigma: float = _param(2.0, "collection", "k in mu - k sigma <= x <= mu + k sigma, §5.1 Eq. (1)", 0.0)
     smoothing_frames: int = _param(3, "collection", "frames averaged for mu and x, §5.1", 1, 255, odd=True)
     min_extent: int = _param(3, "collection", "minimal temporal extent in frames, §5.1", 1, 255)
-    # Off since the step test and linear windows: the step test already keeps a frame beside an
-    # abrupt change to its own side, and a side chosen from the counts flips between neighbouring
-    # frames, which the error benchmark sees as flicker (README, "Windows from the indirect hits")
-    min_extent_similar: bool = _param(False, "collection", "the minimal extent's extra frames on the side(s) least "
-                                      "unlike the frame, not centred (kernels/temporal.py; §5.1 leaves it open)")
-    symmetric_windows: bool = _param(False, "collection", "cut both walks to the shorter one: no bias from a linear "
-                                     "drift, more noise (off: the paper's asymmetric windows, §5.1)")
-    linear_windows: bool = _param(True, "collection", "a window's value is its linear fit at the frame, the slope "
-                                  "shrunk by its noise: no bias from a drift under an asymmetric window "
-                                  "(docs/estimators.md §1.6; off: the paper's pooled mean, §5.1)")
-    # Off: less error and flicker on ROOM, but fewer effective photons, which the AQM counts as
-    # noise (ATRIUM's K 51.6 -> 54.0 %, ROOM's adaptive runs +0.1 to +1.3 points; README "Tapered windows")
-    taper_windows: bool = _param(False, "collection", "frame g of an adaptive window weighs 1 - |g - f| / (F_max/2 + "
-                                 "1): nearer frames count more, so less bias from a curving light and smaller "
-                                 "jumps as windows slide (docs/estimators.md §1.7; off: every frame 1, §5.1)")
-    indirect_counts: bool = _param(True, "collection", "Condition (1), the step test and p_me count the indirect "
-                                   "hits, the photons of the map the windows collect (pipeline/temporal.py "
-                                   "window_counts; off: every hit, direct included, as the per-frame tables of §4)")
     step_k: float = _param(6.0, "collection", "z of the regional step test: windows stop at an abrupt change "
                            "(pipeline/regional_steps.py)", 0.0)
     step_relative: float = _param(0.1, "collection", "smallest change of a cell's photon rate between two frames "
@@ -101,15 +83,6 @@ class RenderConfig:
     n_frame_max: int = _param(1_280_000, "segments", "largest N_frame of the doubling loop, reported when hit, "
                               "§5.2.3", 1, 1 << 30)
     d_thr: float = _param(0.03, "segments", "d_thr, share of AQM pixels above 1 JND, §5.2.3", 0.0, 1.0)
-    # Off by default: on, ROOM's whole animation at 160,000 photons a frame has 19 % less error and
-    # 11 % less flicker, but at the default cap four of its eight K are 1.05-3.64 % of their pixels
-    # from the converged references, over the paper's 1 % (README "F_max that pays")
-    fmax_pays: bool = _param(False, "segments", "at each N_frame of Step 3, F_max steps back while its last growth "
-                             "adds more squared bias than the variance it removes (pipeline/segments.py "
-                             "fmax_that_pays; off: p_me alone, §5.2.2)")
-    predict_doublings: bool = _param(True, "segments", "Step 3 takes at once the doublings that d_AQM, falling "
-                                     "at most twice as fast (in log) as over its last doubling, cannot skip "
-                                     "(pipeline/segments.py doublings_ahead; off: one a step, §5.2.3)")
     aqm_size: int = _param(256, "segments", "AQM input size in pixels, §6", 16, 4096)
     # 1 turns it off: ROOM's guided run at the 160,000 cap then traces 3.5 M photons fewer, with
     # flicker 0.0185 -> 0.0191 and relative L2 0.0391 -> 0.0407 (README "Where the guided run's flicker")

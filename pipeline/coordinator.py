@@ -16,8 +16,7 @@ cannot deadlock); with ``--scheduler synchronous`` the same code runs them in-pr
    - Step 3 (§5.2.3): I1(K), I2(K) from the even and odd photons with adaptive collection,
      composited with the same camera samples and direct light, tone mapped as the final frame
      (pipeline/perceived.py); N_frame starts on a rung of the cap's halvings and doubles (one
-     batch more a frame) while d_AQM > d_thr, several doublings at once where d_AQM's fall so far
-     cannot reach d_thr sooner (segments.ladder_n_frame, doublings_ahead).
+     batch more a frame) while d_AQM > d_thr (segments.ladder_n_frame, next_n_frame).
    - Frames within F_max/2 of an animation end get ``end_photons`` x N_frame (§5.2).
 2. Steps 4-5 (§5.2.4-5) for the frames of segment i: reconstruction tasks of ``CHUNK_FRAMES``
    frames each (workers/reconstruct.reconstruct_task), then one composite task a frame.
@@ -284,13 +283,12 @@ class SegmentRun:
         from .temporal import collection_windows, step_regions, window_counts
 
         use = self.batches(targets)
-        counts = window_counts(self.store, self.config, batches=use)
+        counts = window_counts(self.store, batches=use)
         emitted = np.array([self.store.photons_in(f, int(use[f])) for f in range(self.store.n_frames)], np.float64)
-        # p_me counts how far Condition (1)'s walks reach each way, so not the symmetric cut of
-        # the collection (which would make the two shares one); a regional step stops a walk as
+        # p_me counts how far Condition (1)'s walks reach each way; a regional step stops a walk as
         # it stops the collection (pipeline/regional_steps.py)
         back, fwd = collection_windows(counts, emitted, [place.k - 1], mode="adaptive", fmax=place.fmax,
-                                       config=self.config.replace(symmetric_windows=False),
+                                       config=self.config,
                                        regions=step_regions(self.elements, self.config))
         hit = counts[place.start - 1:place.end].sum(axis=0) > 0
         pb, pf = p_me(back[0], fwd[0], place.fmax, hit)
@@ -355,7 +353,7 @@ class SegmentRun:
         flow = camera_flow(self.scene, k, job.width, job.height, params)
         result = displayed_difference(images[0], images[1], adaptation, params=params,
                                       aqm_size=self.config.aqm_size, flow=flow)
-        counts = window_counts(self.store, self.config, batches=use)[place.start - 1:place.end]
+        counts = window_counts(self.store, batches=use)[place.start - 1:place.end]
         self._windows_at_k = window_histogram(lit.back, lit.fwd, place.fmax, counts)
         picture = record_path(job.out_dir, index).with_suffix(".aqm.png")
         picture.parent.mkdir(parents=True, exist_ok=True)
@@ -398,7 +396,7 @@ class SegmentRun:
             fmax_steps = []
         else:
             place, fmax_steps = fmax_loop(place.start, place.fmax, job.last, p_me_of, p_thr=cfg.p_thr,
-                                          step=cfg.fmax_step, cap=cfg.fmax_cap, widen_only=cfg.fmax_pays)
+                                          step=cfg.fmax_step, cap=cfg.fmax_cap)
         t_fmax = time.perf_counter()
 
         # Step 3: N_frame doubled while d_AQM > d_thr; at each N_frame, F_max first steps back while
@@ -409,7 +407,7 @@ class SegmentRun:
 
         def d_aqm_of(n_frame: int) -> float:
             nonlocal place, ladder
-            checking = cfg.fmax_pays and len(ladder) > 1
+            checking = len(ladder) > 1
             # the check looks at the last frame too, whose windows reach F_max/2 frames past it
             self.shoot({f: n_frame for f in (reach_frames(place, job.last) if checking else place.frames)})
             if checking:
@@ -424,8 +422,7 @@ class SegmentRun:
                     place = place_segment(place.start, ladder[-1], job.last)
             return self.d_aqm(place, {**prior, **{f: n_frame for f in place.frames}}, index, temporal)
 
-        n, n_steps, capped = doubling_loop(n, d_aqm_of, d_thr=cfg.d_thr, n_max=cfg.n_frame_max,
-                                           predict=cfg.predict_doublings)
+        n, n_steps, capped = doubling_loop(n, d_aqm_of, d_thr=cfg.d_thr, n_max=cfg.n_frame_max)
         t_n = time.perf_counter()
 
         # Frames next to an animation end: more photons for their missing neighbours (§5.2)

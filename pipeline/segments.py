@@ -7,8 +7,8 @@ answers (tests/coordinator/test_segments.py); pipeline/coordinator.py only runs 
 * :func:`p_me`, :func:`grow_fmax` — Step 2 (§5.2.2); :func:`growth_ratio`, :func:`fmax_that_pays` —
   Step 2 checked again at each N_frame of Step 3 (ours: a longer segment must remove more noise than
   the bias it adds);
-* :func:`ladder_n_frame`, :func:`next_n_frame`, :func:`doublings_ahead` — Step 3 (§5.2.3; the ladder
-  and the doublings at once are ours);
+* :func:`ladder_n_frame`, :func:`next_n_frame` — Step 3 (§5.2.3; the ladder is ours), one doubling a
+  step as the paper's; :func:`doublings_ahead` extrapolates what a capped segment still lacked;
 * :func:`place_segment`, :func:`photon_targets` — where segments lie and how many photons each
   frame gets (the first and last segments compensate their missing neighbour, §5.2).
 """
@@ -125,21 +125,20 @@ def p_me(back: np.ndarray, fwd: np.ndarray, fmax: int, considered: np.ndarray | 
     return float(np.count_nonzero((back >= half) & mask)) / n, float(np.count_nonzero((fwd >= half) & mask)) / n
 
 
-def grow_fmax(fmax: int, p_back: float, p_fwd: float, *, p_thr: float, step: int, cap: int,
-              widen_only: bool = False) -> int | None:
+def grow_fmax(fmax: int, p_back: float, p_fwd: float, *, p_thr: float, step: int, cap: int) -> int | None:
     """The next F_max to try, or None to keep ``fmax`` (§5.2.2).
 
     F_max grows while p_me >= p_thr in either direction: the paper stops "until p_me < p_thr",
     and its final K_2 (F_max = 30) has p_me below p_thr both ways (36 % and 30 %, §6). Growth is
     by ``step`` frames up to ``cap`` (15 -> 30 -> 44 with the defaults, the paper's F_max values).
-    ``widen_only`` (the F_max check is on): a growth that keeps the windows' half-width F_max // 2
-    (14 -> 15) is not tried, since the check would cut it back at every N_frame: the windows are the
+    A growth that keeps the windows' half-width F_max // 2 (14 -> 15) is not tried, since the F_max
+    check of Step 3 (:func:`fmax_that_pays`) would cut it back at every N_frame: the windows are the
     same, so :func:`growth_ratio` is inf. Trying it cost each ROOM segment a p_me and a check.
     """
     if max(p_back, p_fwd) < p_thr or fmax >= cap:
         return None
     grown = min(fmax + step, cap)
-    if widen_only and grown // 2 == fmax // 2:
+    if grown // 2 == fmax // 2:
         return None
     return grown
 
@@ -204,30 +203,29 @@ def fmax_that_pays(ladder: list[int], ratio_of: Callable[[int, int], float]) -> 
 
 
 # --- Step 3: number of photons (§5.2.3) --------------------------------------------------------
-def next_n_frame(n_frame: int, d_aqm: float, d_thr: float, n_max: int,
-                 before: tuple[int, float] | None = None) -> int | None:
+def next_n_frame(n_frame: int, d_aqm: float, d_thr: float, n_max: int) -> int | None:
     """N_frame doubled while d_AQM (a fraction of pixels) exceeds d_thr, or None to stop: at the
     first N_frame with d_AQM <= d_thr, or at the cap ``n_max`` (reported by the caller). The last
     step goes to the cap itself when doubling would pass it, so the configured maximum is reached
-    whatever N_frame the pilot started from. Given the step ``before`` (its N_frame and d_AQM
-    fraction), it takes :func:`doublings_ahead` doublings at once."""
+    whatever N_frame the pilot started from.
+
+    One doubling a step, as §5.2.3. Several at once, extrapolated from d_AQM's fall so far
+    (:func:`doublings_ahead`), were tried and removed: with the recalibrated AQM, whose d_AQM falls
+    faster than the extrapolation's bound, a jump passed where plain doubling stops (ROOM's quick
+    error benchmark: 1,280,000 photons a frame instead of 640,000, 1.8x the CPU), and elsewhere it
+    saved nothing (docs/defaults.md, "predict_doublings")."""
     if d_aqm <= d_thr or n_frame >= n_max:
         return None
-    k = 1 if before is None else doublings_ahead(before, (n_frame, d_aqm), d_thr)
-    return min(n_frame * 2 ** k, n_max)
+    return min(n_frame * 2, n_max)
 
 
 def doublings_ahead(before: tuple[int, float], now: tuple[int, float], d_thr: float) -> int:
-    """How many doublings of N_frame the loop of §5.2.3 takes at least from ``now`` ((N_frame,
+    """How many doublings of N_frame the loop of §5.2.3 needs at least from ``now`` ((N_frame,
     d_AQM)) before d_AQM <= d_thr, if d_AQM falls per doubling by at most the square of the factor
-    it fell by since ``before`` (ours, not §5.2.3).
-
-    Why: each doubling costs a pass over the segment's photons and an AQM evaluation, and ROOM's
-    d_AQM fell 52.5 -> 39.1 % where d_thr is 3 %: the loop doubled five times to the cap, learning
-    nothing it could use. Twice the measured decline in log is the margin: the paper's "reduced
-    by an even larger factor" (§5.2.3) is the noise's 1/sqrt(2) against the AQM's faster fall, and
-    while d_AQM falls no faster than that, a jump stops no higher than plain doubling would. One
-    doubling when d_AQM did not fall (nothing to extrapolate).
+    it fell by since ``before`` (ours, not §5.2.3): :func:`needed_n_frame` of a segment the cap
+    stopped. Twice the measured decline in log is the margin: the paper's "reduced by an even
+    larger factor" (§5.2.3) is the noise's 1/sqrt(2) against the AQM's faster fall. One doubling
+    when d_AQM did not fall (nothing to extrapolate).
     """
     (n0, d0), (n1, d1) = before, now
     if not (n1 > n0 and 0.0 < d1 < d0 and d1 > d_thr > 0.0):
@@ -237,25 +235,23 @@ def doublings_ahead(before: tuple[int, float], now: tuple[int, float], d_thr: fl
 
 
 def doubling_loop(n_frame: int, measure: Callable[[int], float], *, d_thr: float,
-                  n_max: int, predict: bool = True) -> tuple[int, list[dict], bool]:
+                  n_max: int) -> tuple[int, list[dict], bool]:
     """Step 3's loop: ``measure(n)`` gives d_AQM (percent) at N_frame = n (the caller traces what
-    n needs); N_frame doubles until d_AQM <= d_thr (a fraction) or the cap, several doublings at
-    once after the first step when ``predict`` (:func:`doublings_ahead`). Returns the final
-    N_frame, the steps [{n_frame, d_aqm}] and whether the cap stopped it above d_thr."""
+    n needs); N_frame doubles (:func:`next_n_frame`) until d_AQM <= d_thr (a fraction) or the cap.
+    Returns the final N_frame, the steps [{n_frame, d_aqm}] and whether the cap stopped it above
+    d_thr."""
     steps = []
     while True:
         d = float(measure(n_frame))
-        before = (steps[-1]["n_frame"], steps[-1]["d_aqm"] / 100.0) if predict and steps else None
         steps.append({"n_frame": int(n_frame), "d_aqm": d})
-        doubled = next_n_frame(n_frame, d / 100.0, d_thr, n_max, before)
+        doubled = next_n_frame(n_frame, d / 100.0, d_thr, n_max)
         if doubled is None:
             return int(n_frame), steps, d / 100.0 > d_thr
         n_frame = doubled
 
 
 def fmax_loop(start: int, fmax: int, last: int, measure: Callable[[Placement], tuple[float, float]], *,
-              p_thr: float, step: int, cap: int, grow: bool = True,
-              widen_only: bool = False) -> tuple[Placement, list[dict]]:
+              p_thr: float, step: int, cap: int, grow: bool = True) -> tuple[Placement, list[dict]]:
     """Step 2's loop: ``measure(placement)`` gives (p_me back, p_me fwd) at its K (the caller
     traces the placement's frames); F_max grows by :func:`grow_fmax` until it stops, the cap, or
     the segment reaches the animation's end. Returns the placement and the steps."""
@@ -264,7 +260,7 @@ def fmax_loop(start: int, fmax: int, last: int, measure: Callable[[Placement], t
     while True:
         pb, pf = measure(place)
         steps.append({"fmax": place.fmax, "k": place.k, "p_me_back": float(pb), "p_me_fwd": float(pf)})
-        grown = (grow_fmax(place.fmax, pb, pf, p_thr=p_thr, step=step, cap=cap, widen_only=widen_only)
+        grown = (grow_fmax(place.fmax, pb, pf, p_thr=p_thr, step=step, cap=cap)
                  if grow and place.end < last else None)
         if grown is None:
             return place, steps

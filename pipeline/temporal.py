@@ -64,10 +64,10 @@ def _runs(has_photons: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
 
 
-def window_counts(store: PhotonStore, config: RenderConfig, frames: Iterable[int] | None = None,
+def window_counts(store: PhotonStore, frames: Iterable[int] | None = None,
                   batches: npt.ArrayLike | None = None) -> np.ndarray:
     """(frames, E) hits per element that Condition (1), the step test and p_me read: the indirect
-    hits with ``config.indirect_counts``, the photons of the map the windows collect, else every hit.
+    hits, the photons of the map the windows collect.
 
     Why not every hit, as the per-frame tables of §4 count: a direct light's shadow edge sweeping
     over a moving object changes an element's direct hits tenfold in a frame while the indirect
@@ -75,15 +75,8 @@ def window_counts(store: PhotonStore, config: RenderConfig, frames: Iterable[int
     elements one frame of photons. On ROOM's frames 61-80 at 640,000 photons a frame, indirect
     counts gave relative L2 0.0234 against 0.0248 and error flicker 0.0151 against 0.0181 (20,000
     and 80,000 photons: the same direction), the Fig. 3 highlight and the lag after the light's
-    jump unchanged (README, "Windows from the indirect hits")."""
-    return store.counts(kind="indirect" if config.indirect_counts else "all", frames=frames, batches=batches)
-
-
-def window_taper(fmax: int, mode: str, config: RenderConfig) -> float:
-    """The gather's taper (kernels/gather.frame_sums_flux_cl): frame g of an adaptive window weighs
-    1 - |g - f| / (F_max/2 + 1) with ``config.taper_windows``, so every frame a window can reach
-    weighs more than 0; 0 (every frame 1) otherwise, and always for ``fixed`` windows (Fig. 3b)."""
-    return float(int(fmax) // 2 + 1) if mode == "adaptive" and config.taper_windows else 0.0
+    jump unchanged (README, "Windows from the indirect hits"; on defaults, docs/defaults.md)."""
+    return store.counts(kind="indirect", frames=frames, batches=batches)
 
 
 def window_reach(fmax: int, mode: str, config: RenderConfig) -> int:
@@ -143,8 +136,7 @@ def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames: npt.Ar
                             f"{counts_from + counts.shape[0]}) given")
         b, w = windows_cl(counts[a - counts_from:z - counts_from], n_emitted[a:z], fmax=fmax, mode=mode,
                           k_sigma=config.k_sigma, smoothing_frames=config.smoothing_frames,
-                          min_extent=config.min_extent, similar=config.min_extent_similar,
-                          symmetric=config.symmetric_windows, frames=(lo - a, hi - a))
+                          min_extent=config.min_extent, frames=(lo - a, hi - a))
         if steps:
             b, w = clamp_at_steps(b, w, np.arange(lo - a, hi - a), counts[a - counts_from:z - counts_from],
                                   n_emitted[a:z], regions, config.step_k, config.step_relative)
@@ -167,7 +159,7 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
     store : PhotonStore (pipeline/store) of the scene's photons.
     elements : the ElementMesh the photons were bucketed on; ``scene`` poses frames (vertex areas).
     frames : store frame indices (0-based; default all).
-    mode : "adaptive" (Condition (1), §5.1; with ``config.linear_windows`` each window's linear fit
+    mode : "adaptive" (Condition (1), §5.1; each window's linear fit
         at the frame, docs/estimators.md §1.6), "fixed" (+-F_max/2 pooled, always, §6 Fig. 3b) or "off".
     fmax : F_max in frames (default ``config.fmax_initial``).
     kind : records gathered: "indirect" (the map the compositor reads), "direct" or "all".
@@ -208,7 +200,7 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
     last = min(store.n_frames, int(frames.max()) + 1 + reach) if len(frames) else 0
     if mode == "adaptive":
         use = None if batches is None else store.shared_batches(batches)[first:last]
-        counts = window_counts(store, config, frames=range(first, last), batches=use)
+        counts = window_counts(store, frames=range(first, last), batches=use)
     else:  # the table's values are not read
         counts = np.zeros((last - first, store.n_elements), np.uint32)
     back, fwd = collection_windows(counts, n_emitted, frames, mode=mode, fmax=fmax, config=config,
@@ -227,8 +219,7 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
         clock.lap(None)  # FrameSums adds its own read_s and frame_sums_s
         flux = frame_sums_flux_cl([sums[g].sums for g in range(lo, hi)], n_emitted[lo:hi], back[part],
                                   fwd[part], f - lo, elements.element_vertices, elements.n_vertices,
-                                  linear=mode == "adaptive" and config.linear_windows,
-                                  taper=window_taper(fmax, mode, config))
+                                  linear=mode == "adaptive")
         areas = np.stack([frame_geometry(scene, elements, store.frame_numbers[g]).vertex_areas for g in f.tolist()])
         clock.lap("sums_s")
         own = [sums[g].direct_irradiance(a) if with_direct else None for g, a in zip(f.tolist(), areas)]

@@ -147,7 +147,7 @@ def run(photons: Iterable[int] = (10_000, 20_000, 40_000, 80_000), *, fmax: int 
                 return displayed_difference(a.beauty, b.beauty, adaptation, aqm_size=config.aqm_size).d_aqm
 
             a, b = images["adaptive"]
-            counts = window_counts(pstore, config, frames=range(index - half, index + half + 1))
+            counts = window_counts(pstore, frames=range(index - half, index + half + 1))
             hit = np.asarray(counts).sum(axis=0) > 0
             back, fwd = lit.back.astype(np.int64), lit.fwd.astype(np.int64)
             row = dict(n_frame=int(n), d_linear=aqm(a.beauty, b.beauty, aqm_size=config.aqm_size).d_aqm,

@@ -112,7 +112,6 @@ def run(trace_frames: int = 3, numpy_frames: int = 4, n_frames: int = N_FRAMES,
     from kernels.gather import element_sums_cl, element_sums_reference, irradiance, window_flux_reference
     from kernels.temporal import windows_cl, windows_reference
     from pipeline.config import RenderConfig
-    from pipeline.temporal import window_taper
 
     config = RenderConfig()
     with tempfile.TemporaryDirectory() as tmp:
@@ -133,8 +132,8 @@ def run(trace_frames: int = 3, numpy_frames: int = 4, n_frames: int = N_FRAMES,
     # Warm-up: build every program once (PoCL compile, cached on disk after the first run)
     windows_cl(counts[:8], n_emitted[:8], fmax=4)
     zero = np.zeros((1, mesh.n_elements), np.uint8)
-    # The windows' shape the gather of a render takes (pipeline/temporal.py): linear fit and taper
-    shape = dict(linear=config.linear_windows, taper=window_taper(FMAX, "adaptive", config))
+    # The windows' shape the gather of a render takes (pipeline/temporal.py): the linear fit
+    shape = dict(linear=True)
     wf, _ = _gather_chunk({}, photons, 0, 1, n_emitted, zero, zero, [0], mesh, dict(sums=0.0, flux=0.0),
                           shape=shape)
     hood, hood_s = _timed(neighbourhood, mesh.element_vertices, mesh.vertex_local, mesh.vertex_instance,

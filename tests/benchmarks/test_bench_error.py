@@ -175,3 +175,20 @@ def test_a_reference_draws_the_same_random_numbers_in_every_frame(tmp_path):
     assert a.sum() > 0 and np.array_equal(a, b)
     assert not np.array_equal(a, other)
     assert other.sum() == pytest.approx(a.sum(), rel=0.1)
+
+
+def test_the_reference_basis_says_what_the_uncapped_guided_run_reached():
+    """The guided runs are uncapped (as loom render runs them), the reference stays 50x the largest budget,
+    and the output says how many times the guided run's largest N_frame it holds and what 50x the cap costs."""
+    from pipeline.benchmarks.error import reference_basis
+    from pipeline.config import RenderConfig
+
+    plan = Plan((1, 4), (1_000, 2_000), 2, (0.5,))
+    runs = [{"method": "per-frame", "segments": []},
+            {"method": "guided", "segments": [{"n_frame": 4_000}, {"n_frame": 16_000}]}]
+    basis = reference_basis(plan, runs, RenderConfig(), ref_photons=2 * 100_000 * 4, ref_s=8.0)
+    assert basis["sized_by"] == "largest budget" and basis["guided_n_frame"] == 16_000
+    assert basis["factor_of_guided"] == 100_000 / 16_000
+    assert basis["cap_reference_photons"] == 50 * 1_280_000 and basis["cap_reference_s"] == 8.0 * 640
+    assert "reached N_frame 16,000" in basis["statement"] and "under 50x" in basis["statement"]
+    assert reference_basis(plan, runs[:1], RenderConfig(), 800_000, 8.0)["statement"] == ""

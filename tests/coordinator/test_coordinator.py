@@ -19,7 +19,7 @@ from pipeline.segments import next_n_frame
 
 # Small and quick, but every step runs: F_max grows 6 -> 10 and is checked, N_frame doubles, two segments.
 CHEAP = {"pilot_photons": 2000, "n_frame_min": 1000, "n_frame_max": 16000, "d_thr": 0.45,
-         "fmax_initial": 6, "fmax_step": 4, "fmax_cap": 10, "fmax_pays": True}
+         "fmax_initial": 6, "fmax_step": 4, "fmax_cap": 10}
 FRAMES = "60-80"
 
 
@@ -79,8 +79,7 @@ def test_every_step_runs_and_is_recorded(reference):
         # from a rung of the cap, the next N_frame is what segments.next_n_frame says of the steps so far
         n, cap, d_thr = [s["n_frame"] for s in r.n_frame_steps], CHEAP["n_frame_max"], CHEAP["d_thr"]
         assert n[0] in {-(-cap // 2 ** k) for k in range(16)}
-        assert n[1:] == [next_n_frame(n[i], d[i] / 100, d_thr, cap, (n[i - 1], d[i - 1] / 100) if i else None)
-                         for i in range(len(n) - 1)]
+        assert n[1:] == [next_n_frame(n[i], d[i] / 100, d_thr, cap) for i in range(len(n) - 1)]
         assert set(r.frames) == {str(f) for f in range(r.start, r.end + 1)}
         assert all(v["adaptation"] > 0 for v in r.frames.values())
         # F_max checked at the N_frame steps (segments.fmax_that_pays): the segment keeps what the last check said

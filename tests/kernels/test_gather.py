@@ -133,21 +133,6 @@ class TestLinearWindowFluxTwin(TestFrameSumsFluxTwin):
         return window_flux_reference(np.stack(per_frame), *args, linear=True)
 
 
-class TestTaperedWindowFluxTwin(TestFrameSumsFluxTwin):
-    """Tapered windows (``tapered_window`` in gather.cl, docs/estimators.md §1.7), pooled and linear,
-    against the NumPy twin within 1e-6; the taper is larger than every window's reach."""
-
-    TAPER = 9.0
-
-    def device(self, per_frame, *args):
-        return (frame_sums_flux_cl(per_frame, *args, taper=self.TAPER),
-                frame_sums_flux_cl(per_frame, *args, linear=True, taper=self.TAPER))
-
-    def twin(self, per_frame, *args):
-        return (window_flux_reference(np.stack(per_frame), *args, taper=self.TAPER),
-                window_flux_reference(np.stack(per_frame), *args, linear=True, taper=self.TAPER))
-
-
 def drifting_sums(values, n_emitted, noise_q):
     """(J, E, 1, 3, 4) element sums whose every corner receives n_g * values[g, e] in each channel,
     with Q = noise_q * n_g * values^2 (the photon noise of the linear-window tests)."""
@@ -187,52 +172,6 @@ def test_linear_windows_remove_a_drift_and_keep_the_pooled_mean_otherwise(device
     noisy = drifting_sums(np.stack([a + b * np.arange(n_frames)] * 2, axis=1), n, 1e3)
     np.testing.assert_allclose(flux(list(noisy), n, z, 6 * ones, [f], ev, 6, linear=True)[..., :3],
                                flux(list(noisy), n, z, 6 * ones, [f], ev, 6, linear=False)[..., :3], rtol=1e-12)
-
-
-@pytest.mark.parametrize("device", [True, False])
-def test_tapered_windows_weigh_near_frames_more(device):
-    """Closed forms: frame g of a window weighs a = 1 - |g - f| / taper, so a constant light stays
-    itself, a symmetric window's linear fit of a drift is exact, and a curving light b g^2 seen
-    through [f - 3, f + 3] comes out as sum a_g n_g b g^2 / sum a_g n_g, nearer the frame's own value
-    than the box window's mean; the variance term weighs Q by a^2."""
-    flux = frame_sums_flux_cl if device else (lambda s, *a, **k: window_flux_reference(np.stack(s), *a, **k))
-    n_frames, f, taper = 9, 4, 4.0
-    n = np.array([1000, 2000, 1000, 1500, 1000, 1000, 3000, 1000, 1000.0])
-    ev = np.arange(6).reshape(2, 3)
-    three = 3 * np.ones((1, 2), np.uint8)
-    g = np.arange(n_frames)
-    a = 1.0 - np.abs(g - f) / taper
-    inside = np.abs(g - f) <= 3
-    for linear in (False, True):
-        const = drifting_sums(np.full((n_frames, 2), 2.5), n, 0.5)
-        got = flux(list(const), n, three, three, [f], ev, 6, linear=linear, taper=taper)[0, 0]
-        np.testing.assert_allclose(got[:, :3], 2.5, rtol=1e-12)
-        w = (a * n)[inside]
-        np.testing.assert_allclose(got[:, 3], np.sum(a[inside] ** 2 * 0.5 * n[inside] * 2.5 ** 2) / w.sum() ** 2,
-                                   rtol=1e-12)
-    even = np.full(n_frames, 1000.0)
-    drift = drifting_sums(np.stack([2.0 + 0.1 * g] * 2, axis=1), even, 1e-12)
-    np.testing.assert_allclose(flux(list(drift), even, three, three, [f], ev, 6, linear=True, taper=taper)[0, 0, :, :3],
-                               2.0 + 0.1 * f, rtol=1e-12)
-    curve = drifting_sums(np.stack([0.05 * g ** 2] * 2, axis=1), n, 1e-12)
-    w = (a * n)[inside]
-    np.testing.assert_allclose(flux(list(curve), n, three, three, [f], ev, 6, taper=taper)[0, 0, :, :3],
-                               np.sum(w * 0.05 * g[inside] ** 2) / w.sum(), rtol=1e-12)
-    # Equal photons: the box's bias is b mean(x^2) = 4 b, the taper's b sum(a x^2) / sum(a) = 2.5 b
-    curve = drifting_sums(np.stack([0.05 * g ** 2] * 2, axis=1), even, 1e-12)
-    tapered = flux(list(curve), even, three, three, [f], ev, 6, taper=taper)[0, 0, 0, 0]
-    box = flux(list(curve), even, three, three, [f], ev, 6)[0, 0, 0, 0]
-    assert tapered - 0.05 * f ** 2 == pytest.approx(0.05 * 2.5, rel=1e-9)
-    assert box - 0.05 * f ** 2 == pytest.approx(0.05 * 4.0, rel=1e-9)
-
-
-def test_a_taper_that_would_weigh_a_frame_by_zero_or_less_is_refused():
-    n = np.full(3, 100.0)
-    sums = drifting_sums(np.ones((3, 1)), n, 0.1)
-    for taper in (0.5, -1.0, float("nan")):
-        with pytest.raises(ValueError, match="taper"):
-            window_flux_reference(sums, n, np.zeros((1, 1), np.uint8), np.zeros((1, 1), np.uint8), [1],
-                                  np.arange(3).reshape(1, 3), 3, taper=taper)
 
 
 def test01_parity_halves_add_up_to_the_whole(rng):

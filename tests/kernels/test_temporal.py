@@ -59,9 +59,6 @@ class TestWindowsTwin(KernelTwinTests):
                                                            frames=(10, 20))) for mode in MODES},
              **{f"{name}-{mode}-fmax{fmax}": (name, dict(mode=mode, fmax=fmax))
                 for name in ADVERSARIAL for mode in MODES for fmax in (0, 30, 500)},
-             "random-adaptive-centred": ("random", dict(fmax=30, similar=False)),
-             "random-adaptive-symmetric": ("random", dict(fmax=30, symmetric=True)),
-             "random-adaptive-symmetric-centred": ("random", dict(fmax=7, symmetric=True, similar=False)),
              "random-adaptive-extent7-k3": ("random", dict(fmax=30, min_extent=7, k_sigma=3.0, frames=(0, 50))),
              "flicker-extent5": ("flicker", dict(fmax=12, smoothing_frames=1, min_extent=5))}
 
@@ -122,66 +119,13 @@ def test05_min_extent_is_always_taken():
     counts[1::2] = 0
     n = np.full(20, 1e4)
     # Centred placement: (min_extent - 1) // 2 back, the rest forward, clipped at the ends
-    back, fwd = both(counts, n, fmax=30, smoothing_frames=1, similar=False)
+    back, fwd = both(counts, n, fmax=30, smoothing_frames=1)
     assert (back[1:-1] == 1).all() and (fwd[1:-1] == 1).all()
     assert back[0, 0] == 0 and fwd[0, 0] == 1 and back[-1, 0] == 1 and fwd[-1, 0] == 0
-    back5, fwd5 = both(counts, n, fmax=30, smoothing_frames=1, min_extent=6, similar=False)
+    back5, fwd5 = both(counts, n, fmax=30, smoothing_frames=1, min_extent=6)
     assert back5[10, 0] == 2 and fwd5[10, 0] == 3
-    # Placement by similarity: the 3 frames always, the extra two on one side (f +- 2 is in phase
-    # with f, f +- 1 is not, so one side costs one unlike frame and the centred placement two;
-    # between the two one-sided placements the first tried, all forward, wins the tie)
-    back, fwd = both(counts, n, fmax=30, smoothing_frames=1)
-    assert ((back + fwd) == 2).all()
-    assert (fwd[:-2] == 2).all() and (back[-2:] == 2).all()  # frame 18 has one frame ahead: back it goes
-    for similar in (True, False):  # capped by F_max/2 either way
-        back0, fwd0 = both(counts, n, fmax=0, smoothing_frames=1, similar=similar)
-        assert (back0 == 0).all() and (fwd0 == 0).all()
-
-
-def test05b_frames_beside_an_abrupt_change_keep_to_their_side():
-    # Lighting quadruples at frame 20. The 3-frame means put a third of the jump into mu at 19
-    # and 20, so both walks stop at once there; a centred minimal extent then pooled 20 into 19
-    # and 19 into 20, the placement by similarity takes [17, 19] and [20, 22].
-    counts = np.full((40, 1), 100, np.uint32)
-    counts[20:] = 400
-    n = np.full(40, 1e4)
-    back_c, fwd_c = both(counts, n, fmax=30, similar=False)
-    assert (back_c[19, 0], fwd_c[19, 0], back_c[20, 0], fwd_c[20, 0]) == (1, 1, 1, 1)
-    back, fwd = both(counts, n, fmax=30)
-    assert (back[19, 0], fwd[19, 0], back[20, 0], fwd[20, 0]) == (2, 0, 0, 2)
-    f = np.arange(40)
-    assert (f[:20] + fwd[:20, 0] < 20).all() and (f[20:] - back[20:, 0] >= 20).all()
-    assert ((back + fwd)[:, 0] >= 2).all()
-
-
-def test05d_a_small_difference_keeps_the_centred_extent():
-    # Both neighbours of frame 10 fail Condition (1) (125 against 100 +- 20): z^2 of each is
-    # 25^2 / 225 = 2.8; one-sided forward costs 2.8 (frame 12 equals frame 10), centred 5.6. The
-    # saving, 2.8, is below k^2 = 4: not significant, so the centred placement stays
-    counts = np.full((21, 1), 100, np.uint32)
-    counts[9] = counts[11] = 125
-    counts[8] = 122
-    back, fwd = both(counts, np.full(21, 1e4), fmax=30, smoothing_frames=1)
-    assert (back[10, 0], fwd[10, 0]) == (1, 1)
-    counts[11] = 160  # now the forward neighbour differs a lot (z^2 = 13.8): backward it goes
-    back, fwd = both(counts, np.full(21, 1e4), fmax=30, smoothing_frames=1)
-    assert (back[10, 0], fwd[10, 0]) == (2, 0)
-
-
-def test05c_symmetric_windows_cut_the_longer_walk():
-    # Lighting rises slowly (inside Condition (1)) until a jump at frame 26: frame 20's forward walk
-    # stops after 4 frames, its backward walk reaches F_max/2. Its window [5, 24] pools the light
-    # of frame 14.5, 5.5 frames early; cut to [16, 24] it pools frame 20's under a linear drift.
-    counts = (1000 + 2 * np.arange(41)).astype(np.uint32)[:, None]
-    counts[26:] += 2000
-    n = np.full(41, 1e4)
-    back, fwd = both(counts, n, fmax=30)
-    assert (back[20, 0], fwd[20, 0]) == (15, 4)
-    back_s, fwd_s = both(counts, n, fmax=30, symmetric=True)
-    assert (back_s[20, 0], fwd_s[20, 0]) == (4, 4)
-    assert (back_s == fwd_s)[3:23].all()  # away from the animation's start and the jump's minimal extents
-    pooled = lambda b, w: counts[20 - b:21 + w, 0].mean()  # noqa: E731
-    assert pooled(back_s[20, 0], fwd_s[20, 0]) == counts[20, 0] != pooled(back[20, 0], fwd[20, 0])
+    back0, fwd0 = both(counts, n, fmax=0, smoothing_frames=1)  # capped by F_max/2
+    assert (back0 == 0).all() and (fwd0 == 0).all()
 
 
 def test06_counts_are_compared_on_a_common_photon_budget():
@@ -210,9 +154,8 @@ def test07_sigma_grows_for_frames_with_fewer_photons():
     counts_same = counts.copy()
     counts_same[11:] = 132
     back2, fwd2 = both(counts_same, np.full(30, 1e4), fmax=30, smoothing_frames=1)
-    assert fwd2[10, 0] == 0 and back2[10, 0] == 10  # the walk stops; the backward one covers the minimal extent
-    back3, fwd3 = both(counts_same, np.full(30, 1e4), fmax=30, smoothing_frames=1, similar=False)
-    assert fwd3[10, 0] == 1  # the centred rule takes one frame forward whatever the walks cover
+    assert back2[10, 0] == 10
+    assert fwd2[10, 0] == 1  # the walk stops; the centred minimal extent takes one frame forward
 
 
 def test09_refuses_bad_input():

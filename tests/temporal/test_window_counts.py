@@ -1,6 +1,6 @@
 """pipeline/temporal.window_counts: Condition (1) counts the indirect hits (the photons of the map the
-windows collect) unless ``indirect_counts`` is off, so a frame where only the direct light changes
-does not cut the windows of the indirect map; with every hit counted, as §4's tables, it does."""
+windows collect), so a frame where only the direct light changes does not cut the windows of the
+indirect map; with every hit counted, as §4's tables, it would."""
 from __future__ import annotations
 
 import numpy as np
@@ -28,22 +28,21 @@ def _store(tmp_path) -> PhotonStore:
     return PhotonStore.open(url, mode="r", **IDENTITY)
 
 
-def _windows(store, config, frame):
-    counts = window_counts(store, config)
+def _windows(store, config, frame, counts):
     back, fwd = collection_windows(counts, store.emitted(None).astype(np.float64), [frame], mode="adaptive",
                                    fmax=8, config=config)
     return int(back[0, 0]), int(fwd[0, 0])
 
 
-def test_windows_follow_the_indirect_hits_unless_told_otherwise(tmp_path):
+def test_windows_follow_the_indirect_hits(tmp_path):
     store = _store(tmp_path)
-    on = RenderConfig(step_levels=0)  # Condition (1) alone: no element regions needed
-    off = on.replace(indirect_counts=False)
-    assert window_counts(store, on)[:, 0].tolist() == [INDIRECT] * FRAMES
-    assert window_counts(store, off)[:, 0].tolist() == [INDIRECT + DIRECT[f >= CHANGE] for f in range(FRAMES)]
+    config = RenderConfig(step_levels=0)  # Condition (1) alone: no element regions needed
+    assert window_counts(store)[:, 0].tolist() == [INDIRECT] * FRAMES
+    every = store.counts(kind="all")
+    assert every[:, 0].tolist() == [INDIRECT + DIRECT[f >= CHANGE] for f in range(FRAMES)]
     # The frame after the direct light's jump: its window reaches back over it only on indirect counts
-    assert _windows(store, on, CHANGE) == (4, 4)
-    back, _ = _windows(store, off, CHANGE)
-    assert back == (off.min_extent - 1) // 2  # the centred minimal extent only
+    assert _windows(store, config, CHANGE, window_counts(store)) == (4, 4)
+    back, _ = _windows(store, config, CHANGE, every)
+    assert back == (config.min_extent - 1) // 2  # the centred minimal extent only
     # Both kinds of hit stay in the store: the choice is only what the windows read
     assert store.counts(kind="direct")[:, 0].tolist() == [DIRECT[f >= CHANGE] for f in range(FRAMES)]
