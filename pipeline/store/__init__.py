@@ -7,8 +7,8 @@ counts (Condition (1), p_me, the step test) and its *sums*, the sufficient stati
 gather (per element, corner and parity the indirect energy sums and sums of squares, and the
 direct flux per vertex; pipeline/batch_sums.py, sparse where a batch hits few elements). The
 store keeps those for every batch; the raw hit records only when made with ``keep_records``
-(``loom render --keep-records``), for re-estimation and research: a default ROOM render's
-store is about 1 byte a photon where its records took 40.
+(``loom render --keep-records``), for re-estimation and research: the default ROOM render's
+store takes a few bytes a photon (README, "Photon shooting") where its records took about 40.
 
 Record (docs/estimators.md §1.1), exactly ``RECORD_BYTES`` = 20 bytes uncompressed, stored struct-of-arrays::
 
