@@ -396,7 +396,7 @@ class SegmentRun:
             fmax_steps = []
         else:
             place, fmax_steps = fmax_loop(place.start, place.fmax, job.last, p_me_of, p_thr=cfg.p_thr,
-                                          step=cfg.fmax_step, cap=cfg.fmax_cap)
+                                          step=cfg.fmax_step, cap=cfg.fmax_cap, widen_only=cfg.fmax_pays)
         t_fmax = time.perf_counter()
 
         # Step 3: N_frame doubled while d_AQM > d_thr; at each N_frame, F_max first steps back while
@@ -407,7 +407,7 @@ class SegmentRun:
 
         def d_aqm_of(n_frame: int) -> float:
             nonlocal place, ladder
-            checking = len(ladder) > 1
+            checking = cfg.fmax_pays and len(ladder) > 1
             # the check looks at the last frame too, whose windows reach F_max/2 frames past it
             self.shoot({f: n_frame for f in (reach_frames(place, job.last) if checking else place.frames)})
             if checking:

@@ -125,20 +125,21 @@ def p_me(back: np.ndarray, fwd: np.ndarray, fmax: int, considered: np.ndarray | 
     return float(np.count_nonzero((back >= half) & mask)) / n, float(np.count_nonzero((fwd >= half) & mask)) / n
 
 
-def grow_fmax(fmax: int, p_back: float, p_fwd: float, *, p_thr: float, step: int, cap: int) -> int | None:
+def grow_fmax(fmax: int, p_back: float, p_fwd: float, *, p_thr: float, step: int, cap: int,
+              widen_only: bool = False) -> int | None:
     """The next F_max to try, or None to keep ``fmax`` (§5.2.2).
 
     F_max grows while p_me >= p_thr in either direction: the paper stops "until p_me < p_thr",
     and its final K_2 (F_max = 30) has p_me below p_thr both ways (36 % and 30 %, §6). Growth is
     by ``step`` frames up to ``cap`` (15 -> 30 -> 44 with the defaults, the paper's F_max values).
-    A growth that keeps the windows' half-width F_max // 2 (14 -> 15) is not tried, since the F_max
-    check of Step 3 (:func:`fmax_that_pays`) would cut it back at every N_frame: the windows are the
+    ``widen_only`` (the F_max check is on): a growth that keeps the windows' half-width F_max // 2
+    (14 -> 15) is not tried, since the check would cut it back at every N_frame: the windows are the
     same, so :func:`growth_ratio` is inf. Trying it cost each ROOM segment a p_me and a check.
     """
     if max(p_back, p_fwd) < p_thr or fmax >= cap:
         return None
     grown = min(fmax + step, cap)
-    if grown // 2 == fmax // 2:
+    if widen_only and grown // 2 == fmax // 2:
         return None
     return grown
 
@@ -251,7 +252,8 @@ def doubling_loop(n_frame: int, measure: Callable[[int], float], *, d_thr: float
 
 
 def fmax_loop(start: int, fmax: int, last: int, measure: Callable[[Placement], tuple[float, float]], *,
-              p_thr: float, step: int, cap: int, grow: bool = True) -> tuple[Placement, list[dict]]:
+              p_thr: float, step: int, cap: int, grow: bool = True,
+              widen_only: bool = False) -> tuple[Placement, list[dict]]:
     """Step 2's loop: ``measure(placement)`` gives (p_me back, p_me fwd) at its K (the caller
     traces the placement's frames); F_max grows by :func:`grow_fmax` until it stops, the cap, or
     the segment reaches the animation's end. Returns the placement and the steps."""
@@ -260,7 +262,7 @@ def fmax_loop(start: int, fmax: int, last: int, measure: Callable[[Placement], t
     while True:
         pb, pf = measure(place)
         steps.append({"fmax": place.fmax, "k": place.k, "p_me_back": float(pb), "p_me_fwd": float(pf)})
-        grown = (grow_fmax(place.fmax, pb, pf, p_thr=p_thr, step=step, cap=cap)
+        grown = (grow_fmax(place.fmax, pb, pf, p_thr=p_thr, step=step, cap=cap, widen_only=widen_only)
                  if grow and place.end < last else None)
         if grown is None:
             return place, steps

@@ -19,7 +19,7 @@ from pipeline.segments import next_n_frame
 
 # Small and quick, but every step runs: F_max grows 6 -> 10 and is checked, N_frame doubles, two segments.
 CHEAP = {"pilot_photons": 2000, "n_frame_min": 1000, "n_frame_max": 16000, "d_thr": 0.45,
-         "fmax_initial": 6, "fmax_step": 4, "fmax_cap": 10}
+         "fmax_initial": 6, "fmax_step": 4, "fmax_cap": 10, "fmax_pays": True}
 FRAMES = "60-80"
 
 

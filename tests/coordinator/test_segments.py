@@ -179,18 +179,22 @@ def test_fmax_loop_grows_until_p_me_falls_below_p_thr():
     assert len(steps) == 1 and place.end == 300
 
 
-def test_fmax_loop_skips_growth_that_keeps_the_windows():
-    # 14 -> 15 keeps the half-width 7: the F_max check would cut it back, so it is not tried
-    assert grow_fmax(14, 0.9, 0.9, p_thr=0.4, step=15, cap=15) is None
-    assert grow_fmax(14, 0.9, 0.9, p_thr=0.4, step=2, cap=44) == 16
+def test_fmax_loop_with_the_check_skips_growth_that_keeps_the_windows():
+    # 14 -> 15 keeps the half-width 7: with the F_max check on it is not tried (nothing to measure)
+    assert grow_fmax(14, 0.9, 0.9, p_thr=0.4, step=15, cap=15) == 15
+    assert grow_fmax(14, 0.9, 0.9, p_thr=0.4, step=15, cap=15, widen_only=True) is None
+    assert grow_fmax(14, 0.9, 0.9, p_thr=0.4, step=2, cap=44, widen_only=True) == 16
     seen = []
 
     def measure(place):
         seen.append(place.fmax)
         return 0.98, 0.98
 
-    place, steps = fmax_loop(1, 14, 135, measure, p_thr=0.4, step=15, cap=15)
+    place, steps = fmax_loop(1, 14, 135, measure, p_thr=0.4, step=15, cap=15, widen_only=True)
     assert seen == [14] and place.fmax == 14 and place.frames == list(range(1, 16))
+    seen.clear()
+    place, steps = fmax_loop(1, 14, 135, measure, p_thr=0.4, step=15, cap=15)
+    assert seen == [14, 15] and place.fmax == 15
 
 
 # --- Step 3: the doubling loop ----------------------------------------------------------------
