@@ -218,8 +218,7 @@ class SegmentRun:
             results = run_tasks(self.client, shoot_task, calls, desc="shoot", progress=False,
                                 group=group_sizes(len(calls), len(self.workers()), SHOOT_GROUP))
         for r in results.values():
-            self.add_times({**r, **{f"shoot_{k}": r[k] for k in ("read_bytes", "write_bytes") if k in r}},
-                           ("pose_s", "trace_s", "write_s", "sums_s", "shoot_read_bytes", "shoot_write_bytes"))
+            self.add_times(r, ("pose_s", "trace_s", "write_s", "sums_s", "shoot_read_bytes", "shoot_write_bytes"))
         self.batches_traced += len(calls)
         self.times["shoot_s"] += time.perf_counter() - t0
 

@@ -203,4 +203,4 @@ def shoot_task(*, store_url: str, scene_path: str, scene_hash: str, element_size
     return {"frame": frame, "batch": batch, "skipped": False, "photons": n_photons,
             "records": len(result.key), "rays": result.rays_cast, "capped": result.stats["capped"],
             "pose_s": t1 - t0, "trace_s": t2 - t1, "write_s": t3 - t2 - summed[0], "sums_s": summed[0],
-            "write_bytes": io["write_bytes"], "read_bytes": io["read_bytes"]}
+            **{f"shoot_{k}": v for k, v in io.items()}}
