@@ -329,10 +329,3 @@ def irradiance(flux: np.ndarray, vertex_areas: np.ndarray) -> np.ndarray:
     safe = np.where(areas > 0, areas, 1.0)
     return np.where((areas > 0)[..., None], flux[..., :3] / safe[..., None], 0.0)
 
-
-def irradiance_variance(flux: np.ndarray, vertex_areas: np.ndarray) -> np.ndarray:
-    """Var(E_v) of the luminance, Q_v / A_v^2 (docs/estimators.md §1.3; Q_v is slot 3 of vertex flux
-    ``(..., V, 4)``: the summed photon-weight squares over photons emitted squared); 0 where A_v = 0."""
-    areas = np.asarray(vertex_areas, np.float64)
-    safe = np.where(areas > 0, areas, 1.0)
-    return np.where(areas > 0, flux[..., 3] / (safe * safe), 0.0)

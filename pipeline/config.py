@@ -83,12 +83,6 @@ class RenderConfig:
     n_frame_max: int = _param(1_280_000, "segments", "largest N_frame of the doubling loop, reported when hit, "
                               "§5.2.3", 1, 1 << 30)
     d_thr: float = _param(0.03, "segments", "d_thr, share of AQM pixels above 1 JND, §5.2.3", 0.0, 1.0)
-    # Off by default: on, ROOM's whole animation at 160,000 photons a frame has 19 % less error and
-    # 11 % less flicker, but at the default cap four of its eight K are 1.05-3.64 % of their pixels
-    # from the converged references, over the paper's 1 % (README "F_max that pays")
-    fmax_pays: bool = _param(False, "segments", "at each N_frame of Step 3, F_max steps back while its last growth "
-                             "adds more squared bias than the variance it removes (pipeline/segments.py "
-                             "fmax_that_pays; off: p_me alone, §5.2.2)")
     aqm_size: int = _param(256, "segments", "AQM input size in pixels, §6", 16, 4096)
     # 1 turns it off: ROOM's guided run at the 160,000 cap then traces 3.5 M photons fewer, with
     # flicker 0.0185 -> 0.0191 and relative L2 0.0391 -> 0.0407 (README "Where the guided run's flicker")

@@ -49,15 +49,12 @@ from .segments import (
     doubling_loop,
     energy_error,
     fmax_loop,
-    fmax_that_pays,
-    growth_ratio,
     ladder_n_frame,
     needed_n_frame,
     p_me,
     photon_targets,
     pilot_n_frame,
     place_segment,
-    reach_frames,
 )
 from .shoot import shoot_key
 
@@ -294,27 +291,6 @@ class SegmentRun:
         progress(f"segment {self._index}: F_max {place.fmax}, K {place.k}: p_me {pb:.2f} back, {pf:.2f} forward")
         return pb, pf
 
-    def growth_ratio(self, short: int, place: Placement, targets: dict[int, int], temporal: str) -> float:
-        """segments.growth_ratio over the frames of segments.check_frames(``place``): its maps with
-        windows limited to F_max ``short`` against its own F_max, unfiltered (the check is of the
-        pooling in time, not of Step 5)."""
-        from .segments import check_frames
-        from .temporal import illumination_maps
-        from .tonemap import luminance
-
-        use = self.batches(targets)
-        frames = check_frames(place)
-        lits = [list(illumination_maps(self.store, self.elements, self.scene, [f - 1 for f in frames], mode=temporal,
-                                       fmax=f, config=self.config, batches=use, with_variance=True))
-                for f in (short, place.fmax)]
-        y = [np.concatenate([luminance(lit.irradiance) for lit in one]) for one in lits]
-        v = [np.concatenate([lit.variance for lit in one]) for one in lits]
-        areas = np.concatenate([self.elements.vertex_areas(self.scene.pose_frame(f)) for f in frames])
-        ratio = growth_ratio(y[0], y[1], v[0], v[1], areas)
-        progress(f"segment {self._index}: N_frame {targets[place.k]:,} at frames {frames}: F_max {short} -> "
-                 f"{place.fmax} change/variance {ratio:.2f}")
-        return ratio
-
     # --- Step 3 ------------------------------------------------------------------------------
     def d_aqm(self, place: Placement, targets: dict[int, int], index: int, temporal: str) -> float:
         """d_AQM (percent) of I1(K) against I2(K) as the viewer sees them; the M_AQM picture is
@@ -395,30 +371,12 @@ class SegmentRun:
             fmax_steps = []
         else:
             place, fmax_steps = fmax_loop(place.start, place.fmax, job.last, p_me_of, p_thr=cfg.p_thr,
-                                          step=cfg.fmax_step, cap=cfg.fmax_cap, widen_only=cfg.fmax_pays)
+                                          step=cfg.fmax_step, cap=cfg.fmax_cap)
         t_fmax = time.perf_counter()
 
-        # Step 3: N_frame doubled while d_AQM > d_thr; at each N_frame, F_max first steps back while
-        # its last growth no longer pays (segments.fmax_that_pays), down to the first segment's F_max:
-        # the one handed on is Step 2's start, not a floor (segments after a long one would keep it)
-        ladder = [s["fmax"] for s in fmax_steps] or [place.fmax]
-        ladder, fmax_checks = ([job.fmax] if job.fmax < ladder[0] else []) + ladder, []
-
+        # Step 3: N_frame doubled while d_AQM > d_thr
         def d_aqm_of(n_frame: int) -> float:
-            nonlocal place, ladder
-            checking = cfg.fmax_pays and len(ladder) > 1
-            # the check looks at the last frame too, whose windows reach F_max/2 frames past it
-            self.shoot({f: n_frame for f in (reach_frames(place, job.last) if checking else place.frames)})
-            if checking:
-                def ratio_of(short: int, long: int) -> float:  # ``at`` lies inside ``place``: traced above
-                    at = place_segment(place.start, long, job.last)
-                    return self.growth_ratio(short, at, {**prior, **{f: n_frame for f in reach_frames(at, job.last)}},
-                                             temporal)
-
-                ladder, checks = fmax_that_pays(ladder, ratio_of)
-                fmax_checks.extend({"n_frame": int(n_frame), **c} for c in checks)
-                if ladder[-1] != place.fmax:
-                    place = place_segment(place.start, ladder[-1], job.last)
+            self.shoot({f: n_frame for f in place.frames})
             return self.d_aqm(place, {**prior, **{f: n_frame for f in place.frames}}, index, temporal)
 
         n, n_steps, capped = doubling_loop(n, d_aqm_of, d_thr=cfg.d_thr, n_max=cfg.n_frame_max)
@@ -432,7 +390,6 @@ class SegmentRun:
             index=index, start=place.start, end=place.end, k=place.k, fmax=place.fmax, n_frame=n,
             temporal=temporal, guided=True, decision_hash=job.decision_hash, end_frames=ends,
             end_factor=cfg.end_photons, pilot=pilot, fmax_steps=fmax_steps, n_frame_steps=n_steps, capped=capped,
-            fmax_checks=fmax_checks,
             windows_at_k=self._windows_at_k,
             times_s={"init_s": t_init - t_start, "fmax_s": t_fmax - t_init, "n_frame_s": t_n - t_fmax,
                      "decide_s": time.perf_counter() - t_start})

@@ -29,7 +29,7 @@ from string import Template
 
 from .errors import LoomError
 from .figures import figure, png_bytes
-from .segment_records import SegmentRecord, fmax_checks_text, read_records, used_fmax_step
+from .segment_records import SegmentRecord, read_records, used_fmax_step
 
 VIDEO_EMBED_MAX = 64 * 2**20
 FILMSTRIP_FRAMES = 12
@@ -188,8 +188,6 @@ def _segments(out: Path, records: list[SegmentRecord], config: dict) -> str:
             steps.append(f"<li>segment {r.index}, F_max steps (p_me back/fwd): "
                          + _e(", ".join(f"{s['fmax']} ({s['p_me_back']:.2f}/{s['p_me_fwd']:.2f})"
                                         for s in r.fmax_steps)) + "</li>")
-        if r.fmax_checks:
-            steps.append(f"<li>segment {r.index}, {_e(fmax_checks_text(r))}</li>")
     return (table + (f"<ul>{''.join(steps)}</ul>" if steps else "")
             + _segment_picture(records, config)
             + (_img(_fig6_plot(out, records, config), "fig6-plot", "Fig. 6: d_AQM against N_frame at each K; "

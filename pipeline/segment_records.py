@@ -22,6 +22,11 @@ from .errors import LoomError
 
 DIRECTORY = "segments"
 STATUSES = ("decided", "done")
+# Fields older records hold that the code no longer writes: dropped on reading, so `loom segments`
+# still shows such a record and a rerun finds it stale (its decision_hash digests settings that are
+# gone) and decides the segment again, reusing its photons. Any other unknown field is refused.
+# fmax_checks: the F_max checks of the deleted fmax_pays switch (docs/defaults.md).
+RETIRED_FIELDS = ("fmax_checks",)
 
 
 @dataclass
@@ -41,8 +46,6 @@ class SegmentRecord:
     pilot: dict = field(default_factory=dict)  # frame, n_probe, e_probe, e_target, n_pilot (§5.2.1)
     fmax_steps: list = field(default_factory=list)  # [{fmax, k, p_me_back, p_me_fwd}] (§5.2.2)
     n_frame_steps: list = field(default_factory=list)  # [{n_frame, d_aqm}] (§5.2.3), d_aqm in %
-    # [{n_frame, fmax_short, fmax_long, ratio, limit, pays}]: F_max checked at each N_frame (segments.fmax_that_pays)
-    fmax_checks: list = field(default_factory=list)
     capped: bool = False  # the doubling loop stopped at n_frame_max with d_AQM > d_thr
     windows_at_k: dict = field(default_factory=dict)  # Fig. 5 at K's last d_AQM (coordinator.window_histogram)
     frames: dict = field(default_factory=dict)  # str(frame) -> {adaptation, digest, filtered, window}
@@ -75,21 +78,12 @@ class SegmentRecord:
 
     @classmethod
     def from_dict(cls, data: dict) -> "SegmentRecord":
-        return cls(**data)
+        return cls(**{k: v for k, v in data.items() if k not in RETIRED_FIELDS})
 
 
 def used_fmax_step(r: SegmentRecord) -> dict:
-    """The Step 2 step of the F_max the segment kept ({} without one): the last step, unless a later
-    N_frame stepped F_max back (``fmax_checks``)."""
+    """The Step 2 step of the F_max the segment kept ({} without one)."""
     return next((s for s in reversed(r.fmax_steps) if s["fmax"] == r.fmax), {})
-
-
-def fmax_checks_text(r: SegmentRecord) -> str:
-    """The F_max checks of Step 3 in one line: at N_frame, short -> long F_max, the ratio against
-    its limit (segments.pays_below), pays or not."""
-    checks = ", ".join(f"{c['n_frame']:,}: {c['fmax_short']}->{c['fmax_long']} {c['ratio']:.2f}/{c['limit']:.2f} "
-                       f"{'pays' if c['pays'] else 'no'}" for c in r.fmax_checks)
-    return f"F_max checks (change/variance ratio against its limit): {checks}"
 
 
 def record_path(out_dir: str | Path, index: int) -> Path:
@@ -158,8 +152,6 @@ def table(records: list[SegmentRecord]) -> list[str]:
         if len(r.fmax_steps) > 1:
             steps = ", ".join(f"{s['fmax']} ({s['p_me_back']:.2f}/{s['p_me_fwd']:.2f})" for s in r.fmax_steps)
             lines.append(f"{'':>4}F_max steps (p_me back/fwd): {steps}")
-        if r.fmax_checks:
-            lines.append(f"{'':>4}{fmax_checks_text(r)}")
     if any(r.capped for r in records):
         lines.append("* N_frame reached n_frame_max with d_AQM still above d_thr")
     return lines

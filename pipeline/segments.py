@@ -4,9 +4,7 @@ Nothing here touches Dask, zarr or files, so every rule is tested on synthetic i
 answers (tests/coordinator/test_segments.py); pipeline/coordinator.py only runs them.
 
 * :func:`energy_error`, :func:`pilot_n_frame` — Step 1 (§5.2.1, Eq. 2);
-* :func:`p_me`, :func:`grow_fmax` — Step 2 (§5.2.2); :func:`growth_ratio`, :func:`fmax_that_pays` —
-  Step 2 checked again at each N_frame of Step 3 (ours: a longer segment must remove more noise than
-  the bias it adds);
+* :func:`p_me`, :func:`grow_fmax` — Step 2 (§5.2.2);
 * :func:`ladder_n_frame`, :func:`next_n_frame` — Step 3 (§5.2.3; the ladder is ours), one doubling a
   step as the paper's; :func:`doublings_ahead` extrapolates what a capped segment still lacked;
 * :func:`place_segment`, :func:`photon_targets` — where segments lie and how many photons each
@@ -125,82 +123,16 @@ def p_me(back: np.ndarray, fwd: np.ndarray, fmax: int, considered: np.ndarray | 
     return float(np.count_nonzero((back >= half) & mask)) / n, float(np.count_nonzero((fwd >= half) & mask)) / n
 
 
-def grow_fmax(fmax: int, p_back: float, p_fwd: float, *, p_thr: float, step: int, cap: int,
-              widen_only: bool = False) -> int | None:
+def grow_fmax(fmax: int, p_back: float, p_fwd: float, *, p_thr: float, step: int, cap: int) -> int | None:
     """The next F_max to try, or None to keep ``fmax`` (§5.2.2).
 
     F_max grows while p_me >= p_thr in either direction: the paper stops "until p_me < p_thr",
     and its final K_2 (F_max = 30) has p_me below p_thr both ways (36 % and 30 %, §6). Growth is
     by ``step`` frames up to ``cap`` (15 -> 30 -> 44 with the defaults, the paper's F_max values).
-    ``widen_only`` (the F_max check is on): a growth that keeps the windows' half-width F_max // 2
-    (14 -> 15) is not tried, since the check would cut it back at every N_frame: the windows are the
-    same, so :func:`growth_ratio` is inf. Trying it cost each ROOM segment a p_me and a check.
     """
     if max(p_back, p_fwd) < p_thr or fmax >= cap:
         return None
-    grown = min(fmax + step, cap)
-    if widen_only and grown // 2 == fmax // 2:
-        return None
-    return grown
-
-
-def pays_below(fmax_short: int, fmax_long: int) -> float:
-    """The :func:`growth_ratio` under which growing F_max from ``fmax_short`` to ``fmax_long`` lowers
-    the expected squared error at K: 2 rho^2 / (rho^2 + 1), rho the ratio of the half-widths.
-
-    Why: the squared change the longer windows make estimates (b_long - b_short)^2 + the variance
-    they remove, V. What the growth costs is b_long^2 - b_short^2, which needs b_short: a light that
-    curves in time biases a window by its curvature times mean(x^2) (docs/estimators.md §1.7; the
-    linear windows of §1.6 take out a drift), so b_long = rho^2 b_short, and then b_long^2 - b_short^2
-    = (b_long - b_short)^2 (rho^2 + 1) / (rho^2 - 1). It pays while that stays below V, that is
-    while the ratio stays below 1 + (rho^2 - 1) / (rho^2 + 1). 15 -> 30: 1.64; 30 -> 44: 1.37; 2
-    for a short window taken as unbiased (rho -> inf); 1 when the windows are the same.
-    """
-    h_s, h_l = int(fmax_short) // 2, int(fmax_long) // 2
-    if h_s <= 0:
-        return 2.0
-    rho2 = (h_l / h_s) ** 2
-    return 2.0 * rho2 / (rho2 + 1.0)
-
-
-def growth_ratio(y_short: np.ndarray, y_long: np.ndarray, var_short: np.ndarray, var_long: np.ndarray,
-                 areas: np.ndarray) -> float:
-    """How much a longer F_max changes the map at K against the noise it removes (ours, not §5.2.2).
-
-    ``y_*`` (V,) luminance irradiance at K with windows limited to the shorter and the longer F_max,
-    ``var_*`` (V,) their variances (pipeline/temporal.py ``with_variance``), ``areas`` (V,). The long
-    window holds the short one's photons, so y_long - y_short has variance var_short - var_long, and
-    E[(y_long - y_short)^2] = (b_long - b_short)^2 + var_short - var_long for the windows' biases b.
-    Returns sum A (y_long - y_short)^2 / sum A (var_short - var_long), area-weighted as the error
-    benchmark's relative L2: 1 where the longer windows only pool more of the same lighting; above
-    :func:`pays_below` the squared bias they add exceeds the variance they remove. inf when nothing
-    was removed.
-    """
-    a = np.asarray(areas, np.float64)
-    d = np.asarray(y_long, np.float64) - np.asarray(y_short, np.float64)
-    removed = float(np.sum(a * (np.asarray(var_short, np.float64) - np.asarray(var_long, np.float64))))
-    if not removed > 0:
-        return math.inf
-    return float(np.sum(a * d * d)) / removed
-
-
-def fmax_that_pays(ladder: list[int], ratio_of: Callable[[int, int], float]) -> tuple[list[int], list[dict]]:
-    """The F_max values of Step 2 (``ladder``, ascending, the last in use) cut back while their last
-    growth no longer pays at the N_frame being tested: ``ratio_of(short, long)`` gives
-    :func:`growth_ratio`. Why again at every N_frame: Step 2 runs at the pilot's N_frame, where the
-    noise hides a bias that the doubled N_frame of Step 3 shows (ROOM at 160,000 photons a frame:
-    F_max 44 raised the error against the reference by a third, README "F_max that pays").
-    Returns the ladder kept and the checks made."""
-    ladder, steps = list(ladder), []
-    while len(ladder) > 1:
-        ratio, limit = float(ratio_of(ladder[-2], ladder[-1])), pays_below(ladder[-2], ladder[-1])
-        pays = ratio < limit
-        steps.append({"fmax_short": int(ladder[-2]), "fmax_long": int(ladder[-1]), "ratio": ratio, "limit": limit,
-                      "pays": pays})
-        if pays:
-            break
-        ladder.pop()
-    return ladder, steps
+    return min(fmax + step, cap)
 
 
 # --- Step 3: number of photons (§5.2.3) --------------------------------------------------------
@@ -252,8 +184,7 @@ def doubling_loop(n_frame: int, measure: Callable[[int], float], *, d_thr: float
 
 
 def fmax_loop(start: int, fmax: int, last: int, measure: Callable[[Placement], tuple[float, float]], *,
-              p_thr: float, step: int, cap: int, grow: bool = True,
-              widen_only: bool = False) -> tuple[Placement, list[dict]]:
+              p_thr: float, step: int, cap: int, grow: bool = True) -> tuple[Placement, list[dict]]:
     """Step 2's loop: ``measure(placement)`` gives (p_me back, p_me fwd) at its K (the caller
     traces the placement's frames); F_max grows by :func:`grow_fmax` until it stops, the cap, or
     the segment reaches the animation's end. Returns the placement and the steps."""
@@ -262,8 +193,7 @@ def fmax_loop(start: int, fmax: int, last: int, measure: Callable[[Placement], t
     while True:
         pb, pf = measure(place)
         steps.append({"fmax": place.fmax, "k": place.k, "p_me_back": float(pb), "p_me_fwd": float(pf)})
-        grown = (grow_fmax(place.fmax, pb, pf, p_thr=p_thr, step=step, cap=cap, widen_only=widen_only)
-                 if grow and place.end < last else None)
+        grown = grow_fmax(place.fmax, pb, pf, p_thr=p_thr, step=step, cap=cap) if grow and place.end < last else None
         if grown is None:
             return place, steps
         place = place_segment(start, grown, last)
@@ -301,20 +231,6 @@ def place_segment(start: int, fmax: int, last: int) -> Placement:
         end = last
     k = min(start + half, (start + end) // 2) if end == last else start + half
     return Placement(start, k, end, fmax)
-
-
-def check_frames(place: Placement) -> list[int]:
-    """Where the F_max check looks (:func:`growth_ratio`): K, and the segment's last frame. The
-    paper looks at K alone (§5.2.2), but the last frame's windows reach F_max/2 frames past the
-    segment, into lighting K does not see. On ROOM at 40,000 photons a frame, F_max 44 passed at
-    K = 23 and doubled the error of frames 37-45 (README "how far the guided run is from 1/5")."""
-    return sorted({place.k, place.end})
-
-
-def reach_frames(place: Placement, last: int) -> list[int]:
-    """The segment's frames and the F_max/2 after it that its last frame's windows reach (up to
-    ``last``): what the check at :func:`check_frames` needs traced."""
-    return list(range(place.start, min(place.end + place.fmax // 2, last) + 1))
 
 
 def end_frames(first: int, last: int, fmax: int) -> set[int]:

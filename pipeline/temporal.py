@@ -31,7 +31,7 @@ import numpy as np
 import numpy.typing as npt
 
 from kernels.filter import adaptive_filter_cl, neighbourhood
-from kernels.gather import frame_sums_flux_cl, irradiance, irradiance_variance
+from kernels.gather import frame_sums_flux_cl, irradiance
 from kernels.temporal import MAX_HALF_FMAX, MODES, windows_cl
 
 from .batch_sums import FRAME_SUMS
@@ -55,7 +55,6 @@ class FrameIllumination:
     fwd: np.ndarray  # (E,) uint8
     rings: np.ndarray | None  # (P, V) uint8 filter support taken (0: unfiltered), None: no filter
     direct: np.ndarray | None = None  # (V, 3) float64 the frame's own direct estimate (with_direct)
-    variance: np.ndarray | None = None  # (V,) float64 variance of the luminance irradiance (with_variance)
 
 
 def _runs(has_photons: np.ndarray) -> list[tuple[int, int]]:
@@ -150,7 +149,6 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
                       config: RenderConfig = RenderConfig(), kind: str = "indirect",
                       split_parity: bool = False, spatial_filter: bool = False,
                       batches: npt.ArrayLike | None = None, chunk: int = 96, with_direct: bool = False,
-                      with_variance: bool = False,
                       times: dict[str, float] | None = None) -> Iterator[FrameIllumination]:
     """Yield the illumination of every requested frame, in frame order.
 
@@ -170,8 +168,6 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
     with_direct : also give each frame's mesh-based direct estimate from its own direct photons
         (workers/reconstruct.vertex_irradiance, §4), from the batch sums the gather holds already
         (kind "indirect" only).
-    with_variance : also give each vertex's luminance-irradiance variance, sum Q / (photons A_v)^2
-        (docs/estimators.md §1.3, §1.6; unfiltered maps only, one parity).
     times : if given, seconds spent are added to its keys ``read_s`` (stored sums or records),
         ``frame_sums_s`` (records summed where a batch has no stored sums, once per worker),
         ``windows_s``, ``sums_s`` (gather), ``filter_s`` (filter and irradiance) and ``direct_s``.
@@ -183,8 +179,6 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
     check_window_options(mode, fmax)
     if with_direct and kind != "indirect":
         raise ValueError("with_direct comes with the indirect map's batch sums (kind 'indirect')")
-    if with_variance and (spatial_filter or split_parity):
-        raise ValueError("with_variance is of the unfiltered full map")
     fmax = int(fmax)
     frames = np.arange(store.n_frames) if frames is None else np.unique(np.asarray(frames, np.int64))
     if len(frames) and (frames.min() < 0 or frames.max() >= store.n_frames):
@@ -230,12 +224,10 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
                                             photons=config.filter_photons, z=config.filter_z)
         else:
             irr = irradiance(flux, areas[:, None, :])
-        var = irradiance_variance(flux[:, 0], areas) if with_variance else None
         clock.lap("filter_s")
         for i, (frame_index, j) in enumerate(zip(f.tolist(), part.tolist())):
             yield FrameIllumination(frame_index, irr[i] if split_parity else irr[i, 0], back[j], fwd[j],
-                                    None if rings is None else rings[i], own[i],
-                                    None if var is None else var[i])
+                                    None if rings is None else rings[i], own[i])
 
 
 _per_mesh: dict[int, tuple] = {}  # id(element mesh) -> (weak reference to it, {key: value})

@@ -11,79 +11,21 @@ import pytest
 from pipeline.config import RenderConfig
 from pipeline.segments import (
     calibrated_start,
-    check_frames,
     doubling_loop,
     doublings_ahead,
     end_frames,
     energy_error,
     fmax_loop,
-    fmax_that_pays,
     grow_fmax,
-    growth_ratio,
     ladder_n_frame,
     needed_n_frame,
     next_n_frame,
     p_me,
-    pays_below,
     photon_targets,
     pilot_n_frame,
     place_segment,
-    reach_frames,
 )
 from pipeline.temporal import collection_windows
-
-
-# --- Step 2 checked at each N_frame: does a longer F_max pay? -----------------------------------
-def test_growth_ratio_is_one_where_the_lighting_holds_and_large_where_it_drifts(rng):
-    v, frames = 4000, 31
-    areas = rng.uniform(0.5, 2.0, v)
-    lam = rng.gamma(3.0, 10.0, v)
-    # Unchanged lighting: the longer window only pools more of the same, E[ratio] = 1 exactly
-    steady = np.broadcast_to(lam, (frames, v))
-    k = frames // 2
-    counts = rng.poisson(steady)
-    short = counts[k - 7:k + 8].sum(0), 15
-    long_ = counts.sum(0), frames
-    y = [c / n / areas for c, n in (short, long_)]
-    var = [c / n ** 2 / areas ** 2 for c, n in (short, long_)]
-    r = growth_ratio(y[0], y[1], var[0], var[1], areas)
-    assert abs(r - 1.0) < 0.1 and r < pays_below(14, 30)
-    # A light brightening away from K (a curve: the pooled mean of the long window is biased by
-    # about 0.002 x mean(x^2) = 16 % where the short one is 4 %): the ratio is well above 2
-    x = np.arange(frames) - k
-    curved = lam * (1.0 + 0.002 * x[:, None] ** 2)
-    counts = rng.poisson(curved)
-    y = [counts[k - 7:k + 8].sum(0) / 15 / areas, counts.sum(0) / frames / areas]
-    var = [counts[k - 7:k + 8].sum(0) / 15 ** 2 / areas ** 2, counts.sum(0) / frames ** 2 / areas ** 2]
-    assert growth_ratio(y[0], y[1], var[0], var[1], areas) > 3 * pays_below(14, 30)
-    # The formula by hand: sum A d^2 / sum A (var_s - var_l)
-    assert growth_ratio(np.array([1.0, 2.0]), np.array([2.0, 2.0]), np.array([0.5, 0.25]), np.array([0.25, 0.0]),
-                        np.array([1.0, 2.0])) == pytest.approx(1.0 / (0.25 + 0.5))
-    # Nothing removed (a window that cannot grow): growth cannot pay
-    assert growth_ratio(y[0], y[0], var[0], var[0], areas) == math.inf
-
-
-def test_pays_below_balances_the_bias_a_curving_light_adds_against_the_variance_removed():
-    # Windows of half-width 7 and 15 (F_max 14 -> 30): a curving light biases them b and (15/7)^2 b
-    rho2 = (15 / 7) ** 2
-    limit = pays_below(14, 30)
-    assert limit == pytest.approx(2 * rho2 / (rho2 + 1))
-    # At the limit, the added squared bias b_l^2 - b_s^2 equals the variance removed V: take V = 1 and
-    # (b_l - b_s)^2 = limit - 1 (the ratio's excess over pure noise)
-    b_s = math.sqrt(limit - 1.0) / (rho2 - 1.0)
-    assert (rho2 * b_s) ** 2 - b_s ** 2 == pytest.approx(1.0)
-    assert pays_below(30, 44) < limit < 2.0 and pays_below(0, 14) == 2.0 and pays_below(30, 30) == 1.0
-
-
-def test_fmax_that_pays_steps_back_until_a_growth_pays():
-    ratios = {(30, 44): 3.0, (15, 30): 1.5}
-    ladder, steps = fmax_that_pays([15, 30, 44], lambda short, long: ratios[(short, long)])
-    assert ladder == [15, 30] and [(c["fmax_long"], c["pays"]) for c in steps] == [(44, False), (30, True)]
-    ladder, steps = fmax_that_pays([15, 30, 44], lambda short, long: 2.5)
-    assert ladder == [15] and len(steps) == 2  # never below the ladder's first F_max
-    ladder, steps = fmax_that_pays([15, 30, 44], lambda short, long: 1.3)
-    assert ladder == [15, 30, 44] and len(steps) == 1 and steps[0]["limit"] == pays_below(30, 44)
-    assert fmax_that_pays([15], lambda short, long: 9.0) == ([15], [])
 
 
 # --- Step 1: Eq. (2) --------------------------------------------------------------------------
@@ -179,24 +121,6 @@ def test_fmax_loop_grows_until_p_me_falls_below_p_thr():
     assert len(steps) == 1 and place.end == 300
 
 
-def test_fmax_loop_with_the_check_skips_growth_that_keeps_the_windows():
-    # 14 -> 15 keeps the half-width 7: with the F_max check on it is not tried (nothing to measure)
-    assert grow_fmax(14, 0.9, 0.9, p_thr=0.4, step=15, cap=15) == 15
-    assert grow_fmax(14, 0.9, 0.9, p_thr=0.4, step=15, cap=15, widen_only=True) is None
-    assert grow_fmax(14, 0.9, 0.9, p_thr=0.4, step=2, cap=44, widen_only=True) == 16
-    seen = []
-
-    def measure(place):
-        seen.append(place.fmax)
-        return 0.98, 0.98
-
-    place, steps = fmax_loop(1, 14, 135, measure, p_thr=0.4, step=15, cap=15, widen_only=True)
-    assert seen == [14] and place.fmax == 14 and place.frames == list(range(1, 16))
-    seen.clear()
-    place, steps = fmax_loop(1, 14, 135, measure, p_thr=0.4, step=15, cap=15)
-    assert seen == [14, 15] and place.fmax == 15
-
-
 # --- Step 3: the doubling loop ----------------------------------------------------------------
 def test_doubling_loop_stops_at_the_first_n_frame_below_d_thr():
     # d_AQM (percent) halves with every doubling: 12 % at 10,000 -> 3 % at 40,000 (<= d_thr = 3 %)
@@ -249,15 +173,6 @@ def test_the_loop_doubles_once_a_step_whatever_the_fall():
 
 
 # --- placement and end frames -------------------------------------------------------------------
-def test_the_fmax_check_looks_at_k_and_the_last_frame_with_its_windows_traced():
-    place = place_segment(1, 44, 135)  # frames 1-45, K 23
-    assert check_frames(place) == [23, 45]
-    assert reach_frames(place, 135) == list(range(1, 68))  # frame 45's windows reach 22 frames on
-    assert reach_frames(place, 50) == list(range(1, 51))  # never past the animation
-    last = place_segment(121, 14, 135)  # takes in the stub: frames 121-135, K 128
-    assert check_frames(last) == [128, 135] and reach_frames(last, 135) == list(range(121, 136))
-
-
 def test_segments_tile_the_animation_and_the_last_takes_in_a_stub():
     placed, start = [], 1
     while start <= 135:
@@ -363,3 +278,27 @@ def test_a_capped_segment_carries_over_what_it_still_lacked():
     assert needed_n_frame(80_000, steps[:1], False, 0.03) == 80_000
     assert needed_n_frame(160_000, steps[1:], True, 0.03) == 320_000
     assert needed_n_frame(160_000, [], True, 0.03) == 160_000
+
+
+# --- records on disk ------------------------------------------------------------------------------
+def test_a_record_with_a_retired_field_loads_and_an_unknown_field_is_refused(tmp_path):
+    # A record written while the F_max checks existed holds ``fmax_checks``: it still loads (and a
+    # rerun finds its decision_hash stale), while a field no code ever wrote is a broken file.
+    import json
+
+    from pipeline.errors import LoomError
+    from pipeline.segment_records import SegmentRecord, read_record, record_path, table, write_record
+
+    rec = SegmentRecord(index=0, start=1, end=16, k=8, fmax=15, n_frame=20_000, temporal="adaptive", guided=True,
+                        decision_hash="0" * 16, n_frame_steps=[{"n_frame": 20_000, "d_aqm": 2.0}])
+    write_record(tmp_path, rec)
+    path = record_path(tmp_path, 0)
+    old = {**json.loads(path.read_text()), "fmax_checks": [{"n_frame": 20_000, "fmax_short": 15, "fmax_long": 30,
+                                                             "ratio": 2.1, "limit": 1.64, "pays": False}]}
+    path.write_text(json.dumps(old))
+    loaded = read_record(tmp_path, 0)
+    assert loaded == rec and "fmax_checks" not in loaded.to_dict()
+    assert "20,000" in "\n".join(table([loaded]))
+    path.write_text(json.dumps({**old, "no_such_field": 1}))
+    with pytest.raises(LoomError, match="not a segment record"):
+        read_record(tmp_path, 0)
