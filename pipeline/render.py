@@ -53,7 +53,9 @@ class RenderSettings:
 
     width: int = 640
     height: int = 480
-    spp: int = 4  # jittered camera samples per pixel
+    # jittered camera samples per pixel; the one default of loom render's --spp and of the benchmarks that
+    # render as loom render does (pipeline/cli/render.py RENDER_SPP; 8: docs/sampling.md §2)
+    spp: int = 8
     reflection_depth: int = 4  # mirror/glossy reflections followed per camera path
     area_samples: int = 2  # area-light (or sky) samples per diffuse hit (scenes with emissive triangles or a sky)
     tonemap: ToneMapping = field(default_factory=ToneMapping)

@@ -66,6 +66,8 @@ from typing import TYPE_CHECKING
 import click
 import numpy as np
 
+from pipeline.render import RenderSettings
+
 from . import error_measures as em
 
 if TYPE_CHECKING:
@@ -97,7 +99,7 @@ class Plan:
     d_thr: tuple[float, ...]
     width: int = 320
     height: int = 240
-    spp: int = 2
+    spp: int = RenderSettings.spp  # loom render's
     reference_factor: int = 50
     aqm_every: int = 1
     methods: tuple[str, ...] = METHODS  # a subset (with per-frame) shortens a run to what is compared

@@ -1,7 +1,7 @@
 """``loom bench render``: the paper's Table 2 (§6) per frame, and the scaling of a whole render.
 
-Three renders of the scene (default the built-in ROOM, all its frames, 320x240, 2 spp), each into
-a fresh output directory on a LocalCluster:
+Three renders of the scene (default the built-in ROOM, all its frames, 320x240, loom render's spp,
+``RenderSettings.spp``), each into a fresh output directory on a LocalCluster:
 
 * (a) guided: ``--photons auto`` (``render(..., n_photons=None)``), ``--workers`` workers;
 * (b) fixed N_frame = 40,000, F_max = 30, adaptive collection, on 1 worker and on ``--workers``.
@@ -43,6 +43,8 @@ from pathlib import Path
 from typing import TYPE_CHECKING
 
 import click
+
+from pipeline.render import RenderSettings
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterable
@@ -101,7 +103,7 @@ def io_bytes(records: Iterable[SegmentRecord]) -> dict[str, int]:
 
 def run_render(scene: Path, out: Path, *, frames: str | None, width: int, height: int, spp: int, workers: int,
                n_photons: int | None, fmax: int | None) -> dict:
-    from pipeline.render import RenderSettings, render
+    from pipeline.render import render
     from pipeline.segment_records import read_records
 
     t0 = time.perf_counter()
@@ -150,8 +152,9 @@ def _warm_up() -> None:
         pass
 
 
-def run(scene: str = "room", *, frames: str | None = None, width: int = 320, height: int = 240, spp: int = 2,
-        workers: int = 2, n_photons: int = 40_000, fmax: int = 30, skip_guided: bool = False, repeat: int = 1,
+def run(scene: str = "room", *, frames: str | None = None, width: int = 320, height: int = 240,
+        spp: int = RenderSettings.spp, workers: int = 2, n_photons: int = 40_000, fmax: int = 30,
+        skip_guided: bool = False, repeat: int = 1,
         json_path: str | Path | None = None, echo: Callable[[str], None] = click.echo) -> dict:
     """The three renders of ``scene`` (a built-in name or a file), their tables and the scaling; returns
     the figures (also written to ``json_path`` if given)."""

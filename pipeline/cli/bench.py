@@ -3,6 +3,9 @@ from __future__ import annotations
 
 import click
 
+from .render import RENDER_SPP
+
+_RENDER_SPP_HELP = "Camera samples per pixel of every run (default: loom render's, RenderSettings.spp)."
 
 @click.group("bench")
 def bench() -> None:
@@ -95,7 +98,7 @@ def bench_noise(photons, fmax, resolution, spp, element_scale, filter_photons, c
 @click.argument("scene", default="room")
 @click.option("--frames", default=None, help="Frame range (default: all of the scene's frames).")
 @click.option("--resolution", default="320x240", show_default=True)
-@click.option("--spp", type=int, default=2, show_default=True)
+@click.option("--spp", type=int, default=RENDER_SPP, show_default=True, help=_RENDER_SPP_HELP)
 @click.option("--workers", type=int, default=2, show_default=True, help="Workers of the guided and the scaled run.")
 @click.option("--photons", "n_photons", type=int, default=40_000, show_default=True, help="Fixed N_frame.")
 @click.option("--fmax", type=int, default=30, show_default=True, help="Fixed F_max.")
@@ -121,7 +124,7 @@ def bench_render(scene, frames, resolution, spp, workers, n_photons, fmax, skip_
 @click.option("--fmax", type=int, default=None, help="F_max of the fixed and adaptive windows.")
 @click.option("--d-thr", "d_thr", default=None, help="d_thr values of the guided runs, comma-separated.")
 @click.option("--resolution", default="320x240", show_default=True)
-@click.option("--spp", type=int, default=2, show_default=True)
+@click.option("--spp", type=int, default=RENDER_SPP, show_default=True, help=_RENDER_SPP_HELP)
 @click.option("--reference-factor", type=int, default=50, show_default=True,
               help="Reference photons a frame as a multiple of the largest budget (at least 50).")
 @click.option("--aqm-every", type=int, default=None, help="d_AQM on every n-th frame (and the change's).")

@@ -22,6 +22,24 @@ _KEEP_HELP = ("Also store every photon hit (20 bytes each, the paper's record) f
 _F = TypeVar("_F", bound=Callable[..., Any])
 
 
+class _RenderSpp:
+    """The default of every option that means a render's camera samples per pixel: RenderSettings.spp
+    (pipeline/render.py), its one owner. Read when click needs it, since importing pipeline.render
+    when the CLI starts would cost every loom command about 0.3 s: click calls it for the value and
+    shows str() of it in --help (a plain function would show "(dynamic)")."""
+
+    def __call__(self) -> int:
+        from pipeline.render import RenderSettings
+
+        return RenderSettings.spp
+
+    def __str__(self) -> str:
+        return str(self())
+
+
+RENDER_SPP = _RenderSpp()
+
+
 def scheduler_options(f: _F) -> _F:
     f = click.option("--workers", type=int, default=None,
                      help="Worker processes for --scheduler local (default: one per core).")(f)
@@ -78,9 +96,9 @@ def job_options(f: _F) -> _F:
         click.option("--frames", default=None, help="Farm range: 1-100, 1-100x2, 1,5,10-20 (default: all)."),
         click.option("--out", "out_dir", required=True, type=click.Path(), help="Output directory."),
         click.option("--resolution", default="640x480", show_default=True, help="WIDTHxHEIGHT in pixels."),
-        click.option("--spp", type=int, default=8, show_default=True,
-                     help="Jittered camera samples per pixel (8: the pixels' error no more visible than the "
-                          "photon noise d_thr accepts, docs/sampling.md)."),
+        click.option("--spp", type=int, default=RENDER_SPP, show_default=True,
+                     help="Jittered camera samples per pixel (the default: the pixels' error no more visible "
+                          "than the photon noise d_thr accepts, docs/sampling.md)."),
         click.option("--photons", default="auto", show_default=True, callback=_photons,
                      help="N_frame: auto (chosen per segment by the AQM, §5.2) or photons per frame for every "
                           "frame."),

@@ -143,3 +143,34 @@ def test_store_holds_each_frames_maps_from_its_own_photons(rendered):
                              elements, areas, records.photons_emitted)
     np.testing.assert_allclose(maps.read(1, "direct"), want, rtol=1e-6)
     assert want.max() > 0 and not maps.read(1, "indirect").any()
+
+
+def test_every_option_for_a_renders_spp_defaults_to_render_settings():
+    # One owner (docs/sampling.md §2): loom render, loom plan and the benchmarks that render as loom
+    # render does read RenderSettings.spp; the CLI reads it only when an option's default is needed.
+    import subprocess
+    import sys
+
+    import click
+
+    from pipeline.benchmarks.error import Plan
+    from pipeline.benchmarks.render import run as bench_render_run
+
+    assert RenderSettings().spp == RenderSettings.spp == 8
+    commands = {"render": ["render"], "plan": ["plan"], "bench error": ["bench", "error"],
+                "bench render": ["bench", "render"]}
+    for name, path in commands.items():
+        command = main
+        for part in path:
+            command = command.commands[part]
+        (spp,) = [p for p in command.params if p.name == "spp"]
+        with click.Context(command) as ctx:
+            assert spp.get_default(ctx) == RenderSettings.spp, name
+        shown = CliRunner().invoke(main, [*path, "--help"], terminal_width=200).output
+        assert f"[default: {RenderSettings.spp}]" in shown.split("--spp", 1)[1].split("\n  --", 1)[0], name
+    assert Plan((1, 4), (1_000,), 2, (0.5,)).spp == RenderSettings.spp
+    assert bench_render_run.__kwdefaults__["spp"] == RenderSettings.spp
+    # starting the CLI does not import the renderer (about 0.3 s on every loom command)
+    code = "import sys, pipeline.cli; print('pipeline.render' in sys.modules)"
+    assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip() \
+        == "False"
