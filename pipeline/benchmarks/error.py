@@ -40,7 +40,9 @@ does not trace them again: they are most of a full run's time.
 Measures per run (pipeline/benchmarks/error_measures.py), all frames: relative L2 of the indirect
 vertex irradiance; after one frozen tone mapping (Ward's scale at the log-average luminance of the
 reference's frames, pipeline/perceived.py) RMSE and mean relative error of the displayed frames
-and d_AQM (every ``--aqm-every``-th frame, on the workers); the flicker of the error field
+and d_AQM (every ``--aqm-every``-th frame, on the workers); on the same frames the FLIP mean of the
+frames as their PNGs show them at that adaptation (pipeline/benchmarks/flip.py, as ``loom bench spp``
+computes it, at the AQM's pixels per degree); the flicker of the error field
 (vertex maps and displayed frames); the Fig. 3 highlight's energy (ROOM: floor vertices within
 0.5 m under the aircraft, tests/temporal/test_room.py; elsewhere the brightest 2 % of the
 reference's indirect light) against the reference's; the lag after an abrupt lighting change.
@@ -194,11 +196,14 @@ def save_references(path: Path, refs: np.ndarray, wall_s: float, cpu_s: float) -
     os.replace(tmp, path)
 
 
-def displayed_d_aqm(test: np.ndarray, ref: np.ndarray, adaptation: float) -> float:
-    """Dask task: d_AQM (%) of two linear frames as the viewer sees them (pipeline/perceived.py)."""
+def displayed_measures(test: np.ndarray, ref: np.ndarray, adaptation: float, ppd: float) -> tuple[float, float]:
+    """Dask task: d_AQM (%) of two linear frames as the viewer sees them (pipeline/perceived.py), and
+    their FLIP mean as their PNGs show them (pipeline/benchmarks/flip.py), both at ``adaptation``."""
     from pipeline.perceived import displayed_difference
 
-    return float(displayed_difference(test, ref, adaptation).d_aqm)
+    from .flip import displayed_flip
+
+    return float(displayed_difference(test, ref, adaptation).d_aqm), displayed_flip(test, ref, adaptation, ppd)
 
 
 def _cpu_seconds(client: Client) -> float:
@@ -239,6 +244,8 @@ class Evaluation:
         from workers.camera_paths import render_frame
         from workers.raycast import caster_for
 
+        from .flip import frame_ppd
+
         self.client, self.plan, self.refs = client, plan, refs
         self.frames = list(range(plan.frames[0], plan.frames[1] + 1))
         self.states = [scene.pose_frame(f) for f in self.frames]
@@ -251,6 +258,7 @@ class Evaluation:
         self.ref_images = self.images(refs[0])
         self.adaptation = log_average(luminance(self.ref_images))  # the frozen tone mapping's L_wa
         self.ref_displayed = self.displayed(self.ref_images)
+        self.ppd = frame_ppd(plan.width, plan.height)  # FLIP's viewing distance, the AQM's
         self.floor_flicker = None  # per interval, set from the second reference (see run)
         self.aqm_frames = sorted(set(range(0, len(self.frames), plan.aqm_every)) | {self.event_index})
 
@@ -273,8 +281,8 @@ class Evaluation:
         pairs = self.client.scatter([images[i] for i in self.aqm_frames]
                                     + [self.ref_images[i] for i in self.aqm_frames])
         n = len(self.aqm_frames)
-        futures = self.client.map(displayed_d_aqm, pairs[:n], pairs[n:],
-                                  [self.adaptation] * len(self.aqm_frames), pure=False)
+        futures = self.client.map(displayed_measures, pairs[:n], pairs[n:], [self.adaptation] * n, [self.ppd] * n,
+                                  pure=False)
         rel = [em.relative_l2(m, r, a) for m, r, a in zip(maps, refs, areas)]
         img = np.array([em.image_errors(s, r) for s, r in zip(shown, self.ref_displayed)])
         hl = [em.region_energy(m, a, h) / em.region_energy(r, a, h) - 1.0
@@ -286,14 +294,16 @@ class Evaluation:
         net = np.sqrt(np.maximum(fl ** 2 - floor ** 2 / 2.0, 0.0))
         response = em.step_response(maps, refs, areas, self.event_index)
         lag, reached = em.lag(response)
-        d_aqm = self.client.gather(futures)
+        d_aqm, flip = (list(x) for x in zip(*self.client.gather(futures)))
+        aqm_frames = [self.frames[i] for i in self.aqm_frames]
         return {"rel_l2": float(np.mean(rel)), "rmse": float(img[:, 0].mean()), "mean_rel": float(img[:, 1].mean()),
-                "d_aqm": float(np.mean(d_aqm)), "flicker": float(np.mean(fl)), "flicker_net": float(np.mean(net)),
+                "d_aqm": float(np.mean(d_aqm)), "flip": float(np.mean(flip)), "flicker": float(np.mean(fl)),
+                "flicker_net": float(np.mean(net)),
                 "change": float(np.mean(own)),
                 "image_flicker": float(np.mean(em.image_flicker(shown, self.ref_displayed)[keep])),
                 "highlight": float(np.mean(hl)), "lag": lag, "lag_reached": reached,
                 "per_frame": {"rel_l2": rel, "flicker": fl.tolist(), "response": response.tolist(),
-                              "d_aqm": dict(zip((self.frames[i] for i in self.aqm_frames), d_aqm))}}
+                              "d_aqm": dict(zip(aqm_frames, d_aqm)), "flip": dict(zip(aqm_frames, flip))}}
 
 
 def highlight_regions(scene: Scene, elements: ElementMesh, states: Sequence[FrameState], refs: np.ndarray,
@@ -324,7 +334,7 @@ def summarise(runs: list[dict], clock: str = "wall_s", slope: float | None = Non
         if r["method"] == "per-frame":
             continue
         row = {"run": r["label"], "method": r["method"], clock: r[clock]}
-        for key in ("d_aqm", "rel_l2", "flicker", "flicker_net", "image_flicker"):
+        for key in ("d_aqm", "flip", "rel_l2", "flicker", "flicker_net", "image_flicker"):
             at_t, extra = em.equal_time(photons, times, [b_["measures"][key] for b_ in base], r[clock], slope)
             row[key] = {"run": r["measures"][key], "per_frame_at_equal_time": at_t, "extrapolated": extra,
                         "ratio": None if not at_t else r["measures"][key] / at_t}
@@ -388,21 +398,27 @@ def _ratio(d: dict) -> str:
     return f"{d['ratio']:.3f}{'*' if d['extrapolated'] else ''}"
 
 
+def _against(d: dict, digits: int) -> str:
+    """A run's figure, per-frame rendering's at equal time and their ratio (summarise's row entry)."""
+    at_t = d["per_frame_at_equal_time"]
+    return f"{d['run']:.{digits}f} vs {'n/a' if at_t is None else f'{at_t:.{digits}f}'}: {_ratio(d)}"
+
+
 def _table(echo: Callable[[str], None], result: dict) -> None:
     floor = result["reference"]["floor"]
     echo("")
-    echo("| run | wall s | CPU s | photons | rel L2 | RMSE | mean rel | d_AQM % | flicker | image flicker "
+    echo("| run | wall s | CPU s | photons | rel L2 | RMSE | mean rel | d_AQM % | FLIP | flicker | image flicker "
          "| highlight | lag (frames) |")
-    echo("|---|---|---|---|---|---|---|---|---|---|---|---|")
+    echo("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     echo(f"| reference noise floor (2nd seed) | {result['reference']['wall_s']:.1f} | | "
          f"{result['reference']['photons']:,} x 2 | {floor['rel_l2']:.4f} | {floor['rmse']:.4f} "
-         f"| {floor['mean_rel']:.4f} | {floor['d_aqm']:.2f} | {floor['flicker']:.4f} | {floor['image_flicker']:.4f} "
-         f"| {100 * floor['highlight']:+.1f} % | {floor['lag']} |")
+         f"| {floor['mean_rel']:.4f} | {floor['d_aqm']:.2f} | {floor['flip']:.4f} | {floor['flicker']:.4f} "
+         f"| {floor['image_flicker']:.4f} | {100 * floor['highlight']:+.1f} % | {floor['lag']} |")
     for r in result["runs"]:
         m = r["measures"]
         lag = f"{m['lag']}" if m["lag_reached"] else f">= {m['lag']}"
         echo(f"| {r['label']} | {r['wall_s']:.1f} | {r['cpu_s']:.1f} | {r['photons']:,} | {m['rel_l2']:.4f} "
-             f"| {m['rmse']:.4f} | {m['mean_rel']:.4f} | {m['d_aqm']:.2f} | {m['flicker']:.4f} "
+             f"| {m['rmse']:.4f} | {m['mean_rel']:.4f} | {m['d_aqm']:.2f} | {m['flip']:.4f} | {m['flicker']:.4f} "
              f"| {m['image_flicker']:.4f} | {100 * m['highlight']:+.1f} % | {lag} |")
     echo("")
     for clock, name in (("cpu_s", "CPU"), ("wall_s", "wall")):
@@ -410,15 +426,13 @@ def _table(echo: Callable[[str], None], result: dict) -> None:
         cost = comparison["per_frame_cost"]
         echo(f"\nagainst per-frame rendering at equal {name} time (per-frame cost line: {cost['fixed_s']:.1f} s + "
              f"{cost['s_per_million_photons']:.2f} s per million photons)")
-        echo("| run | d_AQM, per-frame's at equal time: ratio | flicker ratio | net flicker ratio "
-             "| image flicker ratio | speed-up at equal d_AQM | at equal rel L2 |")
-        echo("|---|---|---|---|---|---|---|")
+        echo("| run | d_AQM, per-frame's at equal time: ratio | FLIP, per-frame's at equal time: ratio "
+             "| flicker ratio | net flicker ratio | image flicker ratio | speed-up at equal d_AQM | at equal rel L2 |")
+        echo("|---|---|---|---|---|---|---|---|")
         for s in comparison["rows"]:
-            d = s["d_aqm"]
-            pf = "n/a" if d["per_frame_at_equal_time"] is None else f"{d['per_frame_at_equal_time']:.2f}"
             up = [f"{s[k]['speedup']:.2f}x{'*' if s[k]['extrapolated'] else ''}"
                   for k in ("speedup_at_equal_d_aqm", "speedup_at_equal_rel_l2")]
-            echo(f"| {s['run']} | {d['run']:.2f} vs {pf}: {_ratio(d)} | {_ratio(s['flicker'])} "
+            echo(f"| {s['run']} | {_against(s['d_aqm'], 2)} | {_against(s['flip'], 4)} | {_ratio(s['flicker'])} "
                  f"| {_ratio(s['flicker_net'])} | {_ratio(s['image_flicker'])} | {up[0]} | {up[1]} |")
     echo("(* per-frame figure extrapolated beyond its runs along the power law of the two nearest)")
 
@@ -434,10 +448,12 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, config:
     from pipeline.scene import ElementMesh, Scene
     from pipeline.scene.builtin import BUILTIN_SCENES
 
+    from .flip import evaluator
     from .machine import announce
 
     if plan.reference_factor < 50:
         raise LoomError(f"must be at least 50, got {plan.reference_factor}", field="--reference-factor")
+    evaluator()  # FLIP is one of the measures: refused before any tracing if it is missing
     out_dir.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="loom-bench-error-", dir=out_dir) as tmp:
@@ -508,7 +524,8 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, config:
                 r["measures"] = ev.measure(r.pop("indirect"))
                 r["label"] = _label(r)
                 echo(f"  {r['label']}: {r['wall_s']:.1f} s wall, {r['cpu_s']:.1f} s CPU, {r['photons']:,} photons; "
-                     f"rel L2 {r['measures']['rel_l2']:.4f}, d_AQM {r['measures']['d_aqm']:.2f} %, flicker "
+                     f"rel L2 {r['measures']['rel_l2']:.4f}, d_AQM {r['measures']['d_aqm']:.2f} %, "
+                     f"FLIP {r['measures']['flip']:.4f}, flicker "
                      f"{r['measures']['flicker']:.4f}, lag {r['measures']['lag']}")
                 runs.append(r)
         machine["after"] = announce(tmp, "after", echo)

@@ -6,10 +6,9 @@ temporal collection (§5.1). The compositor (workers/camera_paths.py) then rende
 1, 2, 4, 8, 16 jittered camera samples a pixel and at a converged 256, so that only the pixel sampling
 differs. Each image is compared with the 256-spp reference as the viewer sees it:
 
-* FLIP mean (Andersson et al., "FLIP: A Difference Evaluator for Alternating Images", HPG 2020; the
-  ``flip-evaluator`` package, LDR) of the shown frames: the default look (pipeline/tonemap.py, filmic)
-  at the frame's adaptation luminance, sRGB-encoded, at the pixels per degree of the AQM's viewing
-  conditions (pipeline/perceived.py viewing_for);
+* FLIP mean of the shown frames (pipeline/benchmarks/flip.py): the default look (pipeline/tonemap.py,
+  filmic) at the frame's adaptation luminance, sRGB-encoded, at the pixels per degree of the AQM's
+  viewing conditions (pipeline/perceived.py viewing_for);
 * d_AQM, the share of AQM pixels above 1 JND (pipeline/perceived.py displayed_difference, Ward's
   visibility-matching display values): the measure the guided coordinator accepts photon noise by
   (d_AQM <= d_thr, §5.2.3);
@@ -42,6 +41,8 @@ import click
 import numpy as np
 
 from kernels import colour
+
+from .flip import flip_mean, frame_ppd, shown
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterable, Sequence
@@ -101,49 +102,26 @@ def adaptive_image(first: Sequence[np.ndarray], extra: np.ndarray, extra_spp: in
     return np.where(mask[..., None], both, total / n)
 
 
-def shown(rgb: np.ndarray, adaptation: float) -> np.ndarray:
-    """The frame as its PNG shows it: the default look, sRGB-encoded, float in [0, 1] (FLIP's LDR input)."""
-    from pipeline.tonemap import ToneMapping, display_linear, srgb_encode
-
-    return srgb_encode(display_linear(rgb, adaptation, ToneMapping())).astype(np.float32)
-
-
-def flip_mean(test: np.ndarray, reference: np.ndarray, ppd: float) -> float:
-    """Mean FLIP error of two sRGB-encoded LDR images (H, W, 3) in [0, 1] at ``ppd`` pixels per degree."""
-    try:
-        import flip_evaluator
-    except ImportError:
-        from pipeline.errors import LoomError
-
-        raise LoomError("needs NVIDIA FLIP: pip install flip-evaluator (in the test extras: pip install -e '.[test]')",
-                        field="flip-evaluator") from None
-    _, mean, _ = flip_evaluator.evaluate(np.ascontiguousarray(reference, np.float32),
-                                         np.ascontiguousarray(test, np.float32), "LDR", inputsRGB=True,
-                                         applyMagma=False, parameters={"ppd": float(ppd)})
-    return float(mean)
-
-
 def run(frames: Iterable[int] = FRAMES, *, spps: Sequence[int] = SPPS, reference_spp: int = REFERENCE_SPP,
         photons: int = 160_000, fmax: int = 30, width: int = 320, height: int = 240, seed_check: bool = True,
         adaptive: Sequence[int] = ADAPTIVE_BUDGETS,
         store: str | None = None, json_path: str | None = None,
         echo: Callable[[str], None] = click.echo) -> dict:
     from pipeline.config import RenderConfig
-    from pipeline.perceived import displayed_difference, viewing_for
+    from pipeline.perceived import displayed_difference
     from pipeline.render import RenderSettings
     from pipeline.scene import ElementMesh, Scene
     from pipeline.scene.builtin import write_builtin
     from pipeline.shoot import shoot
     from pipeline.store import PhotonStore
     from pipeline.temporal import illumination_maps
-    from pipeline.tonemap import ToneMapping
     from workers.camera_paths import render_frame, visible_adaptation
     from workers.raycast import caster_for
 
     settings = RenderSettings(width=width, height=height)
     config = RenderConfig()
     thr = 100.0 * config.d_thr
-    ppd = viewing_for(ToneMapping()).frame_ppd((height, width))
+    ppd = frame_ppd(width, height)
     tmp = tempfile.TemporaryDirectory(prefix="bench-spp-") if store is None else None
     root = Path(tmp.name if tmp else store)
     root.mkdir(parents=True, exist_ok=True)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import json
+import math
 
 import numpy as np
 import pytest
@@ -114,6 +115,18 @@ def test_bench_error_runs_end_to_end_on_a_tiny_cornell(tmp_path):
         # Every method is farther from the reference than the reference's second seed
         assert r["measures"]["rel_l2"] > floor["rel_l2"]
     assert len(saved["comparison"]["wall_s"]["rows"]) == len(saved["comparison"]["cpu_s"]["rows"]) == 5
+    # FLIP beside d_AQM, on the same frames: a mean in [0, 1], larger the noisier the run (half the
+    # photons of per-frame rendering; the reference's second seed least of all)
+    for m in [floor] + [r["measures"] for r in saved["runs"]]:
+        assert math.isfinite(m["flip"]) and 0.0 <= m["flip"] <= 1.0
+    for r in saved["runs"]:
+        assert r["measures"]["per_frame"]["flip"].keys() == r["measures"]["per_frame"]["d_aqm"].keys()
+    assert floor["flip"] < per_frame[2_000]["measures"]["flip"] < per_frame[1_000]["measures"]["flip"]
+    for row in saved["comparison"]["cpu_s"]["rows"]:
+        flip = row["flip"]
+        assert flip["ratio"] is None or flip["ratio"] == pytest.approx(flip["run"] / flip["per_frame_at_equal_time"])
+    assert any("| FLIP |" in line for line in lines)
+    assert any("FLIP, per-frame's at equal time" in line for line in lines)
     assert saved["event"]["frame"] == plan.event == 3
     assert any(line.startswith("| per-frame 1,000 |") for line in lines)
     # What the machine charged before and after the runs is printed and kept beside the figures

@@ -5,13 +5,12 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from pipeline.benchmarks.flip import flip_mean, shown
 from pipeline.benchmarks.spp import (
     adaptive_image,
     allot_extra,
     displayed_spread,
-    flip_mean,
     run,
-    shown,
     smallest_invisible_spp,
 )
 
