@@ -41,8 +41,8 @@ Measures per run (pipeline/benchmarks/error_measures.py), all frames: relative L
 vertex irradiance; after one frozen tone mapping (Ward's scale at the log-average luminance of the
 reference's frames, pipeline/perceived.py) RMSE and mean relative error of the displayed frames
 and d_AQM (every ``--aqm-every``-th frame, on the workers); on the same frames the FLIP mean of the
-frames as their PNGs show them at that adaptation (pipeline/benchmarks/flip.py, as ``loom bench spp``
-computes it, at the AQM's pixels per degree); the flicker of the error field
+frames as their PNGs show them at that adaptation (error_measures.displayed_flip, as ``loom bench
+spp`` computes it, at the AQM's pixels per degree); the flicker of the error field
 (vertex maps and displayed frames); the Fig. 3 highlight's energy (ROOM: floor vertices within
 0.5 m under the aircraft, tests/temporal/test_room.py; elsewhere the brightest 2 % of the
 reference's indirect light) against the reference's; the lag after an abrupt lighting change.
@@ -198,12 +198,10 @@ def save_references(path: Path, refs: np.ndarray, wall_s: float, cpu_s: float) -
 
 def displayed_measures(test: np.ndarray, ref: np.ndarray, adaptation: float, ppd: float) -> tuple[float, float]:
     """Dask task: d_AQM (%) of two linear frames as the viewer sees them (pipeline/perceived.py), and
-    their FLIP mean as their PNGs show them (pipeline/benchmarks/flip.py), both at ``adaptation``."""
+    their FLIP mean as their PNGs show them (error_measures.displayed_flip), both at ``adaptation``."""
     from pipeline.perceived import displayed_difference
 
-    from .flip import displayed_flip
-
-    return float(displayed_difference(test, ref, adaptation).d_aqm), displayed_flip(test, ref, adaptation, ppd)
+    return float(displayed_difference(test, ref, adaptation).d_aqm), em.displayed_flip(test, ref, adaptation, ppd)
 
 
 def _cpu_seconds(client: Client) -> float:
@@ -244,8 +242,6 @@ class Evaluation:
         from workers.camera_paths import render_frame
         from workers.raycast import caster_for
 
-        from .flip import frame_ppd
-
         self.client, self.plan, self.refs = client, plan, refs
         self.frames = list(range(plan.frames[0], plan.frames[1] + 1))
         self.states = [scene.pose_frame(f) for f in self.frames]
@@ -258,7 +254,7 @@ class Evaluation:
         self.ref_images = self.images(refs[0])
         self.adaptation = log_average(luminance(self.ref_images))  # the frozen tone mapping's L_wa
         self.ref_displayed = self.displayed(self.ref_images)
-        self.ppd = frame_ppd(plan.width, plan.height)  # FLIP's viewing distance, the AQM's
+        self.ppd = em.frame_ppd(plan.width, plan.height)  # FLIP's viewing distance, the AQM's
         self.floor_flicker = None  # per interval, set from the second reference (see run)
         self.aqm_frames = sorted(set(range(0, len(self.frames), plan.aqm_every)) | {self.event_index})
 
@@ -448,12 +444,11 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, config:
     from pipeline.scene import ElementMesh, Scene
     from pipeline.scene.builtin import BUILTIN_SCENES
 
-    from .flip import evaluator
     from .machine import announce
 
     if plan.reference_factor < 50:
         raise LoomError(f"must be at least 50, got {plan.reference_factor}", field="--reference-factor")
-    evaluator()  # FLIP is one of the measures: refused before any tracing if it is missing
+    em.flip_evaluator()  # FLIP is one of the measures: refused before any tracing if it is missing
     out_dir.mkdir(parents=True, exist_ok=True)
     t_start = time.perf_counter()
     with tempfile.TemporaryDirectory(prefix="loom-bench-error-", dir=out_dir) as tmp:

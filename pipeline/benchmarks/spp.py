@@ -6,7 +6,7 @@ temporal collection (§5.1). The compositor (workers/camera_paths.py) then rende
 1, 2, 4, 8, 16 jittered camera samples a pixel and at a converged 256, so that only the pixel sampling
 differs. Each image is compared with the 256-spp reference as the viewer sees it:
 
-* FLIP mean of the shown frames (pipeline/benchmarks/flip.py): the default look (pipeline/tonemap.py,
+* FLIP mean of the shown frames (pipeline/benchmarks/error_measures.py): the default look (pipeline/tonemap.py,
   filmic) at the frame's adaptation luminance, sRGB-encoded, at the pixels per degree of the AQM's
   viewing conditions (pipeline/perceived.py viewing_for);
 * d_AQM, the share of AQM pixels above 1 JND (pipeline/perceived.py displayed_difference, Ward's
@@ -42,7 +42,7 @@ import numpy as np
 
 from kernels import colour
 
-from .flip import flip_mean, frame_ppd, shown
+from .error_measures import flip_mean, frame_ppd, shown
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterable, Sequence

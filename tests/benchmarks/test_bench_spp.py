@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.benchmarks.flip import flip_mean, shown
+from pipeline.benchmarks.error_measures import flip_mean, shown
 from pipeline.benchmarks.spp import (
     adaptive_image,
     allot_extra,
