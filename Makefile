@@ -30,7 +30,7 @@ test: setup
 test-all: setup
 	$(PY) -m pytest -m ''
 
-# The whole ROOM animation (135 frames) at 320x240, 8 spp (docs/sampling.md); N_frame and F_max chosen per segment (§5.2).
+# The whole ROOM animation (135 frames) at 320x240, 8 spp (docs/10-sampling.md); N_frame and F_max chosen per segment (§5.2).
 demo: setup
 	@mkdir -p $(DEMO)
 	$(LOOM) scene room -o $(DEMO)/room.glb

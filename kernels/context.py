@@ -1,6 +1,6 @@
 """One OpenCL context, queue and built program per process, on a CPU device, cached on disk.
 
-Platform choice is explicit (docs/opencl.md §1): ``PYOPENCL_CTX`` if set, else the
+Platform choice is explicit (docs/15-opencl.md §1): ``PYOPENCL_CTX`` if set, else the
 first platform whose name or version mentions PoCL, else any CPU device. PoCL caches compiled
 kernels under ``POCL_CACHE_DIR`` (default ``~/.cache/pocl/kcache``); pyopencl's own invoker cache
 lives under ``XDG_CACHE_HOME``, and so do the program binaries this module keeps

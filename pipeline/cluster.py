@@ -1,7 +1,7 @@
 """Where tasks run: an embedded LocalCluster (default), the synchronous scheduler, or a farm.
 
 Workers run one thread each: Embree and PoCL start their own all-core thread pools, and
-``cl.Kernel`` is not safe for concurrent use (docs/opencl.md §3). ``run_tasks`` submits
+``cl.Kernel`` is not safe for concurrent use (docs/15-opencl.md §3). ``run_tasks`` submits
 plain functions with readable keys, retries failed tasks, and shows a progress bar on stderr.
 """
 from __future__ import annotations

@@ -8,7 +8,7 @@
 
 Every file is written under a temporary name in its directory and moved into place with
 ``os.replace``, so a killed task leaves either the old file or the new one, never a torn one
-(OIIO picks its writer by extension, hence ``ImageOutput.create(format)``; docs/libraries.md §3).
+(OIIO picks its writer by extension, hence ``ImageOutput.create(format)``; docs/16-libraries.md §3).
 """
 from __future__ import annotations
 

@@ -75,7 +75,7 @@ def window_counts(store: PhotonStore, frames: Iterable[int] | None = None,
     elements one frame of photons. On ROOM's frames 61-80 at 640,000 photons a frame, indirect
     counts gave relative L2 0.0234 against 0.0248 and error flicker 0.0151 against 0.0181 (20,000
     and 80,000 photons: the same direction), the Fig. 3 highlight and the lag after the light's
-    jump unchanged (README, "Windows from the indirect hits"; on defaults, docs/defaults.md)."""
+    jump unchanged (README, "Windows from the indirect hits"; on defaults, docs/11-defaults.md)."""
     return store.counts(kind="indirect", frames=frames, batches=batches)
 
 
@@ -160,7 +160,7 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
     elements : the ElementMesh the photons were bucketed on; ``scene`` poses frames (vertex areas).
     frames : store frame indices (0-based; default all).
     mode : "adaptive" (Condition (1), §5.1; each window's linear fit
-        at the frame, docs/estimators.md §1.6), "fixed" (+-F_max/2 pooled, always, §6 Fig. 3b) or "off".
+        at the frame, docs/05-estimators.md §1.6), "fixed" (+-F_max/2 pooled, always, §6 Fig. 3b) or "off".
     fmax : F_max in frames (default ``config.fmax_initial``).
     kind : records gathered: "indirect" (the map the compositor reads), "direct" or "all".
     split_parity : also give the even/odd half-photon maps I1, I2 (§5.2.3) instead of the full map.
@@ -171,7 +171,7 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
         (workers/reconstruct.vertex_irradiance, §4), from the batch sums the gather holds already
         (kind "indirect" only).
     with_variance : also give each vertex's luminance-irradiance variance, sum Q / (photons A_v)^2
-        (docs/estimators.md §1.3, §1.6; unfiltered maps only, one parity).
+        (docs/05-estimators.md §1.3, §1.6; unfiltered maps only, one parity).
     times : if given, seconds spent are added to its keys ``read_s`` (stored sums or records),
         ``frame_sums_s`` (records summed where a batch has no stored sums, once per worker),
         ``windows_s``, ``sums_s`` (gather), ``filter_s`` (filter and irradiance) and ``direct_s``.

@@ -1,4 +1,4 @@
-"""The ModelFest stimuli and the AQM's detection threshold for each (docs/aqm.md §8).
+"""The ModelFest stimuli and the AQM's detection threshold for each (docs/08-aqm.md §8).
 
 ModelFest (Carney et al., Proc. SPIE 3959, 2000; Watson & Ahumada, J. Vision 5(9):6, 2005) measured foveal
 contrast thresholds of 16 observers for 43 achromatic stimuli shown at 120 pixels per degree, 256 x 256
@@ -11,7 +11,7 @@ Two stimuli are not reproduced exactly: #35 (binary noise) is a fresh sample of 
 (1-arcmin binary noise in a 0.5 deg Gaussian window), not ModelFest's file; #43 (a natural image) needs
 ModelFest's picture, which is not shipped, and is left out. The fit therefore covers 42 stimuli.
 
-Run as a script to print the table of docs/aqm.md §8: ``python tests/aqm/modelfest.py``.
+Run as a script to print the table of docs/08-aqm.md §8: ``python tests/aqm/modelfest.py``.
 """
 from __future__ import annotations
 

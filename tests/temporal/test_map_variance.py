@@ -1,4 +1,4 @@
-"""The variance ``illumination_maps(with_variance=True)`` reports (docs/estimators.md §1.3) is the
+"""The variance ``illumination_maps(with_variance=True)`` reports (docs/05-estimators.md §1.3) is the
 spread two independent photon sets really show, on real stores: what the coordinator's F_max check
 (pipeline/segments.growth_ratio) weighs bias against."""
 from __future__ import annotations
