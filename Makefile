@@ -53,7 +53,7 @@ render: setup
 	$(LOOM) plan "$$scene" --out '$(OUT)' $(if $(FRAMES),--frames $(FRAMES)) $(OPTS)
 	$(MAKE) -C $(OUT) -j$(JOBS)
 
-# Speed is measured here, never in tests: ratios measured in one run (see the README for figures).
+# Speed is measured here, never in tests: ratios measured in one run (figures: README "Headline figures"; docs/13-cluster.md §7).
 bench: setup
 	$(LOOM) bench photons
 	$(LOOM) bench frame

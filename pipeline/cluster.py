@@ -332,7 +332,7 @@ def completed(client: Client, futures: Iterable[Future],
     Each future reports itself on a queue when done (``add_done_callback``): O(n) for n futures,
     where calling ``distributed.wait(pending, return_when=FIRST_COMPLETED)`` once a completion
     made a waiter for every pending future each time, O(n^2): 300 short tasks cost the client
-    process 1.2-1.3 CPU seconds that way against 0.8 (README "Table 2")."""
+    process 1.2-1.3 CPU seconds that way against 0.8 (docs/13-cluster.md §3)."""
     import queue
 
     pending = list(futures)

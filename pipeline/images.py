@@ -54,7 +54,7 @@ def write_exr(path: str | Path, beauty: np.ndarray, alpha: np.ndarray, layers: d
 
     float32, not half: the maps and shading are float32, and half overflows to +Inf above 65504 and
     flushes to 0 below 6e-8 (a light 1e10 or 1e-10 times as bright, tests/stress/test_scale.py),
-    and keeps 3 digits; one pixel type for every frame of an animation (README "Outputs")."""
+    and keeps 3 digits; one pixel type for every frame of an animation (docs/09-frames.md §2)."""
     h, w = alpha.shape
     pixels = np.concatenate([beauty, alpha[..., None]] + [layers[name] for name in LAYERS], axis=2)
     spec = oiio.ImageSpec(w, h, len(EXR_CHANNELS), "float")

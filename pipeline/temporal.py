@@ -72,10 +72,9 @@ def window_counts(store: PhotonStore, frames: Iterable[int] | None = None,
     Why not every hit, as the per-frame tables of §4 count: a direct light's shadow edge sweeping
     over a moving object changes an element's direct hits tenfold in a frame while the indirect
     light there, bounced off the room, drifts smoothly; windows cut at the direct edge left those
-    elements one frame of photons. On ROOM's frames 61-80 at 640,000 photons a frame, indirect
-    counts gave relative L2 0.0234 against 0.0248 and error flicker 0.0151 against 0.0181 (20,000
-    and 80,000 photons: the same direction), the Fig. 3 highlight and the lag after the light's
-    jump unchanged (README, "Windows from the indirect hits"; on defaults, docs/11-defaults.md)."""
+    elements one frame of photons. On the error benchmark's defaults every run has less error and
+    less error flicker with the indirect counts (docs/06-temporal.md §2; docs/11-defaults.md,
+    "indirect_counts")."""
     return store.counts(kind="indirect", frames=frames, batches=batches)
 
 

@@ -7,7 +7,7 @@ Record energies are photon weights (flux x N, pipeline/store), so S / N is flux 
 Indirect hits (not the first hit from a light) give the indirect map the compositor reads; direct
 hits give a mesh-based direct estimate (§4), kept beside it in the illumination store.
 
-:func:`vertex_irradiance` is the NumPy reference of the temporal gather (kernels/, issue 5) for a
+:func:`vertex_irradiance` is the NumPy reference of the temporal gather (kernels/gather.py) for a
 one-frame window: keep its signature and arithmetic (float64, np.bincount) as they are.
 :func:`reconstruct_task` is the Dask task of Steps 4-5 for a chunk of a segment's frames.
 """

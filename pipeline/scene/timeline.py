@@ -15,7 +15,7 @@ from ..errors import LoomError
 DEFAULT_FPS = 30.0
 # Frames a timeline (and so a render or a frame range) may have: 55 minutes at 30 fps, far beyond
 # one render job, and small enough that planning, loading and `loom info` stay in seconds and in
-# megabytes (README "Input limits and hostile input").
+# megabytes (docs/14-robustness.md §1).
 MAX_FRAMES = 100_000
 _PART = re.compile(r"^\s*(-?\d+)\s*(?:-\s*(-?\d+)\s*(?:x\s*(\d+)\s*)?)?$")
 
