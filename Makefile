@@ -30,7 +30,7 @@ test: setup
 test-all: setup
 	$(PY) -m pytest -m ''
 
-# The whole ROOM animation (135 frames) at 320x240, 8 spp (docs/sampling.md); N_frame and F_max chosen per segment (§5.2).
+# The whole ROOM animation (135 frames) at 320x240, 8 spp (docs/10-sampling.md); N_frame and F_max chosen per segment (§5.2).
 demo: setup
 	@mkdir -p $(DEMO)
 	$(LOOM) scene room -o $(DEMO)/room.glb
@@ -53,7 +53,7 @@ render: setup
 	$(LOOM) plan "$$scene" --out '$(OUT)' $(if $(FRAMES),--frames $(FRAMES)) $(OPTS)
 	$(MAKE) -C $(OUT) -j$(JOBS)
 
-# Speed is measured here, never in tests: ratios measured in one run (see the README for figures).
+# Speed is measured here, never in tests: ratios measured in one run (figures: README "Headline figures"; docs/13-cluster.md §7).
 bench: setup
 	$(LOOM) bench photons
 	$(LOOM) bench frame

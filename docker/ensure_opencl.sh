@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
 # Make sure an OpenCL CPU device exists: install Debian's PoCL when no ICD is registered.
 # Debian's pocl-opencl-icd is used because the pip PoCL wheel fails to build kernels on these CPUs
-# (docs/opencl.md §1). Idempotent: does nothing when an ICD is already registered.
+# (docs/15-opencl.md §1). Idempotent: does nothing when an ICD is already registered.
 set -euo pipefail
 if compgen -G "/etc/OpenCL/vendors/*.icd" > /dev/null && dpkg -s pocl-opencl-icd > /dev/null 2>&1; then
     exit 0

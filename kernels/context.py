@@ -1,12 +1,12 @@
 """One OpenCL context, queue and built program per process, on a CPU device, cached on disk.
 
-Platform choice is explicit (docs/opencl.md §1): ``PYOPENCL_CTX`` if set, else the
+Platform choice is explicit (docs/15-opencl.md §1): ``PYOPENCL_CTX`` if set, else the
 first platform whose name or version mentions PoCL, else any CPU device. PoCL caches compiled
 kernels under ``POCL_CACHE_DIR`` (default ``~/.cache/pocl/kcache``); pyopencl's own invoker cache
 lives under ``XDG_CACHE_HOME``, and so do the program binaries this module keeps
 (:func:`binary_cache_dir`): a PoCL build from source costs 20-30 ms a program even when PoCL's cache
 has it, a build from the binary 1-3 ms, and every worker process builds all seven programs (0.2 s
-of each worker's first tasks, a serial cost of every extra worker, README "Program binaries").
+of each worker's first tasks, a serial cost of every extra worker, docs/13-cluster.md §4).
 Programs are built once per process and source text, and kernels
 are fetched once (``prg.name`` would build a new ``cl.Kernel`` on every access). Every program is
 built with :data:`BUILD_OPTIONS`, the ``-D`` defines of the facts the Python side owns (the record

@@ -45,7 +45,7 @@ __kernel void adaptive_filter(__global const double *flux, __global const double
             t0 += fp[step * u]; t1 += fp[step * u + 1]; t2 += fp[step * u + 2]; tq += fp[step * u + 3];
             ta += areas[u];
         }
-        // Bias test (docs/estimators.md §1.5 step 4): the ring's estimate must agree with the inner one
+        // Bias test (docs/05-estimators.md §1.5 step 4): the ring's estimate must agree with the inner one
         // within z standard deviations; an inner region without photons always grows.
         if (y > 0.0 && a > 0.0 && ta > 0.0) {
             const double e_in = y / a, e_ring = luma(t0, t1, t2) / ta;

@@ -5,18 +5,18 @@ reconstruction using fast and adaptive density estimation techniques") "selectiv
 mesh elements for which the expansion in the temporal domain was not possible": a support h
 centred on the vertex grows while stochastic variance estimates say the local illumination is
 still too noisy. Neither full text was available to us; the estimator below is the reconstruction
-of docs/estimators.md §1.3 and §1.5 (marked [R] there), with mesh rings as the support.
+of docs/05-estimators.md §1.3 and §1.5 (marked [R] there), with mesh rings as the support.
 
 Estimator. Per vertex u the gather (kernels/gather.py) gives the flux S_u = sum_j b_k(j) e_j / N
 (RGB) and Q_u = sum_j b_k(j)^2 Y_j^2 / N^2 (Y = Rec. 709 luminance), with photons i.i.d. so that
-Var(S_u,Y) is estimated by Q_u (docs/estimators.md §1.3). Over a support H (a set of vertices, box kernel):
+Var(S_u,Y) is estimated by Q_u (docs/05-estimators.md §1.3). Over a support H (a set of vertices, box kernel):
 
     E_H = sum_{u in H} S_u / sum_{u in H} A_u,      Var(E_H) = sum Q_u / (sum A_u)^2
     relative standard error  r_H = sqrt(sum Q_u) / sum S_u,Y  = 1 / sqrt(n_eff)
 
 Normalising by the area inside the support (sum of hat areas A_u) removes most boundary bias.
 
-Support growth (docs/estimators.md §1.5): H_0 = {v}; H_r adds ring r, the vertices r edges away over the same
+Support growth (docs/05-estimators.md §1.5): H_0 = {v}; H_r adds ring r, the vertices r edges away over the same
 surface (same instance, vertex normal within ``max_angle`` = 30 deg of v's, reached through such
 vertices only). A vertex is filtered only if r_{H_0} > tau (it "collected too few photons":
 n_eff < 1 / tau^2, ``RenderConfig.filter_photons``); then rings are added until r_H <= tau, up to

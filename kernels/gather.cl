@@ -2,7 +2,7 @@
 // vertex-weighted energies, window sums over frames, element -> vertex distribution.
 //
 // Deterministic by construction: every output is written by one work item that adds its inputs
-// in a fixed order (no atomics; docs/opencl.md §2). Accumulation is double.
+// in a fixed order (no atomics; docs/15-opencl.md §2). Accumulation is double.
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #pragma OPENCL FP_CONTRACT OFF
 
@@ -36,7 +36,7 @@ inline void add_records(__global const uint *key, __global const ushort *b1,
 
 // Sums of segment s (a (frame, element) pair; records [offsets[s], offsets[s+1]), element-sorted)
 // for parity p (work item (s, p)): out[(s * n_parity + p) * 12 + 4k + c] = sum over the
-// records of b_k * energy_c, and (c = 3) Q = sum b_k^2 * Y^2 (docs/estimators.md §1.2-1.3). With n_parity = 1
+// records of b_k * energy_c, and (c = 3) Q = sum b_k^2 * Y^2 (docs/05-estimators.md §1.2-1.3). With n_parity = 1
 // every record counts. `kinds`: bit 0 takes indirect records, bit 1 direct ones.
 __kernel void element_sums(__global const uint *key, __global const ushort *b1,
                            __global const ushort *b2, __global const float *energy,
@@ -86,7 +86,7 @@ __kernel void frame_sums_prefix_step(__global const double *sums, const int j, c
     for (int c = 0; c < SLOTS; ++c) o[c] = prev[c] + acc[c];
 }
 
-// The value at x = 0 of the window's least-squares line (docs/estimators.md §1.6), its slope shrunk by
+// The value at x = 0 of the window's least-squares line (docs/05-estimators.md §1.6), its slope shrunk by
 // the positive-part James-Stein factor 1 - var(slope) / slope^2 of its photon noise (luminance): `t`
 // the window sum (R, G, B, Q), n, x1, x2 its photons and their first two moments of x = g - row, s1
 // the sums' first moment, w1, w2 Q's first two; u gets (R, G, B) per photon emitted and the variance.

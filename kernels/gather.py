@@ -4,7 +4,7 @@ Three steps, each an OpenCL kernel in ``gather.cl`` with a NumPy float64 twin he
 
 1. ``element_sums``: per (frame g, element e, parity p, corner k) the sums over e's records of g
    ``T_rgb = sum b_k * energy`` and ``T_Q = sum b_k^2 * Y^2`` (Y = Rec. 709 luminance of the
-   energy; Q feeds the variance estimate of the adaptive filter, docs/estimators.md §1.3). Each record is
+   energy; Q feeds the variance estimate of the adaptive filter, docs/05-estimators.md §1.3). Each record is
    read once in total, however many windows use its frame.
 2. window sums: for output frame f and element e with window W = [f - back, f + fwd]
    (kernels/temporal.py) the pooled flux per corner ``U = sum_{g in W} T_g / sum_{g in W} N_g``
@@ -13,7 +13,7 @@ Three steps, each an OpenCL kernel in ``gather.cl`` with a NumPy float64 twin he
    different N_frame (§5.2.3) are pooled at their photon weight. With the parity split each half
    is normalised by half the photons, so I1 and I2 (§5.2.3) both estimate the full irradiance.
 3. vertex flux: element corners -> vertices in a fixed order (a CSR vertex -> element-corner
-   map), ``S_v = sum U``; irradiance ``E_v = S_v / A_v`` (docs/estimators.md §1.2; for a one-frame window
+   map), ``S_v = sum U``; irradiance ``E_v = S_v / A_v`` (docs/05-estimators.md §1.2; for a one-frame window
    exactly the E_v = S_v / (N A_v) of workers/reconstruct.py).
 
 The device path is the one pipeline/temporal.py runs: :func:`element_sums_cl` once per frame (kept
@@ -27,7 +27,7 @@ most a few hundred frames loses ~1e-13 relative to the range's total. NumPy twin
 :func:`element_sums_reference` and :func:`window_flux_reference`.
 
 No atomics anywhere: every output is written by one work item adding in a fixed order, so
-results are bitwise repeatable (docs/opencl.md §2).
+results are bitwise repeatable (docs/15-opencl.md §2).
 """
 from __future__ import annotations
 
@@ -223,7 +223,7 @@ def frame_sums_flux_cl(frame_sums: Iterable[npt.ArrayLike], n_emitted: npt.Array
     rows : (n_out,) row of each output frame among the J frames.
     element_vertices : (E, 3) vertex ids; ``n_vertices`` V.
     linear : each element corner's value is its window's linear fit at the frame, the slope shrunk
-        by its photon noise (docs/estimators.md §1.6), instead of the window's pooled mean.
+        by its photon noise (docs/05-estimators.md §1.6), instead of the window's pooled mean.
 
     Returns
     -------
@@ -296,7 +296,7 @@ def window_flux_reference(sums: npt.ArrayLike, n_emitted: npt.ArrayLike, back: n
 
 def corners_to_vertices(corners: np.ndarray, element_vertices: np.ndarray, n_vertices: int) -> np.ndarray:
     """(V, C) the sum, at each vertex, of the values (E, 3, C) of the element corners that are that
-    vertex (docs/estimators.md §1.2: S_v sums b_k x energy over the hits of every element at v)."""
+    vertex (docs/05-estimators.md §1.2: S_v sums b_k x energy over the hits of every element at v)."""
     ev = np.asarray(element_vertices).reshape(-1)
     out = np.empty((int(n_vertices), corners.shape[-1]))
     for c in range(corners.shape[-1]):
@@ -324,8 +324,7 @@ def _linear_windows(total: np.ndarray, n: np.ndarray, x1: np.ndarray, x2: np.nda
 
 
 def irradiance(flux: np.ndarray, vertex_areas: np.ndarray) -> np.ndarray:
-    """E_v = S_v / A_v (docs/estimators.md §1.2), RGB, for vertex flux ``(..., V, 4)``; 0 where A_v = 0."""
+    """E_v = S_v / A_v (docs/05-estimators.md §1.2), RGB, for vertex flux ``(..., V, 4)``; 0 where A_v = 0."""
     areas = np.asarray(vertex_areas, np.float64)
     safe = np.where(areas > 0, areas, 1.0)
     return np.where((areas > 0)[..., None], flux[..., :3] / safe[..., None], 0.0)
-

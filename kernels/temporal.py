@@ -18,10 +18,10 @@ the paper's minimal extent of 3 frames, justified by temporal masking (§5.1). T
 say where the extra frames lie; they are centred: at least ``(min_extent-1)//2`` back and the rest
 forward, each clipped to F_max/2 and the ends. Beside an abrupt change the regional step test
 (pipeline/regional_steps.py) keeps a frame's window to its own side; placing the extra frames on
-the side least unlike the frame was tried and removed (docs/defaults.md, "min_extent_similar").
+the side least unlike the frame was tried and removed (docs/11-defaults.md, "min_extent_similar").
 
 The two walks end apart, as in the paper: an asymmetric window's drift bias is taken out by the
-linear windows of the gather (docs/estimators.md §1.6), not by cutting the longer walk.
+linear windows of the gather (docs/05-estimators.md §1.6), not by cutting the longer walk.
 
 Different N_frame in neighbouring frames (N doubles per segment in §5.2.3). Counts are compared on
 frame f's photon budget: a count c_j is scaled by N_f / N_j (done as N_f * (c_j / N_j)). Under

@@ -1,7 +1,7 @@
 """What the temporal gather reads of a photon batch: its element sums, made once, stored sparse.
 
 A batch's *summary* is the indirect records' element sums split by photon parity, (E, 2, 3, 4)
-(kernels/gather.element_sums_cl, docs/estimators.md §1.2-1.3), and its direct records' vertex
+(kernels/gather.element_sums_cl, docs/05-estimators.md §1.2-1.3), and its direct records' vertex
 flux, (V, 3) (their element sums scattered to the vertices, as the gather scatters the indirect
 ones: kernels/gather.corners_to_vertices): everything Steps 3-5 of §5.2 read of the records, so
 the photon store keeps it for every batch and the records only on request (pipeline/store). The
@@ -60,7 +60,7 @@ def batch_summary(records: FrameRecords, elements: ElementMesh) -> np.ndarray:
 
 
 def encode(sums: np.ndarray, flux: np.ndarray) -> np.ndarray:
-    """u32 words of float64 sums (E, 2, 3, 4) with Q (docs/estimators.md §1.3) and direct flux
+    """u32 words of float64 sums (E, 2, 3, 4) with Q (docs/05-estimators.md §1.3) and direct flux
     (V, 3): float32, sqrt(Q) in Q's slot, the rows that are not all zero with their indices."""
     rows = np.array(sums, np.float64).reshape(sums.shape[0], SLOTS)
     q = rows.reshape(-1, 4)[:, 3]  # a view: Q of every (element, parity, corner)

@@ -1,7 +1,7 @@
 """Where tasks run: an embedded LocalCluster (default), the synchronous scheduler, or a farm.
 
 Workers run one thread each: Embree and PoCL start their own all-core thread pools, and
-``cl.Kernel`` is not safe for concurrent use (docs/opencl.md §3). ``run_tasks`` submits
+``cl.Kernel`` is not safe for concurrent use (docs/15-opencl.md §3). ``run_tasks`` submits
 plain functions with readable keys, retries failed tasks, and shows a progress bar on stderr.
 """
 from __future__ import annotations
@@ -332,7 +332,7 @@ def completed(client: Client, futures: Iterable[Future],
     Each future reports itself on a queue when done (``add_done_callback``): O(n) for n futures,
     where calling ``distributed.wait(pending, return_when=FIRST_COMPLETED)`` once a completion
     made a waiter for every pending future each time, O(n^2): 300 short tasks cost the client
-    process 1.2-1.3 CPU seconds that way against 0.8 (README "Table 2")."""
+    process 1.2-1.3 CPU seconds that way against 0.8 (docs/13-cluster.md §3)."""
     import queue
 
     pending = list(futures)

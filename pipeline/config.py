@@ -61,9 +61,9 @@ class RenderConfig:
     filter_photons: float = _param(25.0, "filter", "n_eff below which a vertex is filtered, r = 1/sqrt(n), §5.2.5",
                                    0.0)
     filter_rings: int = _param(3, "filter", "h_max, in element rings over the same surface, §5.2.5", 1, 255)
-    filter_z: float = _param(2.5, "filter", "bias test: a ring differing by > z sigma stops h, docs/estimators.md §1.5",
+    filter_z: float = _param(2.5, "filter", "bias test: a ring differing by > z sigma stops h, docs/05-estimators.md §1.5",
                              0.0)
-    filter_angle: float = _param(30.0, "filter", "degrees between neighbour normals, docs/estimators.md §1.5",
+    filter_angle: float = _param(30.0, "filter", "degrees between neighbour normals, docs/05-estimators.md §1.5",
                                  0.0, 180.0)
 
     # --- segments: the adjustment loops of §5.2 (pipeline/segments.py, pipeline/coordinator.py) -----
@@ -77,15 +77,14 @@ class RenderConfig:
     pilot_photons: int = _param(10_000, "segments", "photons of the pilot run at K, §5.2.1 (the paper's 10,000)",
                                 100, 1 << 30)
     n_frame_min: int = _param(1_000, "segments", "smallest N_frame the pilot may choose, §5.2.1", 1, 1 << 30)
-    # 1,280,000: ROOM's loop climbs past 640,000 in every segment (our AQM sees noise the paper's did
-    # not, README "Why the loop climbs"); at 640,000 the guided frame at K 113 was 2.5 % of its pixels
-    # from a 64,000,000-photon reference, at 1,280,000 0.8 %: the paper's < 1 % (§6; README "Table 1")
+    # Where no N_frame up to the cap makes the halves' difference invisible, the loop stops here and the
+    # segment is reported capped (docs/07-segments.md §7)
     n_frame_max: int = _param(1_280_000, "segments", "largest N_frame of the doubling loop, reported when hit, "
                               "§5.2.3", 1, 1 << 30)
     d_thr: float = _param(0.03, "segments", "d_thr, share of AQM pixels above 1 JND, §5.2.3", 0.0, 1.0)
     aqm_size: int = _param(256, "segments", "AQM input size in pixels, §6", 16, 4096)
-    # 1 turns it off: ROOM's guided run at the 160,000 cap then traces 3.5 M photons fewer, with
-    # flicker 0.0185 -> 0.0191 and relative L2 0.0391 -> 0.0407 (README "Where the guided run's flicker")
+    # An end frame's windows reach one way only, so it collects about half the photons of a frame
+    # inside the animation (docs/07-segments.md §2)
     end_photons: float = _param(2.0, "segments", "N_frame factor for frames within F_max/2 of an animation "
                                 "end, which lack one neighbour segment, §5.2 (1: none)", 1.0, 64.0, closed=True)
 

@@ -254,8 +254,8 @@ class SegmentRun:
     def pilot(self, place: Placement) -> dict:
         """Step 1's probe, traced here in memory, never stored: its photons are the first
         ``pilot_photons`` of frame K's own stream (counter-based), so the frame's batches hold them
-        anyway. Stored, it was one more batch at every K and one more wave of tasks a segment (the
-        twenty-second session's README section); read back from the store when K happened to be
+        anyway. Stored, it was one more batch at every K and one more wave of tasks a segment (docs/07-segments.md
+        §2); read back from the store when K happened to be
         traced, E would depend on what else ran first."""
         from workers.photons import trace_batch
         from workers.reconstruct import vertex_moments

@@ -2,7 +2,7 @@
 pyplot and laid out with fixed margins.
 
 They are drawn at the end of ``loom render``, after the last frame, where every second is serial
-(README "Table 2"). pyplot's figure manager and ``tight_layout`` (which draws every tick label to
+(docs/13-cluster.md §4). pyplot's figure manager and ``tight_layout`` (which draws every tick label to
 measure it, then draws again) cost about a third of a figure's time (a 1 x 3 plot of 135 frames:
 0.75 s against 0.48-0.52 s, both cores otherwise busy); a ``matplotlib.figure.Figure`` on the Agg
 canvas with margins fixed in inches draws once. The margins hold the axis labels and

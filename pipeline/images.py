@@ -8,7 +8,7 @@
 
 Every file is written under a temporary name in its directory and moved into place with
 ``os.replace``, so a killed task leaves either the old file or the new one, never a torn one
-(OIIO picks its writer by extension, hence ``ImageOutput.create(format)``; docs/libraries.md §3).
+(OIIO picks its writer by extension, hence ``ImageOutput.create(format)``; docs/16-libraries.md §3).
 """
 from __future__ import annotations
 
@@ -54,7 +54,7 @@ def write_exr(path: str | Path, beauty: np.ndarray, alpha: np.ndarray, layers: d
 
     float32, not half: the maps and shading are float32, and half overflows to +Inf above 65504 and
     flushes to 0 below 6e-8 (a light 1e10 or 1e-10 times as bright, tests/stress/test_scale.py),
-    and keeps 3 digits; one pixel type for every frame of an animation (README "Outputs")."""
+    and keeps 3 digits; one pixel type for every frame of an animation (docs/09-frames.md §2)."""
     h, w = alpha.shape
     pixels = np.concatenate([beauty, alpha[..., None]] + [layers[name] for name in LAYERS], axis=2)
     spec = oiio.ImageSpec(w, h, len(EXR_CHANNELS), "float")

@@ -32,7 +32,7 @@ def display_values(rgb: np.ndarray, adaptation: float, params: ToneMapping = Ton
 def viewing_for(params: ToneMapping) -> ViewingConditions:
     """The AQM's viewing conditions: the named display's geometry (size, resolution, distance), the
     frame shown on it as ``params.fill`` says, and the display white the tone mapping maps to, with
-    the display's contrast (docs/aqm.md §7)."""
+    the display's contrast (docs/08-aqm.md §7)."""
     named = ViewingConditions.named(params.display, fill=params.fill)
     contrast = DISPLAYS[params.display][4]
     return replace(named, peak_luminance=params.display_max, black_level=params.display_max / contrast,

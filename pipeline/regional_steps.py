@@ -3,7 +3,7 @@
 Condition (1) (§5.1, kernels/temporal.py) tests each element's own photon count, whose noise at
 tens of hits a frame hides a change of 30-50 %: after a light jumps, many elements keep pooling
 the frames before the jump for F_max/2 frames, which the error benchmark sees as the lag and the
-flicker around the change (README, "Run time against error"). Summed over a region of many
+flicker around the change (docs/12-error-benchmark.md §3). Summed over a region of many
 elements, the same change stands far above the counts' noise. So the counts are summed over cubic
 cells of the elements' centroids (instance-local coordinates, so a moving object's cells move
 with it), at ``step_levels`` sizes from ``2 x`` the element size, doubling; a frame boundary
@@ -16,7 +16,7 @@ and by more than ``step_relative`` of the larger rate, and no window of an eleme
 crosses the boundary. A slow drift (a few per cent over the segment) never reaches ``step_k``
 between neighbouring frames; a jumping light, a door, a switched lamp does. The relative bound
 keeps the test's power from growing with N_frame: without it, ROOM's guided loop at 640,000
-photons cut the windows at the aircraft's moving light and stalled (README, "Abrupt changes").
+photons cut the windows at the aircraft's moving light and stalled (docs/06-temporal.md §3).
 Only the two rows of a boundary are read, so a window's bits do not depend on the chunk of frames
 around it (pipeline/temporal.py).
 """

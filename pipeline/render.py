@@ -54,7 +54,7 @@ class RenderSettings:
     width: int = 640
     height: int = 480
     # jittered camera samples per pixel; the one default of loom render's --spp and of the benchmarks that
-    # render as loom render does (pipeline/cli/render.py RENDER_SPP; 8: docs/sampling.md §2)
+    # render as loom render does (pipeline/cli/render.py RENDER_SPP; 8: docs/10-sampling.md §2)
     spp: int = 8
     reflection_depth: int = 4  # mirror/glossy reflections followed per camera path
     area_samples: int = 2  # area-light (or sky) samples per diffuse hit (scenes with emissive triangles or a sky)
@@ -209,7 +209,7 @@ def render(scene_path: str | Path, *, frames: str | None, out_dir: str | Path,
 
     # The scheduler is reached before anything is written: an address with nothing listening
     # leaves no output folder behind. The report, video and figures (finish) are made while the
-    # cluster closes: both are serial ends of the run (README "Table 2").
+    # cluster closes: both are serial ends of the run (docs/13-cluster.md §4).
     with ThreadPoolExecutor(1) as pool:
         with connect(scheduler, workers, performance_report=performance_report, echo=echo) as client:
             job = prepare_job(scene_path, frames=frames, out_dir=out_dir, settings=settings, n_photons=n_photons,
@@ -270,7 +270,7 @@ def finish(job: Job, records: list[SegmentRecord], *, rays: dict, batches: int, 
                      "config": job.config},
     }
     # The video (an ffmpeg process) encodes while this process draws the report's figures: both
-    # are the render's last serial steps (README "Table 2")
+    # are the render's last serial steps (docs/13-cluster.md §4)
     from .report import page_parts, write_report
     with ThreadPoolExecutor(1) as pool:
         encoding = pool.submit(_timed, write_video, [frame_paths(out, f)[1] for f in job.selection], video,

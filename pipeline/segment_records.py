@@ -25,7 +25,7 @@ STATUSES = ("decided", "done")
 # Fields older records hold that the code no longer writes: dropped on reading, so `loom segments`
 # still shows such a record and a rerun finds it stale (its decision_hash digests settings that are
 # gone) and decides the segment again, reusing its photons. Any other unknown field is refused.
-# fmax_checks: the F_max checks of the deleted fmax_pays switch (docs/defaults.md).
+# fmax_checks: the F_max checks of the deleted fmax_pays switch (docs/11-defaults.md).
 RETIRED_FIELDS = ("fmax_checks",)
 
 

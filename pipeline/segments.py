@@ -21,10 +21,10 @@ import numpy as np
 
 # --- Step 1: initialization (§5.2.1) -----------------------------------------------------------
 def energy_error(s_y: np.ndarray, q_y: np.ndarray) -> float:
-    """The energy-based error E of an indirect illumination map (docs/estimators.md §1.4), as a fraction.
+    """The energy-based error E of an indirect illumination map (docs/05-estimators.md §1.4), as a fraction.
 
     E = sum_v A_v sigma_v / sum_v A_v E_v, the flux-weighted mean relative standard error of the
-    vertex values, with E_v = S_v / A_v and sigma_v = sqrt(Q_v) / A_v (docs/estimators.md §1.3: the variance
+    vertex values, with E_v = S_v / A_v and sigma_v = sqrt(Q_v) / A_v (docs/05-estimators.md §1.3: the variance
     of a sum of i.i.d. photon weights is estimated by the sum of their squares). The areas cancel:
     E = sum sqrt(Q_v) / sum S_v. ``s_y`` (V,) luminance flux per vertex, ``q_y`` (V,) its sum of
     squared weights. Why this estimate: it is scale-free, dominated by the bright regions a
@@ -77,7 +77,7 @@ def needed_n_frame(n_frame: int, steps: list[dict], capped: bool, d_thr: float) 
     Why: a capped segment's final N_frame understates its need. Carried over as it is, halved, it
     started ROOM's next segments one rung below the cap at a 160,000 cap, though the previous
     segment's d_AQM there was 26-33 % against d_thr 3 %. Each then spent an AQM and a second photon
-    batch a frame, only to reach the cap (README "Where the guided run's flicker comes from").
+    batch a frame, only to reach the cap (docs/07-segments.md §2).
     """
     if not capped or not steps:
         return float(n_frame)
@@ -146,7 +146,7 @@ def next_n_frame(n_frame: int, d_aqm: float, d_thr: float, n_max: int) -> int | 
     (:func:`doublings_ahead`), were tried and removed: with the recalibrated AQM, whose d_AQM falls
     faster than the extrapolation's bound, a jump passed where plain doubling stops (ROOM's quick
     error benchmark: 1,280,000 photons a frame instead of 640,000, 1.8x the CPU), and elsewhere it
-    saved nothing (docs/defaults.md, "predict_doublings")."""
+    saved nothing (docs/11-defaults.md, "predict_doublings")."""
     if d_aqm <= d_thr or n_frame >= n_max:
         return None
     return min(n_frame * 2, n_max)

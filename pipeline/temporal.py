@@ -71,10 +71,9 @@ def window_counts(store: PhotonStore, frames: Iterable[int] | None = None,
     Why not every hit, as the per-frame tables of §4 count: a direct light's shadow edge sweeping
     over a moving object changes an element's direct hits tenfold in a frame while the indirect
     light there, bounced off the room, drifts smoothly; windows cut at the direct edge left those
-    elements one frame of photons. On ROOM's frames 61-80 at 640,000 photons a frame, indirect
-    counts gave relative L2 0.0234 against 0.0248 and error flicker 0.0151 against 0.0181 (20,000
-    and 80,000 photons: the same direction), the Fig. 3 highlight and the lag after the light's
-    jump unchanged (README, "Windows from the indirect hits"; on defaults, docs/defaults.md)."""
+    elements one frame of photons. On the error benchmark's defaults every run has less error and
+    less error flicker with the indirect counts (docs/06-temporal.md §2; docs/11-defaults.md,
+    "indirect_counts")."""
     return store.counts(kind="indirect", frames=frames, batches=batches)
 
 
@@ -158,7 +157,7 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
     elements : the ElementMesh the photons were bucketed on; ``scene`` poses frames (vertex areas).
     frames : store frame indices (0-based; default all).
     mode : "adaptive" (Condition (1), §5.1; each window's linear fit
-        at the frame, docs/estimators.md §1.6), "fixed" (+-F_max/2 pooled, always, §6 Fig. 3b) or "off".
+        at the frame, docs/05-estimators.md §1.6), "fixed" (+-F_max/2 pooled, always, §6 Fig. 3b) or "off".
     fmax : F_max in frames (default ``config.fmax_initial``).
     kind : records gathered: "indirect" (the map the compositor reads), "direct" or "all".
     split_parity : also give the even/odd half-photon maps I1, I2 (§5.2.3) instead of the full map.

@@ -1,4 +1,4 @@
-"""Tone mapping with eye adaptation: linear frames to 8-bit sRGB (docs/estimators.md §2).
+"""Tone mapping with eye adaptation: linear frames to 8-bit sRGB (docs/05-estimators.md §2).
 
 Three operators (``ToneMapping.operator``, ``loom render --tonemap``), all driven by the same
 time-adapted luminance L_a and shifted by ``exposure`` EV (a factor 2^EV):
@@ -42,7 +42,7 @@ with tau_cone = 0.1 s, tau_rod = 0.4 s and Y in cd/m^2 (sigma is the rods' share
 the time between the frames rendered (the timeline's fps; a frame list's gaps adapt further); the
 first frame rendered starts adapted. A frame's L_a reads only L_wa of frames up to itself, so any
 worker computes it from the per-frame values in the segment records.
-Units: one radiometric radiance unit is ``nits_per_unit`` cd/m^2 (1 by default, docs/conventions.md §1).
+Units: one radiometric radiance unit is ``nits_per_unit`` cd/m^2 (1 by default, docs/03-conventions.md §1).
 """
 from __future__ import annotations
 

@@ -13,7 +13,7 @@ own light (tests/stress/test_lights.py). Weights are flux / probability, so the 
 unbiased. The sampling itself is in kernels/emit.py (an OpenCL kernel and its NumPy twin); this
 module turns a FrameState into their tables, and weights photons of textured emitters
 (textured_emission_weights).
-Records store photon weights; irradiance is sum(weight) / (N_emitted x area) (docs/estimators.md §1.1).
+Records store photon weights; irradiance is sum(weight) / (N_emitted x area) (docs/05-estimators.md §1.1).
 """
 from __future__ import annotations
 

@@ -3,7 +3,7 @@
 An Embree scene cannot be pickled, so each worker process builds one per distinct frame *state
 key* and keeps the most recent few (frames with camera-only motion share one). embreex has no
 ray ``tnear`` (it is fixed at 0), so secondary rays start offset along the surface normal
-(:func:`offset_origins`); see docs/libraries.md §2.
+(:func:`offset_origins`); see docs/16-libraries.md §2.
 
 The offset follows the hit's own scale, not the scene's: a float32 point on a triangle whose
 corners reach a coordinate of magnitude ``s`` is only known to about ``s x 2^-24`` (pbrt-v4 §6.8,

@@ -1,4 +1,4 @@
-"""Illumination maps from one frame's own photons (§4; docs/estimators.md §1.2).
+"""Illumination maps from one frame's own photons (§4; docs/05-estimators.md §1.2).
 
 Each diffuse photon hit in element t = (v0, v1, v2) with barycentrics (b0, b1, b2) adds b_k x energy
 to the accumulator S of vertex v_k; the vertex irradiance is E_v = S_v / (N x A_v) with N the photons
@@ -7,7 +7,7 @@ Record energies are photon weights (flux x N, pipeline/store), so S / N is flux 
 Indirect hits (not the first hit from a light) give the indirect map the compositor reads; direct
 hits give a mesh-based direct estimate (§4), kept beside it in the illumination store.
 
-:func:`vertex_irradiance` is the NumPy reference of the temporal gather (kernels/, issue 5) for a
+:func:`vertex_irradiance` is the NumPy reference of the temporal gather (kernels/gather.py) for a
 one-frame window: keep its signature and arithmetic (float64, np.bincount) as they are.
 :func:`reconstruct_task` is the Dask task of Steps 4-5 for a chunk of a segment's frames.
 """
@@ -29,7 +29,7 @@ if TYPE_CHECKING:
 def vertex_irradiance(element: npt.ArrayLike, b1: npt.ArrayLike, b2: npt.ArrayLike, energy: npt.ArrayLike,
                       elements_mesh: ElementMesh | npt.ArrayLike, vertex_areas: npt.ArrayLike,
                       n_emitted: int) -> np.ndarray:
-    """(V, 3) float64 vertex irradiance E_v = S_v / (N A_v), S_v = sum_j b_k(j) energy_j (docs/estimators.md §1.2).
+    """(V, 3) float64 vertex irradiance E_v = S_v / (N A_v), S_v = sum_j b_k(j) energy_j (docs/05-estimators.md §1.2).
 
     ``element`` (n,) element ids; ``b1``, ``b2`` (n,) barycentrics of the element's vertices 1 and 2,
     either u16 fixed point (/65535, as stored) or floats; b0 = 1 - b1 - b2. ``energy`` (n, 3) photon
@@ -96,7 +96,7 @@ def records_vertex_flux(records: FrameRecords, select: np.ndarray, element_verti
 
 
 def flux_to_irradiance(s: np.ndarray, n_emitted: int, vertex_areas: npt.ArrayLike) -> np.ndarray:
-    """E_v = S_v / (N A_v) (docs/estimators.md §1.2); 0 where A_v = 0 or N = 0."""
+    """E_v = S_v / (N A_v) (docs/05-estimators.md §1.2); 0 where A_v = 0 or N = 0."""
     denom = float(n_emitted) * np.asarray(vertex_areas, dtype=np.float64)
     out = np.zeros_like(s)
     ok = denom > 0
@@ -154,7 +154,7 @@ def frame_geometry(scene: Scene, elements: ElementMesh, frame: int) -> FrameGeom
 def vertex_moments(element: npt.ArrayLike, b1: npt.ArrayLike, b2: npt.ArrayLike, energy: npt.ArrayLike,
                    element_vertices: npt.ArrayLike, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
     """(V,) luminance flux S_v = sum_j b_k(j) Y_j and its squared-weight sum Q_v = sum_j b_k(j)^2 Y_j^2
-    (docs/estimators.md §1.3): the moments the pilot's energy-based error reads (pipeline/segments.energy_error)."""
+    (docs/05-estimators.md §1.3): the moments the pilot's energy-based error reads (pipeline/segments.energy_error)."""
     from pipeline.tonemap import luminance
 
     ev = np.asarray(element_vertices)

@@ -1,7 +1,7 @@
 """Daly's (1993) cortex transform (Watson 1987): radial bands, and radial x orientation channels.
 
 Radial frequency bands, in cycles per pixel: band k (k = 1..5) lies between mesa(rho; 2^-k) and
-mesa(rho; 2^-(k-1)) (Daly's "dom" filters d_k), the base band below 1/32 cy/px (docs/aqm.md §3). Each dom
+mesa(rho; 2^-(k-1)) (Daly's "dom" filters d_k), the base band below 1/32 cy/px (docs/08-aqm.md §3). Each dom
 band is split into six orientations by Daly's fan filters fan_l(theta), raised cosines 30 deg wide about
 theta_l = -90 + 30 l deg: 5 x 6 + 1 = 31 channels, as in Daly's VDP. §6 of the paper drops orientation
 "in the visual masking" only, so detection uses the 31 channels and masking the six radial bands
@@ -12,7 +12,7 @@ two channel centres then needs more contrast than one at a centre (probability s
 beta over channels, psychometric.py; at most 2^(1 - 1/beta) = 1.64x, 0.21 log units, for a pure grating
 halfway between two orientations). Raising the filters to the power 1/beta would remove that ripple; on
 ModelFest it fits worse (RMS 0.377 against 0.230 log10 units; 0.199 against 0.166 with a free gain,
-docs/aqm.md §8), so the AQM keeps Daly's filters.
+docs/08-aqm.md §8), so the AQM keeps Daly's filters.
 """
 from __future__ import annotations
 

@@ -9,7 +9,7 @@ The AQM's CSF is S(rho, l, v) = S_Daly(rho, l) * V(rho, v_R):
     Ratios above 1 (low frequencies at high v_R, where Kelly's stabilised-like drift curve falls below
     Daly's unstabilised one) are not taken: that gain is an artefact of comparing two fits [decision].
 Per-pixel luminance and velocity are applied by filtering with a bank of CSFs at fixed levels and
-interpolating the filtered images per pixel (HDR-VDP 1.x scheme, docs/aqm.md §2a-2b); see
+interpolating the filtered images per pixel (HDR-VDP 1.x scheme, docs/08-aqm.md §2a-2b); see
 :func:`space_variant_filter`.
 """
 from __future__ import annotations
@@ -19,12 +19,12 @@ from functools import lru_cache
 import numpy as np
 import numpy.typing as npt
 
-# --- Daly 1993, static CSF (docs/aqm.md §2a) ---------------------------------------------------
+# --- Daly 1993, static CSF (docs/08-aqm.md §2a) ---------------------------------------------------
 DALY_P = 250.0  # absolute peak scale
 DALY_EPS = 0.9  # epsilon
 DALY_OB = 0.78  # oblique effect
 DALY_KE = 0.24  # eccentricity
-# --- Kelly 1979 / Daly 1998 spatiovelocity CSF (docs/aqm.md §2b) ------------------------------
+# --- Kelly 1979 / Daly 1998 spatiovelocity CSF (docs/08-aqm.md §2b) ------------------------------
 KD_C0, KD_C1, KD_C2 = 1.14, 0.67, 1.7
 # --- Daly 1998 eye movements ---------------------------------------------------------------------
 G_SP = 0.82  # smooth-pursuit gain

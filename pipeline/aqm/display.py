@@ -4,7 +4,7 @@ The AQM works on the luminance a viewer sees on a stated display (Daly 1993 take
 so a rendering's linear Rec.709 value 1.0 is mapped to the display's peak white and values above it
 are clipped, as a monitor does. Spatial frequencies need pixels per degree: of the display, of the
 frame as it is shown (full screen by default), and of the AQM's 256-pixel image (§6 of the paper),
-all derived here by pure functions (docs/aqm.md §6).
+all derived here by pure functions (docs/08-aqm.md §6).
 """
 from __future__ import annotations
 
@@ -24,7 +24,7 @@ FILLS = ("full_screen", "native")
 
 def pixels_per_degree(pixel_m: float, distance_m: float) -> float:
     """Pixels per degree at the centre of a screen of pixel pitch ``pixel_m`` seen from ``distance_m``:
-    1 / (2 atan(pitch / (2 d)) in degrees) (docs/aqm.md §6; ColorVideoVDP and FLIP use the same)."""
+    1 / (2 atan(pitch / (2 d)) in degrees) (docs/08-aqm.md §6; ColorVideoVDP and FLIP use the same)."""
     return 1.0 / math.degrees(2.0 * math.atan(pixel_m / (2.0 * distance_m)))
 
 
@@ -43,7 +43,7 @@ class ViewingConditions:
     animation is watched) scales the frame to fill the display with its aspect kept, "native" shows one
     frame pixel per display pixel. The default display is ColorVideoVDP's "standard_fhd" geometry (a
     24-inch 16:9 1920x1080 monitor from 0.6 m, 37.9 pixels per degree) with peak white 100 cd/m^2 (the
-    reference white of an sRGB/Rec.709 monitor, docs/aqm.md §1 [decision]) and black 0.1 cd/m^2 (1000:1);
+    reference white of an sRGB/Rec.709 monitor, docs/08-aqm.md §1 [decision]) and black 0.1 cd/m^2 (1000:1);
     :meth:`named` gives ColorVideoVDP's displays as they are defined there.
     """
 

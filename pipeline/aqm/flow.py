@@ -2,11 +2,11 @@
 
 Each pixel of frame f is lifted to its world-space point with the frame's depth and camera, then
 projected with the camera of a neighbouring frame; the displacement in pixels per frame, times fps
-and divided by pixels per degree, is the image velocity in deg/s (docs/aqm.md §2b). Only the camera
+and divided by pixels per degree, is the image velocity in deg/s (docs/08-aqm.md §2b). Only the camera
 moves: animated objects are assumed tracked by the eye (§6), so their own motion is left out, and the
 flow is that of a static world seen by the moving camera.
 
-Conventions (docs/conventions.md §3): cameras look down -Z with +Y up; ``world_to_camera`` is a 4x4 matrix;
+Conventions (docs/03-conventions.md §3): cameras look down -Z with +Y up; ``world_to_camera`` is a 4x4 matrix;
 the projection is a pinhole with vertical field of view ``yfov`` (radians) over the depth image's
 rows; ``depth`` is the positive distance along the viewing axis (-z in camera space), +inf for
 pixels that see nothing (sky), which are warped as directions.
@@ -108,5 +108,5 @@ def image_velocity(depth: npt.ArrayLike, world_to_camera: npt.ArrayLike, *, yfov
 
 
 def pixels_per_frame_to_deg_per_s(flow: np.ndarray, fps: float, ppd: float) -> np.ndarray:
-    """v_I = delta_p * fps / ppd (docs/aqm.md §2b)."""
+    """v_I = delta_p * fps / ppd (docs/08-aqm.md §2b)."""
     return np.asarray(flow, dtype=np.float64) * (fps / ppd)

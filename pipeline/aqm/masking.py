@@ -1,4 +1,4 @@
-"""Visual masking with mutual masking (Daly 1993, docs/aqm.md §4), computed on the radial bands (§6).
+"""Visual masking with mutual masking (Daly 1993, docs/08-aqm.md §4), computed on the radial bands (§6).
 
 A band signal m (in threshold units: 1 = just detectable) raises the detection threshold of a
 difference in the same band by Daly's (1993) threshold elevation
@@ -7,7 +7,7 @@ with Daly's W = 6, Q = 0.7, b = 4. Daly's learning slope s ranges from 0.65 to 1
 that reproduces the threshold-versus-masker-contrast curve of a grating masker (Legge & Foley, JOSA 70(12),
 1980: no elevation by a masker near threshold, then a power law of exponent near 0.6). Through the whole
 AQM it gives elevations 1.04, 1.36, 2.6 and 5.1 at maskers of 1, 3, 10 and 30 thresholds, slope 0.62
-(docs/aqm.md §9); the knee of Te is then at |m| = (k1 k2^s)^(-1/s) = 1.58 thresholds.
+(docs/08-aqm.md §9); the knee of Te is then at |m| = (k1 k2^s)^(-1/s) = 1.58 thresholds.
 Mutual masking takes the smaller elevation of the two images so an error does not mask itself:
 Te = max(1, min(Te_a, Te_b)), after Daly's phase-uncertainty low-pass.
 """

@@ -1,4 +1,4 @@
-"""Psychometric function and probability summation over channels (Daly 1993, docs/aqm.md §5).
+"""Psychometric function and probability summation over channels (Daly 1993, docs/08-aqm.md §5).
 
 P_c = 1 - exp(-|dC_c / Te_c|^beta), beta = 3.5 (Daly's patent, HDR-VDP 1.x default), for each of the 31
 cortex channels c (Te_c: the masking elevation of c's radial band); over the channels

@@ -1,5 +1,5 @@
 """``loom bench error SCENE``: run time against error, for our method and the ways a user would otherwise
-render the same animation (issue 11).
+render the same animation.
 
 Every method is a real ``loom render`` (pipeline/render.py) of the same frames on one LocalCluster,
 timed whole (wall; CPU = this process plus every worker process), into a fresh output folder:
@@ -30,8 +30,8 @@ the first is the noise floor printed beside every error. Every frame of one refe
 same random numbers (common random numbers: the Philox stream of the range's first frame, posed
 at its own frame), so where a frame's scene equals the one before, so does its reference noise:
 the reference's noise stays out of the error's *flicker*, where independent per-frame noise would
-add sqrt(2) x its amplitude to every method's figure (README "Common random numbers in the
-reference"). Each frame alone is still an independent-seed estimate, so every per-frame measure
+add sqrt(2) x its amplitude to every method's figure (docs/12-error-benchmark.md
+§2). Each frame alone is still an independent-seed estimate, so every per-frame measure
 and the floor are as before. The references are kept in
 ``OUT/references/`` (:func:`reference_key`: scene, elements, frames, photons, seeds, photon depth and
 the tracer's source), so a rerun with another ``--config`` or other budgets of the same reference

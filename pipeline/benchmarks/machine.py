@@ -1,9 +1,9 @@
 """What the machine charges for fresh memory and new files, printed beside a timing benchmark.
 
 On the shared 2-core build machines (Firecracker VMs, ext4 root) two costs move by up to 10x
-between runs of the same bits and set Table 2's I/O row (README "Where the I/O row's time goes"):
+between runs of the same bits and set Table 2's I/O row (docs/13-cluster.md §7):
 
-* the first touch of memory the VM has not backed yet: 3.7 to 33 us a 4 KiB page (2026-12-03),
+* the first touch of memory the VM has not backed yet: 3.7 to 33 us a 4 KiB page,
   where a page the guest recycles costs about 0.3 us;
 * a new file written on the root ext4: 1.5 MB in 11 to 16 ms on slow stretches, 0.6 to 1.3 ms on
   tmpfs (/dev/shm) in the same minutes. CPU time, not waiting: the store's batch writes took as

@@ -44,7 +44,7 @@ K = 68  # ROOM's segment centre K2 (§6, Table 1)
 
 def split_noise(irradiance: np.ndarray, areas: np.ndarray) -> float:
     """Flux-weighted relative standard error of one half's vertex irradiance from the two halves
-    (2, V, 3): sum A E r / sum A E with r = 1.2533 |E1 - E2| / (sqrt(2) E) (docs/estimators.md §1.4)."""
+    (2, V, 3): sum A E r / sum A E with r = 1.2533 |E1 - E2| / (sqrt(2) E) (docs/05-estimators.md §1.4)."""
     y = irradiance @ LUMA
     mean = y.mean(axis=0)
     ok = mean > 0

@@ -200,7 +200,7 @@ def bench_error(scene, quick, frames, budgets, fmax, d_thr, resolution, spp, ref
 @click.option("--json", "json_path", type=click.Path(dir_okay=False), default=None, help="Also write the figures here.")
 def bench_spp(frames, spps, reference_spp, photons, fmax, resolution, seed_check, adaptive, store, json_path):
     """FLIP and d_AQM of ROOM frames at 1-16 camera samples per pixel against a converged reference, the
-    indirect map fixed, and the compositing time per frame (docs/sampling.md)."""
+    indirect map fixed, and the compositing time per frame (docs/10-sampling.md)."""
     from pipeline.benchmarks.spp import run
     from pipeline.errors import LoomError
     from pipeline.render import parse_resolution

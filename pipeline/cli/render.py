@@ -98,7 +98,7 @@ def job_options(f: _F) -> _F:
         click.option("--resolution", default="640x480", show_default=True, help="WIDTHxHEIGHT in pixels."),
         click.option("--spp", type=int, default=RENDER_SPP, show_default=True,
                      help="Jittered camera samples per pixel (the default: the pixels' error no more visible "
-                          "than the photon noise d_thr accepts, docs/sampling.md)."),
+                          "than the photon noise d_thr accepts, docs/10-sampling.md)."),
         click.option("--photons", default="auto", show_default=True, callback=_photons,
                      help="N_frame: auto (chosen per segment by the AQM, §5.2) or photons per frame for every "
                           "frame."),

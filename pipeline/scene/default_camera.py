@@ -1,6 +1,6 @@
 """The camera a file without one is rendered with (``--camera auto``): the whole animation in view.
 
-Decision (issue 13): the camera looks at the centre of the world-space bounding box of every
+Decision: the camera looks at the centre of the world-space bounding box of every
 mesh over every frame of the timeline, from azimuth ``AZIMUTH`` (degrees from +Z, glTF's front,
 towards +X) and elevation ``ELEVATION`` above the horizon (front-right and a little above, the
 three-quarter view of a product shot), with vertical field of view ``YFOV_DEG``. It stands back

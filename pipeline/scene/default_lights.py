@@ -1,8 +1,8 @@
 """The light a file without any light is rendered with: a directional sun and a uniform sky.
 
-Decision (issue 13): many glTF files, from sample collections and DCC exports, carry no light;
+Decision: many glTF files, from sample collections and DCC exports, carry no light;
 refusing them (``--light none`` still does) leaves a new user with nothing. The default is a
-clear day in the file's units (docs/conventions.md §1: radiometric, no 683 lm/W), with a clear day's values:
+clear day in the file's units (docs/03-conventions.md §1: radiometric, no 683 lm/W), with a clear day's values:
 1000 W/m^2 of direct sun at normal incidence and about 130 W/m^2 of diffuse sky on a horizontal
 surface. The level matters because tone mapping is absolute (pipeline/tonemap.py, Ward 1994,
 one unit of radiance = ``nits_per_unit`` cd/m^2): at daylight levels a sunlit white surface

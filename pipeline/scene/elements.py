@@ -239,7 +239,7 @@ class ElementMesh:
 
     def vertex_areas(self, state: FrameState) -> np.ndarray:
         """(V,) area of each vertex's hat basis function, sum of a third of its elements' areas
-        (docs/estimators.md §1.2): the denominator of vertex irradiance."""
+        (docs/05-estimators.md §1.2): the denominator of vertex irradiance."""
         return np.bincount(self.element_vertices.ravel(), weights=np.repeat(self.areas(state) / 3.0, 3),
                            minlength=self.n_vertices)
 

@@ -38,7 +38,7 @@ COMPONENT_DTYPES = {
 }
 TYPE_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9, "MAT4": 16}
 
-# What a scene file may claim (README "Input limits and hostile input"). A buffer may not exceed a
+# What a scene file may claim (docs/14-robustness.md §1). A buffer may not exceed a
 # GLB's own uint32 length; an accessor without a bufferView is zeros that no byte backs, so its
 # size is capped on its own (it is only meaningful with sparse data).
 MAX_BUFFER_BYTES = (1 << 32) - 1

@@ -1,6 +1,6 @@
 """Punctual lights (``KHR_lights_punctual``) in world space, in radiometric units.
 
-Units (docs/conventions.md §1): point and spot ``intensity x color`` is radiant intensity (W/sr); directional
+Units (docs/03-conventions.md §1): point and spot ``intensity x color`` is radiant intensity (W/sr); directional
 ``intensity x color`` is irradiance (W/m^2) on a surface facing it. No 683 lm/W or 4*pi factor.
 Spot fall-off is the curve the KHR_lights_punctual specification recommends (smoothstep-free,
 squared linear interpolation of the cosine between the outer and inner cone).

@@ -1,6 +1,6 @@
 """Material model: glTF metallic/roughness factors mapped to diffuse, glossy or mirror behaviour.
 
-Mapping (docs/conventions.md §2; written in the README too):
+Mapping (docs/03-conventions.md §2; written in the README too):
 
 * ``baseColorFactor`` RGB is the Lambertian albedo (alpha ignored), times the ``baseColorTexture``
   and ``COLOR_0`` where present (pipeline/scene/shading.py, pipeline/scene/textures.py).

@@ -1,7 +1,7 @@
 """A uniform sky: an emitter at infinity of one radiance above the horizon and another below.
 
 The sky surrounds the scene: radiance ``zenith`` (RGB, W/(m^2 sr) per channel, the units of
-docs/conventions.md §1) from every direction of the upper hemisphere (world +Y, glTF's up) and ``ground``
+docs/03-conventions.md §1) from every direction of the upper hemisphere (world +Y, glTF's up) and ``ground``
 from every direction of the lower one, as if the scene stood on an endless flat ground of that
 brightness. Both the photon tracer (workers/emission.py, kernels/emit.py: photons from a disk
 covering the scene) and the compositor (workers/area_lights.py: cosine-weighted shadow rays;

@@ -90,7 +90,7 @@ def deforms_line(scene: Scene) -> str:
     return f"{len(parts)} of {len(scene.instances)} primitives posed per vertex: " + "; ".join(parts)
 
 
-# Texture slots of a glTF material that photonloom does not read yet (README "Textures")
+# Texture slots of a glTF material that photonloom does not read yet (docs/09-frames.md §4)
 _UNREAD_TEXTURES = ("normalTexture", "occlusionTexture", "metallicRoughnessTexture")
 
 

@@ -1,7 +1,7 @@
 """Frame numbering and render-farm frame ranges.
 
 Frames are numbered from 1, as render farms number them; frame ``f`` shows the scene at
-``t = (f - 1) / fps`` seconds (docs/conventions.md §4), so
+``t = (f - 1) / fps`` seconds (docs/03-conventions.md §4), so
 frame 1 is the animation's first key. A scene with ``frames`` frames spans (frames - 1) / fps
 seconds. Range syntax (Nuke, Deadline, OpenCue): ``1-100``, ``1-100x2`` (step 2), ``1,5,10-20``.
 """
@@ -15,7 +15,7 @@ from ..errors import LoomError
 DEFAULT_FPS = 30.0
 # Frames a timeline (and so a render or a frame range) may have: 55 minutes at 30 fps, far beyond
 # one render job, and small enough that planning, loading and `loom info` stay in seconds and in
-# megabytes (README "Input limits and hostile input").
+# megabytes (docs/14-robustness.md §1).
 MAX_FRAMES = 100_000
 _PART = re.compile(r"^\s*(-?\d+)\s*(?:-\s*(-?\d+)\s*(?:x\s*(\d+)\s*)?)?$")
 

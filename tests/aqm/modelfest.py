@@ -1,4 +1,4 @@
-"""The ModelFest stimuli and the AQM's detection threshold for each (docs/aqm.md §8).
+"""The ModelFest stimuli and the AQM's detection threshold for each (docs/08-aqm.md §8).
 
 ModelFest (Carney et al., Proc. SPIE 3959, 2000; Watson & Ahumada, J. Vision 5(9):6, 2005) measured foveal
 contrast thresholds of 16 observers for 43 achromatic stimuli shown at 120 pixels per degree, 256 x 256
@@ -7,11 +7,11 @@ definitions: luminance L0 (1 + c s(x, y)) with max |s| = 1, so c is the stimulus
 contrast the data set reports. Gabors are cosine phase; their carrier runs across horizontal bars and
 their Gaussian windows are given as standard deviations across (sigma_y) and along (sigma_x) the bars.
 
-Two stimuli are not reproduced exactly: #35 (binary noise) is a fresh sample of the same definition
-(1-arcmin binary noise in a 0.5 deg Gaussian window), not ModelFest's file; #43 (a natural image) needs
+Two stimuli are not reproduced exactly: stimulus 35 (binary noise) is a fresh sample of the same definition
+(1-arcmin binary noise in a 0.5 deg Gaussian window), not ModelFest's file; stimulus 43 (a natural image) needs
 ModelFest's picture, which is not shipped, and is left out. The fit therefore covers 42 stimuli.
 
-Run as a script to print the table of docs/aqm.md §8: ``python tests/aqm/modelfest.py``.
+Run as a script to print the table of docs/08-aqm.md §8: ``python tests/aqm/modelfest.py``.
 """
 from __future__ import annotations
 

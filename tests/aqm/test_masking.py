@@ -1,4 +1,4 @@
-"""Contrast masking by a grating against Legge & Foley (1980) (docs/aqm.md §9).
+"""Contrast masking by a grating against Legge & Foley (1980) (docs/08-aqm.md §9).
 
 Legge & Foley, "Contrast masking in human vision", JOSA 70(12):1458-1471, 1980, measured 2 cy/deg signal
 thresholds on 2 cy/deg masking gratings over three log units of masker contrast: for a range of low masker

@@ -1,4 +1,4 @@
-"""The AQM's detection thresholds against ModelFest (docs/aqm.md §8; data and source in data/)."""
+"""The AQM's detection thresholds against ModelFest (docs/08-aqm.md §8; data and source in data/)."""
 from __future__ import annotations
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""Each stage against the published numbers it implements (docs/aqm.md; Daly 1993, Kelly 1979, Daly 1998)."""
+"""Each stage against the published numbers it implements (docs/08-aqm.md; Daly 1993, Kelly 1979, Daly 1998)."""
 from __future__ import annotations
 
 import numpy as np

@@ -1,4 +1,4 @@
-"""Viewing conditions and the geometry of §6 (docs/aqm.md §6)."""
+"""Viewing conditions and the geometry of §6 (docs/08-aqm.md §6)."""
 from __future__ import annotations
 
 import numpy as np

@@ -1,6 +1,6 @@
-"""House rules a newcomer can rely on (issue 14), checked on the source itself so they stay true:
-kernels sit below the pipeline, each fact has one owner, public functions carry type hints and
-the README's layout names every module (citations: tests/docs/test_citations.py)."""
+"""House rules a newcomer can rely on, checked on the source itself so they stay true: kernels sit
+below the pipeline, each fact has one owner, public functions carry type hints and the layout note
+(docs/02-layout.md) names every module (the README and citations: tests/house/test_readme.py)."""
 from __future__ import annotations
 
 import ast
@@ -89,21 +89,22 @@ def test_each_fact_has_one_owner(fact):
     assert owner is None or places == [owner], f"{fact} defined in {places}, expected {owner}"
 
 
+LAYOUT = ROOT / "docs" / "02-layout.md"
+
+
 def _layout_block() -> str:
-    text = (ROOT / "README.md").read_text()
-    section = text.split("## Layout", 1)[1]
-    return section.split("```", 2)[1]
+    return LAYOUT.read_text().split("```", 2)[1]
 
 
-def test_readme_layout_names_every_module_and_nothing_that_is_gone():
+def test_layout_names_every_module_and_nothing_that_is_gone():
     block = _layout_block()
     named = set(re.findall(r"[\w./-]+\.(?:py|cl)\b", block))
     modules = [p for p in _sources(*PACKAGES, suffixes=(".py", ".cl")) if p.name not in ("__init__.py", "__main__.py")]
     unnamed = [_rel(p) for p in modules if p.name not in {Path(n).name for n in named} and _rel(p) not in named]
-    assert not unnamed, f"README layout does not name: {unnamed}"
+    assert not unnamed, f"docs/02-layout.md does not name: {unnamed}"
     paths = [n for n in re.findall(r"[\w.-]+(?:/[\w.-]*)+", block) if n.split("/")[0] in PACKAGES + ("docs", "tests")]
     gone = [n for n in paths if not (ROOT / n).exists()]
-    assert not gone, f"README layout names paths that do not exist: {gone}"
+    assert not gone, f"docs/02-layout.md names paths that do not exist: {gone}"
     basenames = {Path(n).name for n in named if "/" not in n}
     known = {p.name for p in modules}
-    assert basenames <= known, f"README layout names modules that do not exist: {sorted(basenames - known)}"
+    assert basenames <= known, f"docs/02-layout.md names modules that do not exist: {sorted(basenames - known)}"

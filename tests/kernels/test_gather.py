@@ -123,7 +123,7 @@ class TestFrameSumsFluxTwin(KernelTwinTests):
 
 
 class TestLinearWindowFluxTwin(TestFrameSumsFluxTwin):
-    """The same path with ``linear`` (``linear_window`` in gather.cl, docs/estimators.md §1.6)
+    """The same path with ``linear`` (``linear_window`` in gather.cl, docs/05-estimators.md §1.6)
     against the NumPy twin's fit, within 1e-6."""
 
     def device(self, per_frame, *args):

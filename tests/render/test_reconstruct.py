@@ -1,4 +1,4 @@
-"""vertex_irradiance (docs/estimators.md §1.2): exact splatting on a hand-made mesh, and unbiasedness on a plane."""
+"""vertex_irradiance (docs/05-estimators.md §1.2): exact splatting on a hand-made mesh, and unbiasedness on a plane."""
 from __future__ import annotations
 
 import numpy as np

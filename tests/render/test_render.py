@@ -146,7 +146,7 @@ def test_store_holds_each_frames_maps_from_its_own_photons(rendered):
 
 
 def test_every_option_for_a_renders_spp_defaults_to_render_settings():
-    # One owner (docs/sampling.md §2): loom render, loom plan and the benchmarks that render as loom
+    # One owner (docs/10-sampling.md §2): loom render, loom plan and the benchmarks that render as loom
     # render does read RenderSettings.spp; the CLI reads it only when an option's default is needed.
     import subprocess
     import sys

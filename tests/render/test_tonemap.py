@@ -66,7 +66,7 @@ def test_every_operator_is_monotone_and_bounded(operator):
 
 
 def test_exposure_operator_puts_the_adaptation_on_middle_grey_and_ev_doubles():
-    la = 0.057  # ROOM's adaptation luminance (README): shown at middle grey, not at Ward's 1.7 %
+    la = 0.057  # a dim room's adaptation luminance (ROOM's): shown at middle grey, not at Ward's 1.7 %
     grey = np.full((1, 3), la)
     assert display_linear(grey, la, ToneMapping(operator="exposure"))[0, 0] == pytest.approx(KEY)
     one_up = display_linear(grey, la, ToneMapping(operator="exposure", exposure=1.0))[0, 0]

@@ -126,7 +126,7 @@ def load(url: str, expressions: dict[str, str], width: int = 1280, height: int =
 
 
 def _signal_group(proc: subprocess.Popen, sig: int) -> None:
-    """Signal the browser and every helper it started (its own session, see load)."""
+    """Signal the browser and every helper it started (its own process group: start_new_session in load)."""
     try:
         os.killpg(proc.pid, sig)
     except ProcessLookupError:

@@ -1,4 +1,4 @@
-"""A generator of malformed and unusual scenes and command lines (issue 12), each with what it must give.
+"""A generator of malformed and unusual scenes and command lines, each with what it must give.
 
 Every case starts from one small, valid scene (a floor, a box, a point light and a camera, written by
 the real builder) and changes one thing: the GLB container, the JSON's shapes, accessors and buffer

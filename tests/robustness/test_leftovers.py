@@ -1,4 +1,4 @@
-"""Nothing left behind (issue 12, item 8): a killed ``loom shoot`` leaves temp files in the store that
+"""Nothing left behind: a killed ``loom shoot`` leaves temp files in the store that
 its rerun removes, with the store then equal to an uninterrupted run's; a refused command creates
 no store and no output folder."""
 from __future__ import annotations

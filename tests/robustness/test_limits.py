@@ -1,4 +1,4 @@
-"""Limits that keep memory and time bounded by what the input holds (issue 12, items 2, 3 and 9):
+"""Limits that keep memory and time bounded by what the input holds (docs/14-robustness.md §1):
 frame ranges and timelines (pipeline/scene/timeline.py), worker counts and waits for a cluster
 (pipeline/cluster.py)."""
 from __future__ import annotations

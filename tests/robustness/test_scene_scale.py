@@ -1,4 +1,4 @@
-"""Light does not depend on how big the rest of the scene is (issue 12, item 1; workers/raycast.py).
+"""Light does not depend on how big the rest of the scene is (docs/14-robustness.md §5; workers/raycast.py).
 
 Ray offsets follow each hit triangle's own float precision. A cornell box inside a black backdrop
 cube of side 10 .. 1e6 must get the same light as the box alone: the backdrop absorbs whatever

@@ -1,4 +1,4 @@
-"""1e8 photons accumulated for one frame without drift (issue 11 item 4, slow).
+"""1e8 photons accumulated for one frame without drift (slow).
 
 A point light between a mirror floor and a black diffuse ceiling tile: photons going up hit the
 tile first (direct records), photons reflected by the mirror hit it second (indirect records,

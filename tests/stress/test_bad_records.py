@@ -1,4 +1,4 @@
-"""NaN or Inf in stored records is dropped and counted, never spread into a frame (issue 11 item 4).
+"""NaN or Inf in stored records is dropped and counted, never spread into a frame (docs/14-robustness.md §6).
 
 The store refuses such records when they are written, so they can only come from damage or a
 foreign writer: here the stored chunks of one batch are rewritten through zarr with NaN, +Inf,

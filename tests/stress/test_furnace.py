@@ -1,4 +1,4 @@
-"""Unbiased indirect light (issue 11, deliverable 6): the furnace.
+"""Unbiased indirect light: the furnace (docs/14-robustness.md §7).
 
 In a closed box whose walls all emit radiance L and reflect diffusely with albedo rho, the radiance
 everywhere is L / (1 - rho) (the Neumann series L (1 + rho + rho^2 + ...)), so the irradiance of

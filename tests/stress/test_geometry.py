@@ -1,4 +1,4 @@
-"""Awkward geometry (issue 11 item 4): sliver and near-degenerate triangles, elements no photon
+"""Awkward geometry: sliver and near-degenerate triangles, elements no photon
 hits, and a triangle 1e6 units across.
 
 The room of tests/stress/scenes.lit_room gets, on its floor, a sliver (3 units long, 1e-3 wide) and

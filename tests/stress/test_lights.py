@@ -1,4 +1,4 @@
-"""A 1e6:1 ratio between two lights (issue 11 item 4).
+"""A 1e6:1 ratio between two lights (docs/04-photons.md §1).
 
 The bright lights sit in one closed room, a lamp 1e6 times dimmer in a closed room of its own. By
 power alone the dim room would get 0.2 of 200,000 photons a frame: no indirect light in most

@@ -1,5 +1,5 @@
-"""Light power scaled by 1e-30 ... 1e+30 scales every frame by the same factor (issue 11 item 4,
-issue 12 item 7): no NaN, Inf, flush to zero or overflow anywhere from the emitters through the
+"""Light power scaled by 1e-30 ... 1e+30 scales every frame by the same factor
+(docs/14-robustness.md §4): no NaN, Inf, flush to zero or overflow anywhere from the emitters through the
 photon store, the temporal gather, the filter and the compositor to the float32 EXR.
 
 Every light (point, spot and an emissive panel) of a closed room is scaled by s; the photons take

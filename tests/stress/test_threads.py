@@ -1,4 +1,4 @@
-"""Identical results across PoCL thread counts and 1, 2 and 3 Dask workers (issue 11 item 4).
+"""Identical results across PoCL thread counts and 1, 2 and 3 Dask workers (docs/04-photons.md §6).
 
 Each render runs ``loom render`` in a subprocess of its own with PoCL's thread count set in its
 environment (POCL_MAX_PTHREAD_COUNT for the pthread device, POCL_CPU_MAX_CU_COUNT for the cpu
