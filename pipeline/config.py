@@ -61,8 +61,8 @@ class RenderConfig:
     filter_photons: float = _param(25.0, "filter", "n_eff below which a vertex is filtered, r = 1/sqrt(n), §5.2.5",
                                    0.0)
     filter_rings: int = _param(3, "filter", "h_max, in element rings over the same surface, §5.2.5", 1, 255)
-    filter_z: float = _param(2.5, "filter", "bias test: a ring differing by > z sigma stops h, docs/05-estimators.md §1.5",
-                             0.0)
+    filter_z: float = _param(2.5, "filter", "bias test: a ring differing by > z sigma stops h, "
+                             "docs/05-estimators.md §1.5", 0.0)
     filter_angle: float = _param(30.0, "filter", "degrees between neighbour normals, docs/05-estimators.md §1.5",
                                  0.0, 180.0)
 
