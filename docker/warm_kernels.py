@@ -6,8 +6,8 @@ Run at image build time (docker/Dockerfile) with the installed package, not the 
     python /usr/local/share/photonloom/warm_kernels.py
 
 1. Builds every OpenCL program the tasks build, through ``kernels.context.program`` with the
-   options the tasks pass (none): photons (workers/photons.py: emit, scatter), reconstruction
-   (pipeline/temporal.py: temporal, gather, filter) and composite (workers/composite.py: camera,
+   options the tasks pass (none): photons (pipeline/photons/tracing.py: emit, scatter), reconstruction
+   (pipeline/collection/maps.py: temporal, gather, filter) and composite (workers/composite.py: camera,
    surface). PoCL keys its cache by program text, build options and device, so these are the
    entries a worker looks up; kernels.context keeps each program's binary under
    ``$XDG_CACHE_HOME/photonloom/opencl`` keyed the same way (a worker loads it in 1-3 ms instead of

@@ -1,7 +1,7 @@
 // Camera rays with pixel jitter, eight samples a work item: sample c (counter c0 + i) of pixel
 // c / spp is jittered by a splitmix64 hash of (frame key, c) and cast through the pinhole camera
 // (looking down -Z, +Y up, yfov vertical). NumPy twin: kernels/camera.py::camera_rays_reference
-// (the compositor's random numbers, workers/random_numbers.py, dimension 0).
+// (the compositor's random numbers, pipeline/frames/random_numbers.py, dimension 0).
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #pragma OPENCL FP_CONTRACT OFF  // no fused multiply-add: the NumPy twin rounds every product
 #include "lanes.cl"

@@ -1,7 +1,7 @@
 """Camera rays with pixel jitter for the compositor: ``camera8`` in camera.cl and its NumPy twin.
 
 Sample ``c`` belongs to pixel ``c // spp``; its jitter is a splitmix64 hash of (frame key, c), the
-two halves of one 64-bit word giving x and y (workers/random_numbers.py, dimension 0). Directions are
+two halves of one 64-bit word giving x and y (pipeline/frames/random_numbers.py, dimension 0). Directions are
 float32 through a pinhole camera looking down -Z with +Y up and the vertical field of view.
 """
 from __future__ import annotations

@@ -14,9 +14,9 @@ Three steps, each an OpenCL kernel in ``gather.cl`` with a NumPy float64 twin he
    is normalised by half the photons, so I1 and I2 (§5.2.3) both estimate the full irradiance.
 3. vertex flux: element corners -> vertices in a fixed order (a CSR vertex -> element-corner
    map), ``S_v = sum U``; irradiance ``E_v = S_v / A_v`` (docs/05-estimators.md §1.2; for a one-frame window
-   exactly the E_v = S_v / (N A_v) of workers/reconstruct.py).
+   exactly the E_v = S_v / (N A_v) of pipeline/collection/estimators.py).
 
-The device path is the one pipeline/temporal.py runs: :func:`element_sums_cl` once per frame (kept
+The device path is the one pipeline/collection/maps.py runs: :func:`element_sums_cl` once per frame (kept
 per worker), then :func:`frame_sums_flux_cl` fills an element-major prefix table over the frames on
 the device (row j+1 = row j + frame j's sums; an element's rows are contiguous, one launch a
 frame) and does steps 2 and 3 in one launch: a window sum is the difference of two rows whatever
@@ -210,7 +210,7 @@ def _flux(d_table: cl.Buffer, n_emitted, back, fwd, rows, element_vertices, n_ve
 def frame_sums_flux_cl(frame_sums: Iterable[npt.ArrayLike], n_emitted: npt.ArrayLike, back: npt.ArrayLike,
                        fwd: npt.ArrayLike, rows: npt.ArrayLike, element_vertices: npt.ArrayLike,
                        n_vertices: int, *, linear: bool = False) -> np.ndarray:
-    """Steps 2-3 on PoCL from per-frame element sums made earlier: what lets pipeline/temporal.py sum
+    """Steps 2-3 on PoCL from per-frame element sums made earlier: what lets pipeline/collection/maps.py sum
     a frame's records once per worker, however many chunks' windows reach it. The prefix table is
     filled one launch a frame from the arrays where they lie (no host stacking or transposition),
     then window sums and vertices in one launch.

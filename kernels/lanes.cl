@@ -26,7 +26,7 @@
     } while (0)
 
 // Self-intersection offset of the triangles at c9 (9 float corners each): epsilon times the largest
-// corner magnitude, never below FLT_MIN (workers/raycast.py says why). Twin: scatter.py::surface_offset.
+// corner magnitude, never below FLT_MIN (pipeline/photons/raycast.py says why). Twin: scatter.py::surface_offset.
 inline double8 surface_offset8(__global const float *corners, const long8 c9, const double epsilon) {
     double8 s = (double8)(FLT_MIN);
     for (int j = 0; j < 9; ++j)

@@ -1,4 +1,4 @@
-// One bounce of photon tracing after Embree found the hits (workers/photons.py drives the loop).
+// One bounce of photon tracing after Embree found the hits (pipeline/photons/tracing.py drives the loop).
 // For every hit: record it if the surface is diffuse (element, element barycentrics, weight),
 // play Russian roulette on the albedo, and sample the next direction: cosine lobe (diffuse),
 // mirror, or normalised Phong lobe (glossy). Double precision throughout (PoCL CPU has fp64).

@@ -1,7 +1,7 @@
 """One photon bounce after the hits are known: record, Russian roulette, next direction.
 
 ``scatter_reference`` (NumPy, float64) and :class:`ScatterCL` (``scatter.cl`` on PoCL) compute the
-same thing from the same Philox numbers (kernels/philox.py); the tracer in workers/photons.py uses
+same thing from the same Philox numbers (kernels/philox.py); the tracer in pipeline/photons/tracing.py uses
 either. Per hit on triangle t with material m, photon index i, bounce d:
 
 * diffuse: record (element, b1, b2, weight) with the element located as ElementMesh.locate does;
@@ -93,7 +93,7 @@ class Bounce:
 
 def surface_offset(corners: np.ndarray, epsilon: float) -> np.ndarray:
     """Self-intersection offset of triangles with float32 ``corners`` (n, 9): ``epsilon`` times the
-    largest corner magnitude, at least FLT_MIN (workers/raycast.py says why); lanes.cl's
+    largest corner magnitude, at least FLT_MIN (pipeline/photons/raycast.py says why); lanes.cl's
     ``surface_offset8``, to the bit."""
     scale = np.abs(np.asarray(corners, np.float32).astype(np.float64).reshape(len(corners), 9)).max(
         axis=1, initial=0.0)

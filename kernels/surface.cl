@@ -1,6 +1,6 @@
 // Where camera and reflection hits land on the element mesh, and the indirect irradiance there:
 // the element (ElementMesh.locate's arithmetic) and the barycentric blend of its three vertex
-// values, E0 + b1 (E1 - E0) + b2 (E2 - E0) (workers/shading_tables.py). Eight hits a work item, as in
+// values, E0 + b1 (E1 - E0) + b2 (E2 - E0) (pipeline/frames/shading_tables.py). Eight hits a work item, as in
 // scatter.cl. NumPy twin: kernels/surface.py::lookup_reference.
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #pragma OPENCL FP_CONTRACT OFF  // no fused multiply-add: the NumPy twin rounds every product

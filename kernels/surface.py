@@ -2,7 +2,7 @@
 
 ``lookup_reference`` (NumPy: ElementMesh.locate's arithmetic, then E0 + b1 (E1 - E0) + b2 (E2 - E0)
 in float32) and :class:`LookupCL` (``lookup8`` in surface.cl) give the same elements and the same
-irradiance; the compositor (workers/shading_tables.py) uses them for every camera and reflection hit.
+irradiance; the compositor (pipeline/frames/shading_tables.py) uses them for every camera and reflection hit.
 """
 from __future__ import annotations
 

@@ -17,7 +17,7 @@ F_max/2 frames and at the animation's ends. Afterwards at least ``min_extent`` f
 the paper's minimal extent of 3 frames, justified by temporal masking (§5.1). The paper does not
 say where the extra frames lie; they are centred: at least ``(min_extent-1)//2`` back and the rest
 forward, each clipped to F_max/2 and the ends. Beside an abrupt change the regional step test
-(pipeline/regional_steps.py) keeps a frame's window to its own side; placing the extra frames on
+(pipeline/collection/regional_steps.py) keeps a frame's window to its own side; placing the extra frames on
 the side least unlike the frame was tried and removed (docs/11-defaults.md, "min_extent_similar").
 
 The two walks end apart, as in the paper: an asymmetric window's drift bias is taken out by the

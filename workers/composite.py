@@ -25,13 +25,13 @@ emissive triangles no area rays.
 Determinism: every random number is a hash of (seed, frame, pixel, sample, dimension)
 (splitmix64, Steele et al., OOPSLA 2014), so pixels do not depend on chunking or workers.
 
-The stage in parts: workers/camera_paths.py (the path loop and the frame), workers/camera_hits.py
-(hit records), workers/shading_tables.py (per-frame lookups), workers/punctual_lights.py,
-workers/area_lights.py (emissive triangles and the sky), workers/random_numbers.py.
+The stage in parts: pipeline/frames/camera_paths.py (the path loop and the frame), pipeline/frames/camera_hits.py
+(hit records), pipeline/frames/shading_tables.py (per-frame lookups), pipeline/frames/punctual_lights.py,
+pipeline/frames/area_lights.py (emissive triangles and the sky), pipeline/frames/random_numbers.py.
 """
 from __future__ import annotations
 
-from .camera_paths import render_frame
+from pipeline.frames.camera_paths import render_frame
 
 
 def composite_task(*, scene_path: str, scene_hash: str, camera: str | None, element_size: float,
@@ -40,17 +40,16 @@ def composite_task(*, scene_path: str, scene_hash: str, camera: str | None, elem
                    out_dir: str, metadata: dict) -> dict:
     """Dask task: render one frame, tone-map it and write its EXR and PNG (atomically).
 
-    Plain arguments in (``adaptation`` is the eye's adaptation L_a at this frame, pipeline/tonemap.py), a
+    Plain arguments in (``adaptation`` is the eye's adaptation L_a at this frame, pipeline/frames/tonemap.py), a
     small dict of timings and ray counts out.
     """
     import time
 
-    from pipeline.images import frame_paths, write_exr, write_png
+    from pipeline.frames.images import frame_paths, write_exr, write_png
+    from pipeline.frames.tonemap import ToneMapping
+    from pipeline.frames.tonemap import tonemap as tone
+    from pipeline.scene.scene_cache import load_elements, load_scene
     from pipeline.store.illumination import IlluminationMaps
-    from pipeline.tonemap import ToneMapping
-    from pipeline.tonemap import tonemap as tone
-
-    from .scene_cache import load_elements, load_scene
 
     t0 = time.perf_counter()
     scene = load_scene(scene_path, scene_hash, camera)

@@ -1,7 +1,7 @@
 """``loom bench error SCENE``: run time against error, for our method and the ways a user would otherwise
 render the same animation.
 
-Every method is a real ``loom render`` (pipeline/render.py) of the same frames on one LocalCluster,
+Every method is a real ``loom render`` (pipeline/run/render.py) of the same frames on one LocalCluster,
 timed whole (wall; CPU = this process plus every worker process), into a fresh output folder:
 
 * per-frame: ``--photons N --temporal off``, the traditional approach of §6;
@@ -39,7 +39,7 @@ does not trace them again: they are most of a full run's time.
 
 Measures per run (pipeline/benchmarks/error_measures.py), all frames: relative L2 of the indirect
 vertex irradiance; after one frozen tone mapping (Ward's scale at the log-average luminance of the
-reference's frames, pipeline/perceived.py) RMSE and mean relative error of the displayed frames
+reference's frames, pipeline/frames/perceived.py) RMSE and mean relative error of the displayed frames
 and d_AQM (every ``--aqm-every``-th frame, on the workers); on the same frames the FLIP mean of the
 frames as their PNGs show them at that adaptation (error_measures.displayed_flip, as ``loom bench
 spp`` computes it, at the AQM's pixels per degree); the flicker of the error field
@@ -68,7 +68,8 @@ from typing import TYPE_CHECKING
 import click
 import numpy as np
 
-from pipeline.render import RenderSettings
+from pipeline.run.render import RenderSettings
+from pipeline.scene import read_scene
 
 from . import error_measures as em
 
@@ -145,9 +146,9 @@ def reference_map(*, scene_path: str, scene_hash: str, element_size: float, fram
     posed at ``frame``, drawn from the Philox stream (``seed``, ``stream``), in batches summed in
     float64 (no store: nothing is reused across frames; a common ``stream`` for every frame makes
     the frames' noise alike where their scenes are)."""
-    from workers.photons import trace_batch
-    from workers.reconstruct import vertex_irradiance
-    from workers.scene_cache import load_elements, load_scene
+    from pipeline.collection.estimators import vertex_irradiance
+    from pipeline.photons.tracing import trace_batch
+    from pipeline.scene.scene_cache import load_elements, load_scene
 
     scene = load_scene(scene_path, scene_hash)
     elements = load_elements(scene_path, scene_hash, element_size)
@@ -197,9 +198,9 @@ def save_references(path: Path, refs: np.ndarray, wall_s: float, cpu_s: float) -
 
 
 def displayed_measures(test: np.ndarray, ref: np.ndarray, adaptation: float, ppd: float) -> tuple[float, float]:
-    """Dask task: d_AQM (%) of two linear frames as the viewer sees them (pipeline/perceived.py), and
+    """Dask task: d_AQM (%) of two linear frames as the viewer sees them (pipeline/frames/perceived.py), and
     their FLIP mean as their PNGs show them (error_measures.displayed_flip), both at ``adaptation``."""
-    from pipeline.perceived import displayed_difference
+    from pipeline.frames.perceived import displayed_difference
 
     return float(displayed_difference(test, ref, adaptation).d_aqm), em.displayed_flip(test, ref, adaptation, ppd)
 
@@ -211,7 +212,7 @@ def _cpu_seconds(client: Client) -> float:
 def run_method(client: Client, scene_path: Path, out: Path, plan: Plan, *, method: str, n_photons: int | None,
                config: RenderConfig, fmax: int | None, temporal: str) -> dict:
     """One timed ``loom render`` of the plan's frames; its indirect maps and what it cost."""
-    from pipeline.render import RenderSettings, render
+    from pipeline.run.render import RenderSettings, render
     from pipeline.store import PhotonStore
     from pipeline.store.illumination import IlluminationMaps
 
@@ -238,9 +239,9 @@ class Evaluation:
 
     def __init__(self, client: Client, scene: Scene, elements: ElementMesh, plan: Plan, refs: np.ndarray,
                  highlight: Sequence[np.ndarray]) -> None:
-        from pipeline.tonemap import log_average, luminance
-        from workers.camera_paths import render_frame
-        from workers.raycast import caster_for
+        from pipeline.frames.camera_paths import render_frame
+        from pipeline.frames.tonemap import log_average, luminance
+        from pipeline.photons.raycast import caster_for
 
         self.client, self.plan, self.refs = client, plan, refs
         self.frames = list(range(plan.frames[0], plan.frames[1] + 1))
@@ -266,7 +267,7 @@ class Evaluation:
         return np.stack([self._render(i, m) for i, m in enumerate(maps)])
 
     def displayed(self, images: np.ndarray) -> np.ndarray:
-        from pipeline.perceived import display_values
+        from pipeline.frames.perceived import display_values
 
         return display_values(images, self.adaptation)
 
@@ -438,10 +439,10 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, config:
     """Render, measure, print the tables, write ``error.json`` and ``error.png``/``.svg`` in ``out_dir``.
     ``config`` (a RenderConfig; default the defaults) is every method's; the reference has no
     temporal collection and reads only its photon depth."""
-    from pipeline.cluster import connect
     from pipeline.config import RenderConfig
     from pipeline.errors import LoomError
-    from pipeline.scene import ElementMesh, Scene
+    from pipeline.run.cluster import connect
+    from pipeline.scene import ElementMesh
     from pipeline.scene.builtin import BUILTIN_SCENES
 
     from .machine import announce
@@ -455,7 +456,7 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, config:
         tmp = Path(tmp)
         builtin = scene_name in BUILTIN_SCENES
         path = write_scene(scene_name, tmp / f"{scene_name}.glb", plan.event) if builtin else Path(scene_name)
-        scene = Scene.load(path)
+        scene = read_scene(path)
         first, last = plan.frames
         if not (scene.timeline.first <= first < last <= scene.timeline.last):
             raise LoomError(f"frames {first}-{last} are not inside the scene's {scene.timeline.first}-"

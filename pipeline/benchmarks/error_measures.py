@@ -1,6 +1,6 @@
 """The measures of ``loom bench error``: pure functions over arrays (pipeline/benchmarks/error.py runs them).
 
-Maps are (V, 3) vertex irradiance with (V,) hat-function areas as weights (workers/reconstruct.py);
+Maps are (V, 3) vertex irradiance with (V,) hat-function areas as weights (pipeline/collection/estimators.py);
 sequences are over consecutive frames. The error of a frame is a field, e(t) = M(t) - R(t), and its
 *flicker* is how much that field changes from one frame to the next, mean_t ||e(t) - e(t-1)|| relative
 to the reference: independent per-frame noise flickers by sqrt(2) x its amplitude, an error that
@@ -9,9 +9,9 @@ change is read off the step response along the change (see :func:`step_response`
 
 FLIP (Andersson et al., "FLIP: A Difference Evaluator for Alternating Images", HPG 2020; the
 ``flip-evaluator`` package, LDR) is computed here for ``loom bench error`` and ``loom bench spp``
-alike (:func:`displayed_flip`): both frames of a pair shown with the default look (pipeline/tonemap.py,
+alike (:func:`displayed_flip`): both frames of a pair shown with the default look (pipeline/frames/tonemap.py,
 filmic) at one adaptation luminance, sRGB-encoded, and compared at the pixels per degree of the AQM's
-viewing conditions (pipeline/perceived.py viewing_for), so FLIP and d_AQM judge a frame as one viewer
+viewing conditions (pipeline/frames/perceived.py viewing_for), so FLIP and d_AQM judge a frame as one viewer
 sees it.
 """
 from __future__ import annotations
@@ -171,15 +171,15 @@ def flip_evaluator() -> ModuleType:
 
 def shown(rgb: np.ndarray, adaptation: float) -> np.ndarray:
     """The frame as its PNG shows it: the default look, sRGB-encoded, float in [0, 1] (FLIP's LDR input)."""
-    from pipeline.tonemap import ToneMapping, display_linear, srgb_encode
+    from pipeline.frames.tonemap import ToneMapping, display_linear, srgb_encode
 
     return srgb_encode(display_linear(rgb, adaptation, ToneMapping())).astype(np.float32)
 
 
 def frame_ppd(width: int, height: int) -> float:
     """Pixels per degree of a ``width`` x ``height`` frame under the AQM's default viewing conditions."""
-    from pipeline.perceived import viewing_for
-    from pipeline.tonemap import ToneMapping
+    from pipeline.frames.perceived import viewing_for
+    from pipeline.frames.tonemap import ToneMapping
 
     return viewing_for(ToneMapping()).frame_ppd((height, width))
 

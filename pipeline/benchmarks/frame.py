@@ -21,6 +21,8 @@ from typing import TYPE_CHECKING
 import click
 import numpy as np
 
+from pipeline.scene import read_scene
+
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterable
 
@@ -42,7 +44,7 @@ def _raw_caster(state: FrameState, width: int, height: int) -> Callable[[], None
     o = np.ascontiguousarray(np.broadcast_to(origin, d.shape), np.float32)
     d = np.ascontiguousarray(d, np.float32)
     scene.run(o[:1], d[:1])  # commit the BVH
-    from workers.camera_paths import CHUNK_RAYS
+    from pipeline.frames.camera_paths import CHUNK_RAYS
 
     def cast() -> None:  # in the compositor's batch size, which Embree runs faster than one huge batch
         for lo in range(0, len(d), CHUNK_RAYS):
@@ -56,11 +58,11 @@ def bench_scene(path: str | Path, *, width: int, height: int, spp: int, repeat: 
     Compositor and raw casts alternate, ``repeat`` times each, so both see the same machine load;
     the figures are medians, the ratio the median of the paired ratios.
     """
-    from pipeline.scene import ElementMesh, Scene
-    from workers.camera_paths import render_frame
-    from workers.raycast import caster_for
+    from pipeline.frames.camera_paths import render_frame
+    from pipeline.photons.raycast import caster_for
+    from pipeline.scene import ElementMesh
 
-    scene = Scene.load(path)
+    scene = read_scene(path)
     frame = (scene.timeline.first + scene.timeline.last) // 2
     state = scene.pose_frame(frame)
     elements = ElementMesh.build(scene)

@@ -8,7 +8,7 @@ two halves are composited with the same camera samples and direct light into I1(
 
 * d_AQM of I1 vs I2 (a) on linear values with 1.0 = 100 cd/m^2 (``pipeline.aqm.aqm``, what
   ``loom aqm`` of the EXRs gives), (b) on the displayed values after Ward's tone mapping at the
-  frame's adaptation luminance (``pipeline.perceived``), (c) displayed, with the adaptive spatial
+  frame's adaptation luminance (``pipeline.frames.perceived``), (c) displayed, with the adaptive spatial
   filter of §5.2.5 applied to both halves (``RenderConfig.filter_*``), and displayed with fixed
   +-F_max/2 windows (every photon of the segment: the least noise temporal pooling can give);
 * the share of vertex maps the filter touched, the mean window length back + fwd + 1 per element,
@@ -34,6 +34,7 @@ import click
 import numpy as np
 
 from kernels import colour
+from pipeline.scene import read_scene
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterable, Sequence
@@ -59,7 +60,7 @@ def noise_for_threshold(base: np.ndarray, noise_images: Sequence[np.ndarray], ad
     ``noise_images`` are the indirect layers rendered with the map E_ref x g (g ~ N(0, 1) per
     vertex, one draw per image): the compositor is linear in the map, so E_ref (1 + s g) renders
     to base + s x layer. Bisection; d_AQM grows with s."""
-    from pipeline.perceived import displayed_difference
+    from pipeline.frames.perceived import displayed_difference
 
     def d(s: float) -> float:
         a, b = (np.maximum(base + s * n, 0.0) for n in noise_images)
@@ -77,25 +78,25 @@ def run(photons: Iterable[int] = (10_000, 20_000, 40_000, 80_000), *, fmax: int 
         calibrate: bool = True, scheduler: str = "synchronous", workers: int | None = None, store: str | None = None,
         echo: Callable[[str], None] = click.echo) -> dict:
     from pipeline.aqm import aqm
+    from pipeline.collection.estimators import mesh_adaptation, vertex_irradiance
+    from pipeline.collection.maps import illumination_maps, window_counts
     from pipeline.config import RenderConfig
     from pipeline.errors import LoomError
-    from pipeline.perceived import displayed_difference
-    from pipeline.scene import ElementMesh, Scene
+    from pipeline.frames.camera_paths import render_frame
+    from pipeline.frames.perceived import displayed_difference
+    from pipeline.frames.tonemap import ToneMapping, ward_scale
+    from pipeline.photons.raycast import caster_for
+    from pipeline.run.shoot import shoot
+    from pipeline.scene import ElementMesh
     from pipeline.scene.builtin import write_builtin
-    from pipeline.shoot import shoot
     from pipeline.store import PhotonStore
-    from pipeline.temporal import illumination_maps, window_counts
-    from pipeline.tonemap import ToneMapping, ward_scale
-    from workers.camera_paths import render_frame
-    from workers.raycast import caster_for
-    from workers.reconstruct import mesh_adaptation, vertex_irradiance
 
     tmp = tempfile.TemporaryDirectory(prefix="bench-noise-") if store is None else None
     root = Path(tmp.name if tmp else store)
     root.mkdir(parents=True, exist_ok=True)
     try:
         path = write_builtin("room", root / "room.glb")
-        scene = Scene.load(path)
+        scene = read_scene(path)
         own = ElementMesh.build(scene).element_size
         config = RenderConfig(element_size=own * element_scale)
         if filter_photons is not None:

@@ -20,16 +20,17 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from ..cluster import WORKER_ENV
+from pipeline.run.cluster import WORKER_ENV
+from pipeline.scene import read_scene
 
 if TYPE_CHECKING:
     from collections.abc import Callable
 
 
 def _load(scene_path: str):
-    from pipeline.scene import ElementMesh, Scene
+    from pipeline.scene import ElementMesh
 
-    scene = Scene.load(scene_path)
+    scene = read_scene(scene_path)
     return scene, ElementMesh.build(scene)
 
 
@@ -39,8 +40,8 @@ REPEATS = 3  # tracer and raw Embree alternate this many times; the best time of
 def _worker(scene_path: str, frame: int, n_photons: int, photon_start: int) -> dict:
     """Trace, then cast raw rays, alternately in this process; best-of-REPEATS timings (the
     machine is shared, so the fastest run is the one least disturbed by other jobs)."""
-    from workers.photons import trace_batch
-    from workers.raycast import caster_for
+    from pipeline.photons.raycast import caster_for
+    from pipeline.photons.tracing import trace_batch
 
     scene, elements = _load(scene_path)
     state = scene.pose_frame(frame)
@@ -71,8 +72,8 @@ def _worker(scene_path: str, frame: int, n_photons: int, photon_start: int) -> d
 def _memory_worker(scene_path: str, frame: int, n_photons: int, store_url: str) -> dict:
     """Trace and store one frame of ``n_photons``; peak resident memory of this process."""
     from pipeline.config import RenderConfig
+    from pipeline.photons.tracing import trace_batch
     from pipeline.store import PhotonStore
-    from workers.photons import trace_batch
 
     scene, elements = _load(scene_path)
     state = scene.pose_frame(frame)

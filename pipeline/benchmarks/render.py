@@ -6,14 +6,14 @@ Three renders of the scene (default the built-in ROOM, all its frames, 320x240, 
 * (a) guided: ``--photons auto`` (``render(..., n_photons=None)``), ``--workers`` workers;
 * (b) fixed N_frame = 40,000, F_max = 30, adaptive collection, on 1 worker and on ``--workers``.
 
-Table 2 rows, from the segment records (pipeline/segment_records.py, ``times_s``) of one run:
+Table 2 rows, from the segment records (pipeline/segments/records.py, ``times_s``) of one run:
 wall-clock stage times ``shoot_s``, ``aqm_s``, ``temporal_s`` (the reconstruction tasks),
 ``composite_s``, and the decisions' remainder (``decide_s`` less its shooting and AQM: pilot
 error and p_me windows, counted as temporal processing). The tasks' own timings (summed over
 workers: ``task_*``) split a stage's wall time in proportion: photon tracing = shoot x
 (pose + trace) / (pose + trace + store write); I/O = the store write's part of the shoot and the
 record reads and map writes' part of the reconstruction. The frames stage runs a segment's
-reconstructions and composites at once (pipeline/coordinator.py ``frames``: a chunk's frames are
+reconstructions and composites at once (pipeline/run/coordinator.py ``frames``: a chunk's frames are
 composited while later chunks are reconstructed), so its wall time (``temporal_s`` +
 ``composite_s``) is split between them the same way, by their tasks' core time: the coordinator's
 own clock runs ``temporal_s`` until the last reconstruction ends, and on two workers that counted
@@ -44,67 +44,17 @@ from typing import TYPE_CHECKING
 
 import click
 
-from pipeline.render import RenderSettings
+from pipeline.report.tables import ROWS, stage_table
+from pipeline.run.render import RenderSettings
 
 if TYPE_CHECKING:
-    from collections.abc import Callable, Iterable
-
-    from pipeline.segment_records import SegmentRecord
-
-ROWS = ("photon tracing", "AQM", "temporal processing", "I/O", "total indirect", "ray tracing")
-IO_KEYS = ("task_reconstruct_read_s", "task_reconstruct_map_write_s")
-
-
-def stage_table(records: Iterable[SegmentRecord]) -> dict:
-    """Table 2 in seconds (wall) and core-seconds from a run's segment records."""
-    t: dict[str, float] = {}
-    for r in records:
-        for k, v in r.times_s.items():
-            t[k] = t.get(k, 0.0) + float(v)
-    g = t.get
-    shoot, aqm, temporal, composite = g("shoot_s", 0.0), g("aqm_s", 0.0), g("temporal_s", 0.0), g("composite_s", 0.0)
-    decide_rest = max(0.0, g("decide_s", 0.0) - shoot - aqm)
-    trace_core = g("task_pose_s", 0.0) + g("task_trace_s", 0.0)
-    write_core = g("task_write_s", 0.0)
-    sums_core = g("task_sums_s", 0.0)  # the batch sums the shoot tasks make (pipeline/batch_sums.py)
-    shoot_core = trace_core + write_core + sums_core
-    rec_core = sum(v for k, v in t.items() if k.startswith("task_reconstruct_"))
-    rec_io_core = sum(g(k, 0.0) for k in IO_KEYS)
-    composite_core = sum(g(f"task_composite_{k}_s", 0.0) for k in ("load", "render", "write"))
-    if rec_core > 0 and composite_core > 0:  # the frames stage's wall time, split by core time
-        frames_wall = temporal + composite
-        temporal = frames_wall * rec_core / (rec_core + composite_core)
-        composite = frames_wall - temporal
-    shoot_io = shoot * write_core / shoot_core if shoot_core > 0 else 0.0
-    shoot_sums = shoot * sums_core / shoot_core if shoot_core > 0 else 0.0
-    rec_io = temporal * rec_io_core / rec_core if rec_core > 0 else 0.0
-    wall = {"photon tracing": shoot - shoot_io - shoot_sums, "AQM": aqm,
-            "temporal processing": temporal - rec_io + shoot_sums + decide_rest,
-            "I/O": shoot_io + rec_io, "ray tracing": composite}
-    core = {"photon tracing": trace_core, "AQM": aqm,
-            "temporal processing": rec_core - rec_io_core + sums_core + decide_rest,
-            "I/O": write_core + rec_io_core,
-            "ray tracing": composite_core}
-    for d in (wall, core):
-        d["total indirect"] = sum(d[k] for k in ("photon tracing", "AQM", "temporal processing", "I/O"))
-    return {"wall": wall, "core": core, "times": t, "bytes": io_bytes(records)}
-
-
-def io_bytes(records: Iterable[SegmentRecord]) -> dict[str, int]:
-    """Bytes the I/O row moved (the segment records' ``io_bytes``, pipeline/store counting_io):
-    ``written`` by the shoot tasks (counts, sums, records if kept) and the reconstructions (maps),
-    ``read`` by both (the previous batch's counts; the sums and counts the windows reach)."""
-    out = {"read": 0, "written": 0}
-    for r in records:
-        for k, v in r.io_bytes.items():
-            out["read" if k.endswith("read_bytes") else "written"] += int(v)
-    return out
+    from collections.abc import Callable
 
 
 def run_render(scene: Path, out: Path, *, frames: str | None, width: int, height: int, spp: int, workers: int,
                n_photons: int | None, fmax: int | None) -> dict:
-    from pipeline.render import render
-    from pipeline.segment_records import read_records
+    from pipeline.run.render import render
+    from pipeline.segments.records import read_records
 
     t0 = time.perf_counter()
     report = render(scene, frames=frames, out_dir=out, settings=RenderSettings(width=width, height=height, spp=spp),
@@ -121,7 +71,7 @@ def run_render(scene: Path, out: Path, *, frames: str | None, width: int, height
 
 
 def _print_table(echo: Callable[[str], None], title: str, run: dict) -> None:
-    from pipeline.render import store_size_line
+    from pipeline.report.tables import store_size_line
 
     n = max(run["frames"], 1)
     wall, core = run["table"]["wall"], run["table"]["core"]
@@ -147,7 +97,7 @@ def _warm_up() -> None:
     import matplotlib.backends.backend_agg  # noqa: F401
     import matplotlib.figure  # noqa: F401
 
-    from pipeline.cluster import connect
+    from pipeline.run.cluster import connect
     with connect("local", 1):
         pass
 

@@ -2,14 +2,14 @@
 
 For each frame K of the built-in ROOM (default 68 and 23), frames K - F_max/2 ... K + F_max/2 are shot with
 a large N_frame (default 160,000 photons, F_max = 30) and K's indirect map is gathered once with adaptive
-temporal collection (§5.1). The compositor (workers/camera_paths.py) then renders K with that same map at
+temporal collection (§5.1). The compositor (pipeline/frames/camera_paths.py) then renders K with that same map at
 1, 2, 4, 8, 16 jittered camera samples a pixel and at a converged 256, so that only the pixel sampling
 differs. Each image is compared with the 256-spp reference as the viewer sees it:
 
-* FLIP mean of the shown frames (pipeline/benchmarks/error_measures.py): the default look (pipeline/tonemap.py,
+* FLIP mean of the shown frames (pipeline/benchmarks/error_measures.py): the default look (pipeline/frames/tonemap.py,
   filmic) at the frame's adaptation luminance, sRGB-encoded, at the pixels per degree of the AQM's
-  viewing conditions (pipeline/perceived.py viewing_for);
-* d_AQM, the share of AQM pixels above 1 JND (pipeline/perceived.py displayed_difference, Ward's
+  viewing conditions (pipeline/frames/perceived.py viewing_for);
+* d_AQM, the share of AQM pixels above 1 JND (pipeline/frames/perceived.py displayed_difference, Ward's
   visibility-matching display values): the measure the guided coordinator accepts photon noise by
   (d_AQM <= d_thr, §5.2.3);
 * relative RMS of luminance, and the compositing time of the frame (CPU seconds of this process and wall).
@@ -41,6 +41,7 @@ import click
 import numpy as np
 
 from kernels import colour
+from pipeline.scene import read_scene
 
 from .error_measures import flip_mean, frame_ppd, shown
 
@@ -107,16 +108,16 @@ def run(frames: Iterable[int] = FRAMES, *, spps: Sequence[int] = SPPS, reference
         adaptive: Sequence[int] = ADAPTIVE_BUDGETS,
         store: str | None = None, json_path: str | None = None,
         echo: Callable[[str], None] = click.echo) -> dict:
+    from pipeline.collection.maps import illumination_maps
     from pipeline.config import RenderConfig
-    from pipeline.perceived import displayed_difference
-    from pipeline.render import RenderSettings
-    from pipeline.scene import ElementMesh, Scene
+    from pipeline.frames.camera_paths import render_frame, visible_adaptation
+    from pipeline.frames.perceived import displayed_difference
+    from pipeline.photons.raycast import caster_for
+    from pipeline.run.render import RenderSettings
+    from pipeline.run.shoot import shoot
+    from pipeline.scene import ElementMesh
     from pipeline.scene.builtin import write_builtin
-    from pipeline.shoot import shoot
     from pipeline.store import PhotonStore
-    from pipeline.temporal import illumination_maps
-    from workers.camera_paths import render_frame, visible_adaptation
-    from workers.raycast import caster_for
 
     settings = RenderSettings(width=width, height=height)
     config = RenderConfig()
@@ -128,7 +129,7 @@ def run(frames: Iterable[int] = FRAMES, *, spps: Sequence[int] = SPPS, reference
     rows, floors, arows = [], [], []
     try:
         path = write_builtin("room", root / "room.glb")
-        scene = Scene.load(path)
+        scene = read_scene(path)
         mesh = ElementMesh.build(scene, config.element_size)
         url = str(root / "photons.zarr")
         half = fmax // 2

@@ -5,7 +5,7 @@ The case of §6 for ATRIUM: the real ATRIUM element mesh (about 43,000 elements)
 real ATRIUM frames at 20,000 photons (synchronous, one process); their per-element counts give the
 hit rates of a synthetic 300-frame photon set (Poisson counts per element and frame, a moving
 bright spot over 5 % of the elements so that windows vary; random barycentrics and energies), which
-the gather then processes exactly as pipeline/temporal.py does: chunks of 96 output frames, element
+the gather then processes exactly as pipeline/collection/maps.py does: chunks of 96 output frames, element
 sums of each frame once (kernels/gather.py element_sums_cl), then a prefix table over the chunk's
 frames on the device, window sums and vertices (frame_sums_flux_cl), then the adaptive filter.
 
@@ -24,13 +24,15 @@ from typing import TYPE_CHECKING
 import click
 import numpy as np
 
+from pipeline.scene import read_scene
+
 if TYPE_CHECKING:
     from collections.abc import Callable
 
 N_FRAMES = 300
 N_PHOTONS = 20_000
 FMAX = 44
-CHUNK = 96  # output frames per gather call, as pipeline/temporal.py
+CHUNK = 96  # output frames per gather call, as pipeline/collection/maps.py
 
 
 def _timed(fn, *args, **kw):
@@ -42,15 +44,15 @@ def _timed(fn, *args, **kw):
 def _trace_frames(root: Path, frames: str):
     """Shoot real ATRIUM frames; (scene, mesh, store, seconds per traced frame)."""
     from pipeline.config import RenderConfig
-    from pipeline.scene import ElementMesh, Scene
+    from pipeline.run.shoot import shoot
+    from pipeline.scene import ElementMesh
     from pipeline.scene.builtin import write_builtin
-    from pipeline.shoot import shoot
     from pipeline.store import PhotonStore
 
     path = write_builtin("atrium", root / "atrium.glb")
     summary = shoot(str(path), frames=frames, n_photons=N_PHOTONS, store_url=str(root / "p.zarr"),
                     config=RenderConfig(), scheduler="synchronous", progress=False)
-    scene = Scene.load(path)
+    scene = read_scene(path)
     return scene, ElementMesh.build(scene), PhotonStore.open(str(root / "p.zarr")), \
         summary["seconds"] / summary["traced_frames"], summary
 
@@ -87,7 +89,7 @@ class SyntheticPhotons:
 
 def _gather_chunk(cache: dict, photons: "SyntheticPhotons", lo: int, hi: int, n_emitted, back, fwd, rows, mesh,
                   t: dict, *, shape: dict, kind: str = "indirect"):
-    """The gather as pipeline/temporal.py runs it for one chunk: each frame's element sums once
+    """The gather as pipeline/collection/maps.py runs it for one chunk: each frame's element sums once
     (kept in ``cache`` while later chunks' windows reach the frame), then window and vertex flux
     from them on the device. Adds seconds to ``t["sums"]`` and ``t["flux"]``; returns the flux
     and the records summed."""
@@ -132,7 +134,7 @@ def run(trace_frames: int = 3, numpy_frames: int = 4, n_frames: int = N_FRAMES,
     # Warm-up: build every program once (PoCL compile, cached on disk after the first run)
     windows_cl(counts[:8], n_emitted[:8], fmax=4)
     zero = np.zeros((1, mesh.n_elements), np.uint8)
-    # The windows' shape the gather of a render takes (pipeline/temporal.py): the linear fit
+    # The windows' shape the gather of a render takes (pipeline/collection/maps.py): the linear fit
     shape = dict(linear=True)
     wf, _ = _gather_chunk({}, photons, 0, 1, n_emitted, zero, zero, [0], mesh, dict(sums=0.0, flux=0.0),
                           shape=shape)

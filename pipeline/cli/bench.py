@@ -46,7 +46,7 @@ def bench_aqm(repeat):
 def bench_frame(scenes, resolution, spp, repeat):
     """Milliseconds per frame and rays/s vs raw embreex (default scenes: ROOM and ATRIUM)."""
     from pipeline.benchmarks.frame import run
-    from pipeline.render import RenderSettings, parse_resolution
+    from pipeline.run.render import RenderSettings, parse_resolution
 
     width, height = parse_resolution(resolution)
     RenderSettings(width=width, height=height, spp=spp)  # validates spp
@@ -86,7 +86,7 @@ def bench_noise(photons, fmax, resolution, spp, element_scale, filter_photons, c
     """d_AQM of the even/odd renderings I1(K), I2(K) of ROOM frame 68 against N_frame: linear vs
     displayed input, spatial filter, window statistics, and the AQM's noise threshold."""
     from pipeline.benchmarks.noise import run
-    from pipeline.render import parse_resolution
+    from pipeline.run.render import parse_resolution
 
     width, height = parse_resolution(resolution)
     run(tuple(int(p) for p in photons.split(",") if p.strip()), fmax=fmax, width=width, height=height, spp=spp,
@@ -109,7 +109,7 @@ def bench_noise(photons, fmax, resolution, spp, element_scale, filter_photons, c
 def bench_render(scene, frames, resolution, spp, workers, n_photons, fmax, skip_guided, repeat, json_path):
     """Table 2 per frame (guided and fixed N_frame/F_max) and 1 vs N worker scaling (default: ROOM)."""
     from pipeline.benchmarks.render import run
-    from pipeline.render import parse_resolution
+    from pipeline.run.render import parse_resolution
 
     width, height = parse_resolution(resolution)
     run(scene, frames=frames, width=width, height=height, spp=spp, workers=workers, n_photons=n_photons, fmax=fmax,
@@ -144,7 +144,7 @@ def bench_error(scene, quick, frames, budgets, fmax, d_thr, resolution, spp, ref
     from pipeline.benchmarks.error import FULL, METHODS, QUICK, Plan, run
     from pipeline.config import RenderConfig, load_config
     from pipeline.errors import LoomError
-    from pipeline.render import parse_resolution
+    from pipeline.run.render import parse_resolution
 
     name = Path(scene).stem if Path(scene).suffix else scene
     plans = QUICK if quick else FULL
@@ -203,7 +203,7 @@ def bench_spp(frames, spps, reference_spp, photons, fmax, resolution, seed_check
     indirect map fixed, and the compositing time per frame (docs/10-sampling.md)."""
     from pipeline.benchmarks.spp import run
     from pipeline.errors import LoomError
-    from pipeline.render import parse_resolution
+    from pipeline.run.render import parse_resolution
 
     width, height = parse_resolution(resolution)
     try:

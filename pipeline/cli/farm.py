@@ -19,8 +19,8 @@ from .render import job_arguments, job_options
                    "with --photons N the shoot targets trace instead).")
 def plan_command(loom_command, decide_workers, **job) -> None:
     """Write OUT/Makefile: a make-driven farm render (make -C OUT -j N) of what `loom render` would make."""
-    from pipeline.farm import bounds, write_plan
-    from pipeline.render import prepare_job
+    from pipeline.run.farm import bounds, write_plan
+    from pipeline.run.render import prepare_job
 
     args = job_arguments(**job)
     made = prepare_job(args.pop("scene_path"), **args)
@@ -35,8 +35,8 @@ def plan_command(loom_command, decide_workers, **job) -> None:
 @click.argument("out_dir", type=click.Path(file_okay=False))
 @click.argument("numbers", type=int, nargs=-1)
 def farm_command(step: str, out_dir: str, numbers: tuple[int, ...]) -> None:
-    """One target of a `loom plan` Makefile (pipeline/farm.py)."""
-    from pipeline.farm import step as run_step
+    """One target of a `loom plan` Makefile (pipeline/run/farm.py)."""
+    from pipeline.run.farm import step as run_step
 
     logging.getLogger("pipeline.scene.notices").setLevel(logging.WARNING)  # `loom plan` showed them once
 

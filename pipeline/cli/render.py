@@ -24,12 +24,12 @@ _F = TypeVar("_F", bound=Callable[..., Any])
 
 class _RenderSpp:
     """The default of every option that means a render's camera samples per pixel: RenderSettings.spp
-    (pipeline/render.py), its one owner. Read when click needs it, since importing pipeline.render
+    (pipeline/run/render.py), its one owner. Read when click needs it, since importing pipeline.run.render
     when the CLI starts would cost every loom command about 0.3 s: click calls it for the value and
     shows str() of it in --help (a plain function would show "(dynamic)")."""
 
     def __call__(self) -> int:
-        from pipeline.render import RenderSettings
+        from pipeline.run.render import RenderSettings
 
         return RenderSettings.spp
 
@@ -65,7 +65,7 @@ def shoot_command(scene_file, frames, photons, store_url, seed, element_size, ph
                   light, scheduler, workers) -> None:
     """Trace photons for every frame of SCENE_FILE into a photon store (resumable)."""
     from pipeline.config import RenderConfig
-    from pipeline.shoot import shoot
+    from pipeline.run.shoot import shoot
 
     config = RenderConfig(seed=seed, element_size=element_size, photon_depth=photon_depth)
     summary = shoot(scene_file, frames=frames, n_photons=photons, store_url=store_url, config=config,
@@ -123,7 +123,7 @@ def job_options(f: _F) -> _F:
                      help=LIGHT_HELP),
         click.option("--tonemap", type=click.Choice(["filmic", "exposure", "ward"]), default="filmic",
                      show_default=True, help="How frames are shown: a filmic curve or a linear exposure keyed to the "
-                     "eye's adaptation, or Ward's visibility-matching operator (pipeline/tonemap.py)."),
+                     "eye's adaptation, or Ward's visibility-matching operator (pipeline/frames/tonemap.py)."),
         click.option("--exposure", type=float, default=0.0, show_default=True,
                      help="Exposure offset in EV (x 2^EV) on top of the operator's own."),
         click.option("--display", type=click.Choice(sorted(_DISPLAYS)), default="standard_fhd", show_default=True,
@@ -147,10 +147,10 @@ def job_arguments(scene_file: str, frames: str | None, out_dir: str, resolution:
                   reflection_depth: int, photon_depth: int, d_thr: float | None, config_file: str | None,
                   light: str = "auto", tonemap: str = "filmic", exposure: float = 0.0,
                   element_size: float | None = None, display: str = "standard_fhd", fill: str = "full_screen") -> dict:
-    """The keyword arguments of pipeline.render.prepare_job / render from the job options."""
+    """The keyword arguments of pipeline.run.render.prepare_job / render from the job options."""
     from pipeline.config import RenderConfig, load_config
-    from pipeline.render import RenderSettings, parse_resolution
-    from pipeline.tonemap import ToneMapping
+    from pipeline.frames.tonemap import ToneMapping
+    from pipeline.run.render import RenderSettings, parse_resolution
 
     width, height = parse_resolution(resolution)
     fields = load_config(config_file) if config_file else {}
@@ -176,10 +176,10 @@ def job_arguments(scene_file: str, frames: str | None, out_dir: str, resolution:
 @scheduler_options
 def render_command(segment, quiet, verbose, performance_report, scheduler, workers, **job) -> None:
     """Render frames of SCENE_FILE: photons, segments, illumination maps, EXR/PNG frames, preview.mp4."""
-    if scheduler == "local":  # the workers' fork server imports while this process does (pipeline/cluster.py)
-        from pipeline.cluster import start_worker_server
+    if scheduler == "local":  # the workers' fork server imports while this process does (pipeline/run/cluster.py)
+        from pipeline.run.cluster import start_worker_server
         start_worker_server()
-    from pipeline.render import render
+    from pipeline.run.render import render
 
     if verbose:
         logging.getLogger("pipeline").setLevel(logging.INFO)
@@ -192,7 +192,7 @@ def render_command(segment, quiet, verbose, performance_report, scheduler, worke
                f"{t['total_s']:.1f} s (photons {t['shoot_s']:.1f}, AQM {t['aqm_s']:.1f}, temporal "
                f"{t['temporal_s']:.1f}, composite {t['composite_s']:.1f}, video {t['video_s']:.1f}); "
                f"{len(report['segments'])} segment(s)")
-    from pipeline.render import store_size_line
+    from pipeline.report.tables import store_size_line
 
     click.echo(store_size_line(report["store_size"]))
     click.echo(f"frames: {out_dir}/beauty.####.exr, .png  video: {report['video']}  "
@@ -209,11 +209,11 @@ def segments_command(out_dir: str, as_json: bool, plot_file: str | None) -> None
     """The segments of a render: the paper's Table 1 (K_i, N_frame, F_max) with d_AQM, p_me, times."""
     import json
 
-    from pipeline.segment_records import read_records, table
+    from pipeline.segments.records import read_records, table
 
     records = read_records(out_dir)
     if plot_file:
-        from pipeline.segment_plot import plot_segments
+        from pipeline.report.segment_plot import plot_segments
 
         click.echo(f"wrote {plot_segments(records, plot_file)}", err=as_json)
     if as_json:
@@ -227,6 +227,6 @@ def segments_command(out_dir: str, as_json: bool, plot_file: str | None) -> None
 @click.argument("out_dir", type=click.Path(file_okay=False))
 def report_command(out_dir: str) -> None:
     """Write OUT/report.html: segments, costs, windows, AQM maps, frames, video, skips, settings (one file)."""
-    from pipeline.report import write_report
+    from pipeline.report.page import write_report
 
     click.echo(f"wrote {write_report(out_dir)}")

@@ -3,6 +3,8 @@ from __future__ import annotations
 
 import click
 
+from pipeline.scene import read_scene
+
 CAMERA_HELP = ("Camera or camera-node name, or auto: frame the whole animation (pipeline/scene/default_camera.py). "
                "Default: the first camera, auto when the file has none.")
 LIGHT_HELP = ("auto: a file without any light is lit by a default sun and sky (pipeline/scene/default_lights.py); "
@@ -27,9 +29,8 @@ def scene_command(name: str, output: str) -> None:
 @click.option("--light", type=click.Choice(["auto", "none"]), default="auto", show_default=True, help=LIGHT_HELP)
 def info_command(scene_file: str, camera: str | None, element_size: float | None, light: str) -> None:
     """Summarise SCENE_FILE: timeline, geometry, elements, lights, materials, cameras, needs."""
-    from pipeline.scene import Scene
     from pipeline.scene.summary import describe
 
-    scene = Scene.load(scene_file, camera=camera, light=light)
+    scene = read_scene(scene_file, camera=camera, light=light)
     for line in describe(scene, element_size):
         click.echo(line)

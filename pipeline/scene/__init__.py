@@ -2,7 +2,9 @@
 from __future__ import annotations
 
 from .elements import ElementMesh
-from .scene import FrameState, MeshInstance, Scene
+from .loader import read_scene
+from .nodes import MeshInstance
+from .scene import FrameState, Scene
 from .timeline import Timeline, parse_frame_range
 
-__all__ = ["ElementMesh", "FrameState", "MeshInstance", "Scene", "Timeline", "parse_frame_range"]
+__all__ = ["ElementMesh", "FrameState", "MeshInstance", "Scene", "read_scene", "Timeline", "parse_frame_range"]

@@ -40,3 +40,15 @@ class Camera:
     @property
     def world_to_camera(self) -> np.ndarray:
         return np.linalg.inv(self.to_world)
+
+
+AUTO = "auto"  # the --camera value, and the camera's name (pipeline/scene/default_camera.py)
+
+
+@dataclass(frozen=True)
+class Framing:
+    """The auto camera and the animation bounds it frames."""
+
+    camera: Camera
+    lo: np.ndarray
+    hi: np.ndarray

@@ -11,12 +11,11 @@ animation itself and lets one photon set serve frames whose geometry stands stil
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
 from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .camera import Camera, CameraDef
+from .camera import AUTO, Camera, CameraDef, Framing
 from .sky import UP, direction_from
 
 if TYPE_CHECKING:
@@ -27,7 +26,6 @@ AZIMUTH = 30.0
 ELEVATION = 20.0
 YFOV_DEG = 40.0
 MARGIN = 1.05
-AUTO = "auto"  # the --camera value, and the camera's name
 
 
 def sample_frames(timeline: "Timeline", n: int) -> list[int]:
@@ -80,20 +78,12 @@ def framing_camera(lo: np.ndarray, hi: np.ndarray) -> Camera:
     return Camera(CameraDef(AUTO, float(np.radians(YFOV_DEG)), znear, None, None), -1, to_world)
 
 
-@dataclass(frozen=True)
-class Framing:
-    """The auto camera and the animation bounds it frames."""
-
-    camera: Camera
-    lo: np.ndarray
-    hi: np.ndarray
-
-    def describe(self) -> str:
-        """One line for notices and ``loom info``."""
-        p, c = self.camera.position, (self.lo + self.hi) / 2.0
-        return (f"auto camera from azimuth {AZIMUTH:g} deg, elevation {ELEVATION:g} deg, yfov {YFOV_DEG:g} deg "
-                f"at {_xyz(p)} looking at {_xyz(c)}, framing the bounds {_xyz(self.lo)}-{_xyz(self.hi)} "
-                "of the whole animation")
+def describe_framing(framing: Framing) -> str:
+    """One line for notices and ``loom info``: where the auto camera stands and what it frames."""
+    p, c = framing.camera.position, (framing.lo + framing.hi) / 2.0
+    return (f"auto camera from azimuth {AZIMUTH:g} deg, elevation {ELEVATION:g} deg, yfov {YFOV_DEG:g} deg "
+            f"at {_xyz(p)} looking at {_xyz(c)}, framing the bounds {_xyz(framing.lo)}-{_xyz(framing.hi)} "
+            "of the whole animation")
 
 
 def frame_animation(scene: "Scene") -> Framing:

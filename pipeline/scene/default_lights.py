@@ -4,7 +4,7 @@ Decision: many glTF files, from sample collections and DCC exports, carry no lig
 refusing them (``--light none`` still does) leaves a new user with nothing. The default is a
 clear day in the file's units (docs/03-conventions.md §1: radiometric, no 683 lm/W), with a clear day's values:
 1000 W/m^2 of direct sun at normal incidence and about 130 W/m^2 of diffuse sky on a horizontal
-surface. The level matters because tone mapping is absolute (pipeline/tonemap.py, Ward 1994,
+surface. The level matters because tone mapping is absolute (pipeline/frames/tonemap.py, Ward 1994,
 one unit of radiance = ``nits_per_unit`` cd/m^2): at daylight levels a sunlit white surface
 shows near display white and shadows stay readable, where a dim rig would look like dusk.
 

@@ -8,17 +8,19 @@ displacements, default and animated weights) are read here into each instance's
 from __future__ import annotations
 
 import logging
+from pathlib import Path
 
 import numpy as np
 
 from .animation import INTERPOLATIONS, PATHS, Deformation, Sampler, Skin, normalise_weights
-from .camera import CameraDef
-from .default_camera import AUTO, AZIMUTH, ELEVATION, YFOV_DEG, animation_bounds, frame_animation, sample_frames
+from .camera import AUTO, CameraDef
+from .default_camera import AZIMUTH, ELEVATION, YFOV_DEG, animation_bounds, frame_animation, sample_frames
 from .default_lights import default_sky, default_sun
-from .gltf import GltfDocument
+from .gltf import GltfDocument, read_gltf
 from .lights import light_def_from_gltf
 from .materials import DEFAULT_MATERIAL, material_from_gltf
-from .scene import DEFAULT_ELEMENT_FRACTION, MeshInstance, Node, Scene
+from .nodes import MeshInstance, Node
+from .scene import DEFAULT_ELEMENT_FRACTION, Scene
 from .textures import base_color_texture, emissive_texture
 from .timeline import DEFAULT_FPS, MAX_FRAMES, Timeline
 from .vertex_attributes import read_vertex_attributes
@@ -41,6 +43,14 @@ ELEMENT_SIZE_FRAMES = 256
 # JOINTS_n are unsigned bytes or shorts, WEIGHTS_n floats or normalized unsigned bytes or shorts (§3.7.3.1)
 _JOINT_COMPONENTS = (5121, 5123)
 _WEIGHT_COMPONENTS = (5126, 5121, 5123)
+
+
+def read_scene(path: str | Path, *, camera: str | None = None, fps: float | None = None,
+              light: str = "auto") -> Scene:
+    """Load a ``.glb``/``.gltf`` file. ``camera`` picks a camera by camera or node name, or
+    ``auto`` (pipeline/scene/default_camera.py); ``light`` ``auto`` lights a file without light
+    with the default sun and sky (pipeline/scene/default_lights.py), ``none`` refuses it."""
+    return build_scene(read_gltf(path), camera=camera, fps=fps, light=light)
 
 
 def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | None = None,

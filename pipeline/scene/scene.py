@@ -19,16 +19,15 @@ from pathlib import Path
 
 import numpy as np
 
-from .animation import Deformation, Sampler, joint_matrices, pose_vertices, trs_matrix
-from .camera import Camera, CameraDef
-from .default_camera import AUTO, Framing
-from .gltf import GltfDocument, read_gltf
+from .animation import Sampler, joint_matrices, pose_vertices, trs_matrix
+from .camera import AUTO, Camera, CameraDef, Framing
+from .gltf import GltfDocument
 from .lights import Light, LightDef
 from .materials import Material
+from .nodes import MeshInstance, Node
 from .shading import CornerAttributes, corner_attributes, world_corner_normals
 from .sky import Sky
 from .timeline import Timeline
-from .vertex_attributes import VertexAttributes
 
 log = logging.getLogger(__name__)
 
@@ -37,38 +36,6 @@ log = logging.getLogger(__name__)
 _STATE_DECIMALS = 7
 # Default element size for files that do not state one: this fraction of the bounding-box diagonal.
 DEFAULT_ELEMENT_FRACTION = 1.0 / 50.0
-
-
-@dataclass(frozen=True)
-class Node:
-    index: int
-    name: str
-    parent: int | None
-    children: tuple[int, ...]
-    translation: np.ndarray
-    rotation: np.ndarray  # quaternion x, y, z, w
-    scale: np.ndarray
-    matrix: np.ndarray | None  # a static matrix given instead of TRS
-    mesh: int | None
-    camera: int | None
-    light: int | None
-
-
-@dataclass(frozen=True)
-class MeshInstance:
-    """One primitive of a mesh placed by a node, in the mesh's local coordinates."""
-
-    index: int
-    node: int
-    mesh: int
-    primitive: int
-    name: str
-    vertices: np.ndarray  # (V, 3) float64, local
-    faces: np.ndarray  # (F, 3) int64, zero-area triangles removed
-    material: int  # index into Scene.materials
-    source_faces: np.ndarray  # (F,) int64: index of each kept triangle in the primitive
-    attributes: VertexAttributes | None = None  # NORMAL, TEXCOORD_n, COLOR_0 (vertex_attributes.py)
-    deformation: Deformation | None = None  # a skin and/or morph targets (animation.py): posed per vertex
 
 
 @dataclass
@@ -116,18 +83,6 @@ class Scene:
     default_lights: tuple[Light, ...] = ()  # pipeline/scene/default_lights.py: the file has no light
     sky: Sky | None = None
     framing: Framing | None = None  # the auto camera (pipeline/scene/default_camera.py), no camera_node
-
-    # --- loading --------------------------------------------------------------------------------
-
-    @classmethod
-    def load(cls, path: str | Path, *, camera: str | None = None, fps: float | None = None,
-             light: str = "auto") -> "Scene":
-        """Load a ``.glb``/``.gltf`` file. ``camera`` picks a camera by camera or node name, or
-        ``auto`` (pipeline/scene/default_camera.py); ``light`` ``auto`` lights a file without light
-        with the default sun and sky (pipeline/scene/default_lights.py), ``none`` refuses it."""
-        from .loader import build_scene
-
-        return build_scene(read_gltf(path), camera=camera, fps=fps, light=light)
 
     # --- identity ---------------------------------------------------------------------------------
 

@@ -4,9 +4,9 @@
   inverse transpose of the node's matrix and renormalised (:func:`world_corner_normals`, per pose),
   interpolated with the hit's barycentrics and renormalised again. It is turned into the geometric
   normal's hemisphere, so which side a surface is seen from (sidedness) and where secondary rays
-  start (offsets, workers/raycast.py) still come from the geometric normal; primitives without
+  start (offsets, pipeline/photons/raycast.py) still come from the geometric normal; primitives without
   ``NORMAL`` are flat shaded, as glTF 2.0 §3.7.2.1 asks. Lambert cosines, mirror and lobe directions
-  use the shading normal (kernels/scatter.py, workers/camera_paths.py).
+  use the shading normal (kernels/scatter.py, pipeline/frames/camera_paths.py).
 * **Base colour**: ``baseColorFactor`` RGB x the ``baseColorTexture`` (pipeline/scene/textures.py) at
   the hit's interpolated ``TEXCOORD_n`` x the interpolated ``COLOR_0`` (glTF 2.0 §3.9.2). The photon
   tracer takes its Russian-roulette albedo from here, so colour bleeding follows the texture; the
@@ -14,7 +14,7 @@
 * **Emission**: ``emissiveFactor x strength x emissiveTexture`` (glTF 2.0 §3.9.5; vertex colours do
   not apply): seen emitters and area-light samples in the compositor, photon weights at emission.
 
-Embree's hit barycentrics (u, v) weight a triangle's corners 1 and 2 (workers/raycast.py).
+Embree's hit barycentrics (u, v) weight a triangle's corners 1 and 2 (pipeline/photons/raycast.py).
 """
 from __future__ import annotations
 
@@ -31,7 +31,7 @@ if TYPE_CHECKING:
     import numpy.typing as npt
 
     from .materials import Material
-    from .scene import MeshInstance
+    from .nodes import MeshInstance
 
 MEAN_POINTS = 256  # points per emissive triangle for its mean textured radiance
 
@@ -169,7 +169,7 @@ class SurfaceShading:
     def mean_emission(self, tri: np.ndarray) -> np.ndarray:
         """(n, 3) emitted radiance averaged over each triangle: exact without an emissive texture,
         else the mean of :data:`MEAN_POINTS` stratified, area-uniform points (what emitters are
-        chosen by; photon weights then carry L(x) / this mean, workers/emission.py)."""
+        chosen by; photon weights then carry L(x) / this mean, pipeline/photons/emission.py)."""
         tri = np.asarray(tri, np.int64)
         out = np.take(self.emission_factor, self.tri_mat[tri], axis=0) if len(tri) else np.zeros((0, 3))
         if not self.emission_varies or not len(tri):
@@ -209,7 +209,7 @@ def mean_emission(material: Material) -> np.ndarray:
 
 def mean_base_color(material: Material) -> np.ndarray:
     """(3,) a material's base colour averaged over its texture (factor x texel mean): what a
-    mesh-level estimate such as the adaptation luminance (workers/reconstruct.py) can use."""
+    mesh-level estimate such as the adaptation luminance (pipeline/collection/estimators.py) can use."""
     factor = np.asarray(material.albedo, np.float64)
     tex = getattr(material, "base_color_texture", None)
     return factor if tex is None else factor * tex.mean
@@ -228,5 +228,5 @@ def triangle_points(corners: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.nda
     """Points of (n, 3, 3) triangles at barycentrics (u, v) (corners 1 and 2), in the corners' dtype
     (float32 in the compositor), as corner 0 plus the two edges: the compositor's hit points and its
     area-light samples. Not :func:`interpolate`'s float64 weighted sum: the rounding differs, and the
-    ray offsets (workers/raycast.py) and the frames' bits are those of this form."""
+    ray offsets (pipeline/photons/raycast.py) and the frames' bits are those of this form."""
     return corners[:, 0] + u[:, None] * (corners[:, 1] - corners[:, 0]) + v[:, None] * (corners[:, 2] - corners[:, 0])

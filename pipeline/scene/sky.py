@@ -3,9 +3,9 @@
 The sky surrounds the scene: radiance ``zenith`` (RGB, W/(m^2 sr) per channel, the units of
 docs/03-conventions.md §1) from every direction of the upper hemisphere (world +Y, glTF's up) and ``ground``
 from every direction of the lower one, as if the scene stood on an endless flat ground of that
-brightness. Both the photon tracer (workers/emission.py, kernels/emit.py: photons from a disk
-covering the scene) and the compositor (workers/area_lights.py: cosine-weighted shadow rays;
-workers/camera_paths.py: the background of rays that leave the scene) sample it.
+brightness. Both the photon tracer (pipeline/photons/emission.py, kernels/emit.py: photons from a disk
+covering the scene) and the compositor (pipeline/frames/area_lights.py: cosine-weighted shadow rays;
+pipeline/frames/camera_paths.py: the background of rays that leave the scene) sample it.
 
 Closed forms the tests check: a horizontal plane facing up, unoccluded, has irradiance
 E = pi x zenith; facing down, pi x ground; with zenith = ground = L, every point on the outside of a

@@ -5,6 +5,7 @@ from collections import Counter
 
 import numpy as np
 
+from .default_camera import describe_framing
 from .default_lights import describe_default_lights
 from .elements import ElementMesh
 from .ignored import ignored
@@ -29,11 +30,11 @@ def describe(scene: Scene, element_size: float | None = None) -> list[str]:
             for i in scene.order if scene.nodes[i].camera is not None and scene.cameras[scene.nodes[i].camera]]
     chosen = scene.camera_name or "none"
     if scene.framing is not None:
-        chosen = f"the {scene.framing.describe()}"
+        chosen = f"the {describe_framing(scene.framing)}"
     animated = [f"{scene.nodes[i].name} [{', '.join(sorted(scene.channels[i]))}]" for i in scene.animated_nodes]
     meshes = {inst.mesh for inst in scene.instances}
     # Scene states of at most INFO_STATE_FRAMES evenly spread frames: `loom info` does not pose
-    # every frame of a long timeline (a render does, in pipeline/shoot.py's plan)
+    # every frame of a long timeline (a render does, in pipeline/run/shoot.py's plan)
     sampled = sorted({round(x) for x in np.linspace(tl.first, tl.last, min(tl.frames, INFO_STATE_FRAMES))})
     distinct = len({scene.state_key(f) for f in sampled})
     if distinct > 1:

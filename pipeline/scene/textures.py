@@ -1,7 +1,7 @@
 """Base-colour and emissive textures: images decoded with OpenImageIO, samplers, ``KHR_texture_transform``.
 
 A material's ``baseColorTexture`` or ``emissiveTexture`` becomes a :class:`Texture`: the image
-decoded once when the scene is loaded (a worker loads each scene once, workers/scene_cache.py, so
+decoded once when the scene is loaded (a worker loads each scene once, pipeline/scene/scene_cache.py, so
 once per worker), converted from sRGB to linear (glTF 2.0 §3.9.2, §3.9.5: base-colour and emissive
 textures are sRGB-encoded), with the sampler's wrap modes and filter and the texture transform.
 :func:`sample` is a pure function over arrays: the photon tracer and the compositor both call it

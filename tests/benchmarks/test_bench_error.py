@@ -12,6 +12,7 @@ from click.testing import CliRunner
 from pipeline.benchmarks import error_measures as em
 from pipeline.benchmarks.error import Plan, reference_key, run
 from pipeline.errors import LoomError
+from pipeline.scene import read_scene
 
 
 def _maps(rng, frames=10, vertices=50):
@@ -174,11 +175,11 @@ def test_a_reference_draws_the_same_random_numbers_in_every_frame(tmp_path):
     moves), one reference's maps are the same bits, so its noise adds nothing to the error's flicker;
     another stream gives another estimate of the same light (a noise the floor measures)."""
     from pipeline.benchmarks.error import reference_map
-    from pipeline.scene import ElementMesh, Scene
+    from pipeline.scene import ElementMesh
     from pipeline.scene.builtin import write_builtin
 
     path = write_builtin("static", tmp_path / "static.glb")
-    scene = Scene.load(path)
+    scene = read_scene(path)
     elements = ElementMesh.build(scene)
     common = dict(scene_path=str(path), scene_hash=scene.scene_hash, element_size=elements.element_size,
                   n_photons=3_000, seed=101, max_depth=256)

@@ -1,4 +1,4 @@
-"""Table 2's rows from segment records (pipeline/benchmarks/render.stage_table): every stage's wall
+"""Table 2's rows from segment records (pipeline/report/tables.stage_table): every stage's wall
 time split by its tasks' core time, known answers on made-up clocks."""
 from __future__ import annotations
 
@@ -6,7 +6,7 @@ from types import SimpleNamespace
 
 import pytest
 
-from pipeline.benchmarks.render import stage_table
+from pipeline.report.tables import stage_table
 
 
 def _record(**times):

@@ -13,9 +13,9 @@ import time
 
 import pytest
 
-from pipeline.images import frame_paths
-from pipeline.segment_records import read_record, read_records
-from pipeline.segments import next_n_frame
+from pipeline.frames.images import frame_paths
+from pipeline.segments.decisions import next_n_frame
+from pipeline.segments.records import read_record, read_records
 
 # Small and quick, but every step runs: F_max grows 6 -> 10, N_frame doubles, two segments.
 CHEAP = {"pilot_photons": 2000, "n_frame_min": 1000, "n_frame_max": 16000, "d_thr": 0.45,

@@ -3,7 +3,7 @@
 
 References are one frame's own photons, no temporal collection, ``REFERENCE_PHOTONS`` of them;
 their noise floor is stated by comparing their even and odd halves with the same AQM. Frames are
-compared as the viewer sees them (pipeline/perceived.py) with the same camera samples and direct
+compared as the viewer sees them (pipeline/frames/perceived.py) with the same camera samples and direct
 light, so every difference is in the indirect light.
 """
 from __future__ import annotations
@@ -12,16 +12,16 @@ import numpy as np
 import pytest
 
 from kernels.colour import LUMA
+from pipeline.collection.maps import illumination_maps
 from pipeline.config import RenderConfig
-from pipeline.perceived import displayed_difference
-from pipeline.render import RenderSettings, render
-from pipeline.scene import ElementMesh, Scene
+from pipeline.frames.camera_paths import render_frame
+from pipeline.frames.perceived import displayed_difference
+from pipeline.run.render import RenderSettings, render
+from pipeline.run.shoot import shoot
+from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin import write_builtin
-from pipeline.shoot import shoot
 from pipeline.store import PhotonStore
 from pipeline.store.illumination import IlluminationMaps
-from pipeline.temporal import illumination_maps
-from workers.camera_paths import render_frame
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(3600)]  # minutes of rendering, not a hang
 SETTINGS = RenderSettings(width=320, height=240, spp=2)
@@ -35,7 +35,7 @@ class Frames:
 
     def __init__(self, scene_path, tmp):
         self.path, self.tmp = scene_path, tmp
-        self.scene = Scene.load(scene_path)
+        self.scene = read_scene(scene_path)
         self.elements = ElementMesh.build(self.scene)
 
     def beauty(self, frame: int, irradiance) -> np.ndarray:
@@ -73,7 +73,7 @@ def _check_records(records, config: RenderConfig):
 def test_room_guided_frames_match_the_converged_reference(tmp_path):
     path = write_builtin("room", tmp_path / "room.glb")
     report = render(path, frames=None, out_dir=tmp_path / "out", settings=SETTINGS, progress=False)
-    from pipeline.segment_records import read_records
+    from pipeline.segments.records import read_records
 
     records = read_records(tmp_path / "out")
     _check_records(records, RenderConfig())
@@ -100,7 +100,7 @@ def test_atrium_guided_frames_lose_the_mottling(tmp_path):
     guided = render(path, frames=frames_spec, out_dir=tmp_path / "guided", settings=SETTINGS, progress=False)
     old = render(path, frames=frames_spec, out_dir=tmp_path / "old", settings=SETTINGS, n_photons=40_000,
                  fmax=15, temporal="adaptive", config=RenderConfig(spatial_filter=False), progress=False)
-    from pipeline.segment_records import read_records
+    from pipeline.segments.records import read_records
 
     records = read_records(tmp_path / "guided")
     _check_records(records, RenderConfig())

@@ -1,4 +1,4 @@
-"""The coordinator's pure decisions (pipeline/segments.py) on synthetic inputs with known answers:
+"""The coordinator's pure decisions (pipeline/segments/decisions.py) on synthetic inputs with known answers:
 Eq. (2), p_me with a lighting step at a known frame, the doubling loop, segment placement and the
 photons of the frames next to an animation end."""
 from __future__ import annotations
@@ -8,8 +8,10 @@ import math
 import numpy as np
 import pytest
 
+from pipeline.collection.maps import collection_windows
 from pipeline.config import RenderConfig
-from pipeline.segments import (
+from pipeline.scene import read_scene
+from pipeline.segments.decisions import (
     calibrated_start,
     doubling_loop,
     doublings_ahead,
@@ -25,7 +27,6 @@ from pipeline.segments import (
     pilot_n_frame,
     place_segment,
 )
-from pipeline.temporal import collection_windows
 
 
 # --- Step 1: Eq. (2) --------------------------------------------------------------------------
@@ -57,12 +58,12 @@ def test_energy_error_falls_as_one_over_sqrt_n_and_the_pilot_finds_the_analytic_
 def test_pilot_on_a_real_static_scene_follows_eq2(tmp_path):
     # The STATIC built-in traced for real: E at N and at 4N differ by 2 (E ~ 1/sqrt(N)), so the
     # pilot's N_frame from either probe agrees within 20 %.
-    from pipeline.scene import ElementMesh, Scene
+    from pipeline.collection.estimators import vertex_moments
+    from pipeline.photons.tracing import trace_batch
+    from pipeline.scene import ElementMesh
     from pipeline.scene.builtin import write_builtin
-    from workers.photons import trace_batch
-    from workers.reconstruct import vertex_moments
 
-    scene = Scene.load(write_builtin("static", tmp_path / "static.glb"))
+    scene = read_scene(write_builtin("static", tmp_path / "static.glb"))
     elements = ElementMesh.build(scene)
     state = scene.pose_frame(1)
     errors = {}
@@ -233,14 +234,13 @@ def test_every_config_field_is_read_outside_config():
 
 def test_camera_flow_is_the_cameras_own_motion(tmp_path):
     # The AQM of Step 3 gets the pixel flow of camera motion (§6); a still camera gets none.
-    from pipeline.perceived import camera_flow
-    from pipeline.scene import Scene
+    from pipeline.frames.perceived import camera_flow
     from pipeline.scene.builtin import write_builtin
 
-    orbit = Scene.load(write_builtin("static", tmp_path / "static.glb"))  # the camera orbits the room
+    orbit = read_scene(write_builtin("static", tmp_path / "static.glb"))  # the camera orbits the room
     flow = camera_flow(orbit, 10, 64, 48)
     assert flow.shape == (48, 64, 2) and np.isfinite(flow).all() and np.abs(flow).mean() > 0.1
-    assert camera_flow(Scene.load(write_builtin("room", tmp_path / "room.glb")), 10, 64, 48) is None
+    assert camera_flow(read_scene(write_builtin("room", tmp_path / "room.glb")), 10, 64, 48) is None
 
 
 def test_the_next_segment_starts_where_the_last_ones_aqm_put_the_pilot():
@@ -287,7 +287,7 @@ def test_a_record_with_a_retired_field_loads_and_an_unknown_field_is_refused(tmp
     import json
 
     from pipeline.errors import LoomError
-    from pipeline.segment_records import SegmentRecord, read_record, record_path, table, write_record
+    from pipeline.segments.records import SegmentRecord, read_record, record_path, table, write_record
 
     rec = SegmentRecord(index=0, start=1, end=16, k=8, fmax=15, n_frame=20_000, temporal="adaptive", guided=True,
                         decision_hash="0" * 16, n_frame_steps=[{"n_frame": 20_000, "d_aqm": 2.0}])

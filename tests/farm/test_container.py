@@ -26,7 +26,7 @@ from pathlib import Path
 import pytest
 import yaml
 
-from pipeline.cluster import WORKER_ENV
+from pipeline.run.cluster import WORKER_ENV
 
 pytestmark = pytest.mark.slow
 
@@ -107,7 +107,7 @@ def test_dockerfile_instructions():
     assert "pip install --no-cache-dir /tmp/wheels/photonloom-" in runs
     env = env_of(ins)
     for key, value in WORKER_ENV.items():
-        assert env.get(key) == value, f"ENV {key}={env.get(key)!r}, pipeline/cluster.py WORKER_ENV says {value!r}"
+        assert env.get(key) == value, f"ENV {key}={env.get(key)!r}, pipeline/run/cluster.py WORKER_ENV says {value!r}"
     assert env["POCL_CACHE_DIR"].startswith("/var/cache") and env["XDG_CACHE_HOME"] == "/var/cache"
     # The image keeps no checkout: only the builder stage copies the sources.
     final = ins[max(i for i, (w, _) in enumerate(ins) if w == "FROM"):]
@@ -269,8 +269,8 @@ def test_the_image_builds_and_compose_renders_cornell_as_loom_render_does(tmp_pa
     the same command, byte for byte."""
     import tarfile
 
-    from pipeline.images import frame_paths
-    from pipeline.segment_records import read_records
+    from pipeline.frames.images import frame_paths
+    from pipeline.segments.records import read_records
     from tests.farm.docker_engine import base_image, compose_command, ensure_engine
 
     ensure_engine(tmp_path / "dockerd.log")

@@ -8,8 +8,8 @@ import subprocess
 import sys
 import time
 
-from pipeline.images import frame_paths
-from pipeline.segment_records import read_records
+from pipeline.frames.images import frame_paths
+from pipeline.segments.records import read_records
 from tests.pipeline.test_shoot_distributed import dask_cluster  # noqa: F401  (the fixture)
 
 CHEAP = {"pilot_photons": 2000, "n_frame_min": 1000, "n_frame_max": 8000, "d_thr": 0.45,

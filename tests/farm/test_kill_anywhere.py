@@ -12,8 +12,8 @@ import time
 
 import pytest
 
-from pipeline.images import frame_paths
-from pipeline.segment_records import read_records
+from pipeline.frames.images import frame_paths
+from pipeline.segments.records import read_records
 from tests.pipeline.shoot_helpers import store_fingerprint
 from tests.pipeline.test_shoot_distributed import dask_cluster  # noqa: F401  (the fixture)
 

@@ -12,8 +12,8 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.images import frame_paths
-from pipeline.segment_records import read_records
+from pipeline.frames.images import frame_paths
+from pipeline.segments.records import read_records
 
 CHEAP = {"pilot_photons": 2000, "n_frame_min": 1000, "n_frame_max": 16000, "d_thr": 0.45,
          "fmax_initial": 6, "fmax_step": 4, "fmax_cap": 10}

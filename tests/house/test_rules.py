@@ -72,7 +72,7 @@ FACTS = {
     "Rec. 709 luma weights": (r"0\.2126", "kernels/colour.py"),
     "record key bits": (r"^\s*PARITY_BIT\s*=|^\s*DIRECT_BIT\s*=|#define\s+PARITY_BIT", "kernels/record_layout.py"),
     "barycentric scale": (r"^\s*BARY_SCALE\s*=|#define\s+BARY_SCALE", "kernels/record_layout.py"),
-    "ray kinds": (r"^\s*RAY_KINDS\s*=", "workers/camera_paths.py"),
+    "ray kinds": (r"^\s*RAY_KINDS\s*=", "pipeline/frames/camera_paths.py"),
     "glTF component types": (r"5126\s*:", "pipeline/scene/gltf.py"),
     "glTF type widths": (r"\"MAT4\"\s*:\s*16", "pipeline/scene/gltf.py"),
     "writable-folder check": (r"os\.access\(", "pipeline/paths.py"),

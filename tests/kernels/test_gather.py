@@ -1,6 +1,6 @@
 """Gather (§4, §5.2.4): element sums, window sums and vertex flux on PoCL (element_sums_cl,
-frame_sums_flux_cl: the path pipeline/temporal.py runs) equal their NumPy twins within 1e-6
-relative, a one-frame window is workers/reconstruct.py's vertex_irradiance, and repeated runs are
+frame_sums_flux_cl: the path pipeline/collection/maps.py runs) equal their NumPy twins within 1e-6
+relative, a one-frame window is pipeline/collection/estimators.py's vertex_irradiance, and repeated runs are
 bitwise identical."""
 from __future__ import annotations
 
@@ -16,8 +16,8 @@ from kernels.gather import (
     irradiance,
     window_flux_reference,
 )
+from pipeline.collection.estimators import vertex_irradiance
 from tests.kernels.twin_base import KernelTwinTests
-from workers.reconstruct import vertex_irradiance
 
 RTOL = 1e-6
 
@@ -284,7 +284,7 @@ def test08_refuses_windows_outside_the_table(rng):
 
 @pytest.mark.parametrize("split", [False, True])
 def test_gather_from_frame_sums_gives_the_same_bits(rng, split):
-    """Sums made one frame at a time (and kept, pipeline/temporal.py) are the bits of the frames
+    """Sums made one frame at a time (and kept, pipeline/collection/maps.py) are the bits of the frames
     summed in one call, give the same flux, and agree with the NumPy twin."""
     n_elements, n_vertices = 150, 110
     frames = [frame_records(rng, int(rng.integers(0, 1500)), n_elements) for _ in range(8)]

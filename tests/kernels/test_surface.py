@@ -4,6 +4,7 @@ from __future__ import annotations
 import numpy as np
 
 from kernels.surface import LookupCL, lookup_reference
+from pipeline.scene import read_scene
 from tests.kernels.twin_base import KernelTwinTests
 
 
@@ -50,10 +51,10 @@ def test_elements_stay_in_their_triangle(rng):
 
 
 def test_lookup_matches_element_mesh_locate(tmp_path):
-    from pipeline.scene import ElementMesh, Scene
+    from pipeline.scene import ElementMesh
     from pipeline.scene.builtin import write_builtin
 
-    scene = Scene.load(write_builtin("cornell", tmp_path / "c.glb"))
+    scene = read_scene(write_builtin("cornell", tmp_path / "c.glb"))
     mesh = ElementMesh.build(scene, 0.1)
     rng = np.random.default_rng(3)
     tri = rng.integers(0, len(mesh.triangle_n), 4000)

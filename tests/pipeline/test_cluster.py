@@ -1,4 +1,4 @@
-"""The embedded LocalCluster (pipeline/cluster.py): its workers get WORKER_ENV (one thread each,
+"""The embedded LocalCluster (pipeline/run/cluster.py): its workers get WORKER_ENV (one thread each,
 PoCL's single-threaded device first) and the calling process keeps its own environment; Dask's
 profiler, monitors and event-loop ticks are turned down there (LOCAL_DASK_CONFIG)."""
 from __future__ import annotations
@@ -7,7 +7,7 @@ import os
 
 import pytest
 
-from pipeline.cluster import LOCAL_DASK_CONFIG, TAIL_SHARE, WORKER_ENV, connect, group_sizes, grouped, run_tasks
+from pipeline.run.cluster import LOCAL_DASK_CONFIG, TAIL_SHARE, WORKER_ENV, connect, group_sizes, grouped, run_tasks
 
 
 def _worker_view() -> dict:
@@ -38,7 +38,7 @@ def test_a_worker_writes_its_frames_in_its_own_thread(tmp_path):
     import sys
 
     code = ("import os, numpy as np\n"
-            "from pipeline.images import LAYERS, write_exr\n"
+            "from pipeline.frames.images import LAYERS, write_exr\n"
             "a = np.ones((64, 64, 3), np.float32)\n"
             "before = len(os.listdir('/proc/self/task'))\n"
             f"write_exr({str(tmp_path / 'f.exr')!r}, a, a[..., 0], {{n: a for n in LAYERS}}, {{}})\n"

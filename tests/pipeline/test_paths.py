@@ -5,8 +5,8 @@ import pytest
 
 from pipeline.errors import LoomError
 from pipeline.paths import check_writable_dir
-from pipeline.render import check_out_dir
-from pipeline.shoot import check_store_location
+from pipeline.run.render import check_out_dir
+from pipeline.run.shoot import check_store_location
 
 
 def test_a_new_or_existing_directory_passes(tmp_path):

@@ -13,9 +13,9 @@ from click.testing import CliRunner
 from pipeline.cli import main
 from pipeline.config import RenderConfig
 from pipeline.errors import LoomError
-from pipeline.scene import Scene
+from pipeline.run.shoot import plan, shoot, tasks
+from pipeline.scene import read_scene
 from pipeline.scene.builtin import write_builtin
-from pipeline.shoot import plan, shoot, tasks
 from pipeline.store import PhotonStore
 from tests.pipeline.shoot_helpers import store_fingerprint
 
@@ -154,7 +154,7 @@ def test_photons_fill_the_room_frames(scenes, tmp_path):
 def test_two_stores_never_share_a_task_key(scenes, tmp_path):
     # A key the cluster still holds returns the earlier task's result without running it, so the
     # same batches shot into two stores must have different keys (the second store stayed empty)
-    p = plan(Scene.load(scenes["cornell"]), "1-2", 2_000, RenderConfig())
+    p = plan(read_scene(scenes["cornell"]), "1-2", 2_000, RenderConfig())
     keys = {}
     for name in ("a", "b"):
         url = str(tmp_path / f"{name}.zarr")

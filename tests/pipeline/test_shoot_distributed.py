@@ -15,8 +15,8 @@ from pathlib import Path
 
 import pytest
 
-from pipeline.cluster import WORKER_ENV
-from pipeline.shoot import shoot
+from pipeline.run.cluster import WORKER_ENV
+from pipeline.run.shoot import shoot
 from tests.pipeline.shoot_helpers import store_fingerprint
 
 DASK = str(Path(sys.executable).with_name("dask"))

@@ -1,15 +1,15 @@
-"""Eye adaptation from what the camera sees, over the eye's time course (pipeline/tonemap.py,
-workers/camera_paths.py visible_adaptation), end to end on real renders of a BoxAnimated-like scene."""
+"""Eye adaptation from what the camera sees, over the eye's time course (pipeline/frames/tonemap.py,
+pipeline/frames/camera_paths.py visible_adaptation), end to end on real renders of a BoxAnimated-like scene."""
 from __future__ import annotations
 
 import numpy as np
 import OpenImageIO as oiio
 import pytest
 
-from pipeline.images import frame_paths, read_exr
-from pipeline.render import RenderSettings, render
-from pipeline.segment_records import read_record
-from pipeline.tonemap import ToneMapping, adapt_in_time, image_adaptation
+from pipeline.frames.images import frame_paths, read_exr
+from pipeline.frames.tonemap import ToneMapping, adapt_in_time, image_adaptation
+from pipeline.run.render import RenderSettings, render
+from pipeline.segments.records import read_record
 from tests.render.adaptation_scenes import FPS, box_scene
 
 FRAMES = 24

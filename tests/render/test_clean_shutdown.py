@@ -1,5 +1,5 @@
 """A successful render on a local Dask cluster ends quietly: the cluster is closed so that no
-worker heartbeat outlives it (pipeline/cluster.py close_local), and stderr holds no traceback."""
+worker heartbeat outlives it (pipeline/run/cluster.py close_local), and stderr holds no traceback."""
 from __future__ import annotations
 
 import os

@@ -9,16 +9,16 @@ import numpy as np
 import pytest
 
 from kernels.camera import camera_rays_reference
-from pipeline.scene import ElementMesh, Scene
+from pipeline.frames.camera_paths import render_frame, sample_means
+from pipeline.frames.random_numbers import frame_key
+from pipeline.scene import ElementMesh, read_scene
 from tests.render.scenes import EYE, LAMP, area_scene, mirror_scene, plane_scene
-from workers.camera_paths import render_frame, sample_means
-from workers.random_numbers import frame_key
 
 W, H, SPP = 40, 30, 4
 
 
 def _render(path, irradiance=None, **kw):
-    scene = Scene.load(path)
+    scene = read_scene(path)
     state = scene.pose_frame(1)
     elements = ElementMesh.build(scene)
     args = dict(width=W, height=H, spp=SPP, seed=3, frame=1)
@@ -126,7 +126,7 @@ def test_area_light_irradiance_below_a_square_emitter(tmp_path):
 
 def test_indirect_is_the_interpolated_map(tmp_path):
     path = plane_scene(tmp_path / "i.glb", albedo=(0.5, 0.5, 0.5))
-    scene = Scene.load(path)
+    scene = read_scene(path)
     elements = ElementMesh.build(scene)
     irradiance = np.full((elements.n_vertices, 3), 2.0)  # constant irradiance 2 everywhere
     _, img, _ = _render(path, irradiance)
@@ -165,11 +165,11 @@ def test_sample_means_are_the_bits_of_numpys_mean(spp):
 
 @pytest.mark.parametrize("spp", [1, 4])
 def test_maps_rendered_along_one_set_of_paths_have_the_bits_of_their_own_renders(tmp_path, spp):
-    # The AQM's I1, I2 (pipeline/coordinator.py d_aqm) share camera paths: each layer must be the
+    # The AQM's I1, I2 (pipeline/run/coordinator.py d_aqm) share camera paths: each layer must be the
     # render of its map alone, through metal and glossy bounces too (paths scattered back into samples)
     from pipeline.scene.builtin import write_builtin
 
-    scene = Scene.load(write_builtin("room", tmp_path / "room.glb"))  # diffuse, glossy and metal surfaces
+    scene = read_scene(write_builtin("room", tmp_path / "room.glb"))  # diffuse, glossy and metal surfaces
     state, elements = scene.pose_frame(1), ElementMesh.build(scene)
     rng = np.random.default_rng(5)
     maps = [rng.uniform(0.0, 2.0, (elements.n_vertices, 3)) for _ in range(3)]

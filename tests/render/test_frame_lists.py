@@ -6,8 +6,8 @@ import pytest
 from click.testing import CliRunner
 
 from pipeline.cli import main
-from pipeline.coordinator import frame_chunks
-from pipeline.images import frame_paths
+from pipeline.frames.images import frame_paths
+from pipeline.run.coordinator import frame_chunks
 
 
 def test_chunks_break_at_gaps_and_at_the_chunk_size():

@@ -1,5 +1,5 @@
 """The photon store keeps what a render reads: per-batch counts and sums by default, hit records
-only with ``--keep-records`` (pipeline/store, pipeline/batch_sums.py).
+only with ``--keep-records`` (pipeline/store, pipeline/collection/batch_sums.py).
 
 On ATRIUM's element mesh (about 45,000 elements, where a batch of 6,000 photons hits a fraction of
 them and the sums are stored sparse) a render without records writes none and gives frames and
@@ -17,8 +17,8 @@ import sys
 
 import pytest
 
-from pipeline.images import frame_paths
-from pipeline.segment_records import read_records
+from pipeline.frames.images import frame_paths
+from pipeline.segments.records import read_records
 from pipeline.store import FORMAT_VERSION, PhotonStore, disk_usage
 
 FRAMES = "150-153"
@@ -119,8 +119,8 @@ def test_the_viewing_conditions_are_said_with_their_pixels_per_degree(atrium):
     assert "standard_fhd" in line and "full screen" in line and "frame 48x36 at" in line and "px/deg" in line
     report = json.loads((tmp / "sums" / "report.json").read_text())
     assert report["viewing"] == line
-    from pipeline.perceived import viewing_for
-    from pipeline.tonemap import ToneMapping
+    from pipeline.frames.perceived import viewing_for
+    from pipeline.frames.tonemap import ToneMapping
     fhd, uhd = (viewing_for(ToneMapping(display=d)) for d in ("standard_fhd", "standard_4k"))
     # full screen, a 48x36 frame is shown 30x magnified on either: 4k's larger screen at a
     # longer distance gives fewer frame pixels per degree than the 24-inch fhd

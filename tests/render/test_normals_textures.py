@@ -13,17 +13,17 @@ import numpy as np
 import pytest
 
 from kernels.camera import camera_rays_reference
-from pipeline.scene import ElementMesh, Scene
+from pipeline.frames.camera_paths import render_frame
+from pipeline.frames.random_numbers import frame_key
+from pipeline.photons.raycast import caster_for
+from pipeline.photons.tracing import trace_batch
+from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin import shapes
 from pipeline.scene.builtin.gltf_builder import GltfBuilder
 from pipeline.scene.summary import surface_lines
 from pipeline.scene.textures import srgb_to_linear
 from pipeline.store import DIRECT_BIT, ELEMENT_MASK
 from tests.render.scenes import UP_FACES
-from workers.camera_paths import render_frame
-from workers.photons import trace_batch
-from workers.random_numbers import frame_key
-from workers.raycast import caster_for
 
 SUN = np.array([-0.4, -0.5, -1.0]) / np.linalg.norm([-0.4, -0.5, -1.0])  # direction the light travels
 SUN_E = 3.0  # irradiance on a surface facing the sun
@@ -52,7 +52,7 @@ def _sphere_scene(path, smooth: bool, albedo=0.8):
 def _sphere_render(path, width=48, height=48, spp=8):
     """Direct layer and the analytic Lambert value rho/pi E max(0, n.l) with n the sphere's own
     normal at each sample's hit point on the mesh (pixel = mean of its samples)."""
-    state = Scene.load(path).pose_frame(1)
+    state = read_scene(path).pose_frame(1)
     img = render_frame(state, None, None, width=width, height=height, spp=spp, seed=SEED, frame=1)
     d = _sample_dirs(state, width, height, spp)
     origin = np.broadcast_to(state.camera.position, d.shape)
@@ -91,7 +91,7 @@ def test_vertex_normals_follow_a_non_uniform_scale(tmp_path):
     b.add_node("egg", b.add_mesh("egg", *mesh, material=b.add_material("w", (0.5, 0.5, 0.5)),
                                  normals=shapes.sphere_normals(mesh[0])), scale=(2.0, 0.5, 1.0))
     b.add_node("lamp", light=b.add_point_light("lamp", (1, 1, 1), 1.0), translation=(0, 3, 0))
-    state = Scene.load(b.write(tmp_path / "egg.glb")).pose_frame(1)
+    state = read_scene(b.write(tmp_path / "egg.glb")).pose_frame(1)
     p = state.vertices.astype(np.float64)[state.faces]  # (F, 3, 3) world corners on x^2/4 + 4 y^2 + z^2 = 1
     gradient = p * [0.25, 4.0, 1.0]
     gradient /= np.linalg.norm(gradient, axis=2, keepdims=True)
@@ -147,7 +147,7 @@ def test_checker_texture_in_the_frame_and_its_transform(tmp_path, offset):
     """The albedo layer shows the checker, cell by cell, at the sample positions; with
     KHR_texture_transform's offset the cells move by exactly that offset in uv."""
     transform = None if offset is None else {"offset": list(offset)}
-    state = Scene.load(_top_view(tmp_path / "top.glb", transform)).pose_frame(1)
+    state = read_scene(_top_view(tmp_path / "top.glb", transform)).pose_frame(1)
     w = h = 64
     img = render_frame(state, None, None, width=w, height=h, spp=4, seed=SEED, frame=1)
     want = _expected_cells(state, w, h, 4, offset or (0.0, 0.0))
@@ -176,7 +176,7 @@ def test_colour_bleeding_follows_the_checker(tmp_path):
     b.add_node("wall", b.add_mesh("wall", wall, np.array([0, 1, 2, 0, 2, 3]), material=white))
     b.add_node("lamp", light=b.add_point_light("lamp", (1, 1, 1), 20.0), translation=(0.0, 2.0, 0.5))
     b.set_scene_extras({"photonloom": {"element_size": 0.05}})
-    scene = Scene.load(b.write(tmp_path / "bleed.glb"))
+    scene = read_scene(b.write(tmp_path / "bleed.glb"))
     elements, state = ElementMesh.build(scene), scene.pose_frame(1)
     batch = trace_batch(state, elements, n_photons=400_000, photon_start=0, seed=5, frame=1, max_depth=2)
     elem = (batch.key & ELEMENT_MASK).astype(np.int64)
@@ -227,7 +227,7 @@ def test_furnace_with_a_constant_texture_equals_the_factor(tmp_path):
     out = {}
     for textured in (False, True):
         path, rho = _furnace(tmp_path / f"furnace{int(textured)}.glb", 188, textured)
-        scene = Scene.load(path)
+        scene = read_scene(path)
         elements, state = ElementMesh.build(scene), scene.pose_frame(1)
         batches = [trace_batch(state, elements, n_photons=N_FURNACE, photon_start=k * N_FURNACE, seed=7, frame=1,
                                max_depth=200) for k in range(16)]
@@ -283,7 +283,7 @@ def test_emissive_texture_emits_where_its_texels_are_bright(tmp_path):
     n, k = 20_000, 8
     sums = {}
     for textured in (True, False):
-        scene = Scene.load(_panel_scene(tmp_path / f"panel{int(textured)}.glb", textured))
+        scene = read_scene(_panel_scene(tmp_path / f"panel{int(textured)}.glb", textured))
         elements, state = ElementMesh.build(scene), scene.pose_frame(1)
         rows = []
         for j in range(k):
@@ -304,7 +304,7 @@ def test_emissive_texture_emits_where_its_texels_are_bright(tmp_path):
 def test_emissive_texture_in_the_frame(tmp_path):
     """Seen from below, the panel shows PANEL_L on its white half and nothing on its black half."""
     w = h = 32
-    scene = Scene.load(_panel_scene(tmp_path / "panel.glb", True))
+    scene = read_scene(_panel_scene(tmp_path / "panel.glb", True))
     assert "no base-colour textures; emissive textures on 1 material(s)" in surface_lines(scene)[0]
     state = scene.pose_frame(1)
     img = render_frame(state, None, None, width=w, height=h, spp=1, seed=SEED, frame=1)
@@ -324,7 +324,7 @@ def test_emissive_texture_in_area_lighting(tmp_path):
     w = h = 32
     out = {}
     for textured in (True, False):
-        state = Scene.load(_panel_scene(tmp_path / f"down{int(textured)}.glb", textured, look_up=False)).pose_frame(1)
+        state = read_scene(_panel_scene(tmp_path / f"down{int(textured)}.glb", textured, look_up=False)).pose_frame(1)
         img = render_frame(state, None, None, width=w, height=h, spp=4, seed=SEED, frame=1, area_samples=64)
         out[textured] = img.direct[..., 0].astype(np.float64)
     left, right = np.s_[:, : w // 2 - 1], np.s_[:, w // 2 + 1:]  # the camera's x is the world's x

@@ -3,7 +3,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from workers.reconstruct import vertex_irradiance
+from pipeline.collection.estimators import vertex_irradiance
 
 # Two elements sharing an edge: the unit square split along its diagonal
 VERTS = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], float)
@@ -50,7 +50,7 @@ def test_records_irradiance_is_vertex_irradiance_bit_for_bit(rng):
     """The direct estimate's fast path (integer picks, one product) gives vertex_irradiance's bits."""
     from types import SimpleNamespace
 
-    from workers.reconstruct import records_irradiance
+    from pipeline.collection.estimators import records_irradiance
 
     n_elements, n_vertices = 40, 30
     elems = rng.integers(0, n_vertices, (n_elements, 3))

@@ -12,8 +12,9 @@ from click.testing import CliRunner
 
 from pipeline.cli import main
 from pipeline.config import RenderConfig
-from pipeline.images import EXR_CHANNELS, frame_paths, read_exr
-from pipeline.render import RenderSettings, render
+from pipeline.frames.images import EXR_CHANNELS, frame_paths, read_exr
+from pipeline.run.render import RenderSettings, render
+from pipeline.scene import read_scene
 from tests.render.scenes import plane_scene
 
 SMALL = RenderSettings(width=32, height=24, spp=1)
@@ -121,15 +122,15 @@ def test_output_path_that_is_a_file_is_refused(tmp_path):
 
 
 def test_store_holds_each_frames_maps_from_its_own_photons(rendered):
-    from pipeline.scene import ElementMesh, Scene
+    from pipeline.collection.estimators import vertex_irradiance
+    from pipeline.scene import ElementMesh
     from pipeline.store import PhotonStore
     from pipeline.store.illumination import IlluminationMaps
-    from workers.reconstruct import vertex_irradiance
 
     scene_path, out, _ = rendered
     kept = out.parent / "kept"  # the same render with its hit records, to sum them here
     _render(scene_path, kept, keep_records=True)
-    scene = Scene.load(scene_path)
+    scene = read_scene(scene_path)
     elements = ElementMesh.build(scene)
     assert IlluminationMaps.open(kept / "photons.zarr").read(1, "direct").tobytes() == \
         IlluminationMaps.open(out / "photons.zarr").read(1, "direct").tobytes()
@@ -171,6 +172,6 @@ def test_every_option_for_a_renders_spp_defaults_to_render_settings():
     assert Plan((1, 4), (1_000,), 2, (0.5,)).spp == RenderSettings.spp
     assert bench_render_run.__kwdefaults__["spp"] == RenderSettings.spp
     # starting the CLI does not import the renderer (about 0.3 s on every loom command)
-    code = "import sys, pipeline.cli; print('pipeline.render' in sys.modules)"
+    code = "import sys, pipeline.cli; print('pipeline.run.render' in sys.modules)"
     assert subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout.strip() \
         == "False"

@@ -17,16 +17,16 @@ import numpy as np
 import pytest
 
 from kernels.camera import camera_rays_reference
-from pipeline.scene import ElementMesh, Scene
+from pipeline.collection.estimators import vertex_irradiance
+from pipeline.frames.camera_paths import render_frame
+from pipeline.frames.random_numbers import frame_key
+from pipeline.photons.tracing import trace_batch
+from pipeline.scene import ElementMesh, Scene, read_scene
 from pipeline.scene.builtin.gltf_builder import GltfBuilder
 from pipeline.scene.builtin.shapes import look_at, merge, quad
 from pipeline.scene.default_lights import SUN_COLOR, SUN_ELEVATION, SUN_IRRADIANCE, default_sun
 from pipeline.scene.sky import Sky
 from tests.render.scenes import UP_FACES, quad_y
-from workers.camera_paths import render_frame
-from workers.photons import trace_batch
-from workers.random_numbers import frame_key
-from workers.reconstruct import vertex_irradiance
 
 ALBEDO = np.array([0.5, 0.6, 0.7])
 ZENITH = (0.2, 0.3, 0.4)
@@ -52,7 +52,7 @@ def _unlit_plane(path, half=2.0, camera=None, occluder=None, albedo=ALBEDO):
 
 def _lit(path, *, sun: bool, sky: Sky | None) -> Scene:
     """The file loaded with its default lights replaced by the sun alone, a sky alone, or both."""
-    scene = Scene.load(path)
+    scene = read_scene(path)
     assert scene.default_lights and scene.sky is not None  # the file has no light
     scene.default_lights = (default_sun(),) if sun else ()
     scene.sky = sky

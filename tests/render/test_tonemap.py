@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 
 from pipeline.errors import LoomError
-from pipeline.tonemap import (
+from pipeline.frames.tonemap import (
     KEY,
     ToneMapping,
     aces_filmic,

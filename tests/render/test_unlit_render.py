@@ -8,8 +8,8 @@ import pytest
 from click.testing import CliRunner
 
 from pipeline.cli import main
-from pipeline.images import frame_paths, read_exr
-from pipeline.scene import Scene
+from pipeline.frames.images import frame_paths, read_exr
+from pipeline.scene import read_scene
 from tests.render.unlit_scenes import FRAMES, INNER, SLIDE, box_in_box
 
 W, H = 64, 48
@@ -48,7 +48,7 @@ def test_every_frame_is_rendered_with_the_default_camera_and_lights(rendered):
     channels, meta = read_exr(frame_paths(out, 1)[0])
     beauty, alpha = _layer(channels, ""), channels["A"]
     assert 0.2 < alpha.mean() < 0.9  # the boxes fill the frame, the sky shows round them
-    sky = Scene.load(path).sky
+    sky = read_scene(path).sky
     np.testing.assert_allclose(_layer(channels, "direct")[alpha == 0], np.broadcast_to(
         np.float32(sky.ground), ((alpha == 0).sum(), 3)), rtol=1e-3)  # the ground half below the horizon
     assert beauty[alpha == 1].mean() > 0.1  # lit
@@ -56,7 +56,7 @@ def test_every_frame_is_rendered_with_the_default_camera_and_lights(rendered):
 
 def test_the_moving_box_is_where_the_camera_sees_it_in_every_frame(rendered):
     path, out = rendered
-    scene = Scene.load(path)
+    scene = read_scene(path)
     centres = []
     for f in (1, FRAMES // 2, FRAMES):
         channels, _ = read_exr(frame_paths(out, f)[0])

@@ -1,4 +1,4 @@
-"""``preview.mp4`` (pipeline/images.write_video): ffmpeg decodes the PNGs itself; odd sizes are
+"""``preview.mp4`` (pipeline/frames/images.write_video): ffmpeg decodes the PNGs itself; odd sizes are
 padded to even ones, and a broken input fails with the path named and nothing left behind."""
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import imageio_ffmpeg
 import numpy as np
 import pytest
 
-from pipeline.images import write_png, write_video
+from pipeline.frames.images import write_png, write_video
 
 
 def _pngs(tmp_path, n, h=3, w=5):

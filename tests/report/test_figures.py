@@ -1,11 +1,11 @@
-"""pipeline/figures.py: fixed margins in inches, PNG output of the requested size, atomic files."""
+"""pipeline/report/figures.py: fixed margins in inches, PNG output of the requested size, atomic files."""
 import io
 
 import pytest
 from PIL import Image
 
-from pipeline import figures
-from pipeline.figures import figure, png_bytes, save_png
+from pipeline.report import figures
+from pipeline.report.figures import figure, png_bytes, save_png
 
 
 @pytest.mark.parametrize("rows, cols, size", [(1, 3, (12.5, 3.4)), (2, 3, (12.6, 6.0)), (1, 2, (10.0, 4.0))])

@@ -16,9 +16,9 @@ from PIL import Image
 
 from pipeline.cli import main
 from pipeline.config import RenderConfig
-from pipeline.render import RenderSettings, render
+from pipeline.run.render import RenderSettings, render
 from pipeline.scene.builtin import write_builtin
-from pipeline.segment_records import read_records
+from pipeline.segments.records import read_records
 from tests.report.browser import load
 
 CHEAP = dict(pilot_photons=2000, n_frame_min=1000, n_frame_max=16000, d_thr=0.45, fmax_initial=6, fmax_step=4,
@@ -134,7 +134,7 @@ def test_rerun_reports_what_it_skipped(rendered):
 
 
 def _record(index, start, end, *, n_frame=40_000, fmax=30, guided=False, d_aqm=None):
-    from pipeline.segment_records import SegmentRecord
+    from pipeline.segments.records import SegmentRecord
     return SegmentRecord(index=index, start=start, end=end, k=(start + end) // 2, fmax=fmax, n_frame=n_frame,
                          temporal="adaptive", guided=guided, decision_hash="x",
                          n_frame_steps=[] if d_aqm is None else [{"n_frame": n_frame, "d_aqm": d_aqm}])
@@ -143,7 +143,7 @@ def _record(index, start, end, *, n_frame=40_000, fmax=30, guided=False, d_aqm=N
 def test_segment_plot_only_where_segments_differ_or_were_decided():
     """Fixed settings give one sentence with the two numbers instead of a plot of flat lines; a
     guided segment or segments with different settings get the plot."""
-    from pipeline.report import _segment_picture
+    from pipeline.report.page import _segment_picture
     fixed = _segment_picture([_record(0, 1, 40), _record(1, 41, 80)], {"d_thr": 0.03})
     assert 'id="segment-settings"' in fixed and "N_frame 40,000" in fixed and "F_max 30" in fixed
     assert "<img" not in fixed

@@ -1,4 +1,4 @@
-"""What a render skips (pipeline/skipped.py): the pure account, and camera-only motion end to end."""
+"""What a render skips (pipeline/report/skipped.py): the pure account, and camera-only motion end to end."""
 from __future__ import annotations
 
 import json
@@ -6,8 +6,8 @@ import json
 from click.testing import CliRunner
 
 from pipeline.cli import main
+from pipeline.report.skipped import skipped_work, summary_lines
 from pipeline.scene.builtin import write_builtin
-from pipeline.skipped import skipped_work, summary_lines
 from pipeline.store import PhotonStore
 
 
@@ -54,7 +54,7 @@ def test_a_sky_is_sampled_like_an_area_light_and_is_not_called_skipped(tmp_path)
                      segments_done=[], has_sky=True)
     assert "area-light sampling" not in {i["what"] for i in s["per_frame"]["1"]}
     # end to end: a plane with no light of its own renders under the default sun and sky
-    from pipeline.render import RenderSettings, render
+    from pipeline.run.render import RenderSettings, render
     from pipeline.scene.builtin.gltf_builder import GltfBuilder
     from tests.render.scenes import UP_FACES, camera, quad_y
 

@@ -1,15 +1,15 @@
 """Limits that keep memory and time bounded by what the input holds (docs/14-robustness.md §1):
 frame ranges and timelines (pipeline/scene/timeline.py), worker counts and waits for a cluster
-(pipeline/cluster.py)."""
+(pipeline/run/cluster.py)."""
 from __future__ import annotations
 
 import tracemalloc
 
 import pytest
 
-from pipeline.cluster import check_workers, completed, connect
 from pipeline.errors import LoomError
-from pipeline.scene import Timeline, parse_frame_range
+from pipeline.run.cluster import check_workers, completed, connect
+from pipeline.scene import Timeline, parse_frame_range, read_scene
 from pipeline.scene.timeline import MAX_FRAMES
 
 
@@ -87,7 +87,6 @@ def test_files_outside_the_scene_folder_need_the_explicit_opt_in(tmp_path, monke
     """Item 6: a buffer beside the scene's folder is refused, and read once PHOTONLOOM_ALLOW_OUTSIDE_FILES=1."""
     import json
 
-    from pipeline.scene import Scene
     from pipeline.scene.gltf import ALLOW_OUTSIDE_ENV
     from tests.robustness.cases import base_builder, split_glb
 
@@ -99,6 +98,6 @@ def test_files_outside_the_scene_folder_need_the_explicit_opt_in(tmp_path, monke
     path.write_text(json.dumps(doc))
     monkeypatch.delenv(ALLOW_OUTSIDE_ENV, raising=False)
     with pytest.raises(LoomError, match="outside the scene's folder"):
-        Scene.load(path)
+        read_scene(path)
     monkeypatch.setenv(ALLOW_OUTSIDE_ENV, "1")
-    assert Scene.load(path).n_triangles == 14
+    assert read_scene(path).n_triangles == 14

@@ -1,4 +1,4 @@
-"""Light does not depend on how big the rest of the scene is (docs/14-robustness.md §5; workers/raycast.py).
+"""Light does not depend on how big the rest of the scene is (docs/14-robustness.md §5; pipeline/photons/raycast.py).
 
 Ray offsets follow each hit triangle's own float precision. A cornell box inside a black backdrop
 cube of side 10 .. 1e6 must get the same light as the box alone: the backdrop absorbs whatever
@@ -12,11 +12,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.scene import ElementMesh, Scene
+from pipeline.photons.tracing import trace_batch
+from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin import cornell, shapes
 from pipeline.scene.builtin.gltf_builder import GltfBuilder
 from pipeline.store import DIRECT_BIT, ELEMENT_MASK
-from workers.photons import trace_batch
 
 K = 8
 N = 20_000
@@ -31,7 +31,7 @@ def _box_light(tmp_path, backdrop: float | None):
                                           material=black))
     # Elements coarse enough for the backdrop (the box's sums are per instance, whatever the size)
     b.set_scene_extras({"photonloom": {"element_size": max(2.0, (backdrop or 0) / 20), "frames": 1}})
-    scene = Scene.load(b.write(tmp_path / f"cornell_{backdrop}.glb"))
+    scene = read_scene(b.write(tmp_path / f"cornell_{backdrop}.glb"))
     elements = ElementMesh.build(scene)
     state = scene.pose_frame(1)
     box_instances = [i for i, inst in enumerate(scene.instances) if not inst.name.startswith("backdrop")]
@@ -79,7 +79,7 @@ def test_furnace_far_from_the_origin(tmp_path, distance):
                translation=(distance, 0.0, 0.0), rotation=shapes.axis_angle((1, 2, 3), 0.7))
     b.add_node("lamp", light=b.add_point_light("lamp", (1, 1, 1), intensity), translation=(distance + 0.1, 0.2, 0.05))
     b.set_scene_extras({"photonloom": {"element_size": 2.0, "frames": 1}})
-    scene = Scene.load(b.write(tmp_path / "furnace.glb"))
+    scene = read_scene(b.write(tmp_path / "furnace.glb"))
     elements, state = ElementMesh.build(scene), scene.pose_frame(1)
     phi = 4 * np.pi * intensity
     indirect = []

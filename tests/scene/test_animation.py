@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.scene import Scene
+from pipeline.scene import read_scene
 from pipeline.scene.animation import Sampler, slerp
 from tests.conftest import basic_builder
 
@@ -17,7 +17,7 @@ def _animated_scene(tmp_path, path, times, values, interpolation, name="anim.glb
     node = b.add_node("mover", b.add_mesh("tet", CUBE, CUBE_FACES, material=0))
     b.add_animation("a", node, path, times, values, interpolation)
     b.write(tmp_path / name)
-    scene = Scene.load(tmp_path / name)
+    scene = read_scene(tmp_path / name)
     return scene, node
 
 
@@ -93,7 +93,7 @@ def test_hierarchy_composes_parent_and_child(tmp_path):
     q90 = [0, np.sin(np.pi / 4), 0, np.cos(np.pi / 4)]
     parent = b.add_node("parent", translation=(0, 5, 0), rotation=q90, scale=(2, 2, 2), children=[child])
     b.write(tmp_path / "h.glb")
-    scene = Scene.load(tmp_path / "h.glb")
+    scene = read_scene(tmp_path / "h.glb")
     world = scene.world_matrices(0.0)
     # child origin: parent T * R * S * (1, 0, 0) = (0, 5, 0) + 2 * R_y(90) (1, 0, 0) = (0, 5, -2)
     np.testing.assert_allclose(world[child][:3, 3], [0, 5, -2], atol=1e-6)
@@ -110,7 +110,7 @@ def test_spot_light_on_animated_node(tmp_path):
     node = b.add_node("spotnode", light=spot, translation=(0, 3, 0), rotation=down)
     b.add_animation("fly", node, "translation", [0, 1], [[0, 3, 0], [4, 3, 0]])
     b.write(tmp_path / "spot.glb")
-    scene = Scene.load(tmp_path / "spot.glb")
+    scene = read_scene(tmp_path / "spot.glb")
     light = scene.pose(0.5).lights[0]
     assert light.kind == "spot"
     np.testing.assert_allclose(light.position, [2, 3, 0], atol=1e-6)
@@ -130,13 +130,13 @@ def test_animated_camera_and_camera_choice(tmp_path):
     b.add_node("cam-b", camera=b.add_camera("B", 0.5, 0.1), translation=(9, 9, 9))
     b.add_animation("dolly", c1, "translation", [0, 2], [[0, 1, 5], [0, 1, 1]])
     b.write(tmp_path / "cam.glb")
-    scene = Scene.load(tmp_path / "cam.glb")
+    scene = read_scene(tmp_path / "cam.glb")
     cam = scene.pose(1.0).camera
     assert cam.definition.name == "A"
     np.testing.assert_allclose(cam.position, [0, 1, 3], atol=1e-6)
     np.testing.assert_allclose(cam.forward, [0, 0, -1], atol=1e-9)
     assert scene.timeline.frames == 61  # 2 s at the default 30 fps, frames 1..61
-    assert Scene.load(tmp_path / "cam.glb", camera="B").pose(0).camera.definition.yfov == pytest.approx(0.5)
+    assert read_scene(tmp_path / "cam.glb", camera="B").pose(0).camera.definition.yfov == pytest.approx(0.5)
     assert scene.has_camera_motion and not scene.has_moving_geometry
     assert len(set(scene.frame_state_keys)) == 1
 
@@ -147,7 +147,7 @@ def test_gltf_with_data_uri_or_external_buffer(tmp_path, external):
     path = b.write(tmp_path / "scene.gltf", external_buffer=external)
     text = path.read_text()
     assert ("data:application/octet-stream;base64" in text) != external
-    scene = Scene.load(path)
+    scene = read_scene(path)
     assert scene.n_triangles == 2 and len(scene.light_defs) == 1
 
 

@@ -12,7 +12,7 @@ from click.testing import CliRunner
 
 from pipeline.cli import main
 from pipeline.errors import SceneError
-from pipeline.scene import Scene
+from pipeline.scene import read_scene
 from tests.conftest import QUAD, basic_builder
 
 
@@ -111,7 +111,7 @@ def test_bad_scene_gives_one_line_error(tmp_path, case):
     make, words = CASES[case]
     path = make(tmp_path) or tmp_path / "bad.glb"
     with pytest.raises(SceneError) as err:
-        Scene.load(path)
+        read_scene(path)
     message = str(err.value)
     assert str(path) in message and words in message and "\n" not in message
 
@@ -127,7 +127,7 @@ def test_zero_area_triangles_are_dropped_and_counted(tmp_path):
     # triangle 0 collinear, triangle 1 repeats a vertex, triangle 2 is fine
     b.add_node("degenerate", b.add_mesh("degenerate", pts, np.array([0, 1, 2, 3, 3, 4, 3, 4, 5]), material=0))
     b.write(tmp_path / "zero.glb")
-    scene = Scene.load(tmp_path / "zero.glb")
+    scene = read_scene(tmp_path / "zero.glb")
     assert scene.dropped_triangles == 2
     assert scene.n_triangles == 3
     inst = scene.instances[-1]
@@ -148,4 +148,4 @@ def test_console_script_exit_status(tmp_path):
 
 def test_unknown_camera_name(tmp_path, basic_scene_file):
     with pytest.raises(SceneError, match="no camera named 'nope'"):
-        Scene.load(basic_scene_file, camera="nope")
+        read_scene(basic_scene_file, camera="nope")

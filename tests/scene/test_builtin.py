@@ -15,7 +15,7 @@ import pygltflib
 import pytest
 
 from pipeline.errors import LoomError
-from pipeline.scene import Scene
+from pipeline.scene import read_scene
 from pipeline.scene.builtin import BUILTIN_SCENES, atrium, room, shapes, write_builtin
 from pipeline.scene.builtin.gltf_builder import GltfBuilder
 from tests.scene.element_estimate import GltfData, estimate_elements, world_triangles
@@ -146,7 +146,7 @@ def _unoccluded(state, points: np.ndarray, directions: np.ndarray, distances: np
 @pytest.mark.parametrize("frame", [1, 45, 68, 90, 135])
 def test_no_room_light_sees_into_the_niche(written, frame):
     """The niche behind the partition is lit only indirectly, all through the animation."""
-    state = Scene.load(written("room")[0]).pose_frame(frame)
+    state = read_scene(written("room")[0]).pose_frame(frame)
     u, v, w = np.meshgrid(np.linspace(0.05, room.NICHE_X - 0.05, 6), np.linspace(0.05, room.SOFFIT_Y - 0.05, 6),
                           np.linspace(0.05, room.NICHE_Z - 0.05, 6), indexing="ij")
     points = np.stack([u, v, w], -1).reshape(-1, 3)
@@ -161,7 +161,7 @@ def test_no_room_light_sees_into_the_niche(written, frame):
 
 
 def test_atrium_sun_enters_only_through_the_skylight(written):
-    state = Scene.load(written("atrium")[0]).pose_frame(1)
+    state = read_scene(written("atrium")[0]).pose_frame(1)
     sun = next(light for light in state.lights if light.kind == "directional")
     x, z = np.meshgrid(np.linspace(0.1, atrium.WIDTH - 0.1, 60), np.linspace(0.1, atrium.DEPTH - 0.1, 45))
     floor = np.stack([x.ravel(), np.full(x.size, 1e-3), z.ravel()], -1)

@@ -5,7 +5,7 @@ import pytest
 from click.testing import CliRunner
 
 from pipeline.cli import main
-from pipeline.scene import ElementMesh, Scene
+from pipeline.scene import ElementMesh, Scene, read_scene
 from pipeline.scene.builtin import write_builtin
 
 TARGET_ELEMENTS = {"room": 5_300, "atrium": 45_000}
@@ -18,7 +18,7 @@ def builtin(tmp_path_factory):
 
     def load(name: str) -> Scene:
         if name not in cache:
-            cache[name] = Scene.load(write_builtin(name, out / f"{name}.glb"))
+            cache[name] = read_scene(write_builtin(name, out / f"{name}.glb"))
         return cache[name]
 
     return load

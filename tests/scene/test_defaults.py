@@ -10,7 +10,7 @@ from click.testing import CliRunner
 
 from pipeline.cli import main
 from pipeline.errors import SceneError
-from pipeline.scene import Scene
+from pipeline.scene import read_scene
 from pipeline.scene.default_camera import YFOV_DEG, framing_camera
 from tests.conftest import basic_builder
 from tests.render.scenes import plane_scene
@@ -23,7 +23,7 @@ def _camera_coordinates(camera, points):
 
 
 def test_the_auto_camera_sees_every_vertex_of_every_frame(tmp_path):
-    scene = Scene.load(box_in_box(tmp_path / "bib.glb"))
+    scene = read_scene(box_in_box(tmp_path / "bib.glb"))
     assert scene.camera_node is None and scene.camera_name == "auto"
     cam = scene.framing.camera
     tan_half = np.tan(np.radians(YFOV_DEG) / 2)
@@ -54,19 +54,19 @@ def test_framing_follows_the_moving_box():
 
 def test_camera_auto_replaces_the_files_camera(tmp_path):
     path = plane_scene(tmp_path / "plane.glb")
-    assert Scene.load(path).camera_name == "cam"
-    scene = Scene.load(path, camera="auto")
+    assert read_scene(path).camera_name == "cam"
+    scene = read_scene(path, camera="auto")
     assert scene.camera_name == "auto" and scene.framing is not None
     assert not any("camera" in n for n in scene.notices)  # asked for: no notice
     with pytest.raises(SceneError, match="cameras: auto, cam"):
-        Scene.load(path, camera="nope")
+        read_scene(path, camera="nope")
 
 
 def test_a_file_without_camera_or_light_gets_the_defaults_with_one_notice_each(tmp_path, caplog):
     path = box_in_box(tmp_path / "bib.glb")
     with caplog.at_level(logging.INFO, logger="pipeline.scene.notices"):
-        scene = Scene.load(path)
-        Scene.load(path)  # once per file and process
+        scene = read_scene(path)
+        read_scene(path)  # once per file and process
     notices = [r.getMessage() for r in caplog.records if r.name == "pipeline.scene.notices"]
     assert len(notices) == 2 and all("\n" not in n and str(path) in n for n in notices)
     assert "no perspective camera" in notices[0] and "azimuth 30 deg, elevation 20 deg, yfov 40 deg" in notices[0]
@@ -79,7 +79,7 @@ def test_a_file_without_camera_or_light_gets_the_defaults_with_one_notice_each(t
 def test_light_none_keeps_the_error(tmp_path):
     path = box_in_box(tmp_path / "bib.glb")
     with pytest.raises(SceneError, match="has no light") as err:
-        Scene.load(path, light="none")
+        read_scene(path, light="none")
     assert str(path) in str(err.value) and "\n" not in str(err.value)
     result = CliRunner().invoke(main, ["info", str(path), "--light", "none"])
     lines = [line for line in result.output.splitlines() if line.strip()]
@@ -87,10 +87,10 @@ def test_light_none_keeps_the_error(tmp_path):
 
 
 def test_a_file_with_light_and_camera_gets_no_defaults(tmp_path, basic_scene_file):
-    scene = Scene.load(basic_scene_file, light="none")
+    scene = read_scene(basic_scene_file, light="none")
     assert scene.sky is None and scene.default_lights == ()
     assert [li.kind for li in scene.pose_frame(1).lights] == ["point"]
-    lit = Scene.load(plane_scene(tmp_path / "plane.glb"))
+    lit = read_scene(plane_scene(tmp_path / "plane.glb"))
     assert lit.notices == [] and lit.framing is None and lit.pose_frame(1).sky is None
 
 

@@ -8,7 +8,7 @@ from click.testing import CliRunner
 
 from pipeline.cli import main
 from pipeline.errors import SceneError
-from pipeline.scene import ElementMesh, Scene
+from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin.gltf_builder import GltfBuilder
 from tests.conftest import basic_builder
 from tests.scene.deforming_assets import (
@@ -64,7 +64,7 @@ _CUBIC = np.degrees(2 * np.arctan2(_H * np.sin(np.pi / 4), (1 - _H) + _H * np.co
 ])
 def test_two_bone_cylinder_matches_the_hand_computed_pose(tmp_path, interpolation, t, degrees):
     path = rigged_simple(tmp_path / "rig.glb", interpolation=interpolation, times=(0.0, 1.0), light=False)
-    b = Scene.load(path)
+    b = read_scene(path)
     inst = _instance(b, "skinned")
     _, stored, exact, normals = _posed(b, inst, t)
     points, hand_normals = _hand_skinned(degrees)
@@ -76,8 +76,8 @@ def test_two_bone_cylinder_matches_the_hand_computed_pose(tmp_path, interpolatio
 
 def test_influences_in_the_second_joint_set_count(tmp_path):
     """The upper bone's weight in JOINTS_1/WEIGHTS_1 (slot 5) or JOINTS_0 (slot 1): the same pose."""
-    second = Scene.load(rigged_simple(tmp_path / "a.glb", set_for_upper=1, times=(0.0, 1.0), light=False))
-    first = Scene.load(rigged_simple(tmp_path / "b.glb", set_for_upper=0, times=(0.0, 1.0), light=False))
+    second = read_scene(rigged_simple(tmp_path / "a.glb", set_for_upper=1, times=(0.0, 1.0), light=False))
+    first = read_scene(rigged_simple(tmp_path / "b.glb", set_for_upper=0, times=(0.0, 1.0), light=False))
     assert _instance(second, "skinned").deformation.joints.shape[1] == 8
     assert _instance(first, "skinned").deformation.joints.shape[1] == 4
     np.testing.assert_allclose(second.pose(0.5).vertices, first.pose(0.5).vertices, atol=1e-6)
@@ -105,7 +105,7 @@ def _one_target_morph(tmp_path, interpolation="LINEAR", animate=True, node_weigh
             keys = [[[0.0], [0.0], [0.0]], [[0.0], [1.0], [0.0]]]
         b.add_animation("w", node, "weights", [0.0, 1.0], keys, interpolation)
     b.add_node("lamp", light=b.add_point_light("lamp", (1, 1, 1), 10.0), translation=(1, 2, 1))
-    return Scene.load(b.write(tmp_path / "morph.glb")), pos, nrm
+    return read_scene(b.write(tmp_path / "morph.glb")), pos, nrm
 
 
 @pytest.mark.parametrize("interpolation, t, weight", [
@@ -147,15 +147,15 @@ def test_morph_only_animation_drives_the_timeline_and_state_keys(tmp_path):
 
 
 def test_skin_pose_changes_the_state_key_and_a_still_skin_does_not(tmp_path):
-    scene = Scene.load(rigged_simple(tmp_path / "rig.glb", light=False))
+    scene = read_scene(rigged_simple(tmp_path / "rig.glb", light=False))
     keys = scene.frame_state_keys
     assert len(set(keys)) == 3  # only a joint moves: no node with a mesh is animated
-    still = Scene.load(rigged_simple(tmp_path / "still.glb", degrees=(30.0, 30.0), light=False))
+    still = read_scene(rigged_simple(tmp_path / "still.glb", degrees=(30.0, 30.0), light=False))
     assert len(set(still.frame_state_keys)) == 1 and not still.has_moving_geometry
 
 
 def test_element_mesh_deforms_with_the_surface_and_keeps_its_ids(tmp_path):
-    scene = Scene.load(rigged_simple(tmp_path / "rig.glb"))
+    scene = read_scene(rigged_simple(tmp_path / "rig.glb"))
     mesh = ElementMesh.build(scene, 0.1)
     first, last = scene.pose_frame(1), scene.pose_frame(3)
     p1, p3 = mesh.vertex_positions(first), mesh.vertex_positions(last)
@@ -180,11 +180,11 @@ def test_element_mesh_deforms_with_the_surface_and_keeps_its_ids(tmp_path):
 def test_default_element_size_from_posed_world_bounds(tmp_path):
     """AnimatedMorphCube's cube is 0.02 wide in the file and 2 wide in the world (node scale 100):
     the element size follows the world, and the posed morph grows the bounds."""
-    big = Scene.load(animated_morph_cube(tmp_path / "cube.glb", light=False))
+    big = read_scene(animated_morph_cube(tmp_path / "cube.glb", light=False))
     # cube from (-1, 0, -1) to (1, 2, 1), both targets at weight 1: +1 up, +1 in x -> (-1, 0, -1)..(2, 3, 1)
     assert big.element_size == pytest.approx(np.linalg.norm([3, 3, 2]) / 50, rel=1e-6)
     assert ElementMesh.build(big).n_elements < 50_000
-    small = Scene.load(animated_morph_cube(tmp_path / "small.glb", scale=0.01, light=False))
+    small = read_scene(animated_morph_cube(tmp_path / "small.glb", scale=0.01, light=False))
     assert small.element_size == pytest.approx(np.linalg.norm([3, 3, 2]) * 1e-4 / 50, rel=1e-5)
 
 
@@ -192,7 +192,7 @@ def test_animated_morph_cube_weights_on_every_interpolation(tmp_path):
     pos, _, _ = cube_mesh()
     up, side = morph_targets(pos)
     for interpolation in ("STEP", "LINEAR", "CUBICSPLINE"):
-        scene = Scene.load(animated_morph_cube(tmp_path / f"{interpolation}.glb", interpolation=interpolation,
+        scene = read_scene(animated_morph_cube(tmp_path / f"{interpolation}.glb", interpolation=interpolation,
                                                times=(0.0, 1.0), weights=((0, 0), (1, 0.5)), light=False))
         w = {"STEP": (0, 0), "LINEAR": (0.5, 0.25), "CUBICSPLINE": (0.5, 0.25)}[interpolation]  # at s = 0.5
         expected = (pos + w[0] * up + w[1] * side) * 100 + [0, 1, 0]
@@ -223,7 +223,7 @@ def _with_orthographic_camera(tmp_path):
 def test_choosing_an_orthographic_camera_says_so(tmp_path, name):
     path = _with_orthographic_camera(tmp_path)
     with pytest.raises(SceneError) as err:
-        Scene.load(path, camera=name)
+        read_scene(path, camera=name)
     assert str(err.value) == (f"{path}: cameras[0]: camera {name!r} is orthographic: only perspective cameras "
                               "are supported (--camera auto frames the scene with a perspective camera)")
 
@@ -237,7 +237,7 @@ def test_choosing_an_orthographic_camera_says_so(tmp_path, name):
 def test_bad_skins_are_one_line_errors(tmp_path, change, field, reason):
     path = rigged_simple(tmp_path / "bad.glb", light=False, edit=change)
     with pytest.raises(SceneError) as err:
-        Scene.load(path)
+        read_scene(path)
     assert "\n" not in str(err.value)
     assert str(path) in str(err.value) and field in str(err.value) and reason in str(err.value)
 
@@ -251,7 +251,7 @@ def test_weight_channel_of_the_wrong_width_is_refused(tmp_path):
     b.add_animation("w", node, "weights", [0.0, 1.0, 2.0], [[0.0], [1.0], [0.5]])  # 1 weight a key, 2 targets
     path = b.write(tmp_path / "w.glb")
     with pytest.raises(SceneError, match=r"animations\[0\].samplers\[0\].output: output must be scalars, 2 per key"):
-        Scene.load(path)
+        read_scene(path)
 
 
 def test_frames_beyond_a_morph_timeline_name_the_file(tmp_path):
@@ -272,7 +272,7 @@ def test_unweighted_vertices_follow_their_node(tmp_path):
     joint = b.add_node("joint", translation=(0, 0, 2))
     b.add_node("tri", mesh, translation=(5, 0, 0), skin=b.add_skin([joint]))
     b.add_node("lamp", light=b.add_point_light("lamp", (1, 1, 1), 10.0), translation=(0, 3, 0))
-    scene = Scene.load(b.write(tmp_path / "tri.glb"))
+    scene = read_scene(b.write(tmp_path / "tri.glb"))
     np.testing.assert_allclose(scene.pose(0.0).vertices, [[0, 0, 2], [1, 0, 2], [5, 1, 0]], atol=1e-6)
     assert scene.warnings == ["meshes[0].primitives[0]: 1 vertex(es) have all skin weights zero: they follow "
                               "the node 'tri' unskinned"]
@@ -300,8 +300,8 @@ def _sparse_target_scene(tmp_path, indices=(3,)):
 
 def test_sparse_morph_target(tmp_path):
     path, pos = _sparse_target_scene(tmp_path)
-    np.testing.assert_allclose(Scene.load(path).pose(0.0).vertices, pos + np.array([[0, 0, 0]] * 3 + [[0, 0.5, 0]]),
+    np.testing.assert_allclose(read_scene(path).pose(0.0).vertices, pos + np.array([[0, 0, 0]] * 3 + [[0, 0.5, 0]]),
                                atol=1e-6)
     bad, _ = _sparse_target_scene(tmp_path, indices=(3, 2))
     with pytest.raises(SceneError, match=r"accessors\[\d+\].sparse.indices: indices must increase strictly"):
-        Scene.load(bad)
+        read_scene(bad)

@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.images import frame_paths, read_exr
-from pipeline.render import RenderSettings, render
+from pipeline.frames.images import frame_paths, read_exr
+from pipeline.run.render import RenderSettings, render
 from tests.scene.deforming_assets import animated_morph_cube, rigged_simple
 
 SETTINGS = RenderSettings(width=64, height=48, spp=1)

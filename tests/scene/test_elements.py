@@ -4,7 +4,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.scene import ElementMesh, Scene
+from pipeline.scene import ElementMesh, read_scene
 from tests.conftest import basic_builder
 
 BOX = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0, 0, 1], [1, 0, 1], [1, 1, 1], [0, 1, 1]], float)
@@ -19,7 +19,7 @@ def scene(tmp_path):
                       scale=(0.5, 0.7, 0.4))
     b.add_animation("spin", node, "rotation", [0, 1], [[0, 0, 0, 1], [0, 0.6, 0, 0.8]])
     b.write(tmp_path / "box.glb")
-    return Scene.load(tmp_path / "box.glb")
+    return read_scene(tmp_path / "box.glb")
 
 
 @pytest.mark.parametrize("size", [0.05, 0.13, 0.4, 5.0])
@@ -99,7 +99,7 @@ def test_element_source_maps_to_primitive_triangles(tmp_path):
     pts = np.array([[0, 1, 0], [1, 1, 0], [2, 1, 0], [0, 1, 1], [1, 1, 1]], float)
     b.add_node("mixed", b.add_mesh("mixed", pts, np.array([0, 1, 2, 0, 3, 4]), material=0))
     b.write(tmp_path / "m.glb")
-    scene = Scene.load(tmp_path / "m.glb")
+    scene = read_scene(tmp_path / "m.glb")
     mesh = ElementMesh.build(scene, 0.5)
     src = mesh.element_source
     assert set(map(tuple, src[src[:, 0] == 1])) == {(1, 1)}  # triangle 0 was degenerate

@@ -11,7 +11,7 @@ import numpy as np
 from click.testing import CliRunner
 
 from pipeline.cli import main
-from pipeline.images import exr_metadata, frame_is_valid, frame_paths, read_png
+from pipeline.frames.images import exr_metadata, frame_is_valid, frame_paths, read_png
 from pipeline.scene.gltf import read_gltf
 
 KHRONOS = Path(__file__).resolve().parent / "khronos"

@@ -10,11 +10,11 @@ from click.testing import CliRunner
 
 from pipeline.cli import main
 from pipeline.errors import SceneError
-from pipeline.scene import Scene
+from pipeline.photons.raycast import caster_for
+from pipeline.scene import read_scene
 from pipeline.scene.builtin.gltf_builder import GltfBuilder, encode_png
 from pipeline.scene.shading import SurfaceShading
 from pipeline.scene.textures import CLAMP_TO_EDGE, MIRRORED_REPEAT, REPEAT, Texture, sample, srgb_to_linear
-from workers.raycast import caster_for
 
 QUAD = np.array([[0, 0, 0], [2, 0, 0], [2, 0, 2], [0, 0, 2]], float)
 FACES = np.array([0, 2, 1, 0, 3, 2])
@@ -61,7 +61,7 @@ def test_texture_transform_is_offset_rotation_scale(tmp_path):
     b.add_node("floor", b.add_mesh("floor", QUAD, FACES, material=mat, texcoords={0: UV}))
     b.add_node("lamp", light=b.add_point_light("lamp", (1, 1, 1), 1.0), translation=(1, 2, 1))
     b.gltf.extensionsRequired = ["KHR_texture_transform"]  # files may require it: we implement it
-    t = Scene.load(b.write(tmp_path / "t.glb")).materials[0].base_color_texture
+    t = read_scene(b.write(tmp_path / "t.glb")).materials[0].base_color_texture
     uv = np.array([1.0, 1.0])
     # scale (2, 3), rotate by pi/2 with the extension's matrix [[c, s], [-s, c]], then offset
     expected = np.array([[0, 1], [-1, 0]]) @ (uv * [2, 3]) + [0.25, -0.5]
@@ -94,7 +94,7 @@ def test_images_embedded_or_external(tmp_path, where):
     mat = b.add_material("m", (0.5, 1.0, 1.0), base_color_texture=tex)
     b.add_node("floor", b.add_mesh("floor", QUAD, FACES, material=mat, texcoords={0: UV}))
     b.add_node("lamp", light=b.add_point_light("lamp", (1, 1, 1), 1.0), translation=(1, 2, 1))
-    state = Scene.load(b.write(path)).pose_frame(1)
+    state = read_scene(b.write(path)).pose_frame(1)
     surface = SurfaceShading(state, caster_for(state).normals)
     # triangle 1 = corners 0, 3, 2: Embree u weights corner 3 (0, 0, 2), v corner 2 (2, 0, 2), so
     # (u, v) = (0.5, 0.25) is x = 0.5 in the red half (texture u 0.25), (0.1, 0.7) x = 1.4 in the blue
@@ -115,7 +115,7 @@ def test_texcoord_1_and_vertex_colours(tmp_path):
     b.add_node("floor", b.add_mesh("floor", QUAD, FACES, material=mat, colors=colors,
                                    texcoords={0: np.zeros((4, 2)), 1: np.full((4, 2), 0.75)}))
     b.add_node("lamp", light=b.add_point_light("lamp", (1, 1, 1), 1.0), translation=(1, 2, 1))
-    state = Scene.load(b.write(tmp_path / "c.glb")).pose_frame(1)
+    state = read_scene(b.write(tmp_path / "c.glb")).pose_frame(1)
     surface = SurfaceShading(state, caster_for(state).normals)
     # triangle 0 = corners 0, 2, 1: u weights corner 2 (blue), v corner 1 (red)
     rgb = surface.base_color(np.array([0]), np.array([0.25], np.float32), np.array([0.5], np.float32))
@@ -128,7 +128,7 @@ def test_bad_attributes_and_textures_are_refused(tmp_path):
     b.add_node("lamp", light=b.add_point_light("lamp", (1, 1, 1), 1.0), translation=(1, 2, 1))
     b.gltf.meshes[0].primitives[0].attributes.NORMAL = b.add_accessor(np.ones((3, 3), np.float32))
     with pytest.raises(SceneError, match=r"attributes\.NORMAL: has 3 entries for 4 positions"):
-        Scene.load(b.write(tmp_path / "n.glb"))
+        read_scene(b.write(tmp_path / "n.glb"))
 
     b = GltfBuilder()
     tex = b.add_texture(np.zeros((2, 2, 3), np.uint8), uri="missing.png")
@@ -136,7 +136,7 @@ def test_bad_attributes_and_textures_are_refused(tmp_path):
     b.add_node("floor", b.add_mesh("floor", QUAD, FACES, material=mat, texcoords={0: UV}))
     b.add_node("lamp", light=b.add_point_light("lamp", (1, 1, 1), 1.0), translation=(1, 2, 1))
     with pytest.raises(SceneError, match=r"images\[0\]\.uri: missing image file 'missing.png'"):
-        Scene.load(b.write(tmp_path / "m.gltf"))
+        read_scene(b.write(tmp_path / "m.gltf"))
 
     b = GltfBuilder()
     tex = b.add_texture(np.zeros((2, 2, 3), np.uint8), wrap_s=1234)
@@ -144,7 +144,7 @@ def test_bad_attributes_and_textures_are_refused(tmp_path):
     b.add_node("floor", b.add_mesh("floor", QUAD, FACES, material=mat, texcoords={0: UV}))
     b.add_node("lamp", light=b.add_point_light("lamp", (1, 1, 1), 1.0), translation=(1, 2, 1))
     with pytest.raises(SceneError, match=r"samplers\[0\]\.wrapS: 1234 is not REPEAT"):
-        Scene.load(b.write(tmp_path / "w.glb"))
+        read_scene(b.write(tmp_path / "w.glb"))
 
     path = tmp_path / "junk.gltf"
     b = GltfBuilder()
@@ -154,7 +154,7 @@ def test_bad_attributes_and_textures_are_refused(tmp_path):
     b.add_node("lamp", light=b.add_point_light("lamp", (1, 1, 1), 1.0), translation=(1, 2, 1))
     (tmp_path / "junk.png").write_bytes(b"not an image at all")
     with pytest.raises(SceneError, match=r"images\[0\]: cannot decode the image"):
-        Scene.load(b.write(path))
+        read_scene(b.write(path))
     result = CliRunner().invoke(main, ["info", str(path)])
     assert result.exit_code != 0 and "images[0]: cannot decode the image" in result.output
 

@@ -2,7 +2,7 @@
 
 A point light between a mirror floor and a black diffuse ceiling tile: photons going up hit the
 tile first (direct records), photons reflected by the mirror hit it second (indirect records,
-summed by the OpenCL gather of pipeline/temporal.py); the tile's albedo 0 ends every path there.
+summed by the OpenCL gather of pipeline/collection/maps.py); the tile's albedo 0 ends every path there.
 One frame of 1e8 photons gives about 2.1e6 records. Bound: every map value is a sum of n records
 in float64, added in a fixed order, whose relative error is at most (n - 1) u = 1.1e-8 for
 n = 1e8 (u = 2^-53; Higham, *Accuracy and Stability of Numerical Algorithms*, §4.2), then rounded
@@ -17,8 +17,8 @@ import numpy as np
 import pytest
 
 from pipeline.config import RenderConfig
-from pipeline.render import RenderSettings, render
-from pipeline.scene import ElementMesh, Scene
+from pipeline.run.render import RenderSettings, render
+from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin.gltf_builder import GltfBuilder
 from pipeline.scene.builtin.shapes import look_at
 from pipeline.store import PhotonStore
@@ -75,7 +75,7 @@ def test_1e8_photons_accumulate_without_drift(tmp_path):
     render(path, frames="1", out_dir=out, n_photons=N, temporal="off", config=RenderConfig(spatial_filter=False),
            settings=RenderSettings(width=16, height=12, spp=1), scheduler="synchronous", progress=False,
            keep_records=True)
-    scene = Scene.load(path)
+    scene = read_scene(path)
     elements = ElementMesh.build(scene)
     areas = elements.vertex_areas(scene.pose_frame(1)).astype(np.longdouble)
     records = PhotonStore.open(str(out / "photons.zarr")).read_frame(0)

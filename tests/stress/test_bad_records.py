@@ -3,7 +3,7 @@
 The store refuses such records when they are written, so they can only come from damage or a
 foreign writer: here the stored chunks of one batch are rewritten through zarr with NaN, +Inf,
 -Inf, a negative energy and an element id the mesh does not have, and the batch's stored sums are
-removed so that the render reads the records (pipeline/batch_sums.py). Reading drops them
+removed so that the render reads the records (pipeline/collection/batch_sums.py). Reading drops them
 (pipeline/store/records.valid_records), counts them (FrameRecords.dropped) and logs a warning; a
 render from that store equals, bit for bit, a render from a store whose damaged records carry
 zero energy instead (they then add exactly nothing), in every layer of every frame.
@@ -17,9 +17,9 @@ import numpy as np
 import pytest
 import zarr
 
-from pipeline.images import EXR_CHANNELS, frame_paths, read_exr
-from pipeline.render import RenderSettings, render
-from pipeline.shoot import shoot
+from pipeline.frames.images import EXR_CHANNELS, frame_paths, read_exr
+from pipeline.run.render import RenderSettings, render
+from pipeline.run.shoot import shoot
 from pipeline.store import PhotonStore
 from tests.stress.scenes import lit_room
 
@@ -39,7 +39,7 @@ def _damage(url: str, frame_index: int, values) -> None:
     else:
         rows[2:5, DAMAGED[-1]] = 0
     arr[...] = rows
-    # The batch's stored sums were made from the undamaged records (pipeline/batch_sums.py): remove
+    # The batch's stored sums were made from the undamaged records (pipeline/collection/batch_sums.py): remove
     # them, as damage might, so the render sums the damaged records it keeps.
     (Path(url) / "summaries" / f"c.{frame_index}.0").unlink(missing_ok=True)
 

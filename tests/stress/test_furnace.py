@@ -4,7 +4,7 @@ In a closed box whose walls all emit radiance L and reflect diffusely with albed
 everywhere is L / (1 - rho) (the Neumann series L (1 + rho + rho^2 + ...)), so the irradiance of
 every wall point is pi L from emission seen directly and pi L rho / (1 - rho) from light that
 bounced at least once: the direct and indirect maps of §4 have closed forms. Photon paths end by
-Russian roulette alone (workers/photons.py): the depth cap of 8 bounces this replaced lost
+Russian roulette alone (pipeline/photons/tracing.py): the depth cap of 8 bounces this replaced lost
 rho^8 = 17 % of the indirect light here.
 """
 from __future__ import annotations
@@ -13,9 +13,9 @@ import numpy as np
 import pytest
 
 from pipeline.config import RenderConfig
-from pipeline.images import frame_paths, read_exr
-from pipeline.render import RenderSettings, render
-from pipeline.scene import ElementMesh, Scene
+from pipeline.frames.images import frame_paths, read_exr
+from pipeline.run.render import RenderSettings, render
+from pipeline.scene import ElementMesh, read_scene
 from pipeline.store.illumination import IlluminationMaps
 from tests.stress.scenes import furnace_box
 
@@ -29,7 +29,7 @@ def furnace(tmp_path_factory):
     report = render(path, frames="1", out_dir=tmp / "out", n_photons=200_000, temporal="off",
                     settings=RenderSettings(width=40, height=30, spp=8), scheduler="synchronous",
                     progress=False)
-    scene = Scene.load(path)
+    scene = read_scene(path)
     elements = ElementMesh.build(scene)
     areas = elements.vertex_areas(scene.pose_frame(1))
     maps = IlluminationMaps.open(str(tmp / "out" / "photons.zarr"))
@@ -71,7 +71,7 @@ def test_a_depth_cap_of_eight_loses_rho_to_the_seventh(tmp_path):
     render(path, frames="1", out_dir=tmp_path / "out", n_photons=100_000, temporal="off",
            config=RenderConfig(photon_depth=8), settings=RenderSettings(width=8, height=6, spp=1),
            scheduler="synchronous", progress=False)
-    scene = Scene.load(path)
+    scene = read_scene(path)
     areas = ElementMesh.build(scene).vertex_areas(scene.pose_frame(1))
     indirect = IlluminationMaps.open(str(tmp_path / "out" / "photons.zarr")).read(0, "indirect").astype(np.float64)
     np.testing.assert_allclose(_area_mean(indirect, areas) / (np.pi * L * RHO / (1 - RHO)), 1 - RHO ** 7, rtol=0.01)

@@ -16,9 +16,9 @@ import logging
 import numpy as np
 import pytest
 
-from pipeline.images import EXR_CHANNELS, frame_paths, read_exr
-from pipeline.render import RenderSettings, render
-from pipeline.scene import ElementMesh, Scene
+from pipeline.frames.images import EXR_CHANNELS, frame_paths, read_exr
+from pipeline.run.render import RenderSettings, render
+from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.elements import MAX_SPLIT
 from pipeline.store.illumination import IlluminationMaps
 from tests.stress.scenes import QUAD_FACES, inward_quads, lit_room
@@ -50,7 +50,7 @@ def _run(tmp, name, extra):
     out = tmp / name
     render(path, frames="1-2", out_dir=out, n_photons=N, temporal="off", scheduler="synchronous",
            settings=RenderSettings(width=40, height=30, spp=2), progress=False)
-    scene = Scene.load(path)
+    scene = read_scene(path)
     elements = ElementMesh.build(scene)
     state = scene.pose_frame(1)
     maps = IlluminationMaps.open(str(out / "photons.zarr"))
@@ -109,7 +109,7 @@ def test_slivers_leave_the_room_light_unchanged(runs):
 def test_huge_triangle_is_split_coarser(tmp_path, caplog):
     path = lit_room(tmp_path / "ground.glb", extra=_ground)
     with caplog.at_level(logging.WARNING, logger="pipeline.scene.elements"):
-        elements = ElementMesh.build(Scene.load(path))
+        elements = ElementMesh.build(read_scene(path))
     assert np.diff(elements.triangle_offset).max() == MAX_SPLIT ** 2
     assert f"split {MAX_SPLIT} x {MAX_SPLIT}" in caplog.text
 

@@ -3,7 +3,7 @@
 The bright lights sit in one closed room, a lamp 1e6 times dimmer in a closed room of its own. By
 power alone the dim room would get 0.2 of 200,000 photons a frame: no indirect light in most
 frames, and now and then one photon of the bright lights' weight, 1e6 times its own light. Every
-light gets a floor share of the photons (workers/emission.py LIGHT_FLOOR), so the dim room's
+light gets a floor share of the photons (pipeline/photons/emission.py LIGHT_FLOOR), so the dim room's
 indirect light equals that of the dim lamp alone, within noise, and the total flux is unbiased.
 """
 from __future__ import annotations
@@ -11,13 +11,13 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.images import frame_paths, read_exr
-from pipeline.render import RenderSettings, render
-from pipeline.scene import ElementMesh, Scene
+from pipeline.frames.images import frame_paths, read_exr
+from pipeline.photons.tracing import trace_batch
+from pipeline.run.render import RenderSettings, render
+from pipeline.scene import ElementMesh, read_scene
 from pipeline.store import DIRECT_BIT
 from pipeline.store.illumination import IlluminationMaps
 from tests.stress.scenes import lit_room
-from workers.photons import trace_batch
 
 RATIO = 1e6
 N = 200_000
@@ -29,7 +29,7 @@ def _far_room_indirect(tmp, name, **kw):
     out = tmp / name
     render(path, frames="1", out_dir=out, n_photons=N, temporal="off", scheduler="synchronous",
            settings=RenderSettings(width=32, height=24, spp=1), progress=False)
-    scene = Scene.load(path)
+    scene = read_scene(path)
     elements = ElementMesh.build(scene)
     state = scene.pose_frame(1)
     far = elements.vertex_positions(state)[:, 0] > 3.5
@@ -54,7 +54,7 @@ def test_dim_room_gets_its_own_indirect_light(rooms):
 
 
 def test_total_flux_is_unbiased_with_both_lights(tmp_path):
-    scene = Scene.load(lit_room(tmp_path / "both.glb", dim_ratio=RATIO))
+    scene = read_scene(lit_room(tmp_path / "both.glb", dim_ratio=RATIO))
     elements = ElementMesh.build(scene)
     state = scene.pose_frame(1)
     batch = trace_batch(state, elements, n_photons=N, photon_start=0, seed=3, frame=1, max_depth=256)
@@ -73,7 +73,7 @@ def _areas(state):
 
 
 def test_selection_probability_floor():
-    from workers.emission import LIGHT_FLOOR, selection_probability
+    from pipeline.photons.emission import LIGHT_FLOOR, selection_probability
 
     # a lamp, a 1e6x dimmer lamp, and an emissive material of three triangles (one light)
     weight = np.array([1e6, 1.0, 2.0, 1.0, 1.0])

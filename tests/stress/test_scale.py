@@ -5,15 +5,15 @@ photon store, the temporal gather, the filter and the compositor to the float32 
 Every light (point, spot and an emissive panel) of a closed room is scaled by s; the photons take
 the same paths (emitter choice is by relative power), so frame(s) / s equals frame(1) to float32
 rounding: within 1e-6 relative in every pixel of every layer, and zero exactly where frame(1) is
-zero. Half-float EXRs gave +Inf at 1e10 and zeros at 1e-10 (pipeline/images.py writes float32).
+zero. Half-float EXRs gave +Inf at 1e10 and zeros at 1e-10 (pipeline/frames/images.py writes float32).
 """
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from pipeline.images import EXR_CHANNELS, frame_paths, read_exr
-from pipeline.render import RenderSettings, render
+from pipeline.frames.images import EXR_CHANNELS, frame_paths, read_exr
+from pipeline.run.render import RenderSettings, render
 from tests.stress.scenes import lit_room
 
 FRAMES = 3

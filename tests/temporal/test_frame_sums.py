@@ -14,11 +14,11 @@ import numpy as np
 import pytest
 
 from kernels.gather import corners_to_vertices, element_sums_cl
-from pipeline.batch_sums import HEADER, SLOTS, FrameSums, batch_summary, decode, encode, summariser
+from pipeline.collection.batch_sums import HEADER, SLOTS, FrameSums, batch_summary, decode, encode, summariser
+from pipeline.collection.estimators import records_vertex_flux
 from pipeline.errors import LoomError
 from pipeline.store import ELEMENT_MASK, FrameRecords, PhotonStore
 from tests.store.photonstore_helpers import IDENTITY, make_batch, write_frame
-from workers.reconstruct import records_vertex_flux
 
 N_ELEMENTS, N_VERTICES = 40, 30
 NO_RECORDS = dict(IDENTITY, keep_records=False)
@@ -111,7 +111,8 @@ def test_frame_sums_add_batches_in_order_with_the_records_bits(tmp_path, keep_re
 
 
 def test_the_direct_flux_is_the_per_record_sum(tmp_path):
-    """The direct element sums scattered to the vertices equal workers/reconstruct's per-record sum to rounding."""
+    """The direct element sums scattered to the vertices equal pipeline/collection/estimators' per-record sum
+    to rounding."""
     records = _store(tmp_path, [900]).read_frame(0, batches=[0])
     ev = _elements().element_vertices
     got = corners_to_vertices(element_sums_cl([records], kind="direct")[0, :, 0, :, :3], ev, N_VERTICES)

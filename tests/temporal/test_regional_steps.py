@@ -1,4 +1,4 @@
-"""The regional step test (pipeline/regional_steps.py) on count tables with known answers: a
+"""The regional step test (pipeline/collection/regional_steps.py) on count tables with known answers: a
 step of a known size at a known boundary in one region is found there and nowhere else, no
 window crosses it, a drift never is, and the windows of a chunk do not depend on the rows around
 it."""
@@ -7,9 +7,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from pipeline.collection.maps import collection_windows
+from pipeline.collection.regional_steps import clamp_windows, element_regions, step_boundaries
 from pipeline.config import RenderConfig
-from pipeline.regional_steps import clamp_windows, element_regions, step_boundaries
-from pipeline.temporal import collection_windows
+from pipeline.scene import read_scene
 
 RATE = 30.0  # hits an element a frame: Condition (1) alone cannot see a 40 % change at this count
 
@@ -126,8 +127,8 @@ def room_jump(tmp_path_factory):
     """ROOM frames 63-79 at 20,000 photons a frame, with and without the error benchmark's light
     jump at frame 71 (pipeline/benchmarks/error.py): real photons in a real store."""
     from pipeline.benchmarks.error import write_scene
-    from pipeline.scene import ElementMesh, Scene
-    from pipeline.shoot import shoot
+    from pipeline.run.shoot import shoot
+    from pipeline.scene import ElementMesh
     from pipeline.store import PhotonStore
 
     root = tmp_path_factory.mktemp("room-jump")
@@ -136,13 +137,13 @@ def room_jump(tmp_path_factory):
         path = write_scene("room", root / f"{name}.glb", event)
         shoot(str(path), frames="63-79", n_photons=20_000, store_url=str(root / f"{name}.zarr"),
               config=RenderConfig(), scheduler="synchronous", progress=False)
-        scene = Scene.load(path)
+        scene = read_scene(path)
         out[name] = (ElementMesh.build(scene), PhotonStore.open(str(root / f"{name}.zarr")))
     return out
 
 
 def _windows_around_the_jump(mesh, store, levels):
-    from pipeline.temporal import step_regions
+    from pipeline.collection.maps import step_regions
 
     config = RenderConfig(step_levels=levels)
     frames = np.arange(64, 79)

@@ -1,5 +1,5 @@
 """``loom render --temporal adaptive|fixed|off --fmax N``: the indirect maps come from the temporal
-windows (pipeline/temporal.py), and bad options fail with one line."""
+windows (pipeline/collection/maps.py), and bad options fail with one line."""
 from __future__ import annotations
 
 import numpy as np

@@ -19,13 +19,13 @@ import numpy as np
 import pytest
 
 from kernels import colour
+from pipeline.collection.estimators import vertex_irradiance
+from pipeline.collection.maps import illumination_maps
 from pipeline.config import RenderConfig
-from pipeline.scene import ElementMesh, Scene
+from pipeline.run.shoot import shoot
+from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin import write_builtin
-from pipeline.shoot import shoot
 from pipeline.store import PhotonStore
-from pipeline.temporal import illumination_maps
-from workers.reconstruct import vertex_irradiance
 
 K2 = 68  # frame number of the central frame of the middle segment
 FMAX = 30
@@ -37,7 +37,7 @@ STATIC_WALLS = ("wall_left", "wall_right", "wall_back", "wall_front", "ceiling")
 class Room:
     def __init__(self, root, reference_photons: int):
         path = write_builtin("room", root / "room.glb")
-        self.scene = Scene.load(path)
+        self.scene = read_scene(path)
         self.mesh = ElementMesh.build(self.scene)
         shoot(str(path), frames=f"{K2 - 15}-{K2 + 15}", n_photons=N_FRAME, store_url=str(root / "p.zarr"),
               config=RenderConfig(), scheduler="synchronous", progress=False, keep_records=True)
@@ -95,7 +95,7 @@ def test_a_windows_long_on_static_walls_short_on_moving_lit_objects(room):
     assert min(w["full_back"] for w in walls) >= 0.7 and min(w["full_fwd"] for w in walls) >= 0.7
     assert min(w["mean_len"] for w in walls) >= 27.0
     # The torus leaves the corner spot's cone in frames 46-90: fewer of its windows reach back than
-    # any static wall's. They are counted on the indirect hits (pipeline/temporal.window_counts), so
+    # any static wall's. They are counted on the indirect hits (pipeline/collection/maps.window_counts), so
     # they stop where its bounced light changes, not wherever the spot's edge sweeps its direct light
     # (0.61 reach back against the walls' 0.73 or more); test_b checks that they are valid
     assert torus["full_back"] < min(w["full_back"] for w in walls) - 0.1
@@ -164,7 +164,7 @@ def test_b_against_the_papers_2M_photon_reference(tmp_path):
 def test_windows_from_the_reached_count_rows_are_the_whole_tables(room):
     """A chunk's windows from only the count rows within F_max/2 + smoothing of its frames are the
     windows computed from the whole table, bit for bit; so are the maps the task writes from them."""
-    from pipeline.temporal import collection_windows, step_regions, window_reach
+    from pipeline.collection.maps import collection_windows, step_regions, window_reach
 
     cfg = RenderConfig()
     regions = step_regions(room.mesh, cfg)  # the regional step test reads the same rows
@@ -203,8 +203,8 @@ def test_shared_store_caches_decoded_frames_read_only(room):
 
 
 def test_visible_adaptation_with_the_frames_geometry_is_the_same(room):
-    from workers.camera_paths import visible_adaptation
-    from workers.reconstruct import frame_geometry
+    from pipeline.collection.estimators import frame_geometry
+    from pipeline.frames.camera_paths import visible_adaptation
 
     irr = next(illumination_maps(room.store, room.mesh, room.scene, [room.index])).irradiance
     geometry = frame_geometry(room.scene, room.mesh, K2)

@@ -1,13 +1,13 @@
-"""pipeline/temporal.window_counts: Condition (1) counts the indirect hits (the photons of the map the
+"""pipeline/collection/maps.window_counts: Condition (1) counts the indirect hits (the photons of the map the
 windows collect), so a frame where only the direct light changes does not cut the windows of the
 indirect map; with every hit counted, as §4's tables, it would."""
 from __future__ import annotations
 
 import numpy as np
 
+from pipeline.collection.maps import collection_windows, window_counts
 from pipeline.config import RenderConfig
 from pipeline.store import PhotonStore, pack_key
-from pipeline.temporal import collection_windows, window_counts
 from tests.store.photonstore_helpers import IDENTITY
 
 FRAMES, EMITTED, CHANGE = 9, 1000, 4

@@ -1,5 +1,5 @@
 """Errors at the boundary: kernels/temporal.py refuses a bad mode or F_max with ValueError (no CLI
-wording); pipeline/temporal.py turns the user's --temporal / --fmax into a LoomError naming the
+wording); pipeline/collection/maps.py turns the user's --temporal / --fmax into a LoomError naming the
 option before the kernel runs."""
 from __future__ import annotations
 
@@ -7,9 +7,9 @@ import numpy as np
 import pytest
 
 from kernels.temporal import windows_cl
+from pipeline.collection.maps import collection_windows
 from pipeline.config import RenderConfig
 from pipeline.errors import LoomError
-from pipeline.temporal import collection_windows
 
 COUNTS = np.ones((5, 3), np.uint32)
 EMITTED = np.full(5, 100.0)

@@ -8,10 +8,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.scene import ElementMesh, Scene
+from pipeline.photons.tracing import trace_batch
+from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin.gltf_builder import GltfBuilder
 from pipeline.store import DIRECT_BIT, ELEMENT_MASK, PARITY_BIT
-from workers.photons import trace_batch
 
 K = 8  # independent batches per estimate
 
@@ -23,7 +23,7 @@ def _plane(b, material, half=10.0, y=0.0):
 
 def _load(b, tmp_path, name, element_size):
     b.set_scene_extras({"photonloom": {"element_size": element_size}})
-    scene = Scene.load(b.write(tmp_path / name))
+    scene = read_scene(b.write(tmp_path / name))
     return scene, ElementMesh.build(scene), scene.pose_frame(1)
 
 
@@ -184,7 +184,7 @@ def glossy_room(tmp_path_factory):
     b.add_node("spot", light=spot, translation=(0.3, 1.5, 0.3))
     path = tmp_path_factory.mktemp("glossy") / "glossy.glb"
     b.set_scene_extras({"photonloom": {"element_size": 0.3}})
-    scene = Scene.load(b.write(path))
+    scene = read_scene(b.write(path))
     return scene, ElementMesh.build(scene), scene.pose_frame(1)
 
 
@@ -206,7 +206,7 @@ def test_records_do_not_depend_on_batch_boundaries(glossy_room):
     whole = trace_batch(state, elements, n_photons=6000, photon_start=0, **kw)
     first = trace_batch(state, elements, n_photons=2500, photon_start=0, **kw)
     rest = trace_batch(state, elements, n_photons=3500, photon_start=2500, **kw)
-    from workers.photons import PhotonBatch
+    from pipeline.photons.tracing import PhotonBatch
 
     halves = PhotonBatch(np.concatenate([first.key, rest.key]), np.concatenate([first.bary, rest.bary]),
                          np.concatenate([first.energy, rest.energy]), 6000, 0)

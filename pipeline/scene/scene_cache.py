@@ -10,6 +10,8 @@ from functools import lru_cache
 from pipeline.errors import SceneError
 from pipeline.scene import ElementMesh, Scene
 
+from .loader import read_scene
+
 _SCENES: dict[tuple[str, str, str | None], Scene] = {}  # the last _KEEP scenes, oldest first
 _KEEP = 2
 
@@ -20,7 +22,7 @@ def load_scene(path: str, scene_hash: str, camera: str | None = None) -> Scene:
     # (0.07-0.15 s each for ROOM, most of it pygltflib's JSON decoding) in every worker
     scene = _SCENES.get((path, scene_hash, camera))
     if scene is None:
-        scene = Scene.load(path, camera=camera)
+        scene = read_scene(path, camera=camera)
         if scene.scene_hash != scene_hash:
             raise SceneError(f"changed during the run (hash {scene.scene_hash}, expected {scene_hash})", path=path)
         keep_scene(path, camera, scene)
@@ -29,7 +31,7 @@ def load_scene(path: str, scene_hash: str, camera: str | None = None) -> Scene:
 
 def keep_scene(path: str, camera: str | None, scene: Scene) -> None:
     """Cache a scene this process loaded and checked itself under the (path, camera) the tasks ask
-    for: the client's own (pipeline/render.py), which the report at the end of a render reads
+    for: the client's own (pipeline/run/render.py), which the report at the end of a render reads
     again, without parsing the file a second time in the serial end of the run."""
     _SCENES[(path, scene.scene_hash, camera)] = scene
     while len(_SCENES) > _KEEP:

@@ -1,6 +1,6 @@
 """A make-driven farm render: ``loom plan`` writes ``OUT/Makefile``, ``make -C OUT -j N`` renders.
 
-The targets follow the dependencies of §5.2 and of the coordinator (pipeline/coordinator.py):
+The targets follow the dependencies of §5.2 and of the coordinator (pipeline/run/coordinator.py):
 
     shoot-000-C       fixed settings only (--photons N --fmax F, photons that differ between
                       frames): chunk C's frames traced at N, no dependencies, so make -j runs
@@ -32,9 +32,10 @@ import shlex
 import sys
 from pathlib import Path
 
+from pipeline.errors import LoomError
+from pipeline.segments.records import read_record, read_records, record_path, write_record
+
 from .coordinator import CHUNK_FRAMES, Job, SegmentRun, composite_calls
-from .errors import LoomError
-from .segment_records import read_record, read_records, record_path, write_record
 
 PLAN = "plan.json"
 STAMPS = ".farm"
@@ -215,9 +216,8 @@ def _calls(job: Job, i: int):
 
 
 def _reconstruct(job: Job, i: int, c: int) -> str:
+    from pipeline.store.illumination import IlluminationMaps
     from workers.reconstruct import reconstruct_task
-
-    from .store.illumination import IlluminationMaps
 
     rec, _, calls = _calls(job, i)
     if c >= len(calls):

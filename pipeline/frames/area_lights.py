@@ -1,6 +1,6 @@
 """Area lights in the compositor: emissive triangles sampled by power and the sky sampled by
 cosine-weighted directions, with shadow rays, at diffuse hits (glossy surfaces see them through
-their lobe samples only, workers/camera_paths.py).
+their lobe samples only, pipeline/frames/camera_paths.py).
 """
 from __future__ import annotations
 

@@ -41,7 +41,7 @@ class CameraHits:
     def points(self, rows: np.ndarray | None = None) -> np.ndarray:
         """Hit points from the triangle's corners and Embree's barycentrics, not origin + t dir:
         their error follows the hit triangle's own scale, which the ray offsets assume
-        (workers/raycast.py), however far the ray came."""
+        (pipeline/photons/raycast.py), however far the ray came."""
         if rows is None:
             return self._full("points", lambda _: self._points(self.tri, self.u, self.v))
         return self._points(np.take(self.tri, rows), np.take(self.u, rows), np.take(self.v, rows))

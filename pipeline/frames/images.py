@@ -107,7 +107,7 @@ def exr_metadata(path: str | Path) -> dict:
 
 def frame_is_valid(exr: str | Path, png: str | Path, width: int, height: int, frame_hash: str) -> bool:
     """Whether a frame is done: both files exist, decode, have the expected size and channels,
-    and the EXR carries ``frame_hash`` (pipeline/coordinator.frame_hash: the same settings, map
+    and the EXR carries ``frame_hash`` (pipeline/run/coordinator.frame_hash: the same settings, map
     and exposure)."""
     if not (Path(exr).is_file() and Path(png).is_file()):
         return False
@@ -136,7 +136,7 @@ def write_video(pngs: Iterable[str | Path], path: str | Path, fps: float) -> int
     """Assemble the PNGs into an H.264 MP4 atomically; returns the frame count.
 
     ffmpeg gets the PNG files' bytes through a pipe and decodes them itself (image2pipe), so this
-    process only copies bytes and the encode runs beside the report's figures (pipeline/render.py).
+    process only copies bytes and the encode runs beside the report's figures (pipeline/run/render.py).
     x264's ultrafast preset at CRF 18 (the usual "visually lossless" setting for a preview): on
     ROOM's 135 frames at 320x240, 0.33 s and 0.59 MB, against 0.58 s and 0.68 MB for veryfast at
     CRF 10, where ffmpeg's PNG decoding alone takes 0.31 s. x264 in one thread: the decoding (in

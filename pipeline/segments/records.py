@@ -18,7 +18,7 @@ import re
 from dataclasses import asdict, dataclass, field
 from pathlib import Path
 
-from .errors import LoomError
+from pipeline.errors import LoomError
 
 DIRECTORY = "segments"
 STATUSES = ("decided", "done")
@@ -55,8 +55,8 @@ class SegmentRecord:
     io_bytes: dict = field(default_factory=dict)
 
     def targets(self) -> dict[int, int]:
-        """Photons each frame of the segment traces (pipeline/segments.photon_targets)."""
-        from .segments import frame_photons
+        """Photons each frame of the segment traces (pipeline/segments/decisions.photon_targets)."""
+        from .decisions import frame_photons
 
         ends = set(self.end_frames)
         return {f: frame_photons(self.n_frame, self.end_factor if f in ends else 1.0)
@@ -123,7 +123,7 @@ def read_records(out_dir: str | Path) -> list[SegmentRecord]:
     out = []
     for path in sorted(folder.glob("segment-*.json")):
         if not re.fullmatch(r"segment-\d+\.json", path.name):
-            continue  # a farm's chunk files (pipeline/farm.py) sit beside the records
+            continue  # a farm's chunk files (pipeline/run/farm.py) sit beside the records
         rec = read_record(out_dir, record_index(path))
         if rec is not None:
             out.append(rec)

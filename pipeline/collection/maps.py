@@ -5,7 +5,7 @@ What the render pipeline calls to turn stored photons into per-frame vertex irra
 1. windows   from the store's frames x elements count table (never the records), per frame and
              element, Condition (1) (kernels/temporal.py), ``mode`` adaptive | fixed | off;
 2. gather    per chunk of output frames the element sums of every frame its windows reach
-             (stored with the photons, read once per frame and worker: pipeline/batch_sums.py),
+             (stored with the photons, read once per frame and worker: pipeline/collection/batch_sums.py),
              turned into prefix sums over frames on the device; per output frame the window sums as
              differences of prefix sums, pooled over the photons emitted in the window,
              distributed to the vertices (kernels/gather.py);
@@ -19,7 +19,7 @@ photons is its own animation, with its own ends. Frames sharing another frame's 
 Memory: output frames are processed in chunks of consecutive frames; a chunk holds the element
 sums of its frames and their windows' reach (F_max/2 each side): (chunk + F_max) x E x 12 doubles
 per photon parity, about 590 MB for ATRIUM (43,000 elements, F_max = 44, chunk 96). The per-batch
-sums are kept (pipeline/batch_sums.FrameSums, bounded by bytes), so frames in the overlap of two
+sums are kept (pipeline/collection/batch_sums.FrameSums, bounded by bytes), so frames in the overlap of two
 chunks that run on one worker are read once.
 """
 from __future__ import annotations
@@ -33,16 +33,16 @@ import numpy.typing as npt
 from kernels.filter import adaptive_filter_cl, neighbourhood
 from kernels.gather import frame_sums_flux_cl, irradiance
 from kernels.temporal import MAX_HALF_FMAX, MODES, windows_cl
+from pipeline.config import RenderConfig
+from pipeline.errors import LoomError
+from pipeline.stage_clock import StageClock
 
 from .batch_sums import FRAME_SUMS
-from .config import RenderConfig
-from .errors import LoomError
 from .regional_steps import clamp_at_steps, region_levels
-from .stage_clock import StageClock
 
 if TYPE_CHECKING:
-    from .scene import ElementMesh, Scene
-    from .store import PhotonStore
+    from pipeline.scene import ElementMesh, Scene
+    from pipeline.store import PhotonStore
 
 
 @dataclass(frozen=True)
@@ -107,7 +107,7 @@ def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames: npt.Ar
     and the same run ends (``n_emitted`` is of every frame).
 
     With ``config.step_levels`` > 0, adaptive windows also stop at the abrupt changes of the element
-    regions ``regions`` (pipeline/regional_steps.py), which the caller must then give.
+    regions ``regions`` (pipeline/collection/regional_steps.py), which the caller must then give.
 
     A mode or F_max the user gave outside what the kernel takes is a LoomError naming the option
     (kernels/temporal.py raises ValueError for a broken contract)."""
@@ -163,15 +163,15 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
     split_parity : also give the even/odd half-photon maps I1, I2 (§5.2.3) instead of the full map.
     spatial_filter : apply the adaptive filter of §5.2.5 with ``config.filter_*``.
     batches : (n_frames,) leading batches in use per store frame (None: every done batch); a
-        segment uses the batches that make up its N_frame (pipeline/coordinator.py).
+        segment uses the batches that make up its N_frame (pipeline/run/coordinator.py).
     with_direct : also give each frame's mesh-based direct estimate from its own direct photons
-        (workers/reconstruct.vertex_irradiance, §4), from the batch sums the gather holds already
+        (pipeline/collection/estimators.vertex_irradiance, §4), from the batch sums the gather holds already
         (kind "indirect" only).
     times : if given, seconds spent are added to its keys ``read_s`` (stored sums or records),
         ``frame_sums_s`` (records summed where a batch has no stored sums, once per worker),
         ``windows_s``, ``sums_s`` (gather), ``filter_s`` (filter and irradiance) and ``direct_s``.
     """
-    from workers.reconstruct import frame_geometry
+    from pipeline.collection.estimators import frame_geometry
 
     clock = StageClock(times)
     fmax = config.fmax_initial if fmax is None else fmax

@@ -13,8 +13,8 @@ from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator
 
 from tqdm import tqdm
 
-from .config import stable_digest
-from .errors import LoomError
+from pipeline.config import stable_digest
+from pipeline.errors import LoomError
 
 if TYPE_CHECKING:
     from distributed import Client, Future
@@ -48,7 +48,7 @@ WORKER_ENV = {
 # What a worker process imports before its first task: imported once in the fork server that
 # forks the local workers (see :func:`start_worker_server`), not once per worker and run
 WORKER_PRELOAD = ("distributed", "numpy", "pyopencl", "embreex", "zarr", "OpenImageIO",
-                  "workers.photons", "workers.reconstruct", "workers.composite")
+                  "workers.shoot", "workers.reconstruct", "workers.composite")
 TASK_RETRIES = 3
 # Bounds on waiting for a cluster: worker processes of --scheduler local (more than 4 per core
 # only thrash), and how long tasks may wait while the cluster has no worker at all (a cluster

@@ -7,11 +7,11 @@ from __future__ import annotations
 import numpy as np
 
 from kernels.surface import LookupCL
+from pipeline.photons.raycast import RayCaster
 from pipeline.scene import ElementMesh, FrameState
 from pipeline.scene.shading import SurfaceShading
 
-from .punctual_lights import bounding_spheres, light_reach
-from .raycast import RayCaster
+from .light_culling import bounding_spheres, light_reach
 
 KIND = {"diffuse": 0, "mirror": 1, "glossy": 2}  # material kinds as the path loop codes them
 
@@ -51,7 +51,7 @@ class ShadingTables:
         # Element and map irradiance of every hit, on PoCL (kernels/surface.cl)
         self.lookup = (LookupCL(elements.triangle_n, elements.triangle_offset[:-1], self.element_irradiance)
                        if elements is not None else None)
-        # more maps seen along the same paths (workers/camera_paths.py render_frame's also_maps)
+        # more maps seen along the same paths (pipeline/frames/camera_paths.py render_frame's also_maps)
         self.also = [LookupCL(elements.triangle_n, elements.triangle_offset[:-1], _element_table(elements, m))
                      for m in also_maps]
         self.area_samples = area_samples if len(state.emissive_triangles) else 0

@@ -3,15 +3,15 @@
 One self-contained HTML file that opens from disk: every picture (matplotlib PNGs, the AQM maps
 the coordinator wrote beside the segment records, a filmstrip of the frames) and the preview
 video are embedded as data URIs, the page needs no script and no network. It shows, from
-``report.json`` and the segment records (pipeline/segment_records.py):
+``report.json`` and the segment records (pipeline/segments/records.py):
 
 * the segments: the paper's Table 1 (K_i, N_frame, F_max) with d_AQM and p_me, and plots of
-  N_frame, F_max and d_AQM per segment; Fig. 6 and the F_max steps (pipeline/segment_plot.py);
-* Table 2, the cost of a frame by stage (pipeline/benchmarks/render.stage_table), per segment and in all,
+  N_frame, F_max and d_AQM per segment; Fig. 6 and the F_max steps (pipeline/report/segment_plot.py);
+* Table 2, the cost of a frame by stage (pipeline/report/tables.stage_table), per segment and in all,
   and the compositing time, photons and mean collection window of every frame;
 * Fig. 5, the distribution of collection-window lengths over the elements at each K, and Fig. 3d,
   the AQM map of I1(K) against I2(K) at each K (its last N_frame step);
-* a filmstrip, the preview video, what was skipped and why (pipeline/skipped.py), the settings.
+* a filmstrip, the preview video, what was skipped and why (pipeline/report/skipped.py), the settings.
 
 A video larger than ``VIDEO_EMBED_MAX`` bytes is linked (relative path) instead of embedded, so the
 page stays loadable; the report says so.
@@ -27,9 +27,10 @@ import time
 from pathlib import Path
 from string import Template
 
-from .errors import LoomError
+from pipeline.errors import LoomError
+from pipeline.segments.records import SegmentRecord, read_records, used_fmax_step
+
 from .figures import figure, png_bytes
-from .segment_records import SegmentRecord, read_records, used_fmax_step
 
 VIDEO_EMBED_MAX = 64 * 2**20
 FILMSTRIP_FRAMES = 12
@@ -149,7 +150,7 @@ def _summary(report: dict, records: list[SegmentRecord]) -> str:
     if report.get("viewing"):
         rows.append(["viewing (the AQM's, §6)", report["viewing"]])
     if report.get("store_size"):
-        from .render import store_size_line
+        from .tables import store_size_line
         rows.append(["photon store", store_size_line(report["store_size"])])
     return _table(None, rows, left=2, cls="summary")
 
@@ -267,8 +268,7 @@ def _fig6_plot(out: Path, records: list[SegmentRecord], config: dict) -> str:
 
 
 def _costs(report: dict, records: list[SegmentRecord]) -> str:
-    from .benchmarks.render import ROWS, stage_table
-    from .render import store_size_line
+    from .tables import ROWS, stage_table, store_size_line
 
     selection = set(report.get("frames", []))
     head = ["", "frames"] + [f"{row} (s/frame)" for row in ROWS] + ["read (MB/frame)", "written (MB/frame)"]
@@ -345,7 +345,7 @@ def _windows(records: list[SegmentRecord]) -> str:
 
 
 def _aqm_maps(out: Path, records: list[SegmentRecord]) -> str:
-    from .segment_records import record_path
+    from pipeline.segments.records import record_path
 
     items = []
     for r in records:
@@ -363,7 +363,7 @@ def _aqm_maps(out: Path, records: list[SegmentRecord]) -> str:
 def _filmstrip(out: Path, frames: list[int]) -> str:
     from PIL import Image
 
-    from .images import frame_paths
+    from pipeline.frames.images import frame_paths
 
     present = [f for f in frames if frame_paths(out, f)[1].is_file()]
     if not present:
@@ -402,7 +402,7 @@ def _video(out: Path, report: dict) -> str:
 
 def _poster(out: Path, frames: list[int]) -> str:
     """The first frame as the video's poster attribute (shown before it plays), or nothing."""
-    from .images import frame_paths
+    from pipeline.frames.images import frame_paths
 
     png = frame_paths(out, frames[0])[1] if frames else None
     return f"poster=\"{_png_uri(png.read_bytes())}\" " if png is not None and png.is_file() else ""

@@ -2,10 +2,10 @@
 
 ``spp`` jittered camera rays per pixel, traced in wavefronts of :data:`CHUNK_RAYS` samples; at each
 depth the hits are shaded (emitters seen from the front, diffuse direct light with
-workers/punctual_lights.py and workers/area_lights.py plus the map, glossy highlights) and mirror
+pipeline/frames/punctual_lights.py and pipeline/frames/area_lights.py plus the map, glossy highlights) and mirror
 and glossy hits continue, up to ``max_depth`` reflections. workers/composite.py sums it up.
 
-:func:`visible_adaptation` gives a frame's adaptation luminance L_wa (pipeline/tonemap.py) from what
+:func:`visible_adaptation` gives a frame's adaptation luminance L_wa (pipeline/frames/tonemap.py) from what
 its camera sees: a low-resolution pass of these same paths, :data:`ADAPTATION_WIDTH` pixels across
 at one sample a pixel, then the log-average luminance of the pixels that saw something. Occluded
 surfaces do not count, and the samples are the same every frame (one fixed random key), so a scene
@@ -20,13 +20,13 @@ import numpy as np
 
 from kernels.camera import camera_rays_cl
 from kernels.sampling import around
+from pipeline.photons.raycast import RayCaster, caster_for
 from pipeline.scene import ElementMesh, FrameState
 
 from .area_lights import area_light, sky_light
 from .camera_hits import CameraHits
 from .punctual_lights import punctual_light
 from .random_numbers import DIMS_PER_DEPTH, frame_key, uniform
-from .raycast import RayCaster, caster_for
 from .shading_tables import ShadingTables
 
 CHUNK_RAYS = 1 << 14  # camera samples per wavefront: a working set two workers keep in the shared L3
@@ -238,7 +238,7 @@ def visible_adaptation(state: FrameState, elements: ElementMesh, indirect: np.nd
                        seed: int, max_depth: int, area_samples: int, width: int = ADAPTATION_WIDTH) -> float:
     """L_wa (radiance units) of the frame ``state`` lit by the indirect map ``indirect`` (V, 3), as
     its camera sees it: pixels whose paths saw nothing (no geometry, no sky) are left out."""
-    from pipeline.tonemap import image_adaptation
+    from pipeline.frames.tonemap import image_adaptation
 
     w, h = adaptation_size(aspect, width)
     img = render_frame(state, elements, indirect, width=w, height=h, spp=1, seed=seed,

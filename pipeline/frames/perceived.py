@@ -2,7 +2,7 @@
 
 The AQM predicts visible differences between two *displayed* frames (Daly 1993 takes cd/m^2), so
 the even/odd renderings I1(K), I2(K) are compared after Ward's visibility-matching tone mapping at
-the frame's adaptation (pipeline/tonemap.py): L_d = m(L_wa) L_w, clipped at the display's white
+the frame's adaptation (pipeline/frames/tonemap.py): L_d = m(L_wa) L_w, clipped at the display's white
 Ld_max, whatever look (``--tonemap``) the final frames are shown with. Comparing linear radiance as if 1.0 were
 100 cd/m^2 instead judges a dim room as a bright
 one (sensitivity rises with luminance) and never clips highlights, so it over-states the noise.
@@ -14,12 +14,13 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .aqm import AQMResult, ViewingConditions, aqm
-from .aqm.display import DISPLAYS, aqm_geometry
+from pipeline.aqm import AQMResult, ViewingConditions, aqm
+from pipeline.aqm.display import DISPLAYS, aqm_geometry
+
 from .tonemap import ToneMapping, ward_scale
 
 if TYPE_CHECKING:
-    from .scene import Scene
+    from pipeline.scene import Scene
 
 
 def display_values(rgb: np.ndarray, adaptation: float, params: ToneMapping = ToneMapping()) -> np.ndarray:
@@ -62,9 +63,8 @@ def camera_flow(scene: Scene, frame: int, width: int, height: int,
     flow by 3-D warping of the neighbouring frames' cameras; moving objects are assumed tracked by
     the eye), from a depth image of pixel-centre rays cast with Embree. None when the camera does
     not move around this frame (the AQM then takes the eye as still)."""
-    from workers.raycast import caster_for
-
-    from .aqm import image_velocity
+    from pipeline.aqm import image_velocity
+    from pipeline.photons.raycast import caster_for
 
     state = scene.pose_frame(frame)
     cam = state.camera

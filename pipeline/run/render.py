@@ -3,7 +3,7 @@
 Here, on the client: every option and the scene are checked before anything is written
 (one-line LoomErrors), the photon store and illumination arrays are created (only the client
 creates arrays: zarr 3 has no locks), the hashes are computed, and then
-pipeline/coordinator.py runs one task per segment (§5.2): photons, Steps 1-5, composites.
+pipeline/run/coordinator.py runs one task per segment (§5.2): photons, Steps 1-5, composites.
 Afterwards ``preview.mp4`` and ``report.json``.
 
 Hashes. ``render_hash`` covers what pixels depend on besides their maps (scene, camera, seed,
@@ -27,21 +27,23 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from pipeline.collection.maps import check_window_options
+from pipeline.config import RenderConfig, stable_digest
+from pipeline.errors import LoomError
+from pipeline.frames.images import frame_paths, write_video
+from pipeline.frames.tonemap import LOOK_FIELDS, ToneMapping
+from pipeline.paths import check_writable_dir
+from pipeline.scene import read_scene
+
 from .cluster import connect
-from .config import RenderConfig, stable_digest
-from .errors import LoomError
-from .images import frame_paths, write_video
-from .paths import check_writable_dir
-from .scene import Scene
 from .shoot import check_store_location, plan
-from .temporal import check_window_options
-from .tonemap import LOOK_FIELDS, ToneMapping
 
 if TYPE_CHECKING:
     from collections.abc import Callable
 
+    from pipeline.segments.records import SegmentRecord
+
     from .coordinator import Job
-    from .segment_records import SegmentRecord
 
 log = logging.getLogger(__name__)
 MAX_SIDE = 16384
@@ -93,14 +95,14 @@ def prepare_job(scene_path: str | Path, *, frames: str | None, out_dir: str | Pa
     """Check every input (one-line LoomErrors, before anything is written), then create the output
     folder, the photon store (with the raw hit records if ``keep_records``) and its illumination
     arrays (only the client creates arrays: zarr 3 has no locks) and return the coordinator's Job
-    (pipeline/coordinator.py)."""
-    from workers.scene_cache import keep_scene
+    (pipeline/run/coordinator.py)."""
+    from pipeline.scene.scene_cache import keep_scene
 
     from .coordinator import Job
 
     out = Path(out_dir)
     check_out_dir(out)
-    scene = Scene.load(scene_path, camera=camera, light=light)
+    scene = read_scene(scene_path, camera=camera, light=light)
     p = plan(scene, frames, n_photons if n_photons is not None else 1, config)
     store_url = store_url or str(out / "photons.zarr")
     check_store_location(store_url)
@@ -124,7 +126,7 @@ def prepare_job(scene_path: str | Path, *, frames: str | None, out_dir: str | Pa
                 width=settings.width, height=settings.height, spp=settings.spp,
                 reflection_depth=settings.reflection_depth, area_samples=settings.area_samples,
                 tonemap=settings.tonemap.to_dict())
-    # The AQM judges with Ward's operator whatever the look (pipeline/tonemap.py): a new look re-decides nothing
+    # The AQM judges with Ward's operator whatever the look (pipeline/frames/tonemap.py): a new look re-decides nothing
     decision = dict(look, tonemap={k: v for k, v in look["tonemap"].items() if k not in LOOK_FIELDS},
                     first=p.frames[0], last=p.frames[-1], fmax=fmax, n_photons=n_photons,
                     temporal=temporal, selection=p.frames, **{s: config.stage_hash(s) for s in
@@ -151,8 +153,9 @@ def _create_outputs(out: Path, store_url: str, p, keep_records: bool) -> None:
     /proc, a full disk) is a one-line LoomError, and what this call made is removed again."""
     import shutil
 
+    from pipeline.store.illumination import IlluminationMaps
+
     from .shoot import open_store
-    from .store.illumination import IlluminationMaps
 
     local_store = "://" not in store_url or store_url.startswith("file://")
     store_path = Path(store_url.removeprefix("file://"))
@@ -177,7 +180,7 @@ def render(scene_path: str | Path, *, frames: str | None, out_dir: str | Path,
     """Render ``frames`` of a scene into ``out_dir``; returns the report (also ``report.json``).
 
     ``n_photons`` None (``--photons auto``): the segment coordinator chooses N_frame and F_max per
-    segment (pipeline/coordinator.py, §5.2), ``fmax`` is the first segment's F_max. An integer
+    segment (pipeline/run/coordinator.py, §5.2), ``fmax`` is the first segment's F_max. An integer
     keeps them fixed for every frame (``--photons N --fmax F``), with ``temporal`` adaptive, fixed
     or off. ``segment`` redoes one segment and the frames that depend on it. ``echo`` gets progress
     lines (and the Dask dashboard link); ``performance_report`` an HTML file for Dask's report.
@@ -219,7 +222,7 @@ def render(scene_path: str | Path, *, frames: str | None, out_dir: str | Path,
                 echo(_viewing(job))
             if segment is not None:
                 report_segment(*reprocess(job, client, segment))
-                from .segment_records import read_records
+                from pipeline.segments.records import read_records
                 records = read_records(job.out_dir)
             else:
                 records = coordinate(job, client, on_segment=report_segment,
@@ -228,7 +231,7 @@ def render(scene_path: str | Path, *, frames: str | None, out_dir: str | Path,
                                     frame_times=frame_times, segments_done=segments_done)
         report = finishing.result()
     if echo is not None:
-        from .skipped import summary_lines
+        from pipeline.report.skipped import summary_lines
         for line in summary_lines(report["skipped_work"]):
             echo(f"skipped: {line}")
     return report
@@ -243,13 +246,13 @@ def _timed(func: Callable, *args) -> float:
 
 def finish(job: Job, records: list[SegmentRecord], *, rays: dict, batches: int, t_start: float,
            frame_times: dict | None = None, segments_done: list | None = None, ran_here: bool = True) -> dict:
-    """The segment figure, ``preview.mp4``, ``report.json`` and ``report.html`` (pipeline/report.py)
+    """The segment figure, ``preview.mp4``, ``report.json`` and ``report.html`` (pipeline/report/page.py)
     of a rendered job. ``ran_here`` False: the frames were written by other processes (a farm's
     recipes), whose ray counts and timings this one does not know."""
     out = Path(job.out_dir)
     video = out / "preview.mp4"
-    from workers.camera_paths import RAY_KINDS
-    from workers.scene_cache import load_scene
+    from pipeline.frames.camera_paths import RAY_KINDS
+    from pipeline.scene.scene_cache import load_scene
     scene = load_scene(job.scene_path, job.scene_hash, job.camera)
     report = {
         "scene": job.scene_path, "camera": job.camera_name, "frames": list(job.selection),
@@ -271,7 +274,7 @@ def finish(job: Job, records: list[SegmentRecord], *, rays: dict, batches: int, 
     }
     # The video (an ffmpeg process) encodes while this process draws the report's figures: both
     # are the render's last serial steps (docs/13-cluster.md §4)
-    from .report import page_parts, write_report
+    from pipeline.report.page import page_parts, write_report
     with ThreadPoolExecutor(1) as pool:
         encoding = pool.submit(_timed, write_video, [frame_paths(out, f)[1] for f in job.selection], video,
                                scene.timeline.fps)
@@ -293,7 +296,7 @@ def finish(job: Job, records: list[SegmentRecord], *, rays: dict, batches: int, 
 
 def _viewing(job: Job) -> str:
     """The viewing conditions the AQM judged the frames under, with their pixels per degree."""
-    from .perceived import viewing_line
+    from pipeline.frames.perceived import viewing_line
 
     return viewing_line(ToneMapping(**job.tonemap), job.width, job.height, RenderConfig.from_dict(job.config).aqm_size)
 
@@ -302,7 +305,7 @@ def store_size(store_url: str) -> dict:
     """The photon store's bytes on disk by part (pipeline/store disk_usage; None for a remote
     store), the photons its batches hold and the bytes a photon costs: the render's last lines and
     the report say them."""
-    from .store import PhotonStore, disk_usage
+    from pipeline.store import PhotonStore, disk_usage
 
     store = PhotonStore.open(store_url)
     traced = np.unique(store.source_frames())
@@ -313,20 +316,10 @@ def store_size(store_url: str) -> dict:
             (parts["photons"] + parts["records"]) / photons}
 
 
-def store_size_line(size: dict) -> str:
-    """One line of :func:`store_size`: what the store holds and what a photon costs."""
-    parts = size["bytes"]
-    if parts is None or not size["photons"]:
-        return f"photon store: {size['photons']:,} photons"
-    kept = f", hit records {parts['records'] / 1e6:,.1f} MB" if size["keep_records"] else " (no hit records)"
-    return (f"photon store {(parts['photons'] + parts['records']) / 1e6:,.1f} MB for {size['photons']:,} photons, "
-            f"{size['bytes_per_photon']:.2f} bytes a photon{kept}; illumination maps {parts['maps'] / 1e6:,.1f} MB")
-
-
 def _skipped(job, scene, rays: dict | None, segments_done: list) -> dict:
-    """pipeline/skipped.py's account of the frames of ``job``, from the store's sharing table."""
-    from .skipped import skipped_work
-    from .store import PhotonStore
+    """pipeline/report/skipped.py's account of the frames of ``job``, from the store's sharing table."""
+    from pipeline.report.skipped import skipped_work
+    from pipeline.store import PhotonStore
 
     store = PhotonStore.open(job.store_url)
     sources = {f: store.source_frame(f - 1) + 1 for f in job.selection}
@@ -339,7 +332,7 @@ def _remove_leftovers(out: Path, store_url: str) -> None:
     """Temporary files killed writers left (``.NAME.PID[.ID].partial``, zarr's ``zarr.UUID.partial``)
     in the output folder and a local photon store: with every frame done, no writer of this run is
     alive that could still rename one into place (zarr never reads them either way)."""
-    from .store import remove_partials
+    from pipeline.store import remove_partials
 
     for tmp in [*out.glob(".*.partial*"), *out.glob("segments/.*.partial*"), *out.glob(".farm/.*.partial*")]:
         tmp.unlink(missing_ok=True)

@@ -18,7 +18,7 @@ between neighbouring frames; a jumping light, a door, a switched lamp does. The 
 keeps the test's power from growing with N_frame: without it, ROOM's guided loop at 640,000
 photons cut the windows at the aircraft's moving light and stalled (docs/06-temporal.md §3).
 Only the two rows of a boundary are read, so a window's bits do not depend on the chunk of frames
-around it (pipeline/temporal.py).
+around it (pipeline/collection/maps.py).
 """
 from __future__ import annotations
 

@@ -35,14 +35,13 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 
 from kernels.gather import corners_to_vertices, element_sums_cl
-
-from .errors import LoomError
-from .stage_clock import StageClock
-from .store.records import FrameRecords, element_grouped
+from pipeline.errors import LoomError
+from pipeline.stage_clock import StageClock
+from pipeline.store.records import FrameRecords, element_grouped
 
 if TYPE_CHECKING:
-    from .scene import ElementMesh
-    from .store import PhotonStore
+    from pipeline.scene import ElementMesh
+    from pipeline.store import PhotonStore
 
 SLOTS = 2 * 3 * 4  # parity x corner x (R, G, B, Q) values per element
 HEADER = 4  # E, V, n_e, n_v
@@ -52,7 +51,7 @@ def batch_summary(records: FrameRecords, elements: ElementMesh) -> np.ndarray:
     """The u32 words of the summary of one batch's records grouped by element, as stored (module
     docstring)."""
     sums = element_sums_cl([records], kind="indirect", split_parity=True)[0]
-    # The direct flux from element sums, not per record (workers/reconstruct.records_vertex_flux):
+    # The direct flux from element sums, not per record (pipeline/collection/estimators.records_vertex_flux):
     # the same sum to rounding, over E x 3 corners; a million-record batch took 20 ms the other way
     direct = element_sums_cl([records], kind="direct")[0, :, 0, :, :3]
     flux = corners_to_vertices(direct, elements.element_vertices, elements.n_vertices)
@@ -108,7 +107,7 @@ def summariser(elements: ElementMesh) -> Callable[[np.ndarray, np.ndarray, np.nd
     """``write_batch``'s ``summarise`` for batches bucketed on ``elements``: the batch's records
     (key, bary, energy as the tracer gave them) grouped by element, each element's in that order
     (pipeline/store/records.element_grouped), and summed. The tracer's order is deterministic
-    (workers/photons.py), so the sums are; a damaged summary re-made from kept records, which are
+    (pipeline/photons/tracing.py), so the sums are; a damaged summary re-made from kept records, which are
     stored in the total order, agrees with it to float32 rounding, not always to the bit."""
     def summarise(key: np.ndarray, bary: np.ndarray, energy: np.ndarray) -> np.ndarray:
         grouped = FrameRecords.merge(0, 0, (0,), [element_grouped(key, bary, energy, elements.n_elements)],
@@ -131,9 +130,9 @@ class SummedFrame:
         return self.sums.nbytes + (0 if self.direct_flux is None else self.direct_flux.nbytes)
 
     def direct_irradiance(self, vertex_areas: np.ndarray) -> np.ndarray:
-        """The frame's own direct estimate (workers/reconstruct.records_irradiance's, its flux summed
+        """The frame's own direct estimate (pipeline/collection/estimators.records_irradiance's, its flux summed
         per element first)."""
-        from workers.reconstruct import flux_to_irradiance
+        from pipeline.collection.estimators import flux_to_irradiance
 
         return flux_to_irradiance(self.direct_flux, self.photons_emitted, vertex_areas)
 

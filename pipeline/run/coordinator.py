@@ -15,13 +15,13 @@ cannot deadlock); with ``--scheduler synchronous`` the same code runs them in-pr
    - Step 2 (§5.2.2): p_me both ways at K; F_max grows while p_me >= p_thr, K moving with it.
    - Step 3 (§5.2.3): I1(K), I2(K) from the even and odd photons with adaptive collection,
      composited with the same camera samples and direct light, tone mapped as the final frame
-     (pipeline/perceived.py); N_frame starts on a rung of the cap's halvings and doubles (one
+     (pipeline/frames/perceived.py); N_frame starts on a rung of the cap's halvings and doubles (one
      batch more a frame) while d_AQM > d_thr (segments.ladder_n_frame, next_n_frame).
    - Frames within F_max/2 of an animation end get ``end_photons`` x N_frame (§5.2).
 2. Steps 4-5 (§5.2.4-5) for the frames of segment i: reconstruction tasks of ``CHUNK_FRAMES``
    frames each (workers/reconstruct.reconstruct_task), then one composite task a frame.
 
-The decisions are pure functions in pipeline/segments.py. Records (pipeline/segment_records.py)
+The decisions are pure functions in pipeline/segments/decisions.py. Records (pipeline/segments/records.py)
 are written when a segment is decided and when it is done; a rerun skips done segments whose
 frames are valid and reuses every stored photon batch. Which photons a frame uses is fixed by the
 records (the fewest leading batches holding its target), never by what else the store holds, so
@@ -39,11 +39,8 @@ from typing import TYPE_CHECKING, Callable, Iterable, Iterator
 
 import numpy as np
 
-from .cluster import group_sizes, run_tasks, task_key
-from .cluster import result as wait_result
-from .config import RenderConfig, stable_digest
-from .segment_records import SegmentRecord, read_record, write_record
-from .segments import (
+from pipeline.config import RenderConfig, stable_digest
+from pipeline.segments.decisions import (
     Placement,
     calibrated_start,
     doubling_loop,
@@ -56,15 +53,19 @@ from .segments import (
     pilot_n_frame,
     place_segment,
 )
+from pipeline.segments.records import SegmentRecord, read_record, write_record
+
+from .cluster import group_sizes, run_tasks, task_key
+from .cluster import result as wait_result
 from .shoot import shoot_key
 
 if TYPE_CHECKING:
     from distributed import Client
 
-    from .scene import ElementMesh, Scene
+    from pipeline.scene import ElementMesh, Scene
 
 CHUNK_FRAMES = 16  # frames per reconstruction task: fixed, so the gather's bits never depend on workers
-# Frames per photon-batch task and per composite task at most (pipeline/cluster.py group_sizes,
+# Frames per photon-batch task and per composite task at most (pipeline/run/cluster.py group_sizes,
 # whose groups shrink to single frames at the end of a run): ROOM's batches take about 0.06 s and
 # its composites 0.17 s a frame, against 8 ms of Dask's own CPU a task.
 SHOOT_GROUP, COMPOSITE_GROUP = 8, 4
@@ -121,7 +122,7 @@ def fanout() -> Iterator[object | None]:
 def _writing(where: str):
     """A task's failure to write (permissions, a full or read-only disk, a path that is a file) is
     the user's to fix: one line naming the file, instead of a worker's traceback."""
-    from .errors import LoomError
+    from pipeline.errors import LoomError
 
     try:
         yield
@@ -149,7 +150,7 @@ class SegmentRun:
     """One segment task's view of the run: scene, element mesh, store, config, records."""
 
     def __init__(self, job: Job, client: Client | None):
-        from .store import PhotonStore
+        from pipeline.store import PhotonStore
 
         self.job, self.client = job, client
         self.config = RenderConfig.from_dict(job.config)
@@ -166,13 +167,13 @@ class SegmentRun:
     # needs them, and its worker's first photon batch loads them into the process's cache anyway
     @cached_property
     def scene(self) -> Scene:
-        from workers.scene_cache import load_scene
+        from pipeline.scene.scene_cache import load_scene
 
         return load_scene(self.job.scene_path, self.job.scene_hash, self.job.camera)
 
     @cached_property
     def elements(self) -> ElementMesh:
-        from workers.scene_cache import load_elements
+        from pipeline.scene.scene_cache import load_elements
 
         return load_elements(self.job.scene_path, self.job.scene_hash, self.job.element_size)
 
@@ -192,7 +193,7 @@ class SegmentRun:
     # --- photons ---------------------------------------------------------------------------
     def shoot(self, targets: dict[int, int]) -> None:
         """Trace one batch more for every frame whose stored batches hold fewer than its target."""
-        from workers.photons import shoot_task
+        from workers.shoot import shoot_task
 
         t0 = time.perf_counter()
         sources = self.store.source_frames()
@@ -257,8 +258,8 @@ class SegmentRun:
         anyway. Stored, it was one more batch at every K and one more wave of tasks a segment (docs/07-segments.md
         §2); read back from the store when K happened to be
         traced, E would depend on what else ran first."""
-        from workers.photons import trace_batch
-        from workers.reconstruct import vertex_moments
+        from pipeline.collection.estimators import vertex_moments
+        from pipeline.photons.tracing import trace_batch
 
         n_probe = self.config.pilot_photons
         t0 = time.perf_counter()
@@ -276,13 +277,13 @@ class SegmentRun:
 
     # --- Step 2 ------------------------------------------------------------------------------
     def p_me(self, place: Placement, targets: dict[int, int]) -> tuple[float, float]:
-        from .temporal import collection_windows, step_regions, window_counts
+        from pipeline.collection.maps import collection_windows, step_regions, window_counts
 
         use = self.batches(targets)
         counts = window_counts(self.store, batches=use)
         emitted = np.array([self.store.photons_in(f, int(use[f])) for f in range(self.store.n_frames)], np.float64)
         # p_me counts how far Condition (1)'s walks reach each way; a regional step stops a walk as
-        # it stops the collection (pipeline/regional_steps.py)
+        # it stops the collection (pipeline/collection/regional_steps.py)
         back, fwd = collection_windows(counts, emitted, [place.k - 1], mode="adaptive", fmax=place.fmax,
                                        config=self.config,
                                        regions=step_regions(self.elements, self.config))
@@ -295,14 +296,13 @@ class SegmentRun:
     def d_aqm(self, place: Placement, targets: dict[int, int], index: int, temporal: str) -> float:
         """d_AQM (percent) of I1(K) against I2(K) as the viewer sees them; the M_AQM picture is
         written beside the segment record."""
-        from workers.camera_paths import render_frame, visible_adaptation
-
-        from .aqm.visualize import difference_picture
-        from .images import write_png
-        from .perceived import camera_flow, displayed_difference
-        from .segment_records import record_path
-        from .temporal import illumination_maps, window_counts
-        from .tonemap import ToneMapping
+        from pipeline.aqm.visualize import difference_picture
+        from pipeline.collection.maps import illumination_maps, window_counts
+        from pipeline.frames.camera_paths import render_frame, visible_adaptation
+        from pipeline.frames.images import write_png
+        from pipeline.frames.perceived import camera_flow, displayed_difference
+        from pipeline.frames.tonemap import ToneMapping
+        from pipeline.segments.records import record_path
 
         t0 = time.perf_counter()
         use = self.batches(targets)
@@ -480,7 +480,7 @@ class SegmentRun:
 
         submit = self.client.submit
         # Consecutive chunks share the frames their windows reach: contiguous runs of chunks go to
-        # one worker each (a hint, so the batch-sums cache of pipeline/batch_sums.FrameSums hits;
+        # one worker each (a hint, so the batch-sums cache of pipeline/collection/batch_sums.FrameSums hits;
         # Dask may still move a chunk, and placement never changes a bit of the result)
         workers = self.workers()
         # Priorities: a worker takes its chunks in frame order (so composites can follow chunk by
@@ -535,11 +535,10 @@ def frame_hash(render_hash: str, info: dict, adaptation: float) -> str:
 
 def smoothed_adaptation(job: Job, frames_info: dict[int, dict], upto: int) -> dict[int, float]:
     """The eye's adaptation L_a of each rendered frame up to ``upto``: the time course of
-    pipeline/tonemap.py (adapt_in_time) over the frames' own L_wa in the records, at the timeline's
+    pipeline/frames/tonemap.py (adapt_in_time) over the frames' own L_wa in the records, at the timeline's
     times. It is causal, so a segment's frames need only the L_wa of the frames before them."""
-    from workers.scene_cache import load_scene
-
-    from .tonemap import ToneMapping, adapt_in_time
+    from pipeline.frames.tonemap import ToneMapping, adapt_in_time
+    from pipeline.scene.scene_cache import load_scene
 
     scene = load_scene(job.scene_path, job.scene_hash, job.camera)
     frames = [f for f in job.selection if f <= upto]
@@ -564,7 +563,7 @@ def composite_calls(job: Job, frames: list[int], frames_info: dict[int, dict], *
                     force: frozenset = frozenset()) -> list[tuple[str, dict]]:
     """(key, kwargs) of the composite tasks of the frames in ``frames`` that need one (see
     :func:`composite_frames`); ``frames_info`` holds every rendered frame up to the last of them."""
-    from .images import frame_is_valid, frame_paths
+    from pipeline.frames.images import frame_is_valid, frame_paths
 
     smoothed = smoothed_adaptation(job, frames_info, max(frames))
     calls = []
@@ -635,7 +634,7 @@ def segment_task(job: dict, index: int, force: bool = False) -> dict:
 
 def segment_done(job: Job, index: int) -> SegmentRecord | None:
     """The record of a segment a rerun may skip: done, current and with every frame valid."""
-    from .images import frame_is_valid, frame_paths
+    from pipeline.frames.images import frame_is_valid, frame_paths
 
     rec = read_record(job.out_dir, index)
     if rec is None or rec.status != "done" or rec.decision_hash != job.decision_hash:
@@ -703,7 +702,7 @@ def _coordinate(job, client, on_segment, records, index, start) -> list:
 
 def _drop_records_after(job: Job, last_index: int) -> None:
     """Remove records (and their pictures) a previous run left beyond this run's last segment."""
-    from .segment_records import DIRECTORY, record_index
+    from pipeline.segments.records import DIRECTORY, record_index
 
     for path in (Path(job.out_dir) / DIRECTORY).glob("segment-*"):
         index = record_index(path)
@@ -715,7 +714,7 @@ def reprocess(job: Job, client: Client | None, index: int) -> tuple[SegmentRecor
     """Redo segment ``index`` (its frame range kept) and exactly the frames that depend on it: its
     own, the neighbours' whose windows reach into it, and any later frame whose smoothed exposure
     changed; every other frame's files stay untouched."""
-    from .errors import LoomError
+    from pipeline.errors import LoomError
 
     old = read_record(job.out_dir, index)
     if old is None:

@@ -7,9 +7,9 @@ Work a production renderer should skip, and says it skipped:
 * reflection rays where no mirror or glossy surface is in view (the compositor casts them only
   from specular hits, workers/composite.py), and in every frame of a scene without one;
 * area-light sampling in a scene without emissive triangles or a sky (a sky is sampled like an
-  area light, workers/area_lights.py, and its rays are counted as area rays);
+  area light, pipeline/frames/area_lights.py, and its rays are counted as area rays);
 * segments a rerun found done (record current, every frame valid) and frames whose files carry
-  their current frame hash (pipeline/coordinator.py ``segment_done``, ``composite_calls``).
+  their current frame hash (pipeline/run/coordinator.py ``segment_done``, ``composite_calls``).
 
 Pure: it reads the scene's flags, the store's sharing table and the counts the render returned.
 """

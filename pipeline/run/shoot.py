@@ -11,12 +11,13 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
+from pipeline.config import RenderConfig
+from pipeline.errors import LoomError
+from pipeline.paths import check_writable_dir
+from pipeline.scene import ElementMesh, Scene, read_scene
+from pipeline.store import PhotonStore, remove_partials
+
 from .cluster import connect, run_tasks, task_key
-from .config import RenderConfig
-from .errors import LoomError
-from .paths import check_writable_dir
-from .scene import ElementMesh, Scene
-from .store import PhotonStore, remove_partials
 
 
 @dataclass
@@ -104,9 +105,9 @@ def shoot(scene_path: str, *, frames: str | None, n_photons: int, store_url: str
     """Trace every requested frame's photons into the store; returns a summary of the run.
     ``light`` none refuses a file without light instead of lighting it by default;
     ``keep_records`` stores the raw hit records beside the counts and sums."""
-    from workers.photons import shoot_task
+    from workers.shoot import shoot_task
 
-    scene = Scene.load(scene_path, light=light)
+    scene = read_scene(scene_path, light=light)
     p = plan(scene, frames, n_photons, config)
     check_store_location(store_url)
     t0 = time.perf_counter()

@@ -6,7 +6,7 @@ from __future__ import annotations
 import math
 from pathlib import Path
 
-from .segment_records import SegmentRecord
+from pipeline.segments.records import SegmentRecord
 
 
 def plot_segments(records: list[SegmentRecord], path: str | Path, *, d_thr: float | None = None,

@@ -13,9 +13,9 @@ time-adapted luminance L_a and shifted by ``exposure`` EV (a factor 2^EV):
 * ``ward``: Ward's visibility-matching scale factor, below: the display shows what a viewer
   adapted to the real scene would see, so a dim room stays dim.
 
-The AQM (pipeline/perceived.py) always judges with Ward's operator whatever the look chosen:
+The AQM (pipeline/frames/perceived.py) always judges with Ward's operator whatever the look chosen:
 visibility predictions need the scene's absolute luminances, and a change of look then neither
-re-decides segments nor traces photons again (pipeline/render.py keeps the look out of the
+re-decides segments nor traces photons again (pipeline/run/render.py keeps the look out of the
 decision hash).
 
 Ward's operator: Ward's contrast-based scale factor (G. Ward, "A contrast-based scalefactor for
@@ -30,8 +30,8 @@ viewer sees" (§5); histogram methods are image-dependent and flicker.
 Adaptation: L_wa is the log-average (geometric mean) luminance of what the camera sees, the "key"
 of Ward (1994) and Reinhard et al. (2002): exp(mean log(DELTA + L)) over the pixels of a
 low-resolution pass of the frame's own camera rays against its illumination map
-(workers/camera_paths.py visible_adaptation), pixels that see nothing left out. Occluded surfaces never count, so a
-box moving in front of a wall changes L_wa only by what it covers.
+(pipeline/frames/camera_paths.py visible_adaptation), pixels that see nothing left out. Occluded surfaces
+never count, so a box moving in front of a wall changes L_wa only by what it covers.
 Time course: the eye adapts to L_wa(t) exponentially (Durand & Dorsey, "Interactive tone mapping",
 EGWR 2000; Pattanaik et al., "Time-dependent visual adaptation for fast realistic image display",
 SIGGRAPH 2000), in the discrete form of Krawczyk, Myszkowski & Seidel ("Perceptual effects in
@@ -51,10 +51,9 @@ from dataclasses import asdict, dataclass
 import numpy as np
 import numpy.typing as npt
 
-from kernels.colour import LUMA
-
-from .aqm.display import DISPLAYS, FILLS
-from .errors import ConfigError
+from kernels.colour import luminance
+from pipeline.aqm.display import DISPLAYS, FILLS
+from pipeline.errors import ConfigError
 
 DELTA = 1e-4  # cd/m^2 floor inside the log-average (Ward 1994; avoids log 0)
 OPERATORS = ("filmic", "exposure", "ward")
@@ -70,7 +69,7 @@ class ToneMapping:
     tau_rod: float = 0.4  # rod adaptation time constant, s (same sources)
     operator: str = "filmic"  # filmic | exposure | ward (module docstring)
     exposure: float = 0.0  # EV added to the operator's own exposure (a factor 2^EV)
-    # Where the frames are watched, for the AQM (§6, pipeline/perceived.py viewing_for): a display
+    # Where the frames are watched, for the AQM (§6, pipeline/frames/perceived.py viewing_for): a display
     # of ColorVideoVDP's (its size, resolution and distance) and how a frame fills it
     display: str = "standard_fhd"
     fill: str = "full_screen"
@@ -96,11 +95,6 @@ class ToneMapping:
 
     def to_dict(self) -> dict[str, float | str]:
         return asdict(self)
-
-
-def luminance(rgb: np.ndarray) -> np.ndarray:
-    """Rec.709 luminance of linear RGB (..., 3)."""
-    return np.asarray(rgb, dtype=np.float64) @ np.asarray(LUMA)
 
 
 def log_average(lum: np.ndarray, weights: np.ndarray | None = None) -> float:
