@@ -47,7 +47,7 @@ def camera_rays_reference(key: int, c0: int, count: int, spp: int, width: int, h
 def camera_rays_cl(key: int, c0: int, count: int, spp: int, width: int, height: int, yfov: float,
                    rot: np.ndarray) -> np.ndarray:
     """``camera8`` on PoCL: the same directions as :func:`camera_rays_reference`."""
-    from .context import device_context, kernel
+    from .context import device_context, kernel  # imports pyopencl: only when a kernel runs
 
     ctx, queue = device_context()
     out = np.empty((count, 3), np.float32)

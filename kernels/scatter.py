@@ -176,9 +176,9 @@ class ScatterCL:
     """``scatter.cl`` with the scene tables resident on the device; one instance per frame state."""
 
     def __init__(self, tables: SceneTables):
-        import pyopencl as cl
+        import pyopencl as cl  # only when a kernel runs: twins need no OpenCL
 
-        from .context import device_context, kernel
+        from .context import device_context, kernel  # imports pyopencl: only when a kernel runs
 
         self._cl = cl
         self.ctx, self.queue = device_context()

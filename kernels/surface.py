@@ -28,9 +28,9 @@ class LookupCL:
     """``lookup8`` with the element tables on the device; one per frame's illumination map."""
 
     def __init__(self, tri_n: np.ndarray, tri_offset: np.ndarray, element_irradiance: np.ndarray | None):
-        import pyopencl as cl
+        import pyopencl as cl  # only when a kernel runs: twins need no OpenCL
 
-        from .context import device_context, kernel
+        from .context import device_context, kernel  # imports pyopencl: only when a kernel runs
 
         self._cl = cl
         self.ctx, self.queue = device_context()

@@ -10,6 +10,7 @@ from __future__ import annotations
 import dataclasses
 import hashlib
 import json
+import math
 from dataclasses import dataclass, fields
 from pathlib import Path
 from typing import Any
@@ -151,8 +152,6 @@ def stable_digest(data: dict) -> str:
 
 def load_config(path: str | Path) -> dict:
     """The RenderConfig fields of a JSON file (an object); one-line errors name the file."""
-    import math
-
     try:
         data = json.loads(open(path, encoding="utf-8").read(), parse_constant=lambda c: math.nan)
     except OSError as err:

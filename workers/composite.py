@@ -31,7 +31,14 @@ pipeline/frames/area_lights.py (emissive triangles and the sky), pipeline/frames
 """
 from __future__ import annotations
 
+import time
+
 from pipeline.frames.camera_paths import render_frame
+from pipeline.frames.images import frame_paths, write_exr, write_png
+from pipeline.frames.tonemap import ToneMapping
+from pipeline.frames.tonemap import tonemap as tone
+from pipeline.scene.scene_cache import load_elements, load_scene
+from pipeline.store.illumination import IlluminationMaps
 
 
 def composite_task(*, scene_path: str, scene_hash: str, camera: str | None, element_size: float,
@@ -43,14 +50,6 @@ def composite_task(*, scene_path: str, scene_hash: str, camera: str | None, elem
     Plain arguments in (``adaptation`` is the eye's adaptation L_a at this frame, pipeline/frames/tonemap.py), a
     small dict of timings and ray counts out.
     """
-    import time
-
-    from pipeline.frames.images import frame_paths, write_exr, write_png
-    from pipeline.frames.tonemap import ToneMapping
-    from pipeline.frames.tonemap import tonemap as tone
-    from pipeline.scene.scene_cache import load_elements, load_scene
-    from pipeline.store.illumination import IlluminationMaps
-
     t0 = time.perf_counter()
     scene = load_scene(scene_path, scene_hash, camera)
     elements = load_elements(scene_path, scene_hash, element_size)

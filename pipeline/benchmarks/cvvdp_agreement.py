@@ -68,7 +68,7 @@ def bisect(visible: Callable[[float], bool], lo: float = 1e-3, hi: float = 0.5, 
 
 def main() -> None:
     # Optional heavy dependencies of a bench-only environment (PyTorch, cvvdp): never the project's
-    import pycvvdp
+    import pycvvdp  # bench-only environment
     import torch
 
     torch.set_num_threads(1)

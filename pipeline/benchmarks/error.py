@@ -68,15 +68,30 @@ from typing import TYPE_CHECKING
 import click
 import numpy as np
 
-from pipeline.run.render import RenderSettings
-from pipeline.scene import read_scene
+from pipeline.collection.estimators import vertex_irradiance
+from pipeline.config import RenderConfig
+from pipeline.errors import LoomError
+from pipeline.frames.camera_paths import render_frame
+from pipeline.frames.perceived import display_values, displayed_difference
+from pipeline.frames.tonemap import log_average, luminance
+from pipeline.photons.raycast import caster_for
+from pipeline.photons.tracing import trace_batch
+from pipeline.run.cluster import connect
+from pipeline.run.render import RenderSettings, render
+from pipeline.scene import ElementMesh, read_scene
+from pipeline.scene.builtin import BUILTIN_SCENES
+from pipeline.scene.scene_cache import load_elements, load_scene
+from pipeline.scene.timeline import Timeline
+from pipeline.store import PhotonStore
+from pipeline.store.illumination import IlluminationMaps
 
 from . import error_measures as em
+from .machine import announce
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Sequence
 
-    from distributed import Client
+    from distributed import Client  # imported once a cluster starts
 
     from pipeline.config import RenderConfig
     from pipeline.scene import ElementMesh, FrameState, Scene
@@ -124,9 +139,6 @@ FULL = {"room": Plan((46, 90), (10_000, 20_000, 40_000, 80_000), 30, (0.03, 0.1,
 
 def write_scene(name: str, path: Path, event: int) -> Path:
     """The built-in scene ``name`` with its light jumping at frame ``event`` (``EVENTS``)."""
-    from pipeline.scene.builtin import BUILTIN_SCENES
-    from pipeline.scene.timeline import Timeline
-
     b = BUILTIN_SCENES[name]()
     if name in EVENTS:
         node_name, offset = EVENTS[name]
@@ -146,10 +158,6 @@ def reference_map(*, scene_path: str, scene_hash: str, element_size: float, fram
     posed at ``frame``, drawn from the Philox stream (``seed``, ``stream``), in batches summed in
     float64 (no store: nothing is reused across frames; a common ``stream`` for every frame makes
     the frames' noise alike where their scenes are)."""
-    from pipeline.collection.estimators import vertex_irradiance
-    from pipeline.photons.tracing import trace_batch
-    from pipeline.scene.scene_cache import load_elements, load_scene
-
     scene = load_scene(scene_path, scene_hash)
     elements = load_elements(scene_path, scene_hash, element_size)
     state = scene.pose_frame(frame)
@@ -200,8 +208,6 @@ def save_references(path: Path, refs: np.ndarray, wall_s: float, cpu_s: float) -
 def displayed_measures(test: np.ndarray, ref: np.ndarray, adaptation: float, ppd: float) -> tuple[float, float]:
     """Dask task: d_AQM (%) of two linear frames as the viewer sees them (pipeline/frames/perceived.py), and
     their FLIP mean as their PNGs show them (error_measures.displayed_flip), both at ``adaptation``."""
-    from pipeline.frames.perceived import displayed_difference
-
     return float(displayed_difference(test, ref, adaptation).d_aqm), em.displayed_flip(test, ref, adaptation, ppd)
 
 
@@ -212,10 +218,6 @@ def _cpu_seconds(client: Client) -> float:
 def run_method(client: Client, scene_path: Path, out: Path, plan: Plan, *, method: str, n_photons: int | None,
                config: RenderConfig, fmax: int | None, temporal: str) -> dict:
     """One timed ``loom render`` of the plan's frames; its indirect maps and what it cost."""
-    from pipeline.run.render import RenderSettings, render
-    from pipeline.store import PhotonStore
-    from pipeline.store.illumination import IlluminationMaps
-
     settings = RenderSettings(width=plan.width, height=plan.height, spp=plan.spp)
     cpu0, t0 = _cpu_seconds(client), time.perf_counter()
     report = render(scene_path, frames=f"{plan.frames[0]}-{plan.frames[1]}", out_dir=out, settings=settings,
@@ -239,10 +241,6 @@ class Evaluation:
 
     def __init__(self, client: Client, scene: Scene, elements: ElementMesh, plan: Plan, refs: np.ndarray,
                  highlight: Sequence[np.ndarray]) -> None:
-        from pipeline.frames.camera_paths import render_frame
-        from pipeline.frames.tonemap import log_average, luminance
-        from pipeline.photons.raycast import caster_for
-
         self.client, self.plan, self.refs = client, plan, refs
         self.frames = list(range(plan.frames[0], plan.frames[1] + 1))
         self.states = [scene.pose_frame(f) for f in self.frames]
@@ -267,8 +265,6 @@ class Evaluation:
         return np.stack([self._render(i, m) for i, m in enumerate(maps)])
 
     def displayed(self, images: np.ndarray) -> np.ndarray:
-        from pipeline.frames.perceived import display_values
-
         return display_values(images, self.adaptation)
 
     def measure(self, maps: np.ndarray) -> dict:
@@ -348,10 +344,10 @@ def plot(result: dict, path: Path) -> list[Path]:
     """Error against time: (a) d_AQM and (b) relative L2 against wall seconds per method, the
     reference's noise floor dashed; (c) relative L2 per frame of each method's largest run, the
     abrupt change marked. PNG and SVG."""
-    import matplotlib
+    import matplotlib  # heavy: only when drawing
 
     matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+    import matplotlib.pyplot as plt  # heavy: only when drawing
 
     runs, floor = result["runs"], result["reference"]["floor"]
     fig, axes = plt.subplots(1, 3, figsize=(16, 4.8))
@@ -439,14 +435,6 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, config:
     """Render, measure, print the tables, write ``error.json`` and ``error.png``/``.svg`` in ``out_dir``.
     ``config`` (a RenderConfig; default the defaults) is every method's; the reference has no
     temporal collection and reads only its photon depth."""
-    from pipeline.config import RenderConfig
-    from pipeline.errors import LoomError
-    from pipeline.run.cluster import connect
-    from pipeline.scene import ElementMesh
-    from pipeline.scene.builtin import BUILTIN_SCENES
-
-    from .machine import announce
-
     if plan.reference_factor < 50:
         raise LoomError(f"must be at least 50, got {plan.reference_factor}", field="--reference-factor")
     em.flip_evaluator()  # FLIP is one of the measures: refused before any tracing if it is missing

@@ -21,6 +21,9 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from kernels import colour
+from pipeline.errors import LoomError
+from pipeline.frames.perceived import viewing_for
+from pipeline.frames.tonemap import ToneMapping, display_linear, srgb_encode
 
 if TYPE_CHECKING:
     from types import ModuleType
@@ -160,10 +163,8 @@ def equal_error(photons: npt.ArrayLike, times: npt.ArrayLike, errors: npt.ArrayL
 def flip_evaluator() -> ModuleType:
     """The ``flip_evaluator`` module, or a one-line LoomError saying how to install it (test extras)."""
     try:
-        import flip_evaluator
+        import flip_evaluator  # test extra, only for the FLIP measure
     except ImportError:
-        from pipeline.errors import LoomError
-
         raise LoomError("needs NVIDIA FLIP: pip install flip-evaluator (in the test extras: pip install -e '.[test]')",
                         field="flip-evaluator") from None
     return flip_evaluator
@@ -171,16 +172,11 @@ def flip_evaluator() -> ModuleType:
 
 def shown(rgb: np.ndarray, adaptation: float) -> np.ndarray:
     """The frame as its PNG shows it: the default look, sRGB-encoded, float in [0, 1] (FLIP's LDR input)."""
-    from pipeline.frames.tonemap import ToneMapping, display_linear, srgb_encode
-
     return srgb_encode(display_linear(rgb, adaptation, ToneMapping())).astype(np.float32)
 
 
 def frame_ppd(width: int, height: int) -> float:
     """Pixels per degree of a ``width`` x ``height`` frame under the AQM's default viewing conditions."""
-    from pipeline.frames.perceived import viewing_for
-    from pipeline.frames.tonemap import ToneMapping
-
     return viewing_for(ToneMapping()).frame_ppd((height, width))
 
 

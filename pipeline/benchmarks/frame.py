@@ -20,8 +20,13 @@ from typing import TYPE_CHECKING
 
 import click
 import numpy as np
+from embreex import mesh_construction, rtcore_scene
 
-from pipeline.scene import read_scene
+from kernels.camera import camera_rays_reference
+from pipeline.frames.camera_paths import CHUNK_RAYS, render_frame
+from pipeline.photons.raycast import caster_for
+from pipeline.scene import ElementMesh, read_scene
+from pipeline.scene.builtin import BUILTIN_SCENES, write_builtin
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterable
@@ -31,10 +36,6 @@ if TYPE_CHECKING:
 
 def _raw_caster(state: FrameState, width: int, height: int) -> Callable[[], None]:
     """A function casting the frame's pixel-centre camera rays through embreex alone, once."""
-    from embreex import mesh_construction, rtcore_scene
-
-    from kernels.camera import camera_rays_reference
-
     scene = rtcore_scene.EmbreeScene()
     mesh_construction.TriangleMesh(scene, np.ascontiguousarray(state.vertices, np.float32),
                                    np.ascontiguousarray(state.faces, np.int32))
@@ -44,8 +45,6 @@ def _raw_caster(state: FrameState, width: int, height: int) -> Callable[[], None
     o = np.ascontiguousarray(np.broadcast_to(origin, d.shape), np.float32)
     d = np.ascontiguousarray(d, np.float32)
     scene.run(o[:1], d[:1])  # commit the BVH
-    from pipeline.frames.camera_paths import CHUNK_RAYS
-
     def cast() -> None:  # in the compositor's batch size, which Embree runs faster than one huge batch
         for lo in range(0, len(d), CHUNK_RAYS):
             scene.run(o[lo:lo + CHUNK_RAYS], d[lo:lo + CHUNK_RAYS], output=1)
@@ -58,10 +57,6 @@ def bench_scene(path: str | Path, *, width: int, height: int, spp: int, repeat: 
     Compositor and raw casts alternate, ``repeat`` times each, so both see the same machine load;
     the figures are medians, the ratio the median of the paired ratios.
     """
-    from pipeline.frames.camera_paths import render_frame
-    from pipeline.photons.raycast import caster_for
-    from pipeline.scene import ElementMesh
-
     scene = read_scene(path)
     frame = (scene.timeline.first + scene.timeline.last) // 2
     state = scene.pose_frame(frame)
@@ -92,8 +87,6 @@ def run(scenes: Iterable[str], *, width: int, height: int, spp: int, repeat: int
         echo: Callable[[str], None] = click.echo) -> list[dict]:
     """Benchmark ``scenes`` (built-in names or files; default ROOM and ATRIUM) on one core, echoing a
     line per scene; returns their figures."""
-    from pipeline.scene.builtin import BUILTIN_SCENES, write_builtin
-
     results = []
     pinned = hasattr(os, "sched_setaffinity")
     if pinned:  # one core for both measurements, like one Dask worker

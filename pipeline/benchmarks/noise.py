@@ -34,7 +34,19 @@ import click
 import numpy as np
 
 from kernels import colour
-from pipeline.scene import read_scene
+from pipeline.aqm import aqm
+from pipeline.collection.estimators import mesh_adaptation, vertex_irradiance
+from pipeline.collection.maps import illumination_maps, window_counts
+from pipeline.config import RenderConfig
+from pipeline.errors import LoomError
+from pipeline.frames.camera_paths import render_frame
+from pipeline.frames.perceived import displayed_difference
+from pipeline.frames.tonemap import ToneMapping, ward_scale
+from pipeline.photons.raycast import caster_for
+from pipeline.run.shoot import shoot
+from pipeline.scene import ElementMesh, read_scene
+from pipeline.scene.builtin import write_builtin
+from pipeline.store import PhotonStore
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterable, Sequence
@@ -60,8 +72,6 @@ def noise_for_threshold(base: np.ndarray, noise_images: Sequence[np.ndarray], ad
     ``noise_images`` are the indirect layers rendered with the map E_ref x g (g ~ N(0, 1) per
     vertex, one draw per image): the compositor is linear in the map, so E_ref (1 + s g) renders
     to base + s x layer. Bisection; d_AQM grows with s."""
-    from pipeline.frames.perceived import displayed_difference
-
     def d(s: float) -> float:
         a, b = (np.maximum(base + s * n, 0.0) for n in noise_images)
         return displayed_difference(a, b, adaptation, aqm_size=aqm_size).d_aqm
@@ -77,20 +87,6 @@ def run(photons: Iterable[int] = (10_000, 20_000, 40_000, 80_000), *, fmax: int 
         height: int = 240, spp: int = 2, element_scale: float = 1.0, filter_photons: float | None = None,
         calibrate: bool = True, scheduler: str = "synchronous", workers: int | None = None, store: str | None = None,
         echo: Callable[[str], None] = click.echo) -> dict:
-    from pipeline.aqm import aqm
-    from pipeline.collection.estimators import mesh_adaptation, vertex_irradiance
-    from pipeline.collection.maps import illumination_maps, window_counts
-    from pipeline.config import RenderConfig
-    from pipeline.errors import LoomError
-    from pipeline.frames.camera_paths import render_frame
-    from pipeline.frames.perceived import displayed_difference
-    from pipeline.frames.tonemap import ToneMapping, ward_scale
-    from pipeline.photons.raycast import caster_for
-    from pipeline.run.shoot import shoot
-    from pipeline.scene import ElementMesh
-    from pipeline.scene.builtin import write_builtin
-    from pipeline.store import PhotonStore
-
     tmp = tempfile.TemporaryDirectory(prefix="bench-noise-") if store is None else None
     root = Path(tmp.name if tmp else store)
     root.mkdir(parents=True, exist_ok=True)

@@ -20,16 +20,19 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from pipeline.config import RenderConfig
+from pipeline.photons.raycast import caster_for
+from pipeline.photons.tracing import trace_batch
 from pipeline.run.cluster import WORKER_ENV
-from pipeline.scene import read_scene
+from pipeline.scene import ElementMesh, read_scene
+from pipeline.scene.builtin import BUILTIN_SCENES, write_builtin
+from pipeline.store import PhotonStore
 
 if TYPE_CHECKING:
     from collections.abc import Callable
 
 
 def _load(scene_path: str):
-    from pipeline.scene import ElementMesh
-
     scene = read_scene(scene_path)
     return scene, ElementMesh.build(scene)
 
@@ -40,9 +43,6 @@ REPEATS = 3  # tracer and raw Embree alternate this many times; the best time of
 def _worker(scene_path: str, frame: int, n_photons: int, photon_start: int) -> dict:
     """Trace, then cast raw rays, alternately in this process; best-of-REPEATS timings (the
     machine is shared, so the fastest run is the one least disturbed by other jobs)."""
-    from pipeline.photons.raycast import caster_for
-    from pipeline.photons.tracing import trace_batch
-
     scene, elements = _load(scene_path)
     state = scene.pose_frame(frame)
     caster = caster_for(state)
@@ -71,10 +71,6 @@ def _worker(scene_path: str, frame: int, n_photons: int, photon_start: int) -> d
 
 def _memory_worker(scene_path: str, frame: int, n_photons: int, store_url: str) -> dict:
     """Trace and store one frame of ``n_photons``; peak resident memory of this process."""
-    from pipeline.config import RenderConfig
-    from pipeline.photons.tracing import trace_batch
-    from pipeline.store import PhotonStore
-
     scene, elements = _load(scene_path)
     state = scene.pose_frame(frame)
     batch = trace_batch(state, elements, n_photons=n_photons, photon_start=0, seed=0, frame=frame, max_depth=8)
@@ -94,8 +90,6 @@ def _memory_worker(scene_path: str, frame: int, n_photons: int, store_url: str) 
 
 def run(scene_names: list[str], *, photons: int, workers: int, memory_photons: int,
         echo: Callable[[str], None]) -> list[dict]:
-    from pipeline.scene.builtin import BUILTIN_SCENES, write_builtin
-
     os.environ.update(WORKER_ENV)  # inherited by the spawned workers: one thread each
     results = []
     with tempfile.TemporaryDirectory(prefix="loom-bench-") as tmp:

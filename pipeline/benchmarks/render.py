@@ -44,8 +44,14 @@ from typing import TYPE_CHECKING
 
 import click
 
-from pipeline.report.tables import ROWS, stage_table
-from pipeline.run.render import RenderSettings
+from pipeline.report.tables import ROWS, stage_table, store_size_line
+from pipeline.run.cluster import connect
+from pipeline.run.render import RenderSettings, render
+from pipeline.scene.builtin import BUILTIN_SCENES, write_builtin
+from pipeline.segments.records import read_records
+
+from .machine import announce
+from .median_interval import median_interval
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -53,9 +59,6 @@ if TYPE_CHECKING:
 
 def run_render(scene: Path, out: Path, *, frames: str | None, width: int, height: int, spp: int, workers: int,
                n_photons: int | None, fmax: int | None) -> dict:
-    from pipeline.run.render import render
-    from pipeline.segments.records import read_records
-
     t0 = time.perf_counter()
     report = render(scene, frames=frames, out_dir=out, settings=RenderSettings(width=width, height=height, spp=spp),
                     n_photons=n_photons, fmax=fmax, temporal="adaptive", scheduler="local", workers=workers,
@@ -71,8 +74,6 @@ def run_render(scene: Path, out: Path, *, frames: str | None, width: int, height
 
 
 def _print_table(echo: Callable[[str], None], title: str, run: dict) -> None:
-    from pipeline.report.tables import store_size_line
-
     n = max(run["frames"], 1)
     wall, core = run["table"]["wall"], run["table"]["core"]
     total = wall["total indirect"] + wall["ray tracing"]
@@ -97,7 +98,6 @@ def _warm_up() -> None:
     import matplotlib.backends.backend_agg  # noqa: F401
     import matplotlib.figure  # noqa: F401
 
-    from pipeline.run.cluster import connect
     with connect("local", 1):
         pass
 
@@ -108,11 +108,6 @@ def run(scene: str = "room", *, frames: str | None = None, width: int = 320, hei
         json_path: str | Path | None = None, echo: Callable[[str], None] = click.echo) -> dict:
     """The three renders of ``scene`` (a built-in name or a file), their tables and the scaling; returns
     the figures (also written to ``json_path`` if given)."""
-    from pipeline.scene.builtin import BUILTIN_SCENES, write_builtin
-
-    from .machine import announce
-    from .median_interval import median_interval
-
     results: dict = {}
     with tempfile.TemporaryDirectory(prefix="loom-bench-render-") as tmp:
         tmp = Path(tmp)

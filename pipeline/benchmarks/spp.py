@@ -32,6 +32,7 @@ visible than the photon noise the guided default accepts.
 """
 from __future__ import annotations
 
+import json
 import tempfile
 import time
 from pathlib import Path
@@ -41,7 +42,16 @@ import click
 import numpy as np
 
 from kernels import colour
-from pipeline.scene import read_scene
+from pipeline.collection.maps import illumination_maps
+from pipeline.config import RenderConfig
+from pipeline.frames.camera_paths import render_frame, visible_adaptation
+from pipeline.frames.perceived import displayed_difference
+from pipeline.photons.raycast import caster_for
+from pipeline.run.render import RenderSettings
+from pipeline.run.shoot import shoot
+from pipeline.scene import ElementMesh, read_scene
+from pipeline.scene.builtin import write_builtin
+from pipeline.store import PhotonStore
 
 from .error_measures import flip_mean, frame_ppd, shown
 
@@ -108,17 +118,6 @@ def run(frames: Iterable[int] = FRAMES, *, spps: Sequence[int] = SPPS, reference
         adaptive: Sequence[int] = ADAPTIVE_BUDGETS,
         store: str | None = None, json_path: str | None = None,
         echo: Callable[[str], None] = click.echo) -> dict:
-    from pipeline.collection.maps import illumination_maps
-    from pipeline.config import RenderConfig
-    from pipeline.frames.camera_paths import render_frame, visible_adaptation
-    from pipeline.frames.perceived import displayed_difference
-    from pipeline.photons.raycast import caster_for
-    from pipeline.run.render import RenderSettings
-    from pipeline.run.shoot import shoot
-    from pipeline.scene import ElementMesh
-    from pipeline.scene.builtin import write_builtin
-    from pipeline.store import PhotonStore
-
     settings = RenderSettings(width=width, height=height)
     config = RenderConfig()
     thr = 100.0 * config.d_thr
@@ -210,8 +209,6 @@ def run(frames: Iterable[int] = FRAMES, *, spps: Sequence[int] = SPPS, reference
         result = dict(rows=rows, reference_floor=floors, adaptive=arows, d_thr=thr, choice=choice, ppd=ppd,
                       photons=photons, fmax=fmax, width=width, height=height, reference_spp=reference_spp)
         if json_path:
-            import json
-
             Path(json_path).write_text(json.dumps(result, indent=1))
         return result
     finally:

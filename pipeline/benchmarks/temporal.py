@@ -24,7 +24,20 @@ from typing import TYPE_CHECKING
 import click
 import numpy as np
 
-from pipeline.scene import read_scene
+from kernels.filter import adaptive_filter_cl, adaptive_filter_reference, neighbourhood
+from kernels.gather import (
+    element_sums_cl,
+    element_sums_reference,
+    frame_sums_flux_cl,
+    irradiance,
+    window_flux_reference,
+)
+from kernels.temporal import windows_cl, windows_reference
+from pipeline.config import RenderConfig
+from pipeline.run.shoot import shoot
+from pipeline.scene import ElementMesh, read_scene
+from pipeline.scene.builtin import write_builtin
+from pipeline.store import PhotonStore
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -43,12 +56,6 @@ def _timed(fn, *args, **kw):
 
 def _trace_frames(root: Path, frames: str):
     """Shoot real ATRIUM frames; (scene, mesh, store, seconds per traced frame)."""
-    from pipeline.config import RenderConfig
-    from pipeline.run.shoot import shoot
-    from pipeline.scene import ElementMesh
-    from pipeline.scene.builtin import write_builtin
-    from pipeline.store import PhotonStore
-
     path = write_builtin("atrium", root / "atrium.glb")
     summary = shoot(str(path), frames=frames, n_photons=N_PHOTONS, store_url=str(root / "p.zarr"),
                     config=RenderConfig(), scheduler="synchronous", progress=False)
@@ -93,8 +100,6 @@ def _gather_chunk(cache: dict, photons: "SyntheticPhotons", lo: int, hi: int, n_
     (kept in ``cache`` while later chunks' windows reach the frame), then window and vertex flux
     from them on the device. Adds seconds to ``t["sums"]`` and ``t["flux"]``; returns the flux
     and the records summed."""
-    from kernels.gather import element_sums_cl, frame_sums_flux_cl
-
     n_summed = 0
     for g in range(lo, hi):
         if g not in cache:
@@ -110,11 +115,6 @@ def _gather_chunk(cache: dict, photons: "SyntheticPhotons", lo: int, hi: int, n_
 
 def run(trace_frames: int = 3, numpy_frames: int = 4, n_frames: int = N_FRAMES,
         echo: Callable[[str], None] = click.echo) -> dict:
-    from kernels.filter import adaptive_filter_cl, adaptive_filter_reference, neighbourhood
-    from kernels.gather import element_sums_cl, element_sums_reference, irradiance, window_flux_reference
-    from kernels.temporal import windows_cl, windows_reference
-    from pipeline.config import RenderConfig
-
     config = RenderConfig()
     with tempfile.TemporaryDirectory() as tmp:
         scene, mesh, store, trace_s, summary = _trace_frames(Path(tmp), f"150-{149 + trace_frames}")

@@ -35,6 +35,7 @@ from typing import TYPE_CHECKING, Callable
 import numpy as np
 
 from kernels.gather import corners_to_vertices, element_sums_cl
+from pipeline.collection.estimators import flux_to_irradiance
 from pipeline.errors import LoomError
 from pipeline.stage_clock import StageClock
 from pipeline.store.records import FrameRecords, element_grouped
@@ -132,8 +133,6 @@ class SummedFrame:
     def direct_irradiance(self, vertex_areas: np.ndarray) -> np.ndarray:
         """The frame's own direct estimate (pipeline/collection/estimators.records_irradiance's, its flux summed
         per element first)."""
-        from pipeline.collection.estimators import flux_to_irradiance
-
         return flux_to_irradiance(self.direct_flux, self.photons_emitted, vertex_areas)
 
 

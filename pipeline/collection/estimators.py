@@ -13,6 +13,7 @@ one-frame window: keep its signature and arithmetic (float64, np.bincount) as th
 """
 from __future__ import annotations
 
+import hashlib
 from collections import OrderedDict
 from typing import TYPE_CHECKING
 
@@ -168,8 +169,6 @@ def vertex_moments(element: npt.ArrayLike, b1: npt.ArrayLike, b2: npt.ArrayLike,
 
 def map_digest(*maps: np.ndarray) -> str:
     """16 hex digits of SHA-256 over the float32 bytes of maps: what a frame's pixels read of them."""
-    import hashlib
-
     h = hashlib.sha256()
     for m in maps:
         h.update(np.ascontiguousarray(m, dtype=np.float32).tobytes())

@@ -24,6 +24,7 @@ chunks that run on one worker are read once.
 """
 from __future__ import annotations
 
+import weakref
 from dataclasses import dataclass
 from typing import TYPE_CHECKING, Iterable, Iterator
 
@@ -33,6 +34,7 @@ import numpy.typing as npt
 from kernels.filter import adaptive_filter_cl, neighbourhood
 from kernels.gather import frame_sums_flux_cl, irradiance
 from kernels.temporal import MAX_HALF_FMAX, MODES, windows_cl
+from pipeline.collection.estimators import frame_geometry
 from pipeline.config import RenderConfig
 from pipeline.errors import LoomError
 from pipeline.stage_clock import StageClock
@@ -171,8 +173,6 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
         ``frame_sums_s`` (records summed where a batch has no stored sums, once per worker),
         ``windows_s``, ``sums_s`` (gather), ``filter_s`` (filter and irradiance) and ``direct_s``.
     """
-    from pipeline.collection.estimators import frame_geometry
-
     clock = StageClock(times)
     fmax = config.fmax_initial if fmax is None else fmax
     check_window_options(mode, fmax)
@@ -234,8 +234,6 @@ _per_mesh: dict[int, tuple] = {}  # id(element mesh) -> (weak reference to it, {
 
 def _mesh_cached(elements, key: tuple, compute):
     """``compute()`` once per element mesh, key and process."""
-    import weakref
-
     entry = _per_mesh.get(id(elements))
     if entry is None or entry[0]() is not elements:
         entry = (weakref.ref(elements, lambda _, k=id(elements): _per_mesh.pop(k, None)), {})

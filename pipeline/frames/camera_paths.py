@@ -20,6 +20,7 @@ import numpy as np
 
 from kernels.camera import camera_rays_cl
 from kernels.sampling import around
+from pipeline.frames.tonemap import image_adaptation
 from pipeline.photons.raycast import RayCaster, caster_for
 from pipeline.scene import ElementMesh, FrameState
 
@@ -238,8 +239,6 @@ def visible_adaptation(state: FrameState, elements: ElementMesh, indirect: np.nd
                        seed: int, max_depth: int, area_samples: int, width: int = ADAPTATION_WIDTH) -> float:
     """L_wa (radiance units) of the frame ``state`` lit by the indirect map ``indirect`` (V, 3), as
     its camera sees it: pixels whose paths saw nothing (no geometry, no sky) are left out."""
-    from pipeline.frames.tonemap import image_adaptation
-
     w, h = adaptation_size(aspect, width)
     img = render_frame(state, elements, indirect, width=w, height=h, spp=1, seed=seed,
                        frame=ADAPTATION_KEY_FRAME, max_depth=max_depth, area_samples=area_samples)

@@ -13,6 +13,8 @@ Every file is written under a temporary name in its directory and moved into pla
 from __future__ import annotations
 
 import os
+import subprocess
+import tempfile
 from pathlib import Path
 from typing import Iterable
 
@@ -144,10 +146,7 @@ def write_video(pngs: Iterable[str | Path], path: str | Path, fps: float) -> int
     against 0.31 CPU s at 320x240, 3.97 against 4.07 at 1280x960, wall no longer). An odd width or
     height is padded by one black column or row (yuv420p needs even sizes).
     """
-    import subprocess
-    import tempfile
-
-    import imageio_ffmpeg
+    import imageio_ffmpeg  # only for the preview video
 
     path, pngs = Path(path), list(pngs)
     if not pngs:

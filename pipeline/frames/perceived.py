@@ -14,8 +14,9 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from pipeline.aqm import AQMResult, ViewingConditions, aqm
+from pipeline.aqm import AQMResult, ViewingConditions, aqm, image_velocity
 from pipeline.aqm.display import DISPLAYS, aqm_geometry
+from pipeline.photons.raycast import caster_for
 
 from .tonemap import ToneMapping, ward_scale
 
@@ -63,9 +64,6 @@ def camera_flow(scene: Scene, frame: int, width: int, height: int,
     flow by 3-D warping of the neighbouring frames' cameras; moving objects are assumed tracked by
     the eye), from a depth image of pixel-centre rays cast with Embree. None when the camera does
     not move around this frame (the AQM then takes the eye as still)."""
-    from pipeline.aqm import image_velocity
-    from pipeline.photons.raycast import caster_for
-
     state = scene.pose_frame(frame)
     cam = state.camera
     neighbours = {}

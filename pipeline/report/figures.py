@@ -27,7 +27,7 @@ COLUMN_GAP_IN, ROW_GAP_IN = 0.95, 0.85
 
 def figure(rows: int, cols: int, size: tuple[float, float], dpi: float = 100) -> tuple[Figure, np.ndarray]:
     """A Figure of ``rows`` x ``cols`` axes (always a 2-D array) on the Agg canvas, margins fixed."""
-    from matplotlib import rc_context
+    from matplotlib import rc_context  # heavy: only when drawing
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 

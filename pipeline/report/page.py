@@ -28,9 +28,13 @@ from pathlib import Path
 from string import Template
 
 from pipeline.errors import LoomError
-from pipeline.segments.records import SegmentRecord, read_records, used_fmax_step
+from pipeline.frames.images import frame_paths
+from pipeline.segments.records import SegmentRecord, read_records, record_path, used_fmax_step
 
 from .figures import figure, png_bytes
+from .segment_plot import plot_segments
+from .skipped import summary_lines
+from .tables import ROWS, stage_table, store_size_line
 
 VIDEO_EMBED_MAX = 64 * 2**20
 FILMSTRIP_FRAMES = 12
@@ -150,7 +154,6 @@ def _summary(report: dict, records: list[SegmentRecord]) -> str:
     if report.get("viewing"):
         rows.append(["viewing (the AQM's, §6)", report["viewing"]])
     if report.get("store_size"):
-        from .tables import store_size_line
         rows.append(["photon store", store_size_line(report["store_size"])])
     return _table(None, rows, left=2, cls="summary")
 
@@ -229,7 +232,7 @@ def _per_segment_plot(records: list[SegmentRecord], config: dict) -> str:
     axes[0].set(ylabel="N_frame (photons per frame)", title="N_frame per segment")
     n_frames = [r.n_frame for r in records]
     if n_frames and max(n_frames) > 10 * min(n_frames):  # a decade or more: ticks in range
-        from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter
+        from matplotlib.ticker import FuncFormatter, LogLocator, NullFormatter  # heavy: only when drawing
 
         # Plain labels at 1, 2 and 5 a decade: the log axis' own are mathtext ("10^5"), whose
         # first parse cost 0.1 s of the render's serial end
@@ -260,16 +263,12 @@ def _photon_count(value: float, _position=None) -> str:
 def _fig6_plot(out: Path, records: list[SegmentRecord], config: dict) -> str:
     """Fig. 6, written as the render's ``segments/segments.png`` (drawn once: it is the same picture)
     and embedded."""
-    from .segment_plot import plot_segments
-
     path = plot_segments(records, out / "segments" / "segments.png", d_thr=config.get("d_thr"),
                          p_thr=config.get("p_thr"))
     return _png_uri(path.read_bytes())
 
 
 def _costs(report: dict, records: list[SegmentRecord]) -> str:
-    from .tables import ROWS, stage_table, store_size_line
-
     selection = set(report.get("frames", []))
     head = ["", "frames"] + [f"{row} (s/frame)" for row in ROWS] + ["read (MB/frame)", "written (MB/frame)"]
     rows = []
@@ -345,8 +344,6 @@ def _windows(records: list[SegmentRecord]) -> str:
 
 
 def _aqm_maps(out: Path, records: list[SegmentRecord]) -> str:
-    from pipeline.segments.records import record_path
-
     items = []
     for r in records:
         picture = record_path(out, r.index).with_suffix(".aqm.png")
@@ -361,9 +358,7 @@ def _aqm_maps(out: Path, records: list[SegmentRecord]) -> str:
 
 
 def _filmstrip(out: Path, frames: list[int]) -> str:
-    from PIL import Image
-
-    from pipeline.frames.images import frame_paths
+    from PIL import Image  # Pillow, only for the filmstrip
 
     present = [f for f in frames if frame_paths(out, f)[1].is_file()]
     if not present:
@@ -402,15 +397,11 @@ def _video(out: Path, report: dict) -> str:
 
 def _poster(out: Path, frames: list[int]) -> str:
     """The first frame as the video's poster attribute (shown before it plays), or nothing."""
-    from pipeline.frames.images import frame_paths
-
     png = frame_paths(out, frames[0])[1] if frames else None
     return f"poster=\"{_png_uri(png.read_bytes())}\" " if png is not None and png.is_file() else ""
 
 
 def _skipped(report: dict) -> str:
-    from .skipped import summary_lines
-
     skipped = report.get("skipped_work")
     if not skipped:
         return "<p>Not recorded by the render that wrote this report.json.</p>"

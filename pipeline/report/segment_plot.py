@@ -8,12 +8,12 @@ from pathlib import Path
 
 from pipeline.segments.records import SegmentRecord
 
+from .figures import figure, save_png
+
 
 def plot_segments(records: list[SegmentRecord], path: str | Path, *, d_thr: float | None = None,
                   p_thr: float | None = None) -> Path:
     """Write the figure atomically and return its path."""
-    from .figures import figure, save_png
-
     fig, ((left, right),) = figure(1, 2, (10, 4))
     for r in records:
         colour = f"C{r.index % 10}"
@@ -34,7 +34,7 @@ def plot_segments(records: list[SegmentRecord], path: str | Path, *, d_thr: floa
         right.axhline(p_thr, color="red", lw=1, label=f"p_thr = {p_thr:g}")
     left.set(xscale="log", xlabel="N_frame (photons per frame)", ylabel="d_AQM (% of pixels > 1 JND)",
              title="N_frame at the central frames (Fig. 6, §5.2.3)")
-    from matplotlib.ticker import FuncFormatter
+    from matplotlib.ticker import FuncFormatter  # heavy: only when drawing
 
     def short(n, _pos):  # 20k, 50k, 100k, ...: matplotlib's labelled minor log ticks overlap
         lead = n / 10 ** math.floor(math.log10(n)) if n > 0 else 0

@@ -6,9 +6,13 @@ plain functions with readable keys, retries failed tasks, and shows a progress b
 """
 from __future__ import annotations
 
+import logging
+import multiprocessing
 import os
+import queue
 import time
 from contextlib import contextmanager
+from multiprocessing import forkserver
 from typing import TYPE_CHECKING, Any, Callable, Iterable, Iterator
 
 from tqdm import tqdm
@@ -17,7 +21,7 @@ from pipeline.config import stable_digest
 from pipeline.errors import LoomError
 
 if TYPE_CHECKING:
-    from distributed import Client, Future
+    from distributed import Client, Future  # imported once a cluster starts
 
 # Environment for worker processes: one thread per library, so processes x 1 thread fill the machine.
 WORKER_ENV = {
@@ -80,8 +84,6 @@ def close_local(client: Any, cluster: Any, timeout: float = 10.0) -> None:
     (the nannies') silenced, the nannies stop their workers first and this waits until the
     scheduler has none (a worker's heartbeat to a closed scheduler is what printed a
     CommClosedError traceback after a successful render), then the client closes before the cluster."""
-    import logging
-
     loggers = [logging.getLogger(name) for name in ("distributed", "tornado", "asyncio")]
     levels = [logger.level for logger in loggers]
     for logger in loggers:
@@ -135,9 +137,6 @@ def start_worker_server() -> None:
     client, whose threads a fork would copy badly) and holds no device: each worker still makes its
     own OpenCL context and Embree scenes. The environment must be the server's from its start
     (a forked child keeps it), hence :data:`WORKER_ENV` here and not only in the nannies'."""
-    import multiprocessing
-    from multiprocessing import forkserver
-
     saved = {k: os.environ.get(k) for k in (*WORKER_ENV, "PYTHONHASHSEED")}
     try:
         os.environ.update(WORKER_ENV)
@@ -164,9 +163,7 @@ def connect(scheduler: str = "local", workers: int | None = None, *, performance
             raise LoomError("needs a Dask cluster (--scheduler local or an address)", field="--performance-report")
         yield None
         return
-    import logging
-
-    import dask
+    import dask  # imported once a cluster starts (the fork server starts first)
     from distributed import Client, LocalCluster
 
     logging.getLogger("distributed").setLevel(logging.WARNING)
@@ -220,7 +217,7 @@ def _reporting(client, performance_report: str | None, echo):
     if not performance_report:
         yield
         return
-    from distributed import performance_report as report
+    from distributed import performance_report as report  # imported once a cluster starts
 
     with report(filename=performance_report):
         yield
@@ -333,8 +330,6 @@ def completed(client: Client, futures: Iterable[Future],
     where calling ``distributed.wait(pending, return_when=FIRST_COMPLETED)`` once a completion
     made a waiter for every pending future each time, O(n^2): 300 short tasks cost the client
     process 1.2-1.3 CPU seconds that way against 0.8 (docs/13-cluster.md §3)."""
-    import queue
-
     pending = list(futures)
     finished: queue.SimpleQueue = queue.SimpleQueue()
     for future in pending:

@@ -38,8 +38,19 @@ from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Iterable, Iterator
 
 import numpy as np
+from distributed import get_worker, worker_client
 
+from pipeline.aqm.visualize import difference_picture
+from pipeline.collection.estimators import vertex_moments
+from pipeline.collection.maps import collection_windows, illumination_maps, step_regions, window_counts
 from pipeline.config import RenderConfig, stable_digest
+from pipeline.errors import LoomError
+from pipeline.frames.camera_paths import render_frame, visible_adaptation
+from pipeline.frames.images import frame_is_valid, frame_paths, write_png
+from pipeline.frames.perceived import camera_flow, displayed_difference
+from pipeline.frames.tonemap import ToneMapping, adapt_in_time
+from pipeline.photons.tracing import trace_batch
+from pipeline.scene.scene_cache import load_elements, load_scene
 from pipeline.segments.decisions import (
     Placement,
     calibrated_start,
@@ -53,9 +64,13 @@ from pipeline.segments.decisions import (
     pilot_n_frame,
     place_segment,
 )
-from pipeline.segments.records import SegmentRecord, read_record, write_record
+from pipeline.segments.records import DIRECTORY, SegmentRecord, read_record, record_index, record_path, write_record
+from pipeline.store import PhotonStore
+from workers.composite import composite_task
+from workers.reconstruct import reconstruct_task
+from workers.shoot import shoot_task
 
-from .cluster import group_sizes, run_tasks, task_key
+from .cluster import TASK_RETRIES, completed, group_sizes, run_tasks, submit_grouped, task_key
 from .cluster import result as wait_result
 from .shoot import shoot_key
 
@@ -108,8 +123,6 @@ def fanout() -> Iterator[object | None]:
     """A client for tasks submitted from inside a task (worker_client, which secedes), or None
     when not on a Dask worker (synchronous scheduler): run_tasks then runs them in-process."""
     try:
-        from distributed import get_worker, worker_client
-
         get_worker()
     except (ImportError, ValueError):
         yield None
@@ -122,8 +135,6 @@ def fanout() -> Iterator[object | None]:
 def _writing(where: str):
     """A task's failure to write (permissions, a full or read-only disk, a path that is a file) is
     the user's to fix: one line naming the file, instead of a worker's traceback."""
-    from pipeline.errors import LoomError
-
     try:
         yield
     except OSError as err:
@@ -138,8 +149,6 @@ def progress(message: str) -> None:
     """A progress line from a segment task: a worker event the client subscribed to, or the local
     callback when the task runs in the client's process."""
     try:
-        from distributed import get_worker
-
         get_worker().log_event(PROGRESS_TOPIC, message)
     except (ImportError, ValueError):
         for callback in _local_progress:
@@ -150,8 +159,6 @@ class SegmentRun:
     """One segment task's view of the run: scene, element mesh, store, config, records."""
 
     def __init__(self, job: Job, client: Client | None):
-        from pipeline.store import PhotonStore
-
         self.job, self.client = job, client
         self.config = RenderConfig.from_dict(job.config)
         # A store swapped for another run's (another scene, photon settings or seed) is refused here
@@ -167,14 +174,10 @@ class SegmentRun:
     # needs them, and its worker's first photon batch loads them into the process's cache anyway
     @cached_property
     def scene(self) -> Scene:
-        from pipeline.scene.scene_cache import load_scene
-
         return load_scene(self.job.scene_path, self.job.scene_hash, self.job.camera)
 
     @cached_property
     def elements(self) -> ElementMesh:
-        from pipeline.scene.scene_cache import load_elements
-
         return load_elements(self.job.scene_path, self.job.scene_hash, self.job.element_size)
 
     def workers(self) -> list[str]:
@@ -193,8 +196,6 @@ class SegmentRun:
     # --- photons ---------------------------------------------------------------------------
     def shoot(self, targets: dict[int, int]) -> None:
         """Trace one batch more for every frame whose stored batches hold fewer than its target."""
-        from workers.shoot import shoot_task
-
         t0 = time.perf_counter()
         sources = self.store.source_frames()
         want: dict[int, int] = {}  # per source frame (1-based)
@@ -258,9 +259,6 @@ class SegmentRun:
         anyway. Stored, it was one more batch at every K and one more wave of tasks a segment (docs/07-segments.md
         §2); read back from the store when K happened to be
         traced, E would depend on what else ran first."""
-        from pipeline.collection.estimators import vertex_moments
-        from pipeline.photons.tracing import trace_batch
-
         n_probe = self.config.pilot_photons
         t0 = time.perf_counter()
         batch = trace_batch(self.scene.pose_frame(place.k), self.elements, n_photons=n_probe, photon_start=0,
@@ -277,8 +275,6 @@ class SegmentRun:
 
     # --- Step 2 ------------------------------------------------------------------------------
     def p_me(self, place: Placement, targets: dict[int, int]) -> tuple[float, float]:
-        from pipeline.collection.maps import collection_windows, step_regions, window_counts
-
         use = self.batches(targets)
         counts = window_counts(self.store, batches=use)
         emitted = np.array([self.store.photons_in(f, int(use[f])) for f in range(self.store.n_frames)], np.float64)
@@ -296,14 +292,6 @@ class SegmentRun:
     def d_aqm(self, place: Placement, targets: dict[int, int], index: int, temporal: str) -> float:
         """d_AQM (percent) of I1(K) against I2(K) as the viewer sees them; the M_AQM picture is
         written beside the segment record."""
-        from pipeline.aqm.visualize import difference_picture
-        from pipeline.collection.maps import illumination_maps, window_counts
-        from pipeline.frames.camera_paths import render_frame, visible_adaptation
-        from pipeline.frames.images import write_png
-        from pipeline.frames.perceived import camera_flow, displayed_difference
-        from pipeline.frames.tonemap import ToneMapping
-        from pipeline.segments.records import record_path
-
         t0 = time.perf_counter()
         use = self.batches(targets)
         k = place.k
@@ -435,8 +423,6 @@ class SegmentRun:
 
     def reconstruct(self, rec: SegmentRecord, targets: dict[int, int]) -> dict:
         """Steps 4-5 for the frames of ``rec`` (maps written); their frame infos."""
-        from workers.reconstruct import reconstruct_task
-
         t0 = time.perf_counter()
         out = {}
         for r in run_tasks(self.client, reconstruct_task, self.reconstruct_calls(rec, targets), desc="reconstruct",
@@ -453,11 +439,6 @@ class SegmentRun:
         adaptation looks only backwards), so ray tracing overlaps the temporal stage. Returns the
         frame infos and the composite results of the frames written. ``before``: infos of the
         frames of earlier segments; ``force``: write every frame of the segment."""
-        from workers.composite import composite_task
-        from workers.reconstruct import reconstruct_task
-
-        from .cluster import TASK_RETRIES
-
         t0 = time.perf_counter()
         calls = self.reconstruct_calls(rec, targets)
         forced = frozenset(self.frames_of(rec)) if force else frozenset()
@@ -476,8 +457,6 @@ class SegmentRun:
                     written[int(r["frame"])] = r
             self.times["temporal_s"] += time.perf_counter() - t0
             return out, written
-        from .cluster import completed, submit_grouped
-
         submit = self.client.submit
         # Consecutive chunks share the frames their windows reach: contiguous runs of chunks go to
         # one worker each (a hint, so the batch-sums cache of pipeline/collection/batch_sums.FrameSums hits;
@@ -537,9 +516,6 @@ def smoothed_adaptation(job: Job, frames_info: dict[int, dict], upto: int) -> di
     """The eye's adaptation L_a of each rendered frame up to ``upto``: the time course of
     pipeline/frames/tonemap.py (adapt_in_time) over the frames' own L_wa in the records, at the timeline's
     times. It is causal, so a segment's frames need only the L_wa of the frames before them."""
-    from pipeline.frames.tonemap import ToneMapping, adapt_in_time
-    from pipeline.scene.scene_cache import load_scene
-
     scene = load_scene(job.scene_path, job.scene_hash, job.camera)
     frames = [f for f in job.selection if f <= upto]
     values = adapt_in_time([frames_info[f]["adaptation"] for f in frames],
@@ -552,8 +528,6 @@ def composite_frames(job: Job, client: Client | None, frames: list[int], frames_
     """Composite every frame of ``frames`` whose files do not carry its current frame hash (and
     those in ``force``); returns the composite task's result (rays per kind, timings) of every frame
     written."""
-    from workers.composite import composite_task
-
     done = run_tasks(client, composite_task, composite_calls(job, frames, frames_info, force=force),
                      desc="composite", progress=False)
     return {int(r["frame"]): r for r in done.values()}
@@ -563,8 +537,6 @@ def composite_calls(job: Job, frames: list[int], frames_info: dict[int, dict], *
                     force: frozenset = frozenset()) -> list[tuple[str, dict]]:
     """(key, kwargs) of the composite tasks of the frames in ``frames`` that need one (see
     :func:`composite_frames`); ``frames_info`` holds every rendered frame up to the last of them."""
-    from pipeline.frames.images import frame_is_valid, frame_paths
-
     smoothed = smoothed_adaptation(job, frames_info, max(frames))
     calls = []
     for f in frames:
@@ -634,8 +606,6 @@ def segment_task(job: dict, index: int, force: bool = False) -> dict:
 
 def segment_done(job: Job, index: int) -> SegmentRecord | None:
     """The record of a segment a rerun may skip: done, current and with every frame valid."""
-    from pipeline.frames.images import frame_is_valid, frame_paths
-
     rec = read_record(job.out_dir, index)
     if rec is None or rec.status != "done" or rec.decision_hash != job.decision_hash:
         return None
@@ -702,8 +672,6 @@ def _coordinate(job, client, on_segment, records, index, start) -> list:
 
 def _drop_records_after(job: Job, last_index: int) -> None:
     """Remove records (and their pictures) a previous run left beyond this run's last segment."""
-    from pipeline.segments.records import DIRECTORY, record_index
-
     for path in (Path(job.out_dir) / DIRECTORY).glob("segment-*"):
         index = record_index(path)
         if index is not None and index > last_index:
@@ -714,8 +682,6 @@ def reprocess(job: Job, client: Client | None, index: int) -> tuple[SegmentRecor
     """Redo segment ``index`` (its frame range kept) and exactly the frames that depend on it: its
     own, the neighbours' whose windows reach into it, and any later frame whose smoothed exposure
     changed; every other frame's files stay untouched."""
-    from pipeline.errors import LoomError
-
     old = read_record(job.out_dir, index)
     if old is None:
         raise LoomError(f"segment {index} has no record yet; render first", field="--segment")

@@ -30,12 +30,18 @@ import math
 import os
 import shlex
 import sys
+import time
 from pathlib import Path
 
 from pipeline.errors import LoomError
 from pipeline.segments.records import read_record, read_records, record_path, write_record
+from pipeline.store.illumination import IlluminationMaps
+from workers.composite import composite_task
+from workers.reconstruct import reconstruct_task
 
+from .cluster import connect
 from .coordinator import CHUNK_FRAMES, Job, SegmentRun, composite_calls
+from .render import finish
 
 PLAN = "plan.json"
 STAMPS = ".farm"
@@ -191,8 +197,6 @@ def _decide(job: Job, i: int) -> str:
     prev = _current(job, i - 1) if i else None
     if prev is not None and prev.end >= job.last:
         return f"segment {i}: none (the animation ends in segment {i - 1})"
-    from .cluster import connect
-
     # With fixed settings the shoot targets traced the photons: nothing for workers to do
     workers = 1 if shoot_chunks(job) else int(_plan(job.out_dir).get("decide_workers", 1))
     start, fmax = (job.first, job.fmax) if prev is None else (prev.end + 1, prev.fmax)
@@ -216,9 +220,6 @@ def _calls(job: Job, i: int):
 
 
 def _reconstruct(job: Job, i: int, c: int) -> str:
-    from pipeline.store.illumination import IlluminationMaps
-    from workers.reconstruct import reconstruct_task
-
     rec, _, calls = _calls(job, i)
     if c >= len(calls):
         return f"segment {i} chunk {c}: none"
@@ -249,8 +250,6 @@ def _infos(job: Job, upto: tuple[int, int]) -> dict[int, dict]:
 
 
 def _frames(job: Job, i: int, c: int) -> str:
-    from workers.composite import composite_task
-
     _, _, calls = _calls(job, i)
     if c >= len(calls):
         return f"segment {i} chunk {c}: none"
@@ -275,10 +274,6 @@ def _done(job: Job, i: int) -> str:
 
 
 def _finish(job: Job) -> str:
-    import time
-
-    from .render import finish
-
     report = finish(job, read_records(job.out_dir), rays={}, batches=0, t_start=time.perf_counter(),
                     ran_here=False)
     return f"finished: {report['video']}"

@@ -19,6 +19,7 @@ import json
 import logging
 import os
 import re
+import shutil
 import time
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field
@@ -30,13 +31,22 @@ import numpy as np
 from pipeline.collection.maps import check_window_options
 from pipeline.config import RenderConfig, stable_digest
 from pipeline.errors import LoomError
+from pipeline.frames.camera_paths import RAY_KINDS
 from pipeline.frames.images import frame_paths, write_video
+from pipeline.frames.perceived import viewing_line
 from pipeline.frames.tonemap import LOOK_FIELDS, ToneMapping
 from pipeline.paths import check_writable_dir
+from pipeline.report.page import page_parts, write_report
+from pipeline.report.skipped import skipped_work, summary_lines
 from pipeline.scene import read_scene
+from pipeline.scene.scene_cache import keep_scene, load_scene
+from pipeline.segments.records import read_records
+from pipeline.store import PhotonStore, disk_usage, remove_partials
+from pipeline.store.illumination import IlluminationMaps
 
 from .cluster import connect
-from .shoot import check_store_location, plan
+from .coordinator import Job, coordinate, reprocess
+from .shoot import check_store_location, open_store, plan
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -96,10 +106,6 @@ def prepare_job(scene_path: str | Path, *, frames: str | None, out_dir: str | Pa
     folder, the photon store (with the raw hit records if ``keep_records``) and its illumination
     arrays (only the client creates arrays: zarr 3 has no locks) and return the coordinator's Job
     (pipeline/run/coordinator.py)."""
-    from pipeline.scene.scene_cache import keep_scene
-
-    from .coordinator import Job
-
     out = Path(out_dir)
     check_out_dir(out)
     scene = read_scene(scene_path, camera=camera, light=light)
@@ -151,12 +157,6 @@ def prepare_job(scene_path: str | Path, *, frames: str | None, out_dir: str | Pa
 def _create_outputs(out: Path, store_url: str, p, keep_records: bool) -> None:
     """The output folder, the photon store and its illumination arrays; an OSError (``--out`` under
     /proc, a full disk) is a one-line LoomError, and what this call made is removed again."""
-    import shutil
-
-    from pipeline.store.illumination import IlluminationMaps
-
-    from .shoot import open_store
-
     local_store = "://" not in store_url or store_url.startswith("file://")
     store_path = Path(store_url.removeprefix("file://"))
     made = [path for path in (out, store_path if local_store else None) if path is not None and not path.exists()]
@@ -186,8 +186,6 @@ def render(scene_path: str | Path, *, frames: str | None, out_dir: str | Path,
     lines (and the Dask dashboard link); ``performance_report`` an HTML file for Dask's report.
     ``keep_records`` also stores every photon hit (a render reads only the counts and sums).
     """
-    from .coordinator import coordinate, reprocess
-
     if segment is not None and segment < 0:
         raise LoomError(f"must be a segment index >= 0, got {segment}", field="--segment")
     t_start = time.perf_counter()
@@ -222,7 +220,6 @@ def render(scene_path: str | Path, *, frames: str | None, out_dir: str | Path,
                 echo(_viewing(job))
             if segment is not None:
                 report_segment(*reprocess(job, client, segment))
-                from pipeline.segments.records import read_records
                 records = read_records(job.out_dir)
             else:
                 records = coordinate(job, client, on_segment=report_segment,
@@ -231,7 +228,6 @@ def render(scene_path: str | Path, *, frames: str | None, out_dir: str | Path,
                                     frame_times=frame_times, segments_done=segments_done)
         report = finishing.result()
     if echo is not None:
-        from pipeline.report.skipped import summary_lines
         for line in summary_lines(report["skipped_work"]):
             echo(f"skipped: {line}")
     return report
@@ -251,8 +247,6 @@ def finish(job: Job, records: list[SegmentRecord], *, rays: dict, batches: int, 
     recipes), whose ray counts and timings this one does not know."""
     out = Path(job.out_dir)
     video = out / "preview.mp4"
-    from pipeline.frames.camera_paths import RAY_KINDS
-    from pipeline.scene.scene_cache import load_scene
     scene = load_scene(job.scene_path, job.scene_hash, job.camera)
     report = {
         "scene": job.scene_path, "camera": job.camera_name, "frames": list(job.selection),
@@ -274,7 +268,6 @@ def finish(job: Job, records: list[SegmentRecord], *, rays: dict, batches: int, 
     }
     # The video (an ffmpeg process) encodes while this process draws the report's figures: both
     # are the render's last serial steps (docs/13-cluster.md §4)
-    from pipeline.report.page import page_parts, write_report
     with ThreadPoolExecutor(1) as pool:
         encoding = pool.submit(_timed, write_video, [frame_paths(out, f)[1] for f in job.selection], video,
                                scene.timeline.fps)
@@ -296,8 +289,6 @@ def finish(job: Job, records: list[SegmentRecord], *, rays: dict, batches: int, 
 
 def _viewing(job: Job) -> str:
     """The viewing conditions the AQM judged the frames under, with their pixels per degree."""
-    from pipeline.frames.perceived import viewing_line
-
     return viewing_line(ToneMapping(**job.tonemap), job.width, job.height, RenderConfig.from_dict(job.config).aqm_size)
 
 
@@ -305,8 +296,6 @@ def store_size(store_url: str) -> dict:
     """The photon store's bytes on disk by part (pipeline/store disk_usage; None for a remote
     store), the photons its batches hold and the bytes a photon costs: the render's last lines and
     the report say them."""
-    from pipeline.store import PhotonStore, disk_usage
-
     store = PhotonStore.open(store_url)
     traced = np.unique(store.source_frames())
     photons = int(store.emitted()[traced].sum())
@@ -318,9 +307,6 @@ def store_size(store_url: str) -> dict:
 
 def _skipped(job, scene, rays: dict | None, segments_done: list) -> dict:
     """pipeline/report/skipped.py's account of the frames of ``job``, from the store's sharing table."""
-    from pipeline.report.skipped import skipped_work
-    from pipeline.store import PhotonStore
-
     store = PhotonStore.open(job.store_url)
     sources = {f: store.source_frame(f - 1) + 1 for f in job.selection}
     return skipped_work(job.selection, sources=sources, has_specular=scene.has_specular,
@@ -332,8 +318,6 @@ def _remove_leftovers(out: Path, store_url: str) -> None:
     """Temporary files killed writers left (``.NAME.PID[.ID].partial``, zarr's ``zarr.UUID.partial``)
     in the output folder and a local photon store: with every frame done, no writer of this run is
     alive that could still rename one into place (zarr never reads them either way)."""
-    from pipeline.store import remove_partials
-
     for tmp in [*out.glob(".*.partial*"), *out.glob("segments/.*.partial*"), *out.glob(".farm/.*.partial*")]:
         tmp.unlink(missing_ok=True)
     remove_partials(store_url)

@@ -16,6 +16,7 @@ from pipeline.errors import LoomError
 from pipeline.paths import check_writable_dir
 from pipeline.scene import ElementMesh, Scene, read_scene
 from pipeline.store import PhotonStore, remove_partials
+from workers.shoot import shoot_task
 
 from .cluster import connect, run_tasks, task_key
 
@@ -105,8 +106,6 @@ def shoot(scene_path: str, *, frames: str | None, n_photons: int, store_url: str
     """Trace every requested frame's photons into the store; returns a summary of the run.
     ``light`` none refuses a file without light instead of lighting it by default;
     ``keep_records`` stores the raw hit records beside the counts and sums."""
-    from workers.shoot import shoot_task
-
     scene = read_scene(scene_path, light=light)
     p = plan(scene, frames, n_photons, config)
     check_store_location(store_url)

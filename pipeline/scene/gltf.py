@@ -15,6 +15,7 @@ import stat
 import struct
 from dataclasses import dataclass, field
 from pathlib import Path
+from urllib.parse import unquote, urlsplit
 
 import numpy as np
 import pygltflib
@@ -305,8 +306,6 @@ def scene_file(scene: Path, uri: str, field: str) -> Path:
     """The file a relative ``uri`` of ``scene`` names (percent-decoded, glTF §3.3), refused when it
     is absolute, has a scheme or leads outside the scene's folder (symbolic links resolved), unless
     ``PHOTONLOOM_ALLOW_OUTSIDE_FILES=1`` allows it explicitly."""
-    from urllib.parse import unquote, urlsplit
-
     p = str(scene)
     parts = urlsplit(uri)
     if parts.scheme and len(parts.scheme) > 1:  # "C:" is a Windows drive, not a scheme

@@ -8,6 +8,7 @@ displacements, default and animated weights) are read here into each instance's
 from __future__ import annotations
 
 import logging
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -500,8 +501,6 @@ def _node_name(doc, node: int) -> str:
 
 def _with_textures(doc: GltfDocument, materials: list) -> list:
     """Materials with their base-colour and emissive textures attached, each image decoded once."""
-    from dataclasses import replace
-
     images: dict = {}
     return [replace(m, base_color_texture=base_color_texture(doc, i, images),
                     emissive_texture=emissive_texture(doc, i, images)) for i, m in enumerate(materials)]

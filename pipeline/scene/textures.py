@@ -173,7 +173,7 @@ def _image_bytes(doc: GltfDocument, index: int) -> tuple[bytes, str | None]:
 
 def decode_image(doc: GltfDocument, index: int) -> np.ndarray:
     """``images[index]`` as linear RGB float32 (H, W, 3): decoded by OpenImageIO, sRGB to linear."""
-    import OpenImageIO as oiio
+    import OpenImageIO as oiio  # heavy: only where images are read or written
 
     data, suffix = _image_bytes(doc, index)
     where = f"images[{index}]"

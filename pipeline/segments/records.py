@@ -20,6 +20,8 @@ from pathlib import Path
 
 from pipeline.errors import LoomError
 
+from .decisions import frame_photons
+
 DIRECTORY = "segments"
 STATUSES = ("decided", "done")
 # Fields older records hold that the code no longer writes: dropped on reading, so `loom segments`
@@ -56,8 +58,6 @@ class SegmentRecord:
 
     def targets(self) -> dict[int, int]:
         """Photons each frame of the segment traces (pipeline/segments/decisions.photon_targets)."""
-        from .decisions import frame_photons
-
         ends = set(self.end_frames)
         return {f: frame_photons(self.n_frame, self.end_factor if f in ends else 1.0)
                 for f in range(self.start, self.end + 1)}

@@ -1,6 +1,7 @@
 """PhotonStore: the zarr v3 group of a run (layout and guarantees in ``pipeline.store``)."""
 from __future__ import annotations
 
+import asyncio
 import json
 import logging
 import os
@@ -165,7 +166,6 @@ class _Raw:
             return out
 
         async def fetch():
-            import asyncio
             got = await asyncio.gather(*(self.store.get(k, prototype=default_buffer_prototype())
                                          for k in keys))
             return [None if g is None else g.to_bytes() for g in got]
@@ -184,7 +184,6 @@ class _Raw:
             return
 
         async def put():
-            import asyncio
             proto = default_buffer_prototype()
             await asyncio.gather(*(self.store.set(k, proto.buffer.from_bytes(v)) for k, v in items))
         sync(put())

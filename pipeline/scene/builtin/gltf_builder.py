@@ -14,7 +14,9 @@ from __future__ import annotations
 import base64
 import json
 import math
+import os
 import struct
+import tempfile
 from pathlib import Path
 from typing import Iterable, Sequence
 
@@ -75,10 +77,7 @@ def normalized_quaternion(q: Sequence[float]) -> list[float]:
 
 def encode_png(pixels: np.ndarray) -> bytes:
     """8-bit RGB ``pixels`` (H, W, 3) as PNG bytes, written by OpenImageIO."""
-    import os
-    import tempfile
-
-    import OpenImageIO as oiio
+    import OpenImageIO as oiio  # heavy: only where images are read or written
 
     pixels = np.ascontiguousarray(pixels, dtype=np.uint8)
     fd, name = tempfile.mkstemp(suffix=".png")
