@@ -134,7 +134,8 @@ def one_sided_triangles(state: FrameState) -> np.ndarray | None:
     return single[state.triangle_material]
 
 
-def absorb_back_hits(tri: np.ndarray, dirs: np.ndarray, normals: np.ndarray, one_sided: np.ndarray | None) -> np.ndarray:
+def absorb_back_hits(tri: np.ndarray, dirs: np.ndarray, normals: np.ndarray,
+                     one_sided: np.ndarray | None) -> np.ndarray:
     """``tri`` with the hits on the back face of a single-sided triangle turned into misses (-1).
 
     The back is where the ray travels along the geometric normal (``normals`` (F, 3), the sidedness
