@@ -58,12 +58,8 @@ class RenderConfig:
 
     # --- filter: adaptive object-space filter (§5.2.5, Volevich et al. 2000), kernels/filter.py -----
     spatial_filter: bool = _param(True, "filter", "Step 5 of §5.2: filter where too few photons were collected")
-    # A vertex is filtered until its relative error 1/sqrt(n_eff) is invisible with confidence z:
-    # z / sqrt(n_eff) <= c_t, n_eff = (filter_z / c_t)^2 (docs/estimators.md §1.5, pipeline/temporal.py
-    # filter_target); c_t from the CSF peak at the display's white (pipeline/perceived.py visible_contrast)
-    filter_contrast: float | None = _param(None, "filter", "c_t, the relative error a vertex may keep; "
-                                           "None: 1 / peak of Daly's CSF at the display white, §5.2.5",
-                                           0.0, 1.0, optional=True)
+    filter_photons: float = _param(25.0, "filter", "n_eff below which a vertex is filtered, r = 1/sqrt(n), §5.2.5",
+                                   0.0)
     filter_rings: int = _param(3, "filter", "h_max, in element rings over the same surface, §5.2.5", 1, 255)
     filter_z: float = _param(2.5, "filter", "bias test: a ring differing by > z sigma stops h, docs/estimators.md §1.5",
                              0.0)

@@ -39,24 +39,6 @@ def viewing_for(params: ToneMapping) -> ViewingConditions:
                    name=f"{params.display} (white {params.display_max:g} cd/m^2, the tone mapping's)")
 
 
-def visible_contrast(params: ToneMapping = ToneMapping()) -> float:
-    """c_t, the smallest luminance contrast (Weber fraction dL/L) the AQM can see on the display the
-    frames are judged on: 1 / the peak over frequency of Daly's (1993) CSF (pipeline/aqm/csf.py,
-    docs/aqm.md §2a) at the display's white, for the whole screen (Daly's i^2) from the viewing
-    distance, horizontal gratings (r_theta = 1). The AQM detects a grating at 1/CSF within 0.04 log
-    units (docs/aqm.md §8). Sensitivity only falls at lower luminance (Daly's A_l), so a contrast
-    below c_t is below threshold anywhere on the display: 0.42 % on the default display (peak 238 near
-    3.2 cy/deg at 100 cd/m^2; 138 at 2 cd/m^2, about ROOM's mean on screen)."""
-    from .aqm.csf import daly_csf
-
-    view = viewing_for(params)
-    ppd = view.ppd
-    i2 = (view.resolution[0] / ppd) * (view.resolution[1] / ppd)
-    rho = np.geomspace(0.05, ppd / 2.0, 4096)  # up to the display's Nyquist frequency
-    peak = float(daly_csf(rho, view.peak_luminance, i2=i2, distance_m=view.viewing_distance_m).max())
-    return 1.0 / peak
-
-
 def viewing_line(params: ToneMapping, width: int, height: int, aqm_size: int) -> str:
     """What the AQM assumes of the viewer, in one line: the display, its distance, and the pixels
     per degree of a frame and of the AQM's image (§6): ``loom render`` prints it, the report shows it."""

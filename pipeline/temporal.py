@@ -227,7 +227,7 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
         rings = None
         if hood is not None:  # every map of the chunk in one launch
             irr, rings = adaptive_filter_cl(flux, np.broadcast_to(areas[:, None, :], flux.shape[:-1]), hood,
-                                            photons=filter_target(config), z=config.filter_z)
+                                            photons=config.filter_photons, z=config.filter_z)
         else:
             irr = irradiance(flux, areas[:, None, :])
         var = irradiance_variance(flux[:, 0], areas) if with_variance else None
@@ -252,20 +252,6 @@ def _mesh_cached(elements, key: tuple, compute):
     if key not in entry[1]:
         entry[1][key] = compute()
     return entry[1][key]
-
-
-def filter_target(config) -> float:
-    """The effective photon count n_eff at which the spatial filter stops growing a vertex's support
-    (kernels/filter.py ``photons``): the vertex's relative error 1/sqrt(n_eff) (docs/estimators.md
-    §1.3) is invisible with the filter's confidence z (``filter_z``, the z of its bias test) when
-    z / sqrt(n_eff) <= c_t, the smallest contrast the AQM sees (``filter_contrast``, by default
-    pipeline/perceived.py visible_contrast): n_eff = (z / c_t)^2 (docs/estimators.md §1.5)."""
-    c_t = config.filter_contrast
-    if c_t is None:
-        from .perceived import visible_contrast
-
-        c_t = visible_contrast()
-    return (config.filter_z / c_t) ** 2
 
 
 def _neighbourhood(elements, rings: int, angle: float):

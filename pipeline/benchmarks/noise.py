@@ -73,7 +73,7 @@ def noise_for_threshold(base: np.ndarray, noise_images: Sequence[np.ndarray], ad
 
 
 def run(photons: Iterable[int] = (10_000, 20_000, 40_000, 80_000), *, fmax: int = 30, width: int = 320,
-        height: int = 240, spp: int = 2, element_scale: float = 1.0, filter_contrast: float | None = None,
+        height: int = 240, spp: int = 2, element_scale: float = 1.0, filter_photons: float | None = None,
         calibrate: bool = True, scheduler: str = "synchronous", workers: int | None = None, store: str | None = None,
         echo: Callable[[str], None] = click.echo) -> dict:
     from pipeline.aqm import aqm
@@ -84,7 +84,7 @@ def run(photons: Iterable[int] = (10_000, 20_000, 40_000, 80_000), *, fmax: int 
     from pipeline.scene.builtin import write_builtin
     from pipeline.shoot import shoot
     from pipeline.store import PhotonStore
-    from pipeline.temporal import filter_target, illumination_maps, window_counts
+    from pipeline.temporal import illumination_maps, window_counts
     from pipeline.tonemap import ToneMapping, ward_scale
     from workers.camera_paths import render_frame
     from workers.raycast import caster_for
@@ -98,8 +98,8 @@ def run(photons: Iterable[int] = (10_000, 20_000, 40_000, 80_000), *, fmax: int 
         scene = Scene.load(path)
         own = ElementMesh.build(scene).element_size
         config = RenderConfig(element_size=own * element_scale)
-        if filter_contrast is not None:
-            config = config.replace(filter_contrast=filter_contrast)
+        if filter_photons is not None:
+            config = config.replace(filter_photons=filter_photons)
         mesh = ElementMesh.build(scene, config.element_size)
         state = scene.pose_frame(K)
         caster = caster_for(state)
@@ -110,7 +110,7 @@ def run(photons: Iterable[int] = (10_000, 20_000, 40_000, 80_000), *, fmax: int 
         thr = 100.0 * config.d_thr
         echo(f"ROOM frame {K}: {mesh.n_elements:,} elements (element_size {config.element_size:g} m), "
              f"{mesh.n_vertices:,} vertices; frames {K - half}-{K + half}, F_max = {fmax} adaptive; "
-             f"{width}x{height}, {spp} spp; filter target n_eff {filter_target(config):,.0f}, "
+             f"{width}x{height}, {spp} spp; filter_photons {config.filter_photons:g}, "
              f"filter_rings {config.filter_rings}")
 
         def pair(irradiance):  # I1(K), I2(K): same camera samples and direct light

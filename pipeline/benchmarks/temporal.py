@@ -112,7 +112,6 @@ def run(trace_frames: int = 3, numpy_frames: int = 4, n_frames: int = N_FRAMES,
     from kernels.gather import element_sums_cl, element_sums_reference, irradiance, window_flux_reference
     from kernels.temporal import windows_cl, windows_reference
     from pipeline.config import RenderConfig
-    from pipeline.temporal import filter_target
 
     config = RenderConfig()
     with tempfile.TemporaryDirectory() as tmp:
@@ -155,7 +154,7 @@ def run(trace_frames: int = 3, numpy_frames: int = 4, n_frames: int = N_FRAMES,
         flux, n = _gather_chunk(cache, photons, lo, hi, n_emitted, back[out], fwd[out], out - lo, mesh, t,
                                 shape=shape)
         n_summed += n
-        (_, rings), dt = _timed(adaptive_filter_cl, flux, areas, hood, photons=filter_target(config))
+        (_, rings), dt = _timed(adaptive_filter_cl, flux, areas, hood, photons=config.filter_photons)
         t["filter"] += dt
         filtered += int((rings > 0).sum())
     per_frame = {k: v / n_frames * 1e3 for k, v in t.items()}

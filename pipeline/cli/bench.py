@@ -72,14 +72,14 @@ def bench_temporal(trace_frames: int, numpy_frames: int, n_frames: int) -> None:
 @click.option("--spp", type=int, default=2, show_default=True)
 @click.option("--element-scale", type=float, default=1.0, show_default=True,
               help="Element size as a multiple of the scene's own (0.4 m for ROOM).")
-@click.option("--filter-contrast", type=float, default=None,
-              help="filter_contrast c_t of the filtered column (default: RenderConfig's, from the CSF).")
+@click.option("--filter-photons", type=float, default=None,
+              help="filter_photons of the filtered column (default: RenderConfig's).")
 @click.option("--calibrate/--no-calibrate", default=True, show_default=True,
               help="Also find the per-vertex noise amplitude the AQM puts at d_thr.")
 @click.option("--scheduler", default="synchronous", show_default=True, help="synchronous, local or an address.")
 @click.option("--workers", type=int, default=None, help="Workers of a local scheduler.")
 @click.option("--store", default=None, help="Directory to keep the scene and photons in (default: a temporary one).")
-def bench_noise(photons, fmax, resolution, spp, element_scale, filter_contrast, calibrate, scheduler, workers, store):
+def bench_noise(photons, fmax, resolution, spp, element_scale, filter_photons, calibrate, scheduler, workers, store):
     """d_AQM of the even/odd renderings I1(K), I2(K) of ROOM frame 68 against N_frame: linear vs
     displayed input, spatial filter, window statistics, and the AQM's noise threshold."""
     from pipeline.benchmarks.noise import run
@@ -87,7 +87,7 @@ def bench_noise(photons, fmax, resolution, spp, element_scale, filter_contrast, 
 
     width, height = parse_resolution(resolution)
     run(tuple(int(p) for p in photons.split(",") if p.strip()), fmax=fmax, width=width, height=height, spp=spp,
-        element_scale=element_scale, filter_contrast=filter_contrast, calibrate=calibrate, scheduler=scheduler,
+        element_scale=element_scale, filter_photons=filter_photons, calibrate=calibrate, scheduler=scheduler,
         workers=workers, store=store)
 
 

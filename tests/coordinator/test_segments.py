@@ -294,7 +294,7 @@ def test_an_end_factor_of_one_turns_the_end_photons_off():
 # --- the config: every field read by one stage --------------------------------------------------
 def test_stage_hashes_cover_only_their_stage():
     base = RenderConfig()
-    changed = {"d_thr": 0.05, "p_thr": 0.5, "k_sigma": 3.0, "filter_contrast": 0.05, "photon_depth": 3}
+    changed = {"d_thr": 0.05, "p_thr": 0.5, "k_sigma": 3.0, "filter_photons": 9.0, "photon_depth": 3}
     for name, value in changed.items():
         other = base.replace(**{name: value})
         stage = next(f.metadata["stage"] for f in __import__("dataclasses").fields(RenderConfig) if f.name == name)

@@ -6,11 +6,7 @@ import numpy as np
 import pytest
 
 from kernels.filter import adaptive_filter_cl, adaptive_filter_reference, neighbourhood
-from pipeline.config import RenderConfig
-from pipeline.temporal import filter_target
 from tests.kernels.twin_base import KernelTwinTests
-
-VISIBLE = filter_target(RenderConfig())  # the default target, (z / c_t)^2: about 350,000 photons
 
 
 def grid(n, origin=(0, 0, 0), u=(1, 0, 0), v=(0, 1, 0), first=0):
@@ -94,8 +90,6 @@ class TestAdaptiveFilterTwin(KernelTwinTests):
 
     cases = {
         **{f"two-walls-{p:g}-photons": ("two walls", p, 5, "shared") for p in (4.0, 25.0, 400.0)},
-        "two-walls-visible-target": ("two walls", VISIBLE, 5, "shared"),
-        "many-maps-visible-target": ("many maps", VISIBLE, 3, "per map"),
         "hole": ("hole", 25.0, 2, "shared"),
         "many-maps": ("many maps", 25.0, 3, "shared"),
         "many-maps-own-areas": ("many maps", 25.0, 3, "per map"),
@@ -164,32 +158,6 @@ def test04_growth_stops_at_a_lighting_edge(rng):
     dark_near_edge = (pos[:, 0] > 0.4) & (pos[:, 0] < 0.47)
     # Without the bias test the dark side next to the edge would be lit by the bright side
     assert out[0, dark_near_edge, 0].mean() < 1.0
-
-
-def test04b_at_the_visible_target_growth_still_stops_at_a_lighting_edge(rng):
-    """The default target is out of reach of any support (every vertex is filtered): the bias
-    test alone keeps the shadow edge."""
-    pos, ev = grid(30)
-    hood = neighbourhood(ev, pos, np.zeros(len(pos), np.int32), max_rings=3)
-    areas = hat_areas(pos, ev)
-    level = np.where(pos[:, 0] < 0.5, 0.2, 10.0)
-    flux = noisy_flux(rng, level, areas, 20000.0)
-    out, rings = adaptive_filter_cl(flux, areas, hood, photons=VISIBLE)
-    assert (rings[0] > 0).mean() > 0.9
-    dark_near_edge = (pos[:, 0] > 0.4) & (pos[:, 0] < 0.47)
-    assert out[0, dark_near_edge, 0].mean() < 1.0
-    flat = (pos[:, 0] < 0.3) | (pos[:, 0] > 0.7)
-    assert abs(np.median(out[0, flat, 0] / level[flat]) - 1.0) < 0.05
-
-
-def test04c_the_target_is_the_visible_contrast_at_the_filters_confidence():
-    """n_eff = (z / c_t)^2 with c_t = 1 / the peak of Daly's CSF at the display's white."""
-    from pipeline.perceived import visible_contrast
-
-    c_t = visible_contrast()
-    assert 1 / 260 < c_t < 1 / 220  # Daly's CSF peaks near 237 at 100 cd/m^2 (docs/aqm.md §2a)
-    assert VISIBLE == pytest.approx((RenderConfig().filter_z / c_t) ** 2)
-    assert filter_target(RenderConfig(filter_contrast=0.2, filter_z=1.0)) == pytest.approx(25.0)
 
 
 def test05_holes_grow_and_empty_regions_stay_zero():
