@@ -11,6 +11,8 @@
 #define EMIT_SKY 4
 #define EMISSION_STREAM 0xFFFF0000u
 
+inline long8 is_dir_light(const long8 k) { return k == (long8)(EMIT_DIRECTIONAL); }
+
 // Eight photons a work item in explicit vector types, for the reasons given in lanes.cl: every
 // lane computes the four kinds of emitter and keeps its own. Lane l of work item g is photon
 // min(8 g + l, count - 1); past the end, lanes repeat the last photon and write the same values.
@@ -23,6 +25,7 @@ __kernel void emit8(
     __global const double *light_pos, __global const double *light_dir, __global const double *light_rad,
     __global const double *cos_outer, __global const double *cos_inner,
     __global const float *corners, __global const double *normals,
+    __global const long *light_cells, __global const double *cell_size, __global const double *cells,
     __global float *origin_out, __global float *dir_out, __global double *beta_out, __global int *emitter)
 {
     const long8 i = min((long8)(8 * (long)get_global_id(0)) + (long8)(0, 1, 2, 3, 4, 5, 6, 7),
@@ -89,7 +92,15 @@ __kernel void emit8(
     double8 tx, ty, tz, sx, sy, sz, sp, cp;
     basis8(ax, ay, az, &tx, &ty, &tz, &sx, &sy, &sz);
     sincos8(phi, &sp, &cp);
-    const double8 rc = r * cp, rs = r * sp;
+    // or a projection map (light_cells n > 0): uniform on its n cells of side h
+    const long8 cell_start = G8(long8, light_cells, 2 * li), cell_n = G8(long8, light_cells, 2 * li + 1);
+    const double8 h = G8(double8, cell_size, li);
+    const long8 mapped = is_dir_light(k) & (cell_n > 0L);
+    const double8 n_cells = convert_double8(cell_n);
+    const long8 j = select((long8)(0), cell_start + min(convert_long8(u3 * n_cells), cell_n - 1L), mapped);
+    const double8 rc = select(r * cp, G8(double8, cells, 2 * j) + u1 * h, mapped);
+    const double8 rs = select(r * sp, G8(double8, cells, 2 * j + 1) + u2 * h, mapped);
+    const double8 dir_area = select((double8)(M_PI * radius * radius), n_cells * h * h, mapped);
     const double back = radius * 1.05;
     const double8 dox = cx + (tx * rc + sx * rs) - ax * back;
     const double8 doy = cy + (ty * rc + sy * rs) - ay * back;
@@ -106,8 +117,7 @@ __kernel void emit8(
     const double8 koy = cy + (kty * krc + ksy * krs) - kdy * back;
     const double8 koz = cz + (ktz * krc + ksz * krs) - kdz * back;
     const long8 is_sky = k == (long8)(EMIT_SKY);
-    const double8 disk = (double8)(M_PI * radius * radius);
-    const double8 scale = select(select(select(select(disk, spot_s, k == (long8)(EMIT_SPOT)),
+    const double8 scale = select(select(select(select(dir_area, spot_s, k == (long8)(EMIT_SPOT)),
                                                (double8)(4.0 * M_PI), k == (long8)(EMIT_POINT)),
                                         (double8)(2.0 * M_PI * (M_PI * radius * radius)), is_sky),
                                  (double8)(0.0), is_area);

@@ -4,14 +4,17 @@
 Philox words: photon i draws (w0, u1, u2, u3) from counter (i, EMISSION_STREAM) and u4 from
 (i, EMISSION_STREAM + 1) under the key (seed, frame). The emitter is the first whose CDF exceeds
 w0. A photon's RGB *weight* is its sample's flux estimate over the selection probability, so
-sum(weights) / N estimates the total emitted flux whatever N is (workers/emission.py builds the
+sum(weights) / N estimates the total emitted flux whatever N is (pipeline/photons/emission.py builds the
 tables; pbrt-v4 "Light Sources" for the sampling):
 
   point        direction uniform on the sphere (cos = 1 - 2 u1),     weight I * 4 pi
   spot         uniform in the outer cone's solid angle Omega,        weight I * falloff * Omega
                (cos = 1 - u1 (1 - cos_outer); glTF fall-off ((cos - cos_o) / (cos_i - cos_o))^2 clamped)
   directional  uniform on a disk of radius R facing the light, 1.05 R upstream of the scene centre,
-               weight E * pi R^2
+               weight E * pi R^2; or, where the light has a projection map (``light_cells``: n > 0
+               cells of side h, pipeline/photons/emission.py), uniform on its cells: cell
+               min(floor(u3 n), n - 1), the point (a + u1 h, b + u2 h) in the disk's basis,
+               weight E * n h^2
   emissive     uniform on the triangle (sqrt(u1) warp), cosine-weighted about its front normal,
                weight pi * L * A (the emitter's flux)
   sky          one half of a uniform sky (pipeline/scene/sky.py), its travel axis and radiance L as
@@ -51,6 +54,23 @@ class EmissionTables:
     center: np.ndarray  # (3,) centre of the scene's bounds
     radius: float  # radius of the disk that covers the scene (directional lights)
     epsilon: float  # relative offset of area-light origins off their surface (scatter.py::surface_offset)
+    # Projection maps of directional lights (pipeline/photons/emission.py): light l emits from the cells
+    # cells[start:start + n], (start, n) = light_cells[l], squares of side cell_size[l] whose corners
+    # (a, b) are in the basis of kernels/sampling.orthonormal_basis(light_dir[l]) about the scene
+    # centre; n = 0 (or no tables): the whole disk of ``radius``
+    light_cells: np.ndarray | None = None  # (L, 2) int64 (start, n)
+    cell_size: np.ndarray | None = None  # (L,) float64
+    cells: np.ndarray | None = None  # (M, 2) float64 (a, b) of each cell's lower corner
+
+    def projection(self) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+        """(light_cells, cell_size, cells) as the kernel reads them: no light has a map when not given."""
+        n = len(self.light_dir)
+        lc = np.zeros((n, 2), np.int64) if self.light_cells is None else np.asarray(self.light_cells, np.int64)
+        h = np.zeros(n) if self.cell_size is None else np.asarray(self.cell_size, np.float64)
+        cells = np.zeros((0, 2)) if self.cells is None else np.asarray(self.cells, np.float64).reshape(-1, 2)
+        if n == 0:  # the kernel reads row 0 of every table whatever the emitter (one row of zeros)
+            lc, h = np.zeros((1, 2), np.int64), np.zeros(1)
+        return lc.reshape(-1, 2), h.reshape(-1), cells if len(cells) else np.zeros((1, 2))
 
 
 def emit_reference(t: EmissionTables, photon: np.ndarray,
@@ -100,10 +120,23 @@ def emit_reference(t: EmissionTables, photon: np.ndarray,
         tt, ss = orthonormal_basis(axis[dl])
         sp, cp = sincos_poly(phi)
         rc, rs = r * cp, r * sp
+        scale = np.full(len(r), np.pi * t.radius * t.radius)
+        light_cells, cell_size, cells = t.projection()
+        start, count = light_cells[li[dl], 0], light_cells[li[dl], 1]
+        h = cell_size[li[dl]]
+        mapped = count > 0
+        if mapped.any():  # a projection map: uniform on its cells
+            u3d = u3[lights][dl][mapped]
+            j = start[mapped] + np.minimum((u3d * count[mapped].astype(np.float64)).astype(np.int64),
+                                           count[mapped] - 1)
+            hm = h[mapped]
+            rc[mapped] = cells[j, 0] + sub_u1[dl][mapped] * hm
+            rs[mapped] = cells[j, 1] + sub_u2[dl][mapped] * hm
+            scale[mapped] = count[mapped].astype(np.float64) * hm * hm
         sub = np.flatnonzero(lights)[dl]
         origins[sub] = t.center + (tt * rc[:, None] + ss * rs[:, None]) - axis[dl] * (t.radius * 1.05)
         d[dl] = axis[dl]
-        wgt[dl] = rad[dl] * (np.pi * t.radius * t.radius)
+        wgt[dl] = rad[dl] * scale[:, None]
     sk = k == SKY
     if sk.any():
         d[sk] = around(axis[sk], sub_u1[sk], 2.0 * np.pi * sub_u2[sk], polynomial=True)
@@ -138,7 +171,8 @@ class EmitCL:
             (tables.index, np.int64), (tables.flux, np.float64), (tables.light_pos, np.float64),
             (tables.light_dir, np.float64), (tables.light_rad, np.float64),
             (tables.cos_outer, np.float64), (tables.cos_inner, np.float64),
-            (tables.corners, np.float32), (tables.normals, np.float64))]
+            (tables.corners, np.float32), (tables.normals, np.float64),
+            *zip(tables.projection(), (np.int64, np.float64, np.float64)))]
 
     def __call__(self, photon: np.ndarray, key: tuple[int, int]):
         n = len(photon)

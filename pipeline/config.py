@@ -34,11 +34,11 @@ class RenderConfig:
 
     Grouped by the stage that reads them (``STAGES``); :meth:`stage_hash` digests one stage's
     fields, so a stage's stored results are keyed by what they really depend on: changing d_thr
-    re-decides segments (pipeline/coordinator.py) but keeps the photons, while changing
+    re-decides segments (pipeline/run/coordinator.py) but keeps the photons, while changing
     element_size or photon_depth refuses the photon store.
     """
 
-    # --- photons: tracing and the element mesh they are bucketed on (§4), workers/photons.py --------
+    # --- photons: tracing and the element mesh they are bucketed on (§4), pipeline/photons/tracing.py --------
     element_size: float | None = _param(None, "photons", "element size (§4, §5.3)", 0.0, optional=True)
     seed: int = _param(0, "photons", "run seed: Philox key (seed, frame), counter = photon index", 0)
     # Paths end by Russian roulette (§4); this cap is only a safety net for albedo-1 rooms: a
@@ -67,7 +67,7 @@ class RenderConfig:
     filter_angle: float = _param(30.0, "filter", "degrees between neighbour normals, docs/05-estimators.md §1.5",
                                  0.0, 180.0)
 
-    # --- segments: the adjustment loops of §5.2 (pipeline/segments.py, pipeline/coordinator.py) -----
+    # --- segments: the adjustment loops of §5.2 (pipeline/segments/decisions.py, pipeline/run/coordinator.py) -----
     fmax_initial: int = _param(15, "segments", "F_max of the first segment, §5.2.1 and §6", 0, 510)
     fmax_step: int = _param(15, "segments", "F_max growth per step of §5.2.2 (15, 30, 44: the paper's values)",
                             1, 510)

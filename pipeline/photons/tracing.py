@@ -2,7 +2,9 @@
 
 The tracer is wavefront-style: all live photons of a chunk advance one bounce per Embree call, in
 large float32 batches, and one OpenCL kernel (kernels/scatter.cl) records the diffuse hits and
-samples the next directions for the whole wavefront. At a diffuse hit the photon is recorded
+samples the next directions for the whole wavefront. A photon that reaches the back face of a
+single-sided material (glTF ``doubleSided`` false, pipeline/scene/materials.py) is absorbed there:
+the hit counts as a miss, so nothing is recorded and the path ends. At a diffuse hit the photon is recorded
 (element, barycentrics inside the element, RGB weight, direct = first hit) and bounces
 Lambertian about the shading normal; mirrors reflect, glossy surfaces sample a normalised Phong
 lobe. Russian roulette on the hit's base colour (factor x texture x vertex colour,
@@ -46,7 +48,7 @@ class PhotonBatch:
 
     key: np.ndarray  # (n,) uint32
     bary: np.ndarray  # (n, 2) uint16
-    energy: np.ndarray  # (n, 3) float32 photon weight (flux x N emitted, see workers/emission.py)
+    energy: np.ndarray  # (n, 3) float32 photon weight (flux x N emitted, see pipeline/photons/emission.py)
     photons_emitted: int
     photon_start: int
     rays_cast: int = 0
@@ -55,7 +57,7 @@ class PhotonBatch:
     def indirect(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(element, b1, b2, energy) of the records that are not a light's first hit, decoded as
         kernels/record_layout.py lays the key out: what a map made straight from a batch, with no
-        store, sums (the pilot of pipeline/coordinator.py, the benchmark's reference)."""
+        store, sums (the pilot of pipeline/run/coordinator.py, the benchmark's reference)."""
         keep = (self.key & DIRECT_BIT) == 0
         return self.key[keep] & np.uint32(ELEMENT_MASK), self.bary[keep, 0], self.bary[keep, 1], self.energy[keep]
 
@@ -105,13 +107,14 @@ def trace_batch(state: FrameState, elements: ElementMesh, *, n_photons: int, pho
     caster = caster or caster_for(state)
     emit, scatter, table = _kernels(state, elements, caster, backend)
     surface = SurfaceShading(state, caster.normals)
+    one_sided = one_sided_triangles(state)
     rays_before = caster.rays_cast
     key = (int(seed) & 0xFFFFFFFF, int(frame) & 0xFFFFFFFF)
     parts, capped = [], [0]
     for lo in range(0, n_photons, CHUNK):
         photon = photon_start + lo + np.arange(min(CHUNK, n_photons - lo), dtype=np.int64)
         parts.extend(_trace_wavefront(state, caster, table, emit, scatter, photon, key, max_depth, surface,
-                                      capped))
+                                      capped, one_sided))
     if parts:
         key_out = np.concatenate([p[0] for p in parts])
         bary = np.concatenate([p[1] for p in parts])
@@ -123,7 +126,30 @@ def trace_batch(state: FrameState, elements: ElementMesh, *, n_photons: int, pho
                        {"records": len(key_out), "direct": direct, "capped": capped[0]})
 
 
-def _trace_wavefront(state, caster, table, emit, scatter, photon, key, max_depth, surface, capped):
+def one_sided_triangles(state: FrameState) -> np.ndarray | None:
+    """(F,) bool: the triangles of single-sided materials, None when every material is double-sided."""
+    single = np.array([not m.double_sided for m in state.materials], bool)
+    if not single.any():
+        return None
+    return single[state.triangle_material]
+
+
+def absorb_back_hits(tri: np.ndarray, dirs: np.ndarray, normals: np.ndarray,
+                     one_sided: np.ndarray | None) -> np.ndarray:
+    """``tri`` with the hits on the back face of a single-sided triangle turned into misses (-1).
+
+    The back is where the ray travels along the geometric normal (``normals`` (F, 3), the sidedness
+    the bounce kernel uses). Why: such a surface has no back (glTF ``doubleSided`` false), and an
+    element holds one irradiance for both of its faces, so light recorded on the back of a sheet
+    that models a wall or roof from inside would show on its inner face (a light leak)."""
+    if one_sided is None or not len(tri):
+        return tri
+    t = np.maximum(tri, 0)
+    facing = np.einsum("ij,ij->i", np.take(normals, t, axis=0), np.asarray(dirs, np.float64))
+    return np.where((tri >= 0) & np.take(one_sided, t) & (facing > 0.0), -1, tri).astype(tri.dtype, copy=False)
+
+
+def _trace_wavefront(state, caster, table, emit, scatter, photon, key, max_depth, surface, capped, one_sided=None):
     """Yield (key, bary, energy) record arrays of one wavefront of photons, bounce by bounce; add
     the photons still alive after ``max_depth`` hits to ``capped[0]``. The base colour and shading
     normal at each hit come from ``surface`` (pipeline/scene/shading.py)."""
@@ -134,6 +160,7 @@ def _trace_wavefront(state, caster, table, emit, scatter, photon, key, max_depth
         if not len(photon):
             return
         tri, u, v, dist = caster.intersect(origins, dirs)
+        tri = absorb_back_hits(tri, dirs, caster.normals, one_sided)
         if depth == 0 and any(li.definition.range is not None for li in state.lights):
             beta = beta * _range_window(state, table, emitter, dist)[:, None]
         hits = Hits(tri, u, v, dirs, beta, photon, albedo=surface.base_color(tri, u, v) if surface.varies else None,

@@ -11,6 +11,10 @@ Mapping (docs/03-conventions.md §2; written in the README too):
 * everything else is **diffuse**.
 * ``emissiveFactor x KHR_materials_emissive_strength`` (x the ``emissiveTexture``) is emitted radiance
   (front face only).
+* ``doubleSided`` (glTF's default: false): a single-sided surface has no back. Photons that reach
+  its back face are absorbed there, neither recorded nor reflected (pipeline/photons/tracing.py): the back of
+  a wall or roof modelled as one inward-facing sheet is the outside of the building, and light
+  falling on it must not reach the inner face's elements, which hold one irradiance for both sides.
 * A primitive without a material gets :data:`DEFAULT_MATERIAL`, diffuse grey 0.8 (glTF's own default
   would be a white albedo of 1.0, which never loses energy in a closed room).
 """
@@ -38,6 +42,7 @@ class Material:
     emission: tuple[float, float, float]  # emitted radiance, W/(m^2 sr) per channel
     base_color_texture: object = None  # pipeline.scene.textures.Texture multiplying albedo, or None
     emissive_texture: object = None  # a Texture multiplying emission (area lights), or None
+    double_sided: bool = True  # glTF doubleSided; False: photons reaching the back face are absorbed
 
     @property
     def is_specular(self) -> bool:
@@ -77,6 +82,7 @@ def material_from_gltf(mat: pygltflib.Material, index: int) -> Material:
         kind=classify(metallic, roughness),
         roughness=roughness,
         emission=tuple(float(c) for c in emission),
+        double_sided=bool(mat.doubleSided),
     )
 
 

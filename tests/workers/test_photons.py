@@ -212,3 +212,63 @@ def test_records_do_not_depend_on_batch_boundaries(glossy_room):
                          np.concatenate([first.energy, rest.energy]), 6000, 0)
     for a, b in zip(_sorted_records(whole), _sorted_records(halves)):
         assert a.tobytes() == b.tobytes()
+
+
+def _skylit_hall(tmp_path, double_sided: bool):
+    """A 10 x 10 floor (y = 0, facing up) under a roof sheet (y = 2, facing down) with a 1 x 1 hole
+    at its centre, both single-sided unless ``double_sided``, and a sun straight down."""
+    from pipeline.scene.builtin import shapes
+
+    b = GltfBuilder()
+    grey = b.add_material("grey", (0.5, 0.5, 0.5), double_sided=double_sided)
+    floor = shapes.panel((-5, 0, -5), (0, 0, 10), (10, 0, 0), 1.0)
+    roof = shapes.merge([shapes.panel((x0, 2, z0), (dx, 0, 0), (0, 0, dz), 1.0) for x0, z0, dx, dz in
+                         ((-5, -5, 10, 4.5), (-5, 0.5, 10, 4.5), (-5, -0.5, 4.5, 1), (0.5, -0.5, 4.5, 1))])
+    b.add_node("floor", b.add_mesh("floor", *floor, material=grey))
+    b.add_node("roof", b.add_mesh("roof", *roof, material=grey))
+    sun = b.add_directional_light("sun", (1, 1, 1), 3.0)
+    b.add_node("sun", rotation=shapes.look_at((0, 0, 0), (0, -1, 0)), light=sun)
+    return _load(b, tmp_path, "hall.glb", 0.5)
+
+
+def test_sun_through_a_skylight_lights_the_floor_and_not_the_roof_from_outside(tmp_path):
+    """A single-sided roof has no outside: the sun's photons that reach its back are absorbed, so the
+    roof's elements record none from above, and the sun emits from its projection map, so nearly
+    every photon comes through the hole, with the floor's irradiance under it still E.
+
+    Before: the sun emitted over the whole disk covering the scene (about 1 % of its photons came
+    through the hole), and the photons falling on the roof's top were recorded on its elements,
+    whose one irradiance the room below sees."""
+    scene, elements, state = _skylit_hall(tmp_path, double_sided=False)
+    batches = _batches(state, elements, 20_000, max_depth=1)
+    roof = scene.instances.index(next(i for i in scene.instances if i.name.startswith("roof")))
+    lo, hi = elements.instance_elements[roof], elements.instance_elements[roof + 1]
+    estimates, on_floor = [], []
+    for batch in batches:
+        elem = (batch.key & ELEMENT_MASK).astype(np.int64)
+        assert not ((elem >= lo) & (elem < hi)).any()  # depth 1: only first hits, all from above
+        p = _positions(batch, elements, state)
+        under = (np.abs(p[:, 0]) < 0.5) & (np.abs(p[:, 2]) < 0.5)
+        on_floor.append(len(elem) / batch.photons_emitted)
+        estimates.append(batch.energy[under, 1].astype(np.float64).sum() / batch.photons_emitted / 1.0)
+    _assert_within_3se(estimates, 3.0)  # E = 3 W/m^2 over the 1 m^2 under the hole
+    assert np.mean(on_floor) > 0.5
+
+
+def test_a_double_sided_roof_keeps_the_light_on_its_top(tmp_path):
+    """Double-sided (the builder's default), the roof's top is a surface: the sun lights it, its
+    projection map covers it, and the light through the hole is the same E."""
+    scene, elements, state = _skylit_hall(tmp_path, double_sided=True)
+    batches = _batches(state, elements, 20_000, max_depth=1)
+    roof = scene.instances.index(next(i for i in scene.instances if i.name.startswith("roof")))
+    lo, hi = elements.instance_elements[roof], elements.instance_elements[roof + 1]
+    estimates, roof_flux = [], []
+    for batch in batches:
+        elem = (batch.key & ELEMENT_MASK).astype(np.int64)
+        on_roof = (elem >= lo) & (elem < hi)
+        p = _positions(batch, elements, state)
+        under = ~on_roof & (np.abs(p[:, 0]) < 0.5) & (np.abs(p[:, 2]) < 0.5)
+        estimates.append(batch.energy[under, 1].astype(np.float64).sum() / batch.photons_emitted)
+        roof_flux.append(batch.energy[on_roof, 1].astype(np.float64).sum() / batch.photons_emitted)
+    _assert_within_3se(estimates, 3.0)
+    _assert_within_3se(roof_flux, 3.0 * 99.0)  # E over the roof's 100 - 1 m^2

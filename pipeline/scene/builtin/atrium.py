@@ -40,11 +40,16 @@ SUN_DIRECTION = (0.35, -1.0, 0.45)  # the way sunlight travels
 
 
 def _add_hall(b: GltfBuilder) -> None:
-    """Floor, walls and the roof around the skylight, all facing into the hall."""
-    stone = b.add_material("floor_stone", (0.5, 0.48, 0.45))
-    plaster = b.add_material("wall_plaster", (0.7, 0.68, 0.64))
-    ochre = b.add_material("wall_ochre", (0.75, 0.5, 0.2))
-    roof = b.add_material("roof_white", (0.75, 0.75, 0.75))
+    """Floor, walls and the roof around the skylight, all facing into the hall.
+
+    Single-sided (glTF ``doubleSided`` false): each is one sheet whose back is the outside of the
+    building, where the sun falls on the roof and walls. Double-sided, that light was recorded on
+    the sheets' elements, whose one irradiance the hall sees (8 % of the indirect energy at frame
+    151 came in through the roof's and the well's backs), and the sun's photons were spent on it."""
+    stone = b.add_material("floor_stone", (0.5, 0.48, 0.45), double_sided=False)
+    plaster = b.add_material("wall_plaster", (0.7, 0.68, 0.64), double_sided=False)
+    ochre = b.add_material("wall_ochre", (0.75, 0.5, 0.2), double_sided=False)
+    roof = b.add_material("roof_white", (0.75, 0.75, 0.75), double_sided=False)
     (x0, x1), (z0, z1) = SKYLIGHT_X, SKYLIGHT_Z
     at_roof = lambda x, z: (x, HEIGHT, z)  # noqa: E731 - a point on the roof plane
     roof_parts = shapes.merge([  # four quads around the opening, facing down
@@ -55,10 +60,10 @@ def _add_hall(b: GltfBuilder) -> None:
     ])
     up = (0, WELL_HEIGHT, 0)
     well = shapes.merge([  # the skylight well's four sides facing into it; open top and bottom
-        shapes.panel(at_roof(x0, z0), (0, 0, z1 - z0), up, PANEL_CELL),
-        shapes.panel(at_roof(x1, z0), up, (0, 0, z1 - z0), PANEL_CELL),
-        shapes.panel(at_roof(x0, z0), up, (x1 - x0, 0, 0), PANEL_CELL),
-        shapes.panel(at_roof(x0, z1), (x1 - x0, 0, 0), up, PANEL_CELL),
+        shapes.panel(at_roof(x0, z0), up, (0, 0, z1 - z0), PANEL_CELL),
+        shapes.panel(at_roof(x1, z0), (0, 0, z1 - z0), up, PANEL_CELL),
+        shapes.panel(at_roof(x0, z0), (x1 - x0, 0, 0), up, PANEL_CELL),
+        shapes.panel(at_roof(x0, z1), up, (x1 - x0, 0, 0), PANEL_CELL),
     ])
     shell = shapes.room_shell(WIDTH, HEIGHT, DEPTH, cell=PANEL_CELL)  # its ceiling is replaced by the roof
     surfaces = [
