@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from workers.emission import projection_map
-from workers.photons import absorb_back_hits
+from pipeline.photons.emission import projection_map
+from pipeline.photons.tracing import absorb_back_hits
 
 
 class _Skylight:
