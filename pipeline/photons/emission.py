@@ -34,10 +34,12 @@ import numpy as np
 
 from kernels.emit import AREA, DIRECTIONAL, POINT, SKY, SPOT, EmissionTables
 from kernels.philox import EMISSION_STREAM, uniforms
+from kernels.sampling import orthonormal_basis
 from pipeline.scene import FrameState
 from pipeline.scene.shading import SurfaceShading
 
 from .raycast import RayCaster
+from .sidedness import one_sided_triangles
 
 # Disk radius of directional lights, relative to the radius of the scene's bounds.
 DISK_MARGIN = 1.01
@@ -57,8 +59,6 @@ def projection_map(caster: RayCaster, axis: np.ndarray, center: np.ndarray, radi
     kernels/emit.py starts photons, hits a triangle that is not single-sided (``one_sided`` (F,) bool,
     None: none is) or hits it on its front face; then its eight neighbours are kept too. No cell
     kept (the light misses the scene): every cell, the photons go where the disk's went."""
-    from kernels.sampling import orthonormal_basis
-
     axis = np.asarray(axis, np.float64)
     tt, ss = (v[0] for v in orthonormal_basis(axis[None]))
     h = 2.0 * radius / grid
@@ -99,8 +99,6 @@ def emission_tables(state: FrameState, caster: RayCaster) -> EmissionTables:
     kinds, index, flux, group = [], [], [], []
     code = {"point": POINT, "spot": SPOT, "directional": DIRECTIONAL}
     radius = caster.radius * DISK_MARGIN
-    from .photons import one_sided_triangles
-
     one_sided = one_sided_triangles(state)
     light_cells = np.zeros((len(state.lights), 2), np.int64)
     cell_size = np.zeros(len(state.lights))

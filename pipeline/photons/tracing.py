@@ -37,6 +37,7 @@ from pipeline.scene.shading import SurfaceShading
 
 from .emission import emission_tables, textured_emission_weights
 from .raycast import RayCaster, caster_for
+from .sidedness import absorb_back_hits, one_sided_triangles
 
 CHUNK = 1 << 17  # photons per wavefront: bounds memory per worker (about 0.5 GB at most)
 BACKENDS = ("opencl", "numpy")
@@ -124,29 +125,6 @@ def trace_batch(state: FrameState, elements: ElementMesh, *, n_photons: int, pho
     direct = int(np.count_nonzero(key_out & DIRECT_BIT))
     return PhotonBatch(key_out, bary, energy, n_photons, photon_start, caster.rays_cast - rays_before,
                        {"records": len(key_out), "direct": direct, "capped": capped[0]})
-
-
-def one_sided_triangles(state: FrameState) -> np.ndarray | None:
-    """(F,) bool: the triangles of single-sided materials, None when every material is double-sided."""
-    single = np.array([not m.double_sided for m in state.materials], bool)
-    if not single.any():
-        return None
-    return single[state.triangle_material]
-
-
-def absorb_back_hits(tri: np.ndarray, dirs: np.ndarray, normals: np.ndarray,
-                     one_sided: np.ndarray | None) -> np.ndarray:
-    """``tri`` with the hits on the back face of a single-sided triangle turned into misses (-1).
-
-    The back is where the ray travels along the geometric normal (``normals`` (F, 3), the sidedness
-    the bounce kernel uses). Why: such a surface has no back (glTF ``doubleSided`` false), and an
-    element holds one irradiance for both of its faces, so light recorded on the back of a sheet
-    that models a wall or roof from inside would show on its inner face (a light leak)."""
-    if one_sided is None or not len(tri):
-        return tri
-    t = np.maximum(tri, 0)
-    facing = np.einsum("ij,ij->i", np.take(normals, t, axis=0), np.asarray(dirs, np.float64))
-    return np.where((tri >= 0) & np.take(one_sided, t) & (facing > 0.0), -1, tri).astype(tri.dtype, copy=False)
 
 
 def _trace_wavefront(state, caster, table, emit, scatter, photon, key, max_depth, surface, capped, one_sided=None):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.photons.emission import projection_map
-from pipeline.photons.tracing import absorb_back_hits
+from pipeline.photons.sidedness import absorb_back_hits
 
 
 class _Skylight:
