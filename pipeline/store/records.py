@@ -41,6 +41,17 @@ def records_digest(rows: np.ndarray, *extra: int) -> int:
     return int.from_bytes(h.digest()[:8], "little")
 
 
+def parts_digest(parts: Iterable[np.ndarray], *extra: int) -> int:
+    """:func:`records_digest` of arrays one after the other (their little-endian bytes, no
+    joined copy) and the ``extra`` integers: the digest of a batch stored without records (its
+    summary words and hit counts, pipeline/store/photon_store.py)."""
+    h = hashlib.sha256()
+    for part in parts:
+        h.update(np.ascontiguousarray(part, np.asarray(part).dtype.newbyteorder("<")))
+    h.update(np.array(extra, "<i8").tobytes())
+    return int.from_bytes(h.digest()[:8], "little")
+
+
 @dataclass(frozen=True)
 class FrameRecords:
     """One frame's records merged over batches: element-major, batch order within an element."""
@@ -177,7 +188,7 @@ def as_array(value: npt.ArrayLike, name: str, shape_tail: tuple[int, ...], dtype
     if np.dtype(dtype).kind == "u":
         if arr.dtype.kind not in "ui" and arr.size:
             raise LoomError(f"{name} must be integers, got {arr.dtype}", path=where)
-        if arr.size and (arr.min() < 0 or arr.max() > np.iinfo(dtype).max):
+        if arr.size and not np.can_cast(arr.dtype, dtype) and (arr.min() < 0 or arr.max() > np.iinfo(dtype).max):
             raise LoomError(f"{name} has values outside {np.dtype(dtype).name}", path=where)
     elif arr.size and (arr.dtype.kind not in "fiu" or not np.isfinite(arr).all()
                        or (arr < 0).any()):
@@ -233,10 +244,11 @@ def sort_records_reference(key: np.ndarray, bary: np.ndarray, energy: np.ndarray
 
 
 def check_records(key: npt.ArrayLike, bary: npt.ArrayLike, energy: npt.ArrayLike, n_elements: int,
-                  where: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  where: str, *, elements: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(key, bary, energy) of one batch as u32, u16 and f32 arrays, or a one-line LoomError:
-    lengths agree, element ids exist, energies are finite and >= 0 (float32 energies checked on
-    their bits, one comparison a value, as :func:`valid_records` does)."""
+    lengths agree, element ids exist (unless ``elements`` is False: :func:`checked_counts` then
+    checks them), energies are finite and >= 0 (float32 energies checked on their bits, one
+    comparison a value, as :func:`valid_records` does)."""
     key = as_array(key, "key", (), np.uint32, where)
     bary = as_array(bary, "bary", (2,), np.uint16, where)
     energy = np.asarray(energy)
@@ -249,18 +261,38 @@ def check_records(key: npt.ArrayLike, bary: npt.ArrayLike, energy: npt.ArrayLike
     if bary.shape[0] != n or energy.shape[0] != n:
         raise LoomError(f"record arrays differ in length: key {n}, bary {bary.shape[0]}, "
                         f"energy {energy.shape[0]}", path=where)
-    if n and int((key & np.uint32(ELEMENT_MASK)).max()) >= n_elements:
-        raise LoomError(f"element id {int((key & np.uint32(ELEMENT_MASK)).max())} >= n_elements {n_elements}",
-                        path=where)
+    if elements and n:
+        _check_elements(key, n_elements, where)
     return key, bary, energy
+
+
+def _check_elements(key: np.ndarray, n_elements: int, where: str) -> None:
+    top = int((key & np.uint32(ELEMENT_MASK)).max())
+    if top >= n_elements:
+        raise LoomError(f"element id {top} >= n_elements {n_elements}", path=where)
 
 
 def category_counts(key: np.ndarray, n_elements: int) -> np.ndarray:
     """u64 (4, n_elements): hits per category (CATEGORIES order) and element; order-free."""
+    return _category_counts(key, n_elements)[:, :n_elements]
+
+
+def checked_counts(key: np.ndarray, n_elements: int, where: str) -> np.ndarray:
+    """:func:`category_counts` of keys :func:`check_records` passed with ``elements=False``, or
+    the LoomError it would have raised: an element id past the mesh shows in the counts' length,
+    so the ids cost no pass of their own."""
+    counts = _category_counts(key, n_elements)
+    if counts.shape[1] > n_elements:
+        _check_elements(key, n_elements, where)
+    return counts
+
+
+def _category_counts(key: np.ndarray, n_elements: int) -> np.ndarray:
     # element << 2 | category is the key rotated left by 2 (sort_records' group): one bincount
-    group = (key << np.uint32(2)) | (key >> np.uint32(ELEMENT_BITS))
+    group = key << np.uint32(2)
+    group |= key >> np.uint32(ELEMENT_BITS)
     counts = np.bincount(group, minlength=len(CATEGORIES) * n_elements)
-    return np.ascontiguousarray(counts.reshape(n_elements, len(CATEGORIES)).T, np.uint64)
+    return np.ascontiguousarray(counts.reshape(-1, len(CATEGORIES)).T, np.uint64)
 
 
 def element_grouped(key: np.ndarray, bary: np.ndarray, energy: np.ndarray,
