@@ -196,14 +196,13 @@ class FrameSums:
     def _summary(store, src: int, batch: int, elements, photons_emitted: int, clock: StageClock) -> SummedFrame:
         """A batch's indirect sums and direct flux: its stored summary; if that is damaged, summed
         from its records where the store keeps them."""
-        found = store.read_summary(src, batch)
-        if found is not None:
-            try:
-                parts = decode(found, elements)
-                clock.lap("read_s")
-                return SummedFrame(*parts, photons_emitted)
-            except ValueError:
-                pass  # made on another element mesh, or damaged past its digest: the records decide
+        try:  # decoded from the store's scratch arrays: no new memory for the read (PhotonStore.read_summary)
+            parts = store.read_summary(src, batch, use=lambda words: decode(words, elements))
+        except ValueError:
+            parts = None  # made on another element mesh, or damaged past its CRC: the records decide
+        if parts is not None:
+            clock.lap("read_s")
+            return SummedFrame(*parts, photons_emitted)
         if not store.keep_records:
             raise LoomError(f"frame {src} batch {batch}: batch sums missing or damaged and no hit records kept; "
                             "delete the photon store to trace its photons again", path=store.url)

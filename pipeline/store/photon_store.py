@@ -16,7 +16,7 @@ from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
-from typing import NamedTuple
+from typing import NamedTuple, TypeVar
 
 import numcodecs.blosc
 import numpy as np
@@ -44,12 +44,14 @@ from .records import (
     checked_counts,
     parts_digest,
     records_digest,
+    scratch,
     sorted_batch,
     unpack_records,
     valid_records,
 )
 
 log = logging.getLogger(__name__)
+T = TypeVar("T")
 FORMAT = "photonloom.photons"
 FORMAT_VERSION = 5  # 5: one object a batch (done marker, running counts, sums); 4: marker, counts and
 # sums in three objects; 3: records always, sums optional; 2: BLAKE2b, zstd tables; 1: key/bary/energy/offsets
@@ -212,6 +214,23 @@ class _Raw:
         out = sync(fetch())
         _counted("read_bytes", sum(len(d) for d in out if d is not None))
         return out
+
+    def get_into(self, key: str, offset: int, out: np.ndarray) -> np.ndarray | bytes | None:
+        """``out.nbytes`` bytes of the object at ``key`` from ``offset``: on a LocalStore read into
+        ``out`` (the part of it read returned; no new memory), elsewhere as new bytes; None where
+        the object is absent."""
+        if self.root is None:
+            return self.get_many([key], [(offset, out.nbytes)])[0]
+        try:
+            with open(os.path.join(self.root, key), "rb", buffering=0) as fh:
+                fh.seek(offset)
+                view, n = memoryview(out).cast("B"), 0
+                while n < len(view) and (got := fh.readinto(view[n:])):
+                    n += got
+        except (FileNotFoundError, NotADirectoryError):
+            return None
+        _counted("read_bytes", n)
+        return out.reshape(-1).view(np.uint8)[:n]
 
     def set_many(self, items: list[tuple[str, bytes | tuple[bytes, ...]]], *, write_once: Iterable[str] = ()) -> None:
         """Write every (key, bytes), the bytes given whole or as a tuple of parts written one after
@@ -804,25 +823,35 @@ class PhotonStore:
         self._raw.set_many([(self._batch_key(p.frame, p.batch), (head.pack(p.frame, p.batch), counts, words))])
         self._rows[(p.frame, p.batch)] = head
 
-    def read_summary(self, frame_index: int, batch: int) -> np.ndarray | None:
+    def read_summary(self, frame_index: int, batch: int, *, use: Callable[[np.ndarray], T] | None = None
+                     ) -> np.ndarray | T | None:
         """The u32 words of the summary a done batch's writer stored
         (``write_batch(summarise=...)``), or None when the batch is not done, has none, or its
-        summary is damaged (its CRC or length; a warning)."""
+        summary is damaged (its CRC or length; a warning). With ``use``: ``use(words)`` of words
+        read and decompressed into this thread's scratch arrays (records.scratch: no new memory a
+        batch), valid only during the call."""
         f = self.source_frame(frame_index)
         b = as_int(batch, "batch", self.url, 0, self.max_batches)
         head = self._header(f, b)
         if head is None or head.n_words == NO_SUMMARY:
             return None
-        return self._summary_words(f, b, head)
+        words = self._summary_words(f, b, head, reuse=use is not None)
+        return words if use is None or words is None else use(words)
 
-    def _summary_words(self, f: int, b: int, head: _Header) -> np.ndarray | None:
-        (data,) = self._raw.get_many([self._batch_key(f, b)], [(HEAD + head.counts_bytes, head.words_bytes)])
+    def _summary_words(self, f: int, b: int, head: _Header, reuse: bool = False) -> np.ndarray | None:
+        """The summary words of a done batch, checked (its CRC-32 and length); ``reuse``: in the
+        thread's scratch arrays."""
+        data = self._raw.get_into(self._batch_key(f, b), HEAD + head.counts_bytes,
+                                  scratch("summary_bytes", head.words_bytes, np.uint8) if reuse
+                                  else np.empty(head.words_bytes, np.uint8))
         words = None
-        if data is not None and len(data) == head.words_bytes and zlib.crc32(data) == head.words_crc:
+        if data is not None and len(data) == head.words_bytes and zlib.crc32(data) == head.words_crc \
+                and int.from_bytes(bytes(data[4:8]), "little") == 4 * head.n_words:  # blosc header: bytes out
+            words = scratch("summary_words", head.n_words, "<u4") if reuse else np.empty(head.n_words, "<u4")
             try:
-                words = _decode(data, "<u4", head.n_words)
+                numcodecs.blosc.decompress(data, words)
             except (ValueError, RuntimeError):
-                pass
+                words = None
         if words is None:
             log.warning("%s: frame %d batch %d: damaged batch summary ignored", self.url, f, b)
         return words

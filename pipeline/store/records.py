@@ -5,6 +5,7 @@ Pure NumPy, no zarr: what a batch of records must satisfy before the store write
 from __future__ import annotations
 
 import hashlib
+import threading
 from collections.abc import Iterable
 from dataclasses import dataclass
 
@@ -288,11 +289,37 @@ def checked_counts(key: np.ndarray, n_elements: int, where: str) -> np.ndarray:
 
 
 def _category_counts(key: np.ndarray, n_elements: int) -> np.ndarray:
-    # element << 2 | category is the key rotated left by 2 (sort_records' group): one bincount
-    group = key << np.uint32(2)
-    group |= key >> np.uint32(ELEMENT_BITS)
+    # element << 2 | category is the key rotated left by 2 (sort_records' group): one bincount, of
+    # intp values made in the thread's scratch arrays (bincount copies anything else into a new one)
+    n = key.shape[0]
+    group, category = scratch("group", n, np.intp), scratch("category", n, np.uint32)
+    np.left_shift(key, np.uint32(2), out=category)  # element << 2, the category bits shifted out
+    np.copyto(group, category)
+    np.right_shift(key, np.uint32(ELEMENT_BITS), out=category)
+    np.bitwise_or(group, category, out=group)
     counts = np.bincount(group, minlength=len(CATEGORIES) * n_elements)
     return np.ascontiguousarray(counts.reshape(-1, len(CATEGORIES)).T, np.uint64)
+
+
+_SCRATCH = threading.local()
+
+
+def scratch(name: str, n: int, dtype: npt.DTypeLike) -> np.ndarray:
+    """A 1-D array of ``n`` ``dtype`` values (contents undefined) that this thread gets again at
+    the next call with ``name``, grown to the next power of two when too small.
+
+    For temporaries of the store's hot paths: an array the size of a batch, new at every call,
+    costs a page fault a 4 KiB page, and on the build machines (whose free memory the host
+    reclaims, README "Where the I/O row's time goes") that is 3-33 us a page, several ms a batch.
+    The caller uses the array before its next call with the same name and returns none of it."""
+    size = n * np.dtype(dtype).itemsize
+    kept = getattr(_SCRATCH, "arrays", None)
+    if kept is None:
+        kept = _SCRATCH.arrays = {}
+    buf = kept.get(name)
+    if buf is None or buf.nbytes < size:
+        buf = kept[name] = np.empty(1 << max(12, (size - 1).bit_length()), np.uint8)
+    return buf[:size].view(dtype)
 
 
 def element_grouped(key: np.ndarray, bary: np.ndarray, energy: np.ndarray,
