@@ -75,7 +75,7 @@ chunk reads only the rows its windows can reach (pipeline/temporal.py).
 
 Digest and checks. The header's digest is the first 64 bits of SHA-256 over the batch's packed
 rows (as on disk, uncompressed) and (photon_start, photons_emitted) where records are kept, else
-over its summary words and its own hit counts (u64) and the same two numbers, one pass
+over its summary words and its own hit counts (u32) and the same two numbers, one pass
 (records.parts_digest): what a rewrite of a done batch is compared by, and what
 :meth:`PhotonStore.verify_batch` checks kept records against. SHA-256 runs in hardware on current
 x86 and ARM cores (about 0.5 ms a ROOM batch of 125,000 records). Damage is told by CRC-32 (zlib,
@@ -95,15 +95,19 @@ a done batch never changes once written. ``file://`` URLs map to LocalStore for 
 URLs rely on the object store writing each object whole. A killed writer may leave ``*.partial``
 temp files, which zarr never reads.
 
-Caches. A store instance reads each done batch's header once (it never changes). On a LocalStore
-it also reuses the done table (one directory listing and the headers not yet read) and the
-sources while the ``batch/`` directory and the ``source`` chunk are unchanged (stat), so the
-hundreds of small queries of a reconstruction task cost microseconds, and a batch another process
-finishes is still seen. Instances from :meth:`PhotonStore.open_shared` (one per worker process)
-also keep decoded frames (``read_frame`` of done batches, which never change) up to
+Caches. A store instance reads each done batch's header once (it never changes), and a writer
+keeps the running counts of the last batch it wrote of each frame (up to ``RUNNING_CACHE_BYTES``,
+64 MiB), so that the frame's next batch, when it writes that one too, adds to them without reading
+them back. On a LocalStore it also reuses the done table (one directory listing and the headers not
+yet read) and the sources while the ``batch/`` directory and the ``source`` chunk are unchanged
+(stat), so the hundreds of small queries of a reconstruction task cost microseconds, and a batch
+another process finishes is still seen. Instances from :meth:`PhotonStore.open_shared` (one per
+worker process) also keep decoded frames (``read_frame`` of done batches, which never change) up to
 ``RECORD_CACHE_BYTES`` (192 MiB), least recently used out first, their arrays read-only:
 reconstruction chunks next to each other reach the same F_max frames, and the second one on a
-worker decodes none of them again.
+worker decodes none of them again. The hot paths' batch-sized temporaries (the hit counts' keys, a
+summary read and decompressed) live in per-thread scratch arrays (records.scratch): a new page
+costs 3-33 us on the build machines, several ms a batch.
 
 Illumination maps (``illumination/``, pipeline/store/illumination.py) live in the same group.
 

@@ -512,3 +512,23 @@ def test29_a_store_of_format_4_is_refused_in_one_line(tmp_path):
         assert "\n" not in message and old.url in message
         assert "format version 4" in message and "reads version 5" in message and "delete it" in message
     assert snapshot(tmp_path / "old.zarr") == before
+
+
+def test30_a_writer_adds_to_the_running_counts_it_wrote_without_reading_them(tmp_path):
+    """The next batch of a frame written by the instance that wrote the one before reads nothing
+    back (its running counts are kept); by another instance it reads them from the batch object;
+    the stores end byte-identical."""
+    from pipeline.store import counting_io
+
+    one, fresh = (create(tmp_path / name, keep_records=False) for name in ("one", "fresh"))
+    start = 0
+    for b, n in enumerate([3000, 3000, 6000]):
+        batch = make_batch(1, b, n, N_ELEMENTS, photon_start=start)
+        start += batch["photons_emitted"]
+        with counting_io() as same:
+            one.write_batch(1, b, **batch, summarise=_element_hits)
+        with counting_io() as other:
+            PhotonStore.open(fresh.url, mode="r+").write_batch(1, b, **batch, summarise=_element_hits)
+        assert same["read_bytes"] == 0 and (other["read_bytes"] > 0) == (b > 0)
+    assert contents(tmp_path / "one") == contents(tmp_path / "fresh")
+    np.testing.assert_array_equal(PhotonStore.open(one.url).counts(frames=[1]), fresh.counts(frames=[1]))
