@@ -274,31 +274,38 @@ def _check_elements(key: np.ndarray, n_elements: int, where: str) -> None:
 
 
 def category_counts(key: np.ndarray, n_elements: int) -> np.ndarray:
-    """u64 (4, n_elements): hits per category (CATEGORIES order) and element; order-free."""
-    return _category_counts(key, n_elements)[:, :n_elements]
+    """u64 (4, n_elements): hits per category (CATEGORIES order) and element of checked keys;
+    order-free."""
+    return _counts_of(_groups(key), n_elements)
 
 
 def checked_counts(key: np.ndarray, n_elements: int, where: str) -> np.ndarray:
     """:func:`category_counts` of keys :func:`check_records` passed with ``elements=False``, or
-    the LoomError it would have raised: an element id past the mesh shows in the counts' length,
-    so the ids cost no pass of their own."""
-    counts = _category_counts(key, n_elements)
-    if counts.shape[1] > n_elements:
+    the LoomError it would have raised: the element ids are checked on the groups the counts are
+    made of (no array of their own)."""
+    group = _groups(key)
+    if group.size and int(group.max()) >= len(CATEGORIES) * n_elements:
         _check_elements(key, n_elements, where)
-    return counts
+    return _counts_of(group, n_elements)
 
 
-def _category_counts(key: np.ndarray, n_elements: int) -> np.ndarray:
-    # element << 2 | category is the key rotated left by 2 (sort_records' group): one bincount, of
-    # intp values made in the thread's scratch arrays (bincount copies anything else into a new one)
+def _groups(key: np.ndarray) -> np.ndarray:
+    """element << 2 | category of every key (the key rotated left by 2, sort_records' group), as
+    the intp values bincount takes as they are (it copies anything else into a new array), in
+    the thread's scratch arrays: valid until the thread's next call."""
     n = key.shape[0]
     group, category = scratch("group", n, np.intp), scratch("category", n, np.uint32)
     np.left_shift(key, np.uint32(2), out=category)  # element << 2, the category bits shifted out
     np.copyto(group, category)
     np.right_shift(key, np.uint32(ELEMENT_BITS), out=category)
     np.bitwise_or(group, category, out=group)
-    counts = np.bincount(group, minlength=len(CATEGORIES) * n_elements)
-    return np.ascontiguousarray(counts.reshape(-1, len(CATEGORIES)).T, np.uint64)
+    return group
+
+
+def _counts_of(group: np.ndarray, n_elements: int) -> np.ndarray:
+    size = len(CATEGORIES) * n_elements
+    counts = np.bincount(group, minlength=size)[:size]
+    return np.ascontiguousarray(counts.reshape(n_elements, len(CATEGORIES)).T, np.uint64)
 
 
 _SCRATCH = threading.local()

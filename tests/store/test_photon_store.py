@@ -532,3 +532,16 @@ def test30_a_writer_adds_to_the_running_counts_it_wrote_without_reading_them(tmp
         assert same["read_bytes"] == 0 and (other["read_bytes"] > 0) == (b > 0)
     assert contents(tmp_path / "one") == contents(tmp_path / "fresh")
     np.testing.assert_array_equal(PhotonStore.open(one.url).counts(frames=[1]), fresh.counts(frames=[1]))
+
+
+@pytest.mark.parametrize("element", [N_ELEMENTS, (1 << 30) - 1])
+def test31_a_store_without_records_refuses_unknown_elements_too(tmp_path, element):
+    """Without records the element ids are checked on the hit counts' groups: the same one-line
+    refusal, nothing written, even for the largest id (no count table of its size is made)."""
+    store = create(tmp_path / "s.zarr", keep_records=False)
+    batch = make_batch(0, 0, 50, N_ELEMENTS)
+    batch["key"][7] = (batch["key"][7] & ~np.uint32(ELEMENT_MASK)) | np.uint32(element)
+    with pytest.raises(LoomError, match=f"element id {element} >= n_elements {N_ELEMENTS}") as err:
+        store.write_batch(0, 0, **batch, summarise=_element_hits)
+    assert "\n" not in str(err.value) and store.done_batches(0) == []
+    assert not (tmp_path / "s.zarr" / "batch").exists()
