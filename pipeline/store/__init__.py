@@ -35,7 +35,8 @@ version is refused with a one-line error saying to delete it or render elsewhere
                          (2^64 - 1: none), length and CRC-32, and the CRC-32 of the header before it.
                          Then two blosc lz4 + shuffle blocks of u32:
                          counts (4, E): hits of batches 0..b (running sum) per category
-                           indirect-even, indirect-odd, direct-even, direct-odd;
+                           indirect-even, indirect-odd, direct-even, direct-odd (the batch's own
+                           counted by the summariser's grouping of its records, or by the store);
                          summary: the batch's sums as words (pipeline/batch_sums.py), derived by its
                            writer from the records (``write_batch(summarise=...)``). A summary
                            whose length or CRC does not match is ignored with a warning

@@ -1,6 +1,7 @@
 """PhotonStore: the zarr v3 group of a run (layout and guarantees in ``pipeline.store``)."""
 from __future__ import annotations
 
+import asyncio
 import json
 import logging
 import os
@@ -40,8 +41,8 @@ from .records import (
     FrameRecords,
     SortedBatch,
     as_int,
+    category_counts,
     check_records,
-    checked_counts,
     parts_digest,
     records_digest,
     scratch,
@@ -207,7 +208,6 @@ class _Raw:
             return out
 
         async def fetch():
-            import asyncio
             got = await asyncio.gather(*(self.store.get(
                 k, prototype=default_buffer_prototype(),
                 byte_range=None if s is None else RangeByteRequest(s[0], s[0] + s[1])) for k, s in zip(keys, spans)))
@@ -246,7 +246,6 @@ class _Raw:
             return
 
         async def put():
-            import asyncio
             proto = default_buffer_prototype()
             await asyncio.gather(*(self.store.set(k, proto.buffer.from_bytes(b"".join(v))) for k, v in items))
         sync(put())
@@ -732,8 +731,10 @@ class PhotonStore:
         a different one is refused (non-deterministic tracer). Batch b needs b-1 done.
         ``summarise``: u32 words derived from the batch's checked (key, bary, energy) in the order
         given (pipeline/batch_sums.py summariser), stored in the batch object
-        (:meth:`read_summary`): what a render reads of the batch. Only a store that keeps records
-        may go without; only such a store sorts them into the total order.
+        (:meth:`read_summary`): what a render reads of the batch; or (words, counts) with the
+        records' :func:`~pipeline.store.records.category_counts` as a summariser that groups them
+        by element counts them anyway (the store then does not count them again). Only a store
+        that keeps records may go without; only such a store sorts them into the total order.
         """
         if summarise is None and not self.keep_records:
             raise ValueError("a store without records needs the batch's summary (summarise)")  # a caller's bug
@@ -761,9 +762,7 @@ class PhotonStore:
         if src != f:
             raise LoomError(f"frame {f} shares the photons of frame {src}; write to {src}",
                             path=where)
-        # Without records the element ids are checked by the hit counts (checked_counts)
-        key, bary, energy = check_records(key, bary, energy, self.n_elements, where, elements=self.keep_records)
-        counts = None if self.keep_records else checked_counts(key, self.n_elements, where)
+        key, bary, energy = check_records(key, bary, energy, self.n_elements, where)
         emitted = as_int(photons_emitted, "photons_emitted", where, 1)
         start = as_int(photon_start, "photon_start", where, 0)
         expected_start = 0
@@ -776,14 +775,26 @@ class PhotonStore:
         if start != expected_start:
             raise LoomError(f"photon_start {start} is not contiguous: the previous batch ends at "
                             f"{expected_start}", path=where)
-        summary = None
+        summary = counts = None
         if summarise is not None:
-            summary = np.asarray(summarise(key, bary, energy))
+            made = summarise(key, bary, energy)
+            summary, counts = made if isinstance(made, tuple) else (made, None)
+            summary = np.asarray(summary)
             if summary.dtype != np.uint32 or summary.ndim != 1:
                 raise TypeError(f"a batch summary is 1-D u32 words, not {summary.dtype} {summary.shape}")
             summary = np.ascontiguousarray(summary, "<u4")
+            if counts is not None:  # the summariser's own count of the records (category_counts)
+                counts = np.asarray(counts)
+                if counts.shape != (len(CATEGORIES), self.n_elements) or counts.dtype.kind not in "ui" \
+                        or int(counts.sum(dtype=np.uint64)) != key.shape[0]:
+                    raise TypeError(f"a summariser's hit counts are ({len(CATEGORIES)}, {self.n_elements}) integers "
+                                    f"adding up to the {key.shape[0]} records, not {counts.dtype} {counts.shape}")
         records = sorted_batch(key, bary, energy, self.n_elements) if self.keep_records else None
-        counts = records.counts if records is not None else counts
+        if records is not None:
+            counts = records.counts
+        elif counts is None:
+            counts = category_counts(key, self.n_elements)
+        counts = np.asarray(counts, np.uint64)
         # Without records, one pass over the summary and the counts (u32, as stored), no joined copy
         digest = records.digest(start, emitted) if records is not None else \
             parts_digest([summary, counts.astype("<u4")], start, emitted)

@@ -245,11 +245,10 @@ def sort_records_reference(key: np.ndarray, bary: np.ndarray, energy: np.ndarray
 
 
 def check_records(key: npt.ArrayLike, bary: npt.ArrayLike, energy: npt.ArrayLike, n_elements: int,
-                  where: str, *, elements: bool = True) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                  where: str) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """(key, bary, energy) of one batch as u32, u16 and f32 arrays, or a one-line LoomError:
-    lengths agree, element ids exist (unless ``elements`` is False: :func:`checked_counts` then
-    checks them), energies are finite and >= 0 (float32 energies checked on their bits, one
-    comparison a value, as :func:`valid_records` does)."""
+    lengths agree, element ids exist, energies are finite and >= 0 (float32 energies checked on
+    their bits, one comparison a value, as :func:`valid_records` does)."""
     key = as_array(key, "key", (), np.uint32, where)
     bary = as_array(bary, "bary", (2,), np.uint16, where)
     energy = np.asarray(energy)
@@ -262,48 +261,24 @@ def check_records(key: npt.ArrayLike, bary: npt.ArrayLike, energy: npt.ArrayLike
     if bary.shape[0] != n or energy.shape[0] != n:
         raise LoomError(f"record arrays differ in length: key {n}, bary {bary.shape[0]}, "
                         f"energy {energy.shape[0]}", path=where)
-    if elements and n:
-        _check_elements(key, n_elements, where)
+    if n:  # the element ids in the thread's scratch array (no new memory a batch)
+        top = int(np.bitwise_and(key, np.uint32(ELEMENT_MASK), out=scratch("element", n, np.uint32)).max())
+        if top >= n_elements:
+            raise LoomError(f"element id {top} >= n_elements {n_elements}", path=where)
     return key, bary, energy
-
-
-def _check_elements(key: np.ndarray, n_elements: int, where: str) -> None:
-    top = int((key & np.uint32(ELEMENT_MASK)).max())
-    if top >= n_elements:
-        raise LoomError(f"element id {top} >= n_elements {n_elements}", path=where)
 
 
 def category_counts(key: np.ndarray, n_elements: int) -> np.ndarray:
     """u64 (4, n_elements): hits per category (CATEGORIES order) and element of checked keys;
-    order-free."""
-    return _counts_of(_groups(key), n_elements)
-
-
-def checked_counts(key: np.ndarray, n_elements: int, where: str) -> np.ndarray:
-    """:func:`category_counts` of keys :func:`check_records` passed with ``elements=False``, or
-    the LoomError it would have raised: the element ids are checked on the groups the counts are
-    made of (no array of their own)."""
-    group = _groups(key)
-    if group.size and int(group.max()) >= len(CATEGORIES) * n_elements:
-        _check_elements(key, n_elements, where)
-    return _counts_of(group, n_elements)
-
-
-def _groups(key: np.ndarray) -> np.ndarray:
-    """element << 2 | category of every key (the key rotated left by 2, sort_records' group), as
-    the intp values bincount takes as they are (it copies anything else into a new array), in
-    the thread's scratch arrays: valid until the thread's next call."""
-    n = key.shape[0]
+    order-free. One bincount of element << 2 | category (the key rotated left by 2, sort_records'
+    group), made as the intp values bincount takes as they are (it copies anything else into a
+    new array) in the thread's scratch arrays."""
+    n, size = key.shape[0], len(CATEGORIES) * n_elements
     group, category = scratch("group", n, np.intp), scratch("category", n, np.uint32)
     np.left_shift(key, np.uint32(2), out=category)  # element << 2, the category bits shifted out
     np.copyto(group, category)
     np.right_shift(key, np.uint32(ELEMENT_BITS), out=category)
     np.bitwise_or(group, category, out=group)
-    return group
-
-
-def _counts_of(group: np.ndarray, n_elements: int) -> np.ndarray:
-    size = len(CATEGORIES) * n_elements
     counts = np.bincount(group, minlength=size)[:size]
     return np.ascontiguousarray(counts.reshape(n_elements, len(CATEGORIES)).T, np.uint64)
 
@@ -329,20 +304,25 @@ def scratch(name: str, n: int, dtype: npt.DTypeLike) -> np.ndarray:
     return buf[:size].view(dtype)
 
 
-def element_grouped(key: np.ndarray, bary: np.ndarray, energy: np.ndarray,
-                    n_elements: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+def element_grouped(key: np.ndarray, bary: np.ndarray, energy: np.ndarray, n_elements: int, *,
+                    with_counts: bool = False) -> tuple[np.ndarray, ...]:
     """(key, bary, energy, offsets) grouped by element, each element's records in input order: the
     order a batch's sums are added in (pipeline/batch_sums.py). A counting sort per 16-bit digit of
     the element id (one pass below 65,536 elements), a fraction of the total order's cost; the
-    tracer's output order is itself deterministic (workers/photons.py), so the sums are too."""
+    tracer's output order is itself deterministic (workers/photons.py), so the sums are too.
+    ``with_counts``: and the :func:`category_counts` of the keys, from the one bincount that gives
+    the offsets (per element and category instead of per element)."""
     element = key & np.uint32(ELEMENT_MASK)
     n = key.shape[0]
     top = int(element.max()) if n else 0
     order = _lsd_order([(element >> np.uint32(s)).astype(np.uint16) for s in range(0, max(1, top.bit_length()), 16)]
                        ) if n else np.empty(0, np.int64)
     offsets = np.zeros(n_elements + 1, np.int64)
-    np.cumsum(np.bincount(element, minlength=n_elements), out=offsets[1:])
-    return np.take(key, order), np.take(bary, order, axis=0), np.take(energy, order, axis=0), offsets
+    counts = category_counts(key, n_elements) if with_counts else None
+    np.cumsum(counts.sum(axis=0, dtype=np.int64) if with_counts else np.bincount(element, minlength=n_elements),
+              out=offsets[1:])
+    grouped = (np.take(key, order), np.take(bary, order, axis=0), np.take(energy, order, axis=0), offsets)
+    return (*grouped, counts) if with_counts else grouped
 
 
 def sorted_batch(key: np.ndarray, bary: np.ndarray, energy: np.ndarray, n_elements: int) -> SortedBatch:

@@ -11,7 +11,17 @@ import zarr
 from photonstore_helpers import IDENTITY, contents, make_batch, snapshot, write_frame
 
 from pipeline.errors import LoomError
-from pipeline.store import CATEGORIES, ELEMENT_MASK, RECORD_BYTES, FrameRecords, PhotonStore, pack_key, sort_records
+from pipeline.store import (
+    CATEGORIES,
+    ELEMENT_MASK,
+    RECORD_BYTES,
+    FrameRecords,
+    PhotonStore,
+    counting_io,
+    pack_key,
+    sort_records,
+)
+from pipeline.store.records import category_counts
 
 N_ELEMENTS = 500
 
@@ -518,8 +528,6 @@ def test30_a_writer_adds_to_the_running_counts_it_wrote_without_reading_them(tmp
     """The next batch of a frame written by the instance that wrote the one before reads nothing
     back (its running counts are kept); by another instance it reads them from the batch object;
     the stores end byte-identical."""
-    from pipeline.store import counting_io
-
     one, fresh = (create(tmp_path / name, keep_records=False) for name in ("one", "fresh"))
     start = 0
     for b, n in enumerate([3000, 3000, 6000]):
@@ -536,8 +544,8 @@ def test30_a_writer_adds_to_the_running_counts_it_wrote_without_reading_them(tmp
 
 @pytest.mark.parametrize("element", [N_ELEMENTS, (1 << 30) - 1])
 def test31_a_store_without_records_refuses_unknown_elements_too(tmp_path, element):
-    """Without records the element ids are checked on the hit counts' groups: the same one-line
-    refusal, nothing written, even for the largest id (no count table of its size is made)."""
+    """Without records too an unknown element id is refused in one line before anything is
+    counted, summed or written, even the largest id."""
     store = create(tmp_path / "s.zarr", keep_records=False)
     batch = make_batch(0, 0, 50, N_ELEMENTS)
     batch["key"][7] = (batch["key"][7] & ~np.uint32(ELEMENT_MASK)) | np.uint32(element)
@@ -545,3 +553,21 @@ def test31_a_store_without_records_refuses_unknown_elements_too(tmp_path, elemen
         store.write_batch(0, 0, **batch, summarise=_element_hits)
     assert "\n" not in str(err.value) and store.done_batches(0) == []
     assert not (tmp_path / "s.zarr" / "batch").exists()
+
+
+def test32_a_summarisers_hit_counts_are_taken_when_they_add_up(tmp_path):
+    """A summarise that returns (words, counts), as pipeline/batch_sums.summariser does, gives the
+    store the batch's counts (the same bytes as counting them itself); counts that are not
+    (4, n_elements) integers adding up to the records are a caller's bug."""
+    plain, given = (create(tmp_path / name, keep_records=False) for name in ("plain", "given"))
+    batch = make_batch(0, 0, 4000, N_ELEMENTS)
+    plain.write_batch(0, 0, **batch, summarise=_element_hits)
+    given.write_batch(0, 0, **batch, summarise=lambda k, b, e: (_element_hits(k, b, e),
+                                                                 category_counts(k, N_ELEMENTS)))
+    assert contents(tmp_path / "plain") == contents(tmp_path / "given")
+    wrong = category_counts(batch["key"], N_ELEMENTS)
+    wrong[0, 0] += 1
+    for counts in (wrong, wrong[:, :-1], wrong.astype(np.float64)):
+        with pytest.raises(TypeError, match="hit counts"):
+            given.write_batch(1, 0, **batch, summarise=lambda k, b, e, c=counts: (_element_hits(k, b, e), c))
+    assert given.done_batches(1) == []
