@@ -104,16 +104,18 @@ def decode(words: np.ndarray, elements: ElementMesh) -> tuple[np.ndarray, np.nda
     return sums, flux
 
 
-def summariser(elements: ElementMesh) -> Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray]:
+def summariser(elements: ElementMesh) -> Callable[[np.ndarray, np.ndarray, np.ndarray],
+                                                 tuple[np.ndarray, np.ndarray]]:
     """``write_batch``'s ``summarise`` for batches bucketed on ``elements``: the batch's records
     (key, bary, energy as the tracer gave them) grouped by element, each element's in that order
     (pipeline/store/records.element_grouped), and summed. The tracer's order is deterministic
     (pipeline/photons/tracing.py), so the sums are; a damaged summary re-made from kept records, which are
-    stored in the total order, agrees with it to float32 rounding, not always to the bit."""
-    def summarise(key: np.ndarray, bary: np.ndarray, energy: np.ndarray) -> np.ndarray:
-        grouped = FrameRecords.merge(0, 0, (0,), [element_grouped(key, bary, energy, elements.n_elements)],
-                                     elements.n_elements, 1)
-        return batch_summary(grouped, elements)
+    stored in the total order, agrees with it to float32 rounding, not always to the bit. Returns
+    the summary's words and the batch's hit counts per category and element, which the grouping
+    counts anyway (the store takes them instead of counting the records again)."""
+    def summarise(key: np.ndarray, bary: np.ndarray, energy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        *grouped, counts = element_grouped(key, bary, energy, elements.n_elements, with_counts=True)
+        return batch_summary(FrameRecords.merge(0, 0, (0,), [grouped], elements.n_elements, 1), elements), counts
     return summarise
 
 
@@ -194,14 +196,13 @@ class FrameSums:
     def _summary(store, src: int, batch: int, elements, photons_emitted: int, clock: StageClock) -> SummedFrame:
         """A batch's indirect sums and direct flux: its stored summary; if that is damaged, summed
         from its records where the store keeps them."""
-        found = store.read_summary(src, batch)
-        if found is not None:
-            try:
-                parts = decode(found, elements)
-                clock.lap("read_s")
-                return SummedFrame(*parts, photons_emitted)
-            except ValueError:
-                pass  # made on another element mesh, or damaged past its digest: the records decide
+        try:  # decoded from the store's scratch arrays: no new memory for the read (PhotonStore.read_summary)
+            parts = store.read_summary(src, batch, use=lambda words: decode(words, elements))
+        except ValueError:
+            parts = None  # made on another element mesh, or damaged past its CRC: the records decide
+        if parts is not None:
+            clock.lap("read_s")
+            return SummedFrame(*parts, photons_emitted)
         if not store.keep_records:
             raise LoomError(f"frame {src} batch {batch}: batch sums missing or damaged and no hit records kept; "
                             "delete the photon store to trace its photons again", path=store.url)

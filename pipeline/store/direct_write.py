@@ -1,9 +1,9 @@
 """Writing a file past the page cache (``O_DIRECT``), for objects written once and seldom read.
 
 A batch's photon records are the store's truth but, once its summary is stored beside them
-(pipeline/batch_sums.py), nothing in a render reads them again. Written the usual way, every byte
+(pipeline/collection/batch_sums.py), nothing in a render reads them again. Written the usual way, every byte
 first lands in a newly allocated page-cache page. On the build machines (Firecracker VMs whose
-free memory the host reclaims, README "Where the I/O row's time goes") a new page costs 3-33 us,
+free memory the host reclaims, docs/13-cluster.md §5) a new page costs 3-33 us,
 so a 1.8 MB ROOM batch took 12 ms of CPU to write; with ``O_DIRECT`` it takes 0.3 ms of CPU and
 1-2 ms of wall time (the same 40 files each way, medians). On any machine it keeps a store of
 gigabytes from pushing useful data out of the cache. A later read comes from the disk instead

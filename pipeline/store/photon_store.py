@@ -6,21 +6,25 @@ import json
 import logging
 import os
 import re
+import struct
 import threading
 import time
 import urllib.parse
 import urllib.request
+import zlib
 from collections import OrderedDict
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
+from typing import NamedTuple, TypeVar
 
 import numcodecs.blosc
 import numpy as np
 import numpy.typing as npt
 import zarr
 import zarr.errors
+from zarr.abc.store import RangeByteRequest
 from zarr.codecs import BloscCodec
 from zarr.core.buffer import default_buffer_prototype
 from zarr.core.sync import sync
@@ -39,30 +43,36 @@ from .records import (
     as_int,
     category_counts,
     check_records,
+    parts_digest,
     records_digest,
+    scratch,
     sorted_batch,
     unpack_records,
     valid_records,
 )
 
 log = logging.getLogger(__name__)
+T = TypeVar("T")
 FORMAT = "photonloom.photons"
-FORMAT_VERSION = 4  # 4: every batch's sums, records only on request; 3: records always, sums optional;
-# 2: BLAKE2b, zstd tables; 1: key/bary/energy/offsets arrays
-BATCH_FIELDS = ("done_magic", "photon_start", "photons_emitted", "n_records", "digest")
-DONE_MAGIC = 0x4C4F4F4D  # "LOOM": the batch chunk is written last, so its presence means done
+FORMAT_VERSION = 5  # 5: one object a batch (done marker, running counts, sums); 4: marker, counts and
+# sums in three objects; 3: records always, sums optional; 2: BLAKE2b, zstd tables; 1: key/bary/energy/offsets
+BATCH_FIELDS = ("photon_start", "photons_emitted", "n_records", "digest")  # batch_info, the header's core
+BATCH_MAGIC = b"LOOMBAT5"  # first bytes of a batch object (batch/c.f.b), the done marker
+# A batch object's header: the magic, then u64 each: frame, batch, BATCH_FIELDS, the counts' bytes
+# and CRC-32, the summary's word count (NO_SUMMARY: none), bytes and CRC-32, and last the CRC-32 of
+# everything before it. Then the running counts and the summary words, each lz4 + shuffle.
+_HEADER = struct.Struct("<8s12Q")
+HEAD = _HEADER.size  # 104 bytes
+NO_SUMMARY = (1 << 64) - 1
 RECORD_CHUNK = 1 << 20  # records per chunk of the per-batch arrays (20 MiB raw)
 RECORD_CACHE_BYTES = 192 << 20  # decoded frames an open_shared instance keeps (LRU, read-only)
-# Header of a batch summary object: the magic, then (u64 each) the batch digest, the word count and
-# the first 64 bits of SHA-256 over the words (what verify_batch checks); then the words, lz4 + shuffle
-SUMMARY_MAGIC = b"LOOMSUM5"
-SUMMARY_HEAD = len(SUMMARY_MAGIC) + 24
+RUNNING_CACHE_BYTES = 64 << 20  # running counts a writer keeps of the batches it wrote (LRU)
 LISTING_MARGIN_NS = 100_000_000  # a done-table listing is reused once the directory is 0.1 s old
 # Chunk keys with "." (c.f.b.0): all chunks of an array in its one directory. A new directory
 # costs about 1 ms on ext4 (a block and a journal entry) against 0.1 ms for a new file, and "/" keys
 # made five new directories per batch and four per frame of maps.
 FLAT_KEYS = {"name": "default", "separator": "."}
-_BATCH_CHUNK = re.compile(r"c\.(\d+)\.(\d+)\.0")  # chunk keys of batch/ ("." separator)
+_BATCH_OBJECT = re.compile(r"c\.(\d+)\.(\d+)")  # names of batch/ objects
 
 
 def records_codec() -> BloscCodec:
@@ -93,14 +103,39 @@ def _batch_metadata(n: int, rows: int) -> bytes:
 
 
 def table_codec() -> BloscCodec:
-    """The codec of the count table and the illumination maps, whose chunks the store encodes
-    itself (:func:`_encode_rows`): BATCH_CODEC's lz4 + byte shuffle on 4-byte values."""
+    """The codec of the illumination maps, whose chunks the store encodes itself
+    (:func:`_encode_rows`, as it does a batch object's counts and summary): BATCH_CODEC's lz4 +
+    byte shuffle on 4-byte values."""
     return BloscCodec(**BATCH_CODEC)
 
 
-def _words_digest(data: bytes) -> int:
-    """A summary's own digest, what tells a damaged one: :func:`records_digest` of its words."""
-    return records_digest(np.frombuffer(data, "<u4"))
+class _Header(NamedTuple):
+    """A batch object's header (:data:`_HEADER`) past its magic, frame and batch."""
+
+    photon_start: int
+    photons_emitted: int
+    n_records: int
+    digest: int
+    counts_bytes: int
+    counts_crc: int
+    n_words: int  # NO_SUMMARY: the batch has none (a store that keeps records, written without)
+    words_bytes: int
+    words_crc: int
+
+    def pack(self, frame: int, batch: int) -> bytes:
+        head = _HEADER.pack(BATCH_MAGIC, frame, batch, *self, 0)[:-8]
+        return head + struct.pack("<Q", zlib.crc32(head))
+
+    @classmethod
+    def parse(cls, data: bytes | None, frame: int, batch: int) -> _Header | None:
+        """The header at the start of ``data`` if it is whole (magic, its CRC) and names (frame,
+        batch); else None: the object is no done marker of this batch."""
+        if data is None or len(data) < HEAD:
+            return None
+        magic, f, b, *fields, crc = _HEADER.unpack_from(data)
+        if magic != BATCH_MAGIC or crc != zlib.crc32(data[:HEAD - 8]) or (f, b) != (frame, batch):
+            return None
+        return cls(*fields)
 
 
 def _encode_rows(block: np.ndarray) -> bytes:
@@ -153,39 +188,66 @@ class _Raw:
         self.store = store
         self.root = store.root if isinstance(store, LocalStore) else None
 
-    def get_many(self, keys: list[str]) -> list[bytes | None]:
+    def get_many(self, keys: list[str], spans: list[tuple[int, int]] | None = None) -> list[bytes | None]:
+        """The objects at ``keys`` (None where absent), or of each only ``spans[i]`` = (offset,
+        length) bytes (fewer where the object is shorter)."""
+        spans = spans or [None] * len(keys)
         if self.root is not None:
             out = []
-            for key in keys:
+            for key, span in zip(keys, spans):
                 try:
-                    with open(self.root / key, "rb") as fh:
-                        out.append(fh.read())
-                except FileNotFoundError:
+                    with open(os.path.join(self.root, key), "rb") as fh:
+                        if span is None:
+                            out.append(fh.read())
+                        else:
+                            fh.seek(span[0])
+                            out.append(fh.read(span[1]))
+                except (FileNotFoundError, NotADirectoryError):
                     out.append(None)
             _counted("read_bytes", sum(len(d) for d in out if d is not None))
             return out
 
         async def fetch():
-            got = await asyncio.gather(*(self.store.get(k, prototype=default_buffer_prototype())
-                                         for k in keys))
+            got = await asyncio.gather(*(self.store.get(
+                k, prototype=default_buffer_prototype(),
+                byte_range=None if s is None else RangeByteRequest(s[0], s[0] + s[1])) for k, s in zip(keys, spans)))
             return [None if g is None else g.to_bytes() for g in got]
         out = sync(fetch())
         _counted("read_bytes", sum(len(d) for d in out if d is not None))
         return out
 
-    def set_many(self, items: list[tuple[str, bytes]], *, write_once: Iterable[str] = ()) -> None:
-        """Write every (key, bytes); on a LocalStore the keys of ``write_once`` (objects nothing
+    def get_into(self, key: str, offset: int, out: np.ndarray) -> np.ndarray | bytes | None:
+        """``out.nbytes`` bytes of the object at ``key`` from ``offset``: on a LocalStore read into
+        ``out`` (the part of it read returned; no new memory), elsewhere as new bytes; None where
+        the object is absent."""
+        if self.root is None:
+            return self.get_many([key], [(offset, out.nbytes)])[0]
+        try:
+            with open(os.path.join(self.root, key), "rb", buffering=0) as fh:
+                fh.seek(offset)
+                view, n = memoryview(out).cast("B"), 0
+                while n < len(view) and (got := fh.readinto(view[n:])):
+                    n += got
+        except (FileNotFoundError, NotADirectoryError):
+            return None
+        _counted("read_bytes", n)
+        return out.reshape(-1).view(np.uint8)[:n]
+
+    def set_many(self, items: list[tuple[str, bytes | tuple[bytes, ...]]], *, write_once: Iterable[str] = ()) -> None:
+        """Write every (key, bytes), the bytes given whole or as a tuple of parts written one after
+        the other (no joined copy); on a LocalStore the keys of ``write_once`` (objects nothing
         in a render reads back) go past the page cache (pipeline/store/direct_write.py)."""
-        _counted("write_bytes", sum(len(v) for _, v in items))
+        items = [(k, v if isinstance(v, tuple) else (v,)) for k, v in items]
+        _counted("write_bytes", sum(len(p) for _, v in items for p in v))
         if self.root is not None:
             direct = frozenset(write_once)
-            for key, data in items:
-                _write_object(os.path.join(self.root, key), data, key in direct)
+            for key, parts in items:
+                _write_object(os.path.join(self.root, key), parts, key in direct)
             return
 
         async def put():
             proto = default_buffer_prototype()
-            await asyncio.gather(*(self.store.set(k, proto.buffer.from_bytes(v)) for k, v in items))
+            await asyncio.gather(*(self.store.set(k, proto.buffer.from_bytes(b"".join(v))) for k, v in items))
         sync(put())
 
     def stamp(self, *keys: str):
@@ -197,7 +259,7 @@ class _Raw:
         out, now = [], time.time_ns()
         for key in keys:
             try:
-                st = os.stat(self.root / key)
+                st = os.stat(os.path.join(self.root, key))
             except FileNotFoundError:
                 out.append(None)
                 continue
@@ -206,17 +268,20 @@ class _Raw:
         return tuple(out), reusable
 
 
-def _write_object(path: str, data: bytes, direct: bool) -> None:
+def _write_object(path: str, data: bytes | tuple[bytes, ...], direct: bool) -> None:
     """Write ``path`` atomically: a temp file beside it (``*.partial``, removed on failure), then
-    a rename; ``direct``: past the page cache where the file system allows it."""
+    a rename; ``data`` whole or as parts written one after the other; ``direct``: past the page
+    cache where the file system allows it."""
+    parts = data if isinstance(data, tuple) else (data,)
     head, name = os.path.split(path)
-    tmp = os.path.join(head, f".{name}.{os.getpid()}.{id(data):x}.partial")
+    tmp = os.path.join(head, f".{name}.{os.getpid()}.{id(parts):x}.partial")
     try:
         for first in (True, False):
             try:
-                if not (direct and direct_write.write_new(tmp, data)):
+                if not (direct and direct_write.write_new(tmp, parts[0] if len(parts) == 1 else b"".join(parts))):
                     with open(tmp, "wb") as fh:
-                        fh.write(data)
+                        for part in parts:
+                            fh.write(part)
                 break
             except FileNotFoundError:  # first object under this prefix
                 if not first:
@@ -234,13 +299,13 @@ def _write_object(path: str, data: bytes, direct: bool) -> None:
 @dataclass(frozen=True)
 class _Prepared:
     """A batch ready to write: where, its sorted records (None unless kept), its hit counts,
-    ``row``, its done marker, and its summary."""
+    ``row`` (BATCH_FIELDS), and its summary."""
 
     frame: int
     batch: int
     records: SortedBatch | None
     counts: np.ndarray  # u64 (4, n_elements), this batch only
-    row: np.ndarray  # u64 (5,) in BATCH_FIELDS order
+    row: tuple[int, int, int, int]  # BATCH_FIELDS
     summary: np.ndarray | None  # little-endian u32 words (write_batch's summarise)
 
 
@@ -332,13 +397,13 @@ class PhotonStore:
         self.seed: int = attrs["seed"]
         self.keep_records: bool = bool(attrs["keep_records"])  # raw hit records beside the sums
         try:
-            self._batch, self._counts, self._source = (root[n] for n in ("batch", "counts", "source"))
+            self._source = root["source"]
         except KeyError as err:
             raise LoomError(f"photon store is missing array {err}", path=url) from None
-        # Per-instance caches of what never changes once written: the done marker of a done
-        # batch, and (revalidated by a stat on a LocalStore) the done table and the sources.
+        # Per-instance caches of what never changes once written: the header of a done batch,
+        # and (revalidated by a stat on a LocalStore) the done table and the sources.
         self._raw = _Raw(root.store)
-        self._rows: dict[tuple[int, int], np.ndarray] = {}
+        self._rows: dict[tuple[int, int], _Header] = {}
         self._done_cache = None
         self._source_cache = None
         # Decoded frames (FrameRecords of done batches never change): only open_shared instances
@@ -346,6 +411,9 @@ class PhotonStore:
         self.record_cache_bytes = 0
         self._records: OrderedDict = OrderedDict()
         self._records_bytes = 0
+        # The running counts of the last batch this instance wrote of each frame (least recently
+        # written out first): the frame's next batch adds to them without reading them back
+        self._running: OrderedDict[int, tuple[int, np.ndarray]] = OrderedDict()
 
     def __repr__(self) -> str:
         return (f"PhotonStore({self.url!r}, mode={self.mode!r}, frames={self.n_frames}, "
@@ -413,15 +481,7 @@ class PhotonStore:
 
     @staticmethod
     def _make_arrays(root: zarr.Group, n_frames: int, n_elements: int, max_batches: int, keep_records: bool) -> None:
-        # batch and counts chunks are written (and read) by the store itself: the done marker
-        # uncompressed (40 bytes), the running counts with the record arrays' lz4
-        root.create_array("batch", shape=(n_frames, max_batches, len(BATCH_FIELDS)),
-                          chunks=(1, 1, len(BATCH_FIELDS)), dtype="uint64", fill_value=0,
-                          chunk_key_encoding=FLAT_KEYS,
-                          overwrite=True, compressors=None)
-        root.create_array("counts", shape=(n_frames, max_batches, len(CATEGORIES), n_elements),
-                          chunks=(1, 1, len(CATEGORIES), n_elements), dtype="uint32",
-                          fill_value=0, overwrite=True, compressors=table_codec(), chunk_key_encoding=FLAT_KEYS)
+        # The batch objects (batch/c.f.b) are written and read by the store itself, no zarr array
         root.create_array("source", shape=(n_frames,), chunks=(n_frames,), dtype="int32",
                           fill_value=-1, overwrite=True, compressors=records_codec())
         # frames/<f> groups are written with a frame's first batch (_write_payload): making all of
@@ -474,26 +534,35 @@ class PhotonStore:
         return as_int(frame_index, name, self.url, 0, self.n_frames)
 
     def _done_table(self) -> np.ndarray:
-        """bool (n_frames, max_batches), read-only: which batch chunks exist, from one directory
-        listing. On a LocalStore the listing is reused while the directory is unchanged
-        (:meth:`_Raw.stamp`)."""
+        """bool (n_frames, max_batches), read-only: the done batches, from one directory listing
+        of ``batch/`` and the headers of the objects listed (:meth:`_prefixes`; a done batch's
+        header is read once per instance). On a LocalStore the table is reused while the
+        directory is unchanged (:meth:`_Raw.stamp`)."""
         store = self._root.store
+        stamp, reusable = None, False
         if self._raw.root is not None:
             stamp, reusable = self._raw.stamp("batch")
             if self._done_cache is not None and self._done_cache[0] == stamp:
                 return self._done_cache[1]
-            names = os.listdir(self._raw.root / "batch") if stamp[0] is not None else []
+            try:
+                names = os.listdir(os.path.join(self._raw.root, "batch")) if stamp[0] is not None else []
+            except NotADirectoryError:  # not a store we can write: its writers say so
+                names = []
         elif store.supports_listing:
-            stamp, names = None, _list_dir(store, "batch")
+            names = _list_dir(store, "batch")
         else:
-            done = self._batch[...][..., 0] == DONE_MAGIC
-            done.flags.writeable = False
-            return done
-        done = np.zeros((self.n_frames, self.max_batches), dtype=bool)
-        for name in names:
-            m = _BATCH_CHUNK.fullmatch(name)
+            names = None  # every header is asked for
+        listed = np.zeros((self.n_frames, self.max_batches), dtype=bool)
+        if names is None:
+            listed[:] = True
+        for name in names or ():
+            m = _BATCH_OBJECT.fullmatch(name)
             if m and int(m[1]) < self.n_frames and int(m[2]) < self.max_batches:
-                done[int(m[1]), int(m[2])] = True
+                listed[int(m[1]), int(m[2])] = True
+        runs = np.cumprod(listed, axis=1).sum(axis=1)  # objects present from batch 0 on
+        done = np.zeros_like(listed)
+        for f, heads in self._prefixes({int(f): int(runs[f]) for f in np.flatnonzero(runs)}).items():
+            done[f, :len(heads)] = True
         done.flags.writeable = False
         if stamp is not None and reusable:
             self._done_cache = (stamp, done)
@@ -517,35 +586,53 @@ class PhotonStore:
         """The frame whose photons ``frame_index`` uses (itself unless shared)."""
         return int(self._sources()[self._frame(frame_index)])
 
-    def _marker_rows(self, frame: int, batches) -> list[np.ndarray | None]:
-        """The done markers of (frame, b) for b in ``batches``, None where not done. A done
-        marker never changes, so it is read once per instance."""
-        batches = [int(b) for b in batches]
-        missing = [b for b in batches if (frame, b) not in self._rows]
+    @staticmethod
+    def _batch_key(frame: int, batch: int) -> str:
+        return f"batch/c.{frame}.{batch}"
+
+    def _prefixes(self, wanted: dict[int, int]) -> dict[int, list[_Header]]:
+        """For each ``{frame: n}`` the headers of the frame's done batches among 0..n-1: the
+        longest prefix of objects whose headers are whole and name their batch, each batch
+        starting where the one before ends. A done batch never changes, so its header is read
+        once per instance; the others are read again whenever asked (a rerun rewrites them)."""
+        missing = [(f, b) for f, n in wanted.items() for b in range(n) if (f, b) not in self._rows]
+        got = {}
         if missing:
-            for b, data in zip(missing, self._raw.get_many([f"batch/c.{frame}.{b}.0" for b in missing])):
-                if data is None:
-                    continue
-                if len(data) != 8 * len(BATCH_FIELDS):
-                    raise LoomError(f"frame {frame} batch {b}: unreadable done marker", path=self.url)
-                row = np.frombuffer(data, "<u8").astype(np.uint64)
-                if row[0] == DONE_MAGIC:
-                    self._rows[(frame, b)] = row
-        return [self._rows.get((frame, b)) for b in batches]
+            data = self._raw.get_many([self._batch_key(f, b) for f, b in missing], [(0, HEAD)] * len(missing))
+            got = {(f, b): _Header.parse(d, f, b) for (f, b), d in zip(missing, data)}
+        out = {}
+        for f, n in wanted.items():
+            heads, end = [], 0
+            for b in range(n):
+                head = self._rows.get((f, b)) or got.get((f, b))
+                if head is None or head.photon_start != end:
+                    break
+                self._rows[(f, b)] = head
+                heads.append(head)
+                end = head.photon_start + head.photons_emitted
+            out[f] = heads
+        return out
+
+    def _header(self, frame: int, batch: int) -> _Header | None:
+        """The header of (frame, batch) if the batch is done (batches 0..batch done), else None."""
+        heads = self._prefixes({frame: batch + 1})[frame]
+        return heads[batch] if len(heads) > batch else None
 
     def _meta(self, frame: int, batches) -> np.ndarray:
-        if not len(batches):
+        """u64 (len(batches), BATCH_FIELDS) of done batches of a frame."""
+        batches = [int(b) for b in batches]
+        if not batches:
             return np.zeros((0, len(BATCH_FIELDS)), np.uint64)
-        rows = self._marker_rows(frame, batches)
-        if any(r is None for r in rows):
-            raise LoomError(f"frame {frame}: corrupt batch table", path=self.url)
-        return np.stack(rows)
+        heads = self._prefixes({frame: max(batches) + 1})[frame]
+        if max(batches) >= len(heads):
+            raise LoomError(f"frame {frame}: batch {len(heads)} is no longer done (its object changed or is "
+                            "damaged)", path=self.url)
+        return np.array([heads[b][:len(BATCH_FIELDS)] for b in batches], np.uint64)
 
     def is_done(self, frame_index: int, batch: int) -> bool:
-        """Whether (frame, batch) has its done marker: a rerun of the task can be skipped."""
+        """Whether (frame, batch) is done: a rerun of the task can be skipped."""
         f = self.source_frame(frame_index)
-        b = as_int(batch, "batch", self.url, 0, self.max_batches)
-        return self._marker_rows(f, [b])[0] is not None
+        return self._header(f, as_int(batch, "batch", self.url, 0, self.max_batches)) is not None
 
     def done_batches(self, frame_index: int) -> list[int]:
         """Done batches of a frame (of its source frame, if shared): always 0..k-1."""
@@ -559,7 +646,7 @@ class PhotonStore:
     def photons_emitted(self, frame_index: int) -> int:
         """Photons emitted for a frame, summed over its done batches."""
         f = self.source_frame(frame_index)
-        return int(self._meta(f, self.done_batches(f))[:, 2].sum())
+        return int(self._meta(f, self.done_batches(f))[:, 1].sum())
 
     def photons_in(self, frame_index: int, n_batches: int) -> int:
         """Photons emitted by a frame's first ``n_batches`` done batches (a prefix in use)."""
@@ -567,7 +654,7 @@ class PhotonStore:
         done = self.done_batches(f)
         if not 0 <= n_batches <= len(done):
             raise LoomError(f"frame {f}: {n_batches} batches asked, {len(done)} done", path=self.url)
-        return int(self._meta(f, done[:n_batches])[:, 2].sum())
+        return int(self._meta(f, done[:n_batches])[:, 1].sum())
 
     def emitted(self, batches: npt.ArrayLike | None = None) -> np.ndarray:
         """int64 (n_frames,): photons emitted per frame by its first ``batches[f]`` done batches
@@ -585,7 +672,7 @@ class PhotonStore:
             raise LoomError(f"frame {g}: {int(use[bad[0]])} batches asked, {int(n_done[g])} done", path=self.url)
         for g in np.unique(sources[use > 0]):  # only frames with photons: a long timeline has few
             mine = np.flatnonzero(sources == g)
-            running = np.concatenate([[0], np.cumsum(self._meta(int(g), range(int(use[mine].max())))[:, 2]
+            running = np.concatenate([[0], np.cumsum(self._meta(int(g), range(int(use[mine].max())))[:, 1]
                                                      .astype(np.int64))])
             out[mine] = running[use[mine]]
         return out
@@ -615,7 +702,7 @@ class PhotonStore:
         out: dict[int, int | None] = {}
         for frame_index, n_photons in targets.items():
             f = int(sources[self._frame(frame_index)])
-            running = np.cumsum(self._meta(f, np.flatnonzero(done[f]))[:, 2].astype(np.int64))
+            running = np.cumsum(self._meta(f, np.flatnonzero(done[f]))[:, 1].astype(np.int64))
             reach = np.flatnonzero(running >= n_photons)
             out[frame_index] = int(reach[0]) + 1 if len(reach) else (0 if n_photons <= 0 else None)
         return out
@@ -625,11 +712,10 @@ class PhotonStore:
         return self._sources()
 
     def batch_info(self, frame_index: int, batch: int) -> dict[str, int] | None:
-        """The done marker of a batch as a dict of BATCH_FIELDS, or None if not done."""
+        """The header of a done batch as a dict of BATCH_FIELDS, or None if not done."""
         f = self.source_frame(frame_index)
-        b = as_int(batch, "batch", self.url, 0, self.max_batches)
-        row = self._marker_rows(f, [b])[0]
-        return None if row is None else dict(zip(BATCH_FIELDS, map(int, row)))
+        head = self._header(f, as_int(batch, "batch", self.url, 0, self.max_batches))
+        return None if head is None else dict(zip(BATCH_FIELDS, head))
 
     # --- writing --------------------------------------------------------------------------
     def _writable(self) -> None:
@@ -639,21 +725,23 @@ class PhotonStore:
     def write_batch(self, frame_index: int, batch: int, *, key: npt.ArrayLike, bary: npt.ArrayLike,
                     energy: npt.ArrayLike, photons_emitted: int, photon_start: int,
                     summarise: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None) -> bool:
-        """Write one batch, done marker last. Returns False if it was already done.
+        """Write one batch, its batch object last. Returns False if it was already done.
 
         Rerunning a batch rewrites identical bytes; a done batch is only compared by digest and
         a different one is refused (non-deterministic tracer). Batch b needs b-1 done.
         ``summarise``: u32 words derived from the batch's checked (key, bary, energy) in the order
-        given (pipeline/batch_sums.py summariser), stored before the done marker
-        (:meth:`read_summary`): what a render reads of the batch. Only a store that keeps records
-        may go without; only such a store sorts them into the total order.
+        given (pipeline/collection/batch_sums.py summariser), stored in the batch object
+        (:meth:`read_summary`): what a render reads of the batch; or (words, counts) with the
+        records' :func:`~pipeline.store.records.category_counts` as a summariser that groups them
+        by element counts them anyway (the store then does not count them again). Only a store
+        that keeps records may go without; only such a store sorts them into the total order.
         """
         if summarise is None and not self.keep_records:
             raise ValueError("a store without records needs the batch's summary (summarise)")  # a caller's bug
         prepared = self._prepare(frame_index, batch, key, bary, energy, photons_emitted, photon_start, summarise)
-        done = self.batch_info(prepared.frame, prepared.batch)
+        done = self._header(prepared.frame, prepared.batch)
         if done is not None:
-            if np.array_equal(np.array(list(done.values()), dtype=np.uint64), prepared.row):
+            if tuple(done[:len(BATCH_FIELDS)]) == prepared.row:
                 return False
             raise LoomError("is already done with different photons (digest, count or range "
                             "differ): the tracer is not deterministic", path=self.url,
@@ -665,8 +753,8 @@ class PhotonStore:
     def _prepare(self, frame_index, batch, key, bary, energy, photons_emitted, photon_start,
                  summarise) -> _Prepared:
         """Validate a batch, make its counts and summary, and sort its records if they are kept
-        (reads only the previous batch's done marker). The done marker's digest is of the sorted
-        records where they are kept, else of the summary and counts: what the batch stores."""
+        (reads only the previous batch's header). The digest is of the sorted records where they
+        are kept, else of the summary and counts: what the batch stores."""
         self._writable()
         f, b = self._frame(frame_index), as_int(batch, "batch", self.url, 0, self.max_batches)
         where = f"{self.url}: frame {f} batch {b}"
@@ -679,107 +767,133 @@ class PhotonStore:
         start = as_int(photon_start, "photon_start", where, 0)
         expected_start = 0
         if b > 0:
-            prev = self.batch_info(f, b - 1)
+            prev = self._header(f, b - 1)
             if prev is None:
                 raise LoomError(f"batch {b - 1} is not done; batches are written in order",
                                 path=where)
-            expected_start = prev["photon_start"] + prev["photons_emitted"]
+            expected_start = prev.photon_start + prev.photons_emitted
         if start != expected_start:
             raise LoomError(f"photon_start {start} is not contiguous: the previous batch ends at "
                             f"{expected_start}", path=where)
-        summary = None
+        summary = counts = None
         if summarise is not None:
-            summary = np.asarray(summarise(key, bary, energy))
+            made = summarise(key, bary, energy)
+            summary, counts = made if isinstance(made, tuple) else (made, None)
+            summary = np.asarray(summary)
             if summary.dtype != np.uint32 or summary.ndim != 1:
                 raise TypeError(f"a batch summary is 1-D u32 words, not {summary.dtype} {summary.shape}")
             summary = np.ascontiguousarray(summary, "<u4")
+            if counts is not None:  # the summariser's own count of the records (category_counts)
+                counts = np.asarray(counts)
+                if counts.shape != (len(CATEGORIES), self.n_elements) or counts.dtype.kind not in "ui" \
+                        or int(counts.sum(dtype=np.uint64)) != key.shape[0]:
+                    raise TypeError(f"a summariser's hit counts are ({len(CATEGORIES)}, {self.n_elements}) integers "
+                                    f"adding up to the {key.shape[0]} records, not {counts.dtype} {counts.shape}")
         records = sorted_batch(key, bary, energy, self.n_elements) if self.keep_records else None
-        counts = records.counts if records is not None else category_counts(key, self.n_elements)
+        if records is not None:
+            counts = records.counts
+        elif counts is None:
+            counts = category_counts(key, self.n_elements)
+        counts = np.asarray(counts, np.uint64)
+        # Without records, one pass over the summary and the counts (u32, as stored), no joined copy
         digest = records.digest(start, emitted) if records is not None else \
-            records_digest(np.concatenate([summary, counts.astype("<u8").view("<u4").reshape(-1)]), start, emitted)
-        row = np.array([DONE_MAGIC, start, emitted, key.shape[0], digest], dtype=np.uint64)
-        return _Prepared(f, b, records, counts, row, summary)
+            parts_digest([summary, counts.astype("<u4")], start, emitted)
+        return _Prepared(f, b, records, counts, (start, emitted, int(key.shape[0]), digest), summary)
 
     def _write_payload(self, p: _Prepared) -> None:
-        """Running counts, summary and (if the store keeps them) records of one batch: everything
-        but the done marker.
+        """The records of one batch, if the store keeps them: everything written before its
+        batch object.
 
         The records are one (5, n) u32 zarr array at ``frames/<f>/<b>``, its metadata and chunks
         written as whole objects (no zarr call): identical bytes on a rerun, written over
         identical objects, and nothing is ever deleted, so a duplicate task cannot expose a done
         batch with missing chunks. zarr reads the array as any other.
         """
-        running = p.counts
-        if p.batch > 0:
-            running = running + self._count_chunks([(p.frame, p.batch - 1)])[0]
-        if running.size and running.max() > np.iinfo(np.uint32).max:
-            raise LoomError("per-element hit count overflows u32", path=self.url)
-        items, bulk = [], []
-        if self.keep_records:
-            base, n = f"frames/{p.frame}/{p.batch}", len(p.records)
-            rows = max(1, min(n, RECORD_CHUNK))
-            block = p.records.packed()
-            items = [(f"{base}/c.0.{i}", _encode_rows(self._chunk(block, i * rows, rows)))
-                     for i in range(max(1, -(-n // rows)))]
-            # Only the records' chunks skip the page cache: a render reads the batch's summary
-            bulk = [k for k, _ in items]
-            items.append((f"{base}/zarr.json", _batch_metadata(n, rows)))
-            if p.batch == 0:  # the frame's group, as zarr writes it (bytes equal to require_group's)
-                items.append((f"frames/{p.frame}/zarr.json", _GROUP_METADATA))
-        items.append((self._count_key(p.frame, p.batch), _encode_rows(running.astype(np.uint32))))
-        if p.summary is not None:
-            words = p.summary.tobytes()
-            items.append((self._summary_key(p.frame, p.batch), SUMMARY_MAGIC + np.array(
-                [int(p.row[4]), p.summary.size, _words_digest(words)], "<u8").tobytes() + numcodecs.blosc.compress(
-                words, b"lz4", 5, numcodecs.blosc.SHUFFLE, 0, 4)))
+        if not self.keep_records:
+            return
+        base, n = f"frames/{p.frame}/{p.batch}", len(p.records)
+        rows = max(1, min(n, RECORD_CHUNK))
+        block = p.records.packed()
+        items = [(f"{base}/c.0.{i}", _encode_rows(self._chunk(block, i * rows, rows)))
+                 for i in range(max(1, -(-n // rows)))]
+        # Only the records' chunks skip the page cache: a render reads the batch object
+        bulk = [k for k, _ in items]
+        items.append((f"{base}/zarr.json", _batch_metadata(n, rows)))
+        if p.batch == 0:  # the frame's group, as zarr writes it (bytes equal to require_group's)
+            items.append((f"frames/{p.frame}/zarr.json", _GROUP_METADATA))
         self._raw.set_many(items, write_once=bulk)
 
-    @staticmethod
-    def _summary_key(frame: int, batch: int) -> str:
-        return f"summaries/c.{frame}.{batch}"
+    def _mark_done(self, p: _Prepared) -> None:
+        """Write the batch object (header, running counts, summary) in one atomic write: the
+        batch is done."""
+        running = p.counts
+        if p.batch > 0:
+            kept = self._running.get(p.frame)
+            running = running + (kept[1] if kept is not None and kept[0] == p.batch - 1
+                                 else self._count_chunks([(p.frame, p.batch - 1)])[0])
+        if running.size and running.max() > np.iinfo(np.uint32).max:
+            raise LoomError("per-element hit count overflows u32", path=self.url)
+        running = running.astype(np.uint32)
+        counts = _encode_rows(running)
+        words = b"" if p.summary is None else _encode_rows(p.summary)
+        head = _Header(*p.row, len(counts), zlib.crc32(counts), NO_SUMMARY if p.summary is None else p.summary.size,
+                       len(words), zlib.crc32(words))
+        self._raw.set_many([(self._batch_key(p.frame, p.batch), (head.pack(p.frame, p.batch), counts, words))])
+        self._rows[(p.frame, p.batch)] = head
+        self._running.pop(p.frame, None)
+        self._running[p.frame] = (p.batch, running)
+        while len(self._running) * running.nbytes > RUNNING_CACHE_BYTES:
+            self._running.popitem(last=False)
 
-    def read_summary(self, frame_index: int, batch: int) -> np.ndarray | None:
+    def read_summary(self, frame_index: int, batch: int, *, use: Callable[[np.ndarray], T] | None = None
+                     ) -> np.ndarray | T | None:
         """The u32 words of the summary a done batch's writer stored
         (``write_batch(summarise=...)``), or None when the batch is not done, has none, or its
-        summary belongs to other records (digest) or is damaged (its own digest; a warning)."""
+        summary is damaged (its CRC or length; a warning). With ``use``: ``use(words)`` of words
+        read and decompressed into this thread's scratch arrays (records.scratch: no new memory a
+        batch), valid only during the call."""
         f = self.source_frame(frame_index)
-        info = self.batch_info(f, batch)
-        if info is None:
+        b = as_int(batch, "batch", self.url, 0, self.max_batches)
+        head = self._header(f, b)
+        if head is None or head.n_words == NO_SUMMARY:
             return None
-        (data,) = self._raw.get_many([self._summary_key(f, int(batch))])
-        if data is None:
-            return None
+        words = self._summary_words(f, b, head, reuse=use is not None)
+        return words if use is None or words is None else use(words)
+
+    def _summary_words(self, f: int, b: int, head: _Header, reuse: bool = False) -> np.ndarray | None:
+        """The summary words of a done batch, checked (its CRC-32 and length); ``reuse``: in the
+        thread's scratch arrays."""
+        data = self._raw.get_into(self._batch_key(f, b), HEAD + head.counts_bytes,
+                                  scratch("summary_bytes", head.words_bytes, np.uint8) if reuse
+                                  else np.empty(head.words_bytes, np.uint8))
         words = None
-        if data.startswith(SUMMARY_MAGIC) and len(data) >= SUMMARY_HEAD:
-            digest, n, check = (int(v) for v in np.frombuffer(data[len(SUMMARY_MAGIC):SUMMARY_HEAD], "<u8"))
+        if data is not None and len(data) == head.words_bytes and zlib.crc32(data) == head.words_crc \
+                and int.from_bytes(bytes(data[4:8]), "little") == 4 * head.n_words:  # blosc header: bytes out
+            words = scratch("summary_words", head.n_words, "<u4") if reuse else np.empty(head.n_words, "<u4")
             try:
-                raw = numcodecs.blosc.decompress(data[SUMMARY_HEAD:])
+                numcodecs.blosc.decompress(data, words)
             except (ValueError, RuntimeError):
-                raw = b""
-            if digest == info["digest"] and len(raw) == 4 * n and _words_digest(raw) == check:
-                words = np.frombuffer(raw, "<u4")
+                words = None
         if words is None:
-            log.warning("%s: frame %d batch %d: damaged or foreign batch summary ignored", self.url, f, int(batch))
-            return None
+            log.warning("%s: frame %d batch %d: damaged batch summary ignored", self.url, f, b)
         return words
 
-    @staticmethod
-    def _count_key(frame: int, batch: int) -> str:
-        return f"counts/c.{frame}.{batch}.0.0"
-
     def _count_chunks(self, pairs) -> list[np.ndarray]:
-        """u32 (4, n_elements) running counts of (frame, batch) pairs, zeros where absent (the
-        fill value), decoded straight from their chunks."""
+        """u32 (4, n_elements) running counts of (frame, batch) pairs, zeros where not done,
+        decoded straight from the batch objects."""
         shape = (len(CATEGORIES), self.n_elements)
-        out = []
-        for (f, b), data in zip(pairs, self._raw.get_many([self._count_key(f, b) for f, b in pairs])):
-            if data is None:
-                out.append(np.zeros(shape, np.uint32))
-                continue
+        out = [np.zeros(shape, np.uint32) for _ in pairs]
+        todo = [(i, f, b, head) for i, (f, b) in enumerate(pairs) if (head := self._header(f, b)) is not None]
+        data = self._raw.get_many([self._batch_key(f, b) for _, f, b, _ in todo],
+                                  [(HEAD, head.counts_bytes) for *_, head in todo])
+        for (i, f, b, head), got in zip(todo, data):
             try:
-                out.append(_decode(data, "<u4", shape[0] * shape[1]).reshape(shape))
+                if got is None or len(got) != head.counts_bytes or zlib.crc32(got) != head.counts_crc:
+                    raise ValueError("damaged")
+                out[i] = _decode(got, "<u4", shape[0] * shape[1]).reshape(shape)
             except (ValueError, RuntimeError):
-                raise LoomError(f"frame {f} batch {b}: unreadable count chunk", path=self.url) from None
+                raise LoomError(f"frame {f} batch {b}: damaged hit counts; delete the photon store to trace its "
+                                "photons again", path=self.url) from None
         return out
 
     @staticmethod
@@ -789,12 +903,6 @@ class PhotonStore:
         if part.shape[1] < rows:
             part = np.concatenate([part, np.zeros((5, rows - part.shape[1]), np.uint32)], axis=1)
         return part
-
-    def _mark_done(self, p: _Prepared) -> None:
-        """Write the batch's row of the batch table: its own chunk, so it lands whole."""
-        # one uncompressed chunk, one atomic write: the batch is done
-        self._raw.set_many([(f"batch/c.{p.frame}.{p.batch}.0", p.row.astype("<u8").tobytes())])
-        self._rows[(p.frame, p.batch)] = p.row.astype(np.uint64)
 
     def share_frame(self, frame_index: int, source_frame_index: int) -> None:
         """Record that frame f reuses frame g's photons (equal scene state); coordinator only."""
@@ -843,13 +951,13 @@ class PhotonStore:
         meta = self._meta(g, chosen)
         parts, dropped = [], 0
         for b, row in zip(chosen, meta):
-            rows, bad = valid_records(self._read_rows(g, b, int(row[3])), self.n_elements)
+            rows, bad = valid_records(self._read_rows(g, b, int(row[2])), self.n_elements)
             if bad:
                 log.warning("%s: frame %d batch %d: %d damaged record(s) dropped (NaN, infinite or negative "
                             "energy, or an unknown element)", self.url, g, b, bad)
             dropped += bad
             parts.append(unpack_records(rows, self.n_elements))
-        records = FrameRecords.merge(f, g, chosen, parts, self.n_elements, int(meta[:, 2].sum()), dropped)
+        records = FrameRecords.merge(f, g, chosen, parts, self.n_elements, int(meta[:, 1].sum()), dropped)
         if self.record_cache_bytes > 0:
             self._keep(key, records)
         return records
@@ -868,19 +976,26 @@ class PhotonStore:
             self._records_bytes -= sum(v.nbytes for v in vars(old).values() if isinstance(v, np.ndarray))
 
     def verify_batch(self, frame_index: int, batch: int) -> bool:
-        """Re-read a done batch and check it: its summary (if any) against its own digest and the
-        batch's, and its records (if kept) against the digest in its done marker."""
-        info = self.batch_info(frame_index, batch)
-        if info is None:
-            return False
+        """Re-read a done batch and check it: its counts and summary (if any) against their
+        CRC-32 in its header, and its records (if kept) against the header's digest."""
         f = self.source_frame(frame_index)
-        has_summary = self._raw.get_many([self._summary_key(f, int(batch))])[0] is not None
-        if (has_summary or not self.keep_records) and self.read_summary(f, batch) is None:
+        b = as_int(batch, "batch", self.url, 0, self.max_batches)
+        head = self._header(f, b)
+        if head is None:
+            return False
+        try:
+            self._count_chunks([(f, b)])
+        except LoomError:
+            return False
+        if head.n_words != NO_SUMMARY:
+            if self._summary_words(f, b, head) is None:
+                return False
+        elif not self.keep_records:
             return False
         if not self.keep_records:
             return True
-        rows = self._read_rows(f, int(batch), info["n_records"])
-        return records_digest(rows, info["photon_start"], info["photons_emitted"]) == info["digest"]
+        rows = self._read_rows(f, b, head.n_records)
+        return records_digest(rows, head.photon_start, head.photons_emitted) == head.digest
 
     def _read_rows(self, f: int, b: int, n: int) -> np.ndarray:
         """u32 (5, n): the packed rows of a done batch of ``n`` records."""
@@ -892,7 +1007,7 @@ class PhotonStore:
             if len(parts) != len(keys):
                 raise ValueError("missing chunk")
         except (ValueError, RuntimeError):
-            raise LoomError(f"frame {f} batch {b}: records do not match its done marker ({n})",
+            raise LoomError(f"frame {f} batch {b}: records do not match its batch object ({n})",
                             path=self.url) from None
         block = parts[0] if len(parts) == 1 else np.concatenate(parts, axis=1)
         return block[:, :n]
@@ -957,7 +1072,7 @@ def remove_partials(url: str) -> int:
 
 
 def disk_usage(url: str) -> dict[str, int] | None:
-    """Bytes on disk of a local store by part: ``photons`` (done markers, counts, sums, sharing
+    """Bytes on disk of a local store by part: ``photons`` (batch objects: counts and sums; sharing
     table), ``records`` (hit records, kept on request) and ``maps`` (illumination/); None for a
     remote store, whose size its object store tells."""
     root = local_path(url)

@@ -5,6 +5,7 @@ Pure NumPy, no zarr: what a batch of records must satisfy before the store write
 from __future__ import annotations
 
 import hashlib
+import threading
 from collections.abc import Iterable
 from dataclasses import dataclass
 
@@ -37,6 +38,17 @@ def records_digest(rows: np.ndarray, *extra: int) -> int:
     (int64). SHA-256 runs in hardware on current x86 (SHA-NI) and ARM cores: 2x faster than the
     BLAKE2b of format 1-2, and the packed rows are hashed in place, not copied field by field."""
     h = hashlib.sha256(np.ascontiguousarray(rows, "<u4"))
+    h.update(np.array(extra, "<i8").tobytes())
+    return int.from_bytes(h.digest()[:8], "little")
+
+
+def parts_digest(parts: Iterable[np.ndarray], *extra: int) -> int:
+    """:func:`records_digest` of arrays one after the other (their little-endian bytes, no
+    joined copy) and the ``extra`` integers: the digest of a batch stored without records (its
+    summary words and hit counts, pipeline/store/photon_store.py)."""
+    h = hashlib.sha256()
+    for part in parts:
+        h.update(np.ascontiguousarray(part, np.asarray(part).dtype.newbyteorder("<")))
     h.update(np.array(extra, "<i8").tobytes())
     return int.from_bytes(h.digest()[:8], "little")
 
@@ -177,7 +189,7 @@ def as_array(value: npt.ArrayLike, name: str, shape_tail: tuple[int, ...], dtype
     if np.dtype(dtype).kind == "u":
         if arr.dtype.kind not in "ui" and arr.size:
             raise LoomError(f"{name} must be integers, got {arr.dtype}", path=where)
-        if arr.size and (arr.min() < 0 or arr.max() > np.iinfo(dtype).max):
+        if arr.size and not np.can_cast(arr.dtype, dtype) and (arr.min() < 0 or arr.max() > np.iinfo(dtype).max):
             raise LoomError(f"{name} has values outside {np.dtype(dtype).name}", path=where)
     elif arr.size and (arr.dtype.kind not in "fiu" or not np.isfinite(arr).all()
                        or (arr < 0).any()):
@@ -192,8 +204,8 @@ def sort_records(key: np.ndarray, bary: np.ndarray, energy: np.ndarray) -> np.nd
     A least-significant-digit radix sort over 16-bit digits: numpy's stable argsort of u16 values
     is a counting sort, O(n) a pass, so (b2, b1, then the group's 16-bit digits) take 3 passes on
     ROOM, and the energy bits 6 more only where (element, category, b1, b2) repeat. A ROOM batch of
-    134,000 records: 2.4 against 12.6 ms for the two packed u64 sorts this replaced (README
-    "Radix-sorted records")."""
+    134,000 records: 2.4 against 12.6 ms for the two packed u64 sorts this replaced (docs/04-photons.md
+    §3)."""
     key = np.asarray(key, np.uint32)
     n = key.shape[0]
     if n == 0:
@@ -249,34 +261,68 @@ def check_records(key: npt.ArrayLike, bary: npt.ArrayLike, energy: npt.ArrayLike
     if bary.shape[0] != n or energy.shape[0] != n:
         raise LoomError(f"record arrays differ in length: key {n}, bary {bary.shape[0]}, "
                         f"energy {energy.shape[0]}", path=where)
-    if n and int((key & np.uint32(ELEMENT_MASK)).max()) >= n_elements:
-        raise LoomError(f"element id {int((key & np.uint32(ELEMENT_MASK)).max())} >= n_elements {n_elements}",
-                        path=where)
+    if n:  # the element ids in the thread's scratch array (no new memory a batch)
+        top = int(np.bitwise_and(key, np.uint32(ELEMENT_MASK), out=scratch("element", n, np.uint32)).max())
+        if top >= n_elements:
+            raise LoomError(f"element id {top} >= n_elements {n_elements}", path=where)
     return key, bary, energy
 
 
 def category_counts(key: np.ndarray, n_elements: int) -> np.ndarray:
-    """u64 (4, n_elements): hits per category (CATEGORIES order) and element; order-free."""
-    # element << 2 | category is the key rotated left by 2 (sort_records' group): one bincount
-    group = (key << np.uint32(2)) | (key >> np.uint32(ELEMENT_BITS))
-    counts = np.bincount(group, minlength=len(CATEGORIES) * n_elements)
+    """u64 (4, n_elements): hits per category (CATEGORIES order) and element of checked keys;
+    order-free. One bincount of element << 2 | category (the key rotated left by 2, sort_records'
+    group), made as the intp values bincount takes as they are (it copies anything else into a
+    new array) in the thread's scratch arrays."""
+    n, size = key.shape[0], len(CATEGORIES) * n_elements
+    group, category = scratch("group", n, np.intp), scratch("category", n, np.uint32)
+    np.left_shift(key, np.uint32(2), out=category)  # element << 2, the category bits shifted out
+    np.copyto(group, category)
+    np.right_shift(key, np.uint32(ELEMENT_BITS), out=category)
+    np.bitwise_or(group, category, out=group)
+    counts = np.bincount(group, minlength=size)[:size]
     return np.ascontiguousarray(counts.reshape(n_elements, len(CATEGORIES)).T, np.uint64)
 
 
-def element_grouped(key: np.ndarray, bary: np.ndarray, energy: np.ndarray,
-                    n_elements: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+_SCRATCH = threading.local()
+
+
+def scratch(name: str, n: int, dtype: npt.DTypeLike) -> np.ndarray:
+    """A 1-D array of ``n`` ``dtype`` values (contents undefined) that this thread gets again at
+    the next call with ``name``, grown to the next power of two when too small.
+
+    For temporaries of the store's hot paths: an array the size of a batch, new at every call,
+    costs a page fault a 4 KiB page, and on the build machines (whose free memory the host
+    reclaims, docs/13-cluster.md §5) that is 3-33 us a page, several ms a batch.
+    The caller uses the array before its next call with the same name and returns none of it."""
+    size = n * np.dtype(dtype).itemsize
+    kept = getattr(_SCRATCH, "arrays", None)
+    if kept is None:
+        kept = _SCRATCH.arrays = {}
+    buf = kept.get(name)
+    if buf is None or buf.nbytes < size:
+        buf = kept[name] = np.empty(1 << max(12, (size - 1).bit_length()), np.uint8)
+    return buf[:size].view(dtype)
+
+
+def element_grouped(key: np.ndarray, bary: np.ndarray, energy: np.ndarray, n_elements: int, *,
+                    with_counts: bool = False) -> tuple[np.ndarray, ...]:
     """(key, bary, energy, offsets) grouped by element, each element's records in input order: the
-    order a batch's sums are added in (pipeline/batch_sums.py). A counting sort per 16-bit digit of
+    order a batch's sums are added in (pipeline/collection/batch_sums.py). A counting sort per 16-bit digit of
     the element id (one pass below 65,536 elements), a fraction of the total order's cost; the
-    tracer's output order is itself deterministic (workers/photons.py), so the sums are too."""
+    tracer's output order is itself deterministic (pipeline/photons/tracing.py), so the sums are too.
+    ``with_counts``: and the :func:`category_counts` of the keys, from the one bincount that gives
+    the offsets (per element and category instead of per element)."""
     element = key & np.uint32(ELEMENT_MASK)
     n = key.shape[0]
     top = int(element.max()) if n else 0
     order = _lsd_order([(element >> np.uint32(s)).astype(np.uint16) for s in range(0, max(1, top.bit_length()), 16)]
                        ) if n else np.empty(0, np.int64)
     offsets = np.zeros(n_elements + 1, np.int64)
-    np.cumsum(np.bincount(element, minlength=n_elements), out=offsets[1:])
-    return np.take(key, order), np.take(bary, order, axis=0), np.take(energy, order, axis=0), offsets
+    counts = category_counts(key, n_elements) if with_counts else None
+    np.cumsum(counts.sum(axis=0, dtype=np.int64) if with_counts else np.bincount(element, minlength=n_elements),
+              out=offsets[1:])
+    grouped = (np.take(key, order), np.take(bary, order, axis=0), np.take(energy, order, axis=0), offsets)
+    return (*grouped, counts) if with_counts else grouped
 
 
 def sorted_batch(key: np.ndarray, bary: np.ndarray, energy: np.ndarray, n_elements: int) -> SortedBatch:

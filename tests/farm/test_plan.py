@@ -185,9 +185,9 @@ def test_a_recipe_with_another_runs_store_or_an_unwritable_one_is_one_line(room,
     swapped = _run(*LOOM, "farm", "decide", out, "0", check=False)
     assert swapped.returncode == 2 and len(swapped.stderr.strip().splitlines()) == 1
     assert "photons.zarr" in swapped.stderr and "scene" in swapped.stderr
-    # A store a worker cannot write into: where its batch sums go is a file
+    # A store a worker cannot write into: where its batches go is a file
     _run(*LOOM, "plan", scene, *_options(tmp_path / "third", config))
-    (tmp_path / "third" / "photons.zarr" / "summaries").write_text("not a folder")
+    (tmp_path / "third" / "photons.zarr" / "batch").write_text("not a folder")
     broken = _run(*LOOM, "farm", "decide", tmp_path / "third", "0", check=False)
     assert broken.returncode == 2 and len(broken.stderr.strip().splitlines()) == 1, broken.stderr
     assert "photons.zarr" in broken.stderr and "cannot write" in broken.stderr

@@ -106,7 +106,7 @@ def test_worker_killed_mid_run_still_gives_identical_store(dask_cluster, cornell
     killed_at = None
     markers = Path(url) / "batch"
     while time.monotonic() < deadline and thread.is_alive():
-        # A batch's done marker is one file "c.f.b.0" (pipeline/store/__init__.py): listing them is
+        # A batch is one object "c.f.b", its done marker (pipeline/store/__init__.py): listing them is
         # cheap enough to poll every few milliseconds, so the kill lands while batches remain
         # (opening the store at each poll was slow enough to miss a fast run now and then).
         done = len([n for n in os.listdir(markers) if n.startswith("c.")]) if markers.is_dir() else 0

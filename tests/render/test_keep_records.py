@@ -62,7 +62,7 @@ def test_a_render_without_records_writes_none_and_the_same_bits(atrium):
     assert size_plain["records"] == 0 and size_kept["records"] > 0
     assert abs(size_plain["photons"] - size_kept["photons"]) < 16  # the same counts and sums (and a flag)
     # The sums of a small batch on a fine mesh are sparse: fewer bytes than dense float32 sums would take
-    summaries = list((sums / "photons.zarr" / "summaries").iterdir())
+    summaries = list((sums / "photons.zarr" / "batch").iterdir())  # one object a batch: counts and sums
     assert len(summaries) == 4
     assert sum(p.stat().st_size for p in summaries) < len(summaries) * plain.n_elements * 24 * 4 / 3
 

@@ -40,10 +40,10 @@ def test_rerun_of_a_killed_shoot_removes_its_temp_files(cornell):
     proc = subprocess.Popen([*LOOM, "shoot", str(tmp / "cornell.glb"), "--store", str(store), "--frames", "1-6",
                              "--photons", "60000", "--scheduler", "synchronous", "--quiet"],
                             env=ENV, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
-    # Kill it once it has written the sums of its first batch (summaries/c.f.b), mid-run
+    # Kill it once it has written its first batch (batch/c.f.b), mid-run
     deadline = time.monotonic() + 300
     while proc.poll() is None and time.monotonic() < deadline:
-        if any(store.glob("summaries/c.*")):
+        if any(store.glob("batch/c.*")):
             break
         time.sleep(0.05)
     proc.send_signal(signal.SIGKILL)

@@ -82,9 +82,9 @@ def test_store_batches_read_back_the_same_with_and_without_a_summary(tmp_path):
                                  summarise=summarise)
         written[f] = (key, bary, energy)
     # Past the page cache: none of the record pages are cached (on a disk file system; tmpfs
-    # keeps every file in memory), while the counts chunk written beside them is
+    # keeps every file in memory), while the batch object (counts and sums) written after them is
     chunks = [tmp_path / "s.zarr" / "frames" / f / "0" / "c.0.0" for f in ("0", "1")]
-    counts = tmp_path / "s.zarr" / "counts" / "c.1.0.0.0"
+    counts = tmp_path / "s.zarr" / "batch" / "c.1.0"
     assert cached_pages(counts) == -(-os.path.getsize(counts) // mmap.PAGESIZE)
     if _file_system(tmp_path) != "tmpfs":
         assert [cached_pages(c) for c in chunks] == [0, 0]

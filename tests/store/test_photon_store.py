@@ -11,7 +11,17 @@ import zarr
 from photonstore_helpers import IDENTITY, contents, make_batch, snapshot, write_frame
 
 from pipeline.errors import LoomError
-from pipeline.store import CATEGORIES, ELEMENT_MASK, RECORD_BYTES, FrameRecords, PhotonStore, pack_key, sort_records
+from pipeline.store import (
+    CATEGORIES,
+    ELEMENT_MASK,
+    RECORD_BYTES,
+    FrameRecords,
+    PhotonStore,
+    counting_io,
+    pack_key,
+    sort_records,
+)
+from pipeline.store.records import category_counts
 
 N_ELEMENTS = 500
 
@@ -48,7 +58,7 @@ def test01_record_is_20_bytes_and_described(store):
     assert RECORD_BYTES == 20
     attrs = dict(zarr.open_group(store.url, mode="r").attrs)
     assert attrs["record_layout"]["record_bytes"] == 20
-    assert attrs["format_version"] == 4 and attrs["frame_numbers"] == [101, 102, 103, 104]
+    assert attrs["format_version"] == 5 and attrs["frame_numbers"] == [101, 102, 103, 104]
     assert {k: attrs[k] for k in IDENTITY} == IDENTITY
 
 
@@ -116,7 +126,7 @@ def test06_append_leaves_earlier_batches_untouched(store, tmp_path):
     after = snapshot(tmp_path / "run.zarr")
     assert {k: after[k] for k in before} == before  # same bytes, inode and mtime
     new = sorted(set(after) - set(before))
-    assert new and all(k.startswith(("frames/0/1/", "counts/c.0.1.", "batch/c.0.1.")) for k in new)
+    assert new and all(k.startswith(("frames/0/1/", "batch/c.0.1")) for k in new)
     assert store.done_batches(0) == [0, 1] and store.photons_emitted(0) == 1500 + 3000
 
 
@@ -426,3 +436,138 @@ def test_keep_records_is_part_of_a_stores_identity(tmp_path):
     with pytest.raises(LoomError, match="holds no hit records.*use another --out or --store"):
         PhotonStore.open(tmp_path / "without", keep_records=True)
     assert PhotonStore.open(tmp_path / "without").keep_records is False
+
+
+def _element_hits(key, bary, energy):
+    """A stand-in summary for a store without records: u32 words made from the records."""
+    return np.bincount(key & ELEMENT_MASK, minlength=N_ELEMENTS).astype(np.uint32)
+
+
+def _write(store, frame, sizes, summarise=None, sizes_from=0):
+    """write_batch of batches ``sizes`` of a frame in order (batch ``sizes_from`` on); their results."""
+    start, out = 0, []
+    for b, n in enumerate(sizes):
+        batch = make_batch(frame, b, n, N_ELEMENTS, photon_start=start)
+        if b >= sizes_from:
+            out.append(store.write_batch(frame, b, **batch, summarise=summarise))
+        start += batch["photons_emitted"]
+    return out
+
+
+@pytest.mark.parametrize("damage", ["flipped", "truncated", "foreign"])
+@pytest.mark.parametrize("keep_records", [True, False], ids=["with records", "sums only"])
+def test27_a_damaged_batch_header_is_not_done_and_is_rewritten(tmp_path, damage, keep_records):
+    """A batch is done iff its object (batch/c.f.b: header, counts, sums) has a whole header
+    naming it: one with a flipped bit, cut short or another batch's is not done, nor is any later
+    batch; a rerun rewrites it, finds the later one done again, and the store ends equal to one
+    never damaged."""
+    summarise = None if keep_records else _element_hits
+    sizes = [3000, 3000, 3000]
+    damaged, clean = (create(tmp_path / name, keep_records=keep_records) for name in ("damaged", "clean"))
+    for store in (damaged, clean):
+        assert _write(store, 2, sizes, summarise) == [True] * 3
+    assert sorted(p.name for p in (tmp_path / "clean" / "batch").iterdir()) == ["c.2.0", "c.2.1", "c.2.2"]
+    if not keep_records:  # one object a batch, nothing else
+        assert sorted(p.relative_to(tmp_path / "clean").as_posix() for p in (tmp_path / "clean").rglob("*")
+                      if p.is_file() and p.name != "zarr.json") == ["batch/c.2.0", "batch/c.2.1", "batch/c.2.2"]
+    path = tmp_path / "damaged" / "batch" / "c.2.1"
+    data = bytearray(path.read_bytes())
+    if damage == "flipped":
+        data[50] ^= 0x04  # inside the header's fields: its CRC-32 no longer matches
+    elif damage == "truncated":
+        data = data[:60]  # shorter than a header
+    else:
+        data = bytearray((tmp_path / "damaged" / "batch" / "c.2.0").read_bytes())  # batch 0's object
+    path.write_bytes(bytes(data))
+    store = PhotonStore.open(damaged.url, mode="r+")  # a new instance, as a rerun opens it
+    assert store.done_batches(2) == [0] and not store.is_done(2, 1) and not store.is_done(2, 2)
+    assert store.batch_info(2, 1) is None and store.batch_info(2, 2) is None and store.read_summary(2, 1) is None
+    assert store.photons_emitted(2) == 1500 and store.batches_per_frame()[2] == 1
+    np.testing.assert_array_equal(store.counts(frames=[2]), clean.counts(frames=[2], batches=[1]))
+    assert _write(store, 2, sizes, summarise) == [False, True, False]  # batch 1 rewritten, 2 done again
+    assert store.done_batches(2) == [0, 1, 2] and store.verify_batch(2, 2)
+    assert contents(tmp_path / "damaged") == contents(tmp_path / "clean")
+
+
+def test28_a_later_batch_that_no_longer_follows_is_not_done_and_is_overwritten(tmp_path):
+    """Batch 1 damaged and traced again with other photons (another N_frame): batch 2's object,
+    which started where the old batch 1 ended, is not done, and writing batch 2 replaces it."""
+    store = create(tmp_path / "s.zarr")
+    _write(store, 0, [2000, 2000, 2000])
+    (tmp_path / "s.zarr" / "batch" / "c.0.1").write_bytes(b"LOOM")
+    rerun = PhotonStore.open(store.url, mode="r+")
+    assert _write(rerun, 0, [2000, 4000], sizes_from=1) == [True]
+    assert rerun.done_batches(0) == [0, 1] and not rerun.is_done(0, 2)  # batch 2 starts at 2000, not 3000
+    assert _write(rerun, 0, [2000, 4000, 1000], sizes_from=2) == [True]
+    fresh = PhotonStore.open(store.url)
+    assert fresh.done_batches(0) == [0, 1, 2] and fresh.photons_emitted(0) == 1000 + 2000 + 500
+    assert len(fresh.read_frame(0)) == 7000 and all(fresh.verify_batch(0, b) for b in range(3))
+
+
+def test29_a_store_of_format_4_is_refused_in_one_line(tmp_path):
+    """Format 4 kept a batch in three objects (done marker, counts chunk, summary): a store of it
+    is refused by open and create in one line that says what to do, and nothing is written."""
+    old = create(tmp_path / "old.zarr", keep_records=False)
+    _write(old, 0, [500], _element_hits)
+    meta = tmp_path / "old.zarr" / "zarr.json"
+    data = json.loads(meta.read_text())
+    data["attributes"]["format_version"] = 4
+    meta.write_text(json.dumps(data))
+    before = snapshot(tmp_path / "old.zarr")
+    for call in (lambda: PhotonStore.open(old.url), lambda: PhotonStore.open(old.url, mode="r+"),
+                 lambda: create(old.url, keep_records=False)):
+        with pytest.raises(LoomError) as err:
+            call()
+        message = str(err.value)
+        assert "\n" not in message and old.url in message
+        assert "format version 4" in message and "reads version 5" in message and "delete it" in message
+    assert snapshot(tmp_path / "old.zarr") == before
+
+
+def test30_a_writer_adds_to_the_running_counts_it_wrote_without_reading_them(tmp_path):
+    """The next batch of a frame written by the instance that wrote the one before reads nothing
+    back (its running counts are kept); by another instance it reads them from the batch object;
+    the stores end byte-identical."""
+    one, fresh = (create(tmp_path / name, keep_records=False) for name in ("one", "fresh"))
+    start = 0
+    for b, n in enumerate([3000, 3000, 6000]):
+        batch = make_batch(1, b, n, N_ELEMENTS, photon_start=start)
+        start += batch["photons_emitted"]
+        with counting_io() as same:
+            one.write_batch(1, b, **batch, summarise=_element_hits)
+        with counting_io() as other:
+            PhotonStore.open(fresh.url, mode="r+").write_batch(1, b, **batch, summarise=_element_hits)
+        assert same["read_bytes"] == 0 and (other["read_bytes"] > 0) == (b > 0)
+    assert contents(tmp_path / "one") == contents(tmp_path / "fresh")
+    np.testing.assert_array_equal(PhotonStore.open(one.url).counts(frames=[1]), fresh.counts(frames=[1]))
+
+
+@pytest.mark.parametrize("element", [N_ELEMENTS, (1 << 30) - 1])
+def test31_a_store_without_records_refuses_unknown_elements_too(tmp_path, element):
+    """Without records too an unknown element id is refused in one line before anything is
+    counted, summed or written, even the largest id."""
+    store = create(tmp_path / "s.zarr", keep_records=False)
+    batch = make_batch(0, 0, 50, N_ELEMENTS)
+    batch["key"][7] = (batch["key"][7] & ~np.uint32(ELEMENT_MASK)) | np.uint32(element)
+    with pytest.raises(LoomError, match=f"element id {element} >= n_elements {N_ELEMENTS}") as err:
+        store.write_batch(0, 0, **batch, summarise=_element_hits)
+    assert "\n" not in str(err.value) and store.done_batches(0) == []
+    assert not (tmp_path / "s.zarr" / "batch").exists()
+
+
+def test32_a_summarisers_hit_counts_are_taken_when_they_add_up(tmp_path):
+    """A summarise that returns (words, counts), as pipeline/batch_sums.summariser does, gives the
+    store the batch's counts (the same bytes as counting them itself); counts that are not
+    (4, n_elements) integers adding up to the records are a caller's bug."""
+    plain, given = (create(tmp_path / name, keep_records=False) for name in ("plain", "given"))
+    batch = make_batch(0, 0, 4000, N_ELEMENTS)
+    plain.write_batch(0, 0, **batch, summarise=_element_hits)
+    given.write_batch(0, 0, **batch, summarise=lambda k, b, e: (_element_hits(k, b, e),
+                                                                 category_counts(k, N_ELEMENTS)))
+    assert contents(tmp_path / "plain") == contents(tmp_path / "given")
+    wrong = category_counts(batch["key"], N_ELEMENTS)
+    wrong[0, 0] += 1
+    for counts in (wrong, wrong[:, :-1], wrong.astype(np.float64)):
+        with pytest.raises(TypeError, match="hit counts"):
+            given.write_batch(1, 0, **batch, summarise=lambda k, b, e, c=counts: (_element_hits(k, b, e), c))
+    assert given.done_batches(1) == []

@@ -74,3 +74,7 @@ def test_element_grouping_keeps_the_writers_order_within_an_element(n_elements):
     want = np.zeros((4, n_elements), np.uint64)
     np.add.at(want, ((key >> np.uint32(30)).astype(np.intp), element.astype(np.intp)), 1)
     assert np.array_equal(category_counts(key, n_elements), want)
+    # with_counts: the same grouping, and the counts from the bincount that gave the offsets
+    *again, counts = element_grouped(key, bary, energy, n_elements, with_counts=True)
+    assert all(np.array_equal(x, y) for x, y in zip(again, (k, b, e, offsets)))
+    assert np.array_equal(counts, want) and counts.dtype == np.uint64

@@ -3,7 +3,7 @@
 The store refuses such records when they are written, so they can only come from damage or a
 foreign writer: here the stored chunks of one batch are rewritten through zarr with NaN, +Inf,
 -Inf, a negative energy and an element id the mesh does not have, and the batch's stored sums are
-removed so that the render reads the records (pipeline/collection/batch_sums.py). Reading drops them
+damaged so that the render reads the records (pipeline/collection/batch_sums.py). Reading drops them
 (pipeline/store/records.valid_records), counts them (FrameRecords.dropped) and logs a warning; a
 render from that store equals, bit for bit, a render from a store whose damaged records carry
 zero energy instead (they then add exactly nothing), in every layer of every frame.
@@ -39,9 +39,14 @@ def _damage(url: str, frame_index: int, values) -> None:
     else:
         rows[2:5, DAMAGED[-1]] = 0
     arr[...] = rows
-    # The batch's stored sums were made from the undamaged records (pipeline/collection/batch_sums.py): remove
-    # them, as damage might, so the render sums the damaged records it keeps.
-    (Path(url) / "summaries" / f"c.{frame_index}.0").unlink(missing_ok=True)
+    # The batch's stored sums were made from the undamaged records (pipeline/collection/batch_sums.py): damage
+    # them too (a byte of the words that end its batch object), so the render sums the damaged records
+    # it keeps. (Damage to the object's header would make the batch not done: the render would trace
+    # it again.)
+    path = Path(url) / "batch" / f"c.{frame_index}.0"
+    data = bytearray(path.read_bytes())
+    data[-3] ^= 0x10
+    path.write_bytes(bytes(data))
 
 
 def _run(tmp, name, values):
