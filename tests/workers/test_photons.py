@@ -231,23 +231,28 @@ def _skylit_hall(tmp_path, double_sided: bool):
     return _load(b, tmp_path, "hall.glb", 0.5)
 
 
+def _hall_hits(tmp_path, double_sided):
+    """Per batch of 20,000 sun photons (first hits only) in the skylit hall: the batch, each hit's
+    element, whether it is on the roof, and its position."""
+    scene, elements, state = _skylit_hall(tmp_path, double_sided=double_sided)
+    roof = scene.instances.index(next(i for i in scene.instances if i.name.startswith("roof")))
+    lo, hi = elements.instance_elements[roof], elements.instance_elements[roof + 1]
+    for batch in _batches(state, elements, 20_000, max_depth=1):
+        elem = (batch.key & ELEMENT_MASK).astype(np.int64)
+        yield batch, elem, (elem >= lo) & (elem < hi), _positions(batch, elements, state)
+
+
 def test_sun_through_a_skylight_lights_the_floor_and_not_the_roof_from_outside(tmp_path):
     """A single-sided roof has no outside: the sun's photons that reach its back are absorbed, so the
     roof's elements record none from above, and the sun emits from its projection map, so nearly
     every photon comes through the hole, with the floor's irradiance under it still E.
 
-    Before: the sun emitted over the whole disk covering the scene (about 1 % of its photons came
-    through the hole), and the photons falling on the roof's top were recorded on its elements,
-    whose one irradiance the room below sees."""
-    scene, elements, state = _skylit_hall(tmp_path, double_sided=False)
-    batches = _batches(state, elements, 20_000, max_depth=1)
-    roof = scene.instances.index(next(i for i in scene.instances if i.name.startswith("roof")))
-    lo, hi = elements.instance_elements[roof], elements.instance_elements[roof + 1]
+    Emitted over the whole disk covering the scene instead, about 1 % of the sun's photons would
+    come through the hole, and those recorded on the roof's top would light the room below through
+    the roof elements' one irradiance."""
     estimates, on_floor = [], []
-    for batch in batches:
-        elem = (batch.key & ELEMENT_MASK).astype(np.int64)
-        assert not ((elem >= lo) & (elem < hi)).any()  # depth 1: only first hits, all from above
-        p = _positions(batch, elements, state)
+    for batch, elem, on_roof, p in _hall_hits(tmp_path, double_sided=False):
+        assert not on_roof.any()  # depth 1: only first hits, all from above
         under = (np.abs(p[:, 0]) < 0.5) & (np.abs(p[:, 2]) < 0.5)
         on_floor.append(len(elem) / batch.photons_emitted)
         estimates.append(batch.energy[under, 1].astype(np.float64).sum() / batch.photons_emitted / 1.0)
@@ -258,15 +263,8 @@ def test_sun_through_a_skylight_lights_the_floor_and_not_the_roof_from_outside(t
 def test_a_double_sided_roof_keeps_the_light_on_its_top(tmp_path):
     """Double-sided (the builder's default), the roof's top is a surface: the sun lights it, its
     projection map covers it, and the light through the hole is the same E."""
-    scene, elements, state = _skylit_hall(tmp_path, double_sided=True)
-    batches = _batches(state, elements, 20_000, max_depth=1)
-    roof = scene.instances.index(next(i for i in scene.instances if i.name.startswith("roof")))
-    lo, hi = elements.instance_elements[roof], elements.instance_elements[roof + 1]
     estimates, roof_flux = [], []
-    for batch in batches:
-        elem = (batch.key & ELEMENT_MASK).astype(np.int64)
-        on_roof = (elem >= lo) & (elem < hi)
-        p = _positions(batch, elements, state)
+    for batch, _, on_roof, p in _hall_hits(tmp_path, double_sided=True):
         under = ~on_roof & (np.abs(p[:, 0]) < 0.5) & (np.abs(p[:, 2]) < 0.5)
         estimates.append(batch.energy[under, 1].astype(np.float64).sum() / batch.photons_emitted)
         roof_flux.append(batch.energy[on_roof, 1].astype(np.float64).sum() / batch.photons_emitted)
