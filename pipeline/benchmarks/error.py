@@ -100,8 +100,9 @@ if TYPE_CHECKING:
 EVENTS = {"room": ("corner_spot", (-2.0, 0.0, 1.5)), "cornell": ("ceiling_lamp", (-0.3, 0.0, 0.0))}
 # Kernels that run on stored photons only (windows, gather, filter): not the reference's
 RECONSTRUCTION_KERNELS = ("temporal", "gather", "filter")
-# The compositor's modules (camera paths and their shading): the reference traces photons only
-COMPOSITOR_MODULES = ("area_lights", "camera_hits", "camera_paths", "composite", "punctual_lights", "shading_tables")
+# What a reference map depends on besides its inputs: the tracer, the estimator, the scene and the
+# kernels (but those that run on stored photons only); the compositor (pipeline/frames/) is not in it
+REFERENCE_SOURCES = ("pipeline/photons", "pipeline/collection/estimators.py", "kernels", "pipeline/scene")
 REFERENCE_BATCH = 250_000  # photons traced per call into a reference map (bounded worker memory)
 # The methods compared; per-frame rendering is the baseline every ratio is taken against
 METHODS = ("per-frame", "fixed", "adaptive", "guided")
@@ -174,16 +175,15 @@ def reference_map(*, scene_path: str, scene_hash: str, element_size: float, fram
 def reference_key(*, scene_hash: str, element_size: float, frames: tuple[int, int], n_photons: int,
                   seeds: Sequence[int], max_depth: int) -> str:
     """Name of a cached pair of references: everything :func:`reference_map` reads, and the source of
-    the code that traces and estimates (workers/ but the compositor, kernels/ but the programs that
-    reconstruct from a store, pipeline/scene/), so a changed tracer never meets a stale reference
-    and a changed compositor does not cost a new one (ROOM's pair: 1,115 s)."""
+    the code that traces and estimates (``REFERENCE_SOURCES``), so a changed tracer never meets a
+    stale reference and a changed compositor does not cost a new one."""
     h = hashlib.sha256(json.dumps([scene_hash, element_size, list(frames), n_photons, list(seeds), max_depth,
                                    "common random numbers"]).encode())
     root = Path(__file__).resolve().parents[2]
-    for folder in ("workers", "kernels", "pipeline/scene"):
-        for f in sorted((root / folder).rglob("*")):
-            if f.suffix in (".py", ".cl") and not (folder == "kernels" and f.stem in RECONSTRUCTION_KERNELS
-                                                   or folder == "workers" and f.stem in COMPOSITOR_MODULES):
+    for source in REFERENCE_SOURCES:
+        path = root / source
+        for f in sorted(path.rglob("*")) if path.is_dir() else [path]:
+            if f.suffix in (".py", ".cl") and not (source == "kernels" and f.stem in RECONSTRUCTION_KERNELS):
                 h.update(f.relative_to(root).as_posix().encode() + b"\0" + f.read_bytes())
     return h.hexdigest()[:20]
 

@@ -158,6 +158,18 @@ def test_reference_key_names_everything_the_reference_reads():
         assert reference_key(**{**base, **change}) != key
 
 
+def test_reference_key_reads_the_tracer_it_names():
+    """Every source the key hashes exists (a moved tracer must not drop out of the key unnoticed)
+    and the tracer is among them."""
+    from pathlib import Path
+
+    from pipeline.benchmarks.error import REFERENCE_SOURCES
+
+    root = Path(__file__).resolve().parents[2]
+    assert all((root / s).exists() for s in REFERENCE_SOURCES)
+    assert any((root / s / "tracing.py").exists() for s in REFERENCE_SOURCES)
+
+
 def test_bench_error_refuses_a_reference_under_50x(tmp_path):
     with pytest.raises(LoomError, match="at least 50"):
         run("cornell", Plan((1, 4), (1_000,), 2, (0.5,), reference_factor=10), tmp_path / "out")
