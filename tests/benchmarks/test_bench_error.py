@@ -4,13 +4,14 @@ from __future__ import annotations
 
 import json
 import math
+from pathlib import Path
 
 import numpy as np
 import pytest
 from click.testing import CliRunner
 
 from pipeline.benchmarks import error_measures as em
-from pipeline.benchmarks.error import Plan, reference_key, run
+from pipeline.benchmarks.error import REFERENCE_SOURCES, Plan, reference_key, run
 from pipeline.errors import LoomError
 from pipeline.scene import read_scene
 
@@ -161,10 +162,6 @@ def test_reference_key_names_everything_the_reference_reads():
 def test_reference_key_reads_the_tracer_it_names():
     """Every source the key hashes exists (a moved tracer must not drop out of the key unnoticed)
     and the tracer is among them."""
-    from pathlib import Path
-
-    from pipeline.benchmarks.error import REFERENCE_SOURCES
-
     root = Path(__file__).resolve().parents[2]
     assert all((root / s).exists() for s in REFERENCE_SOURCES)
     assert any((root / s / "tracing.py").exists() for s in REFERENCE_SOURCES)
