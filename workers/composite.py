@@ -47,8 +47,8 @@ def composite_task(*, scene_path: str, scene_hash: str, camera: str | None, elem
                    out_dir: str, metadata: dict) -> dict:
     """Dask task: render one frame, tone-map it and write its EXR and PNG (atomically).
 
-    Plain values and frozen settings in (``adaptation`` is the eye's adaptation L_a at this frame, pipeline/frames/tonemap.py), a
-    small dict of timings and ray counts out.
+    Plain values and the frozen ToneMapping in (``adaptation`` is the eye's adaptation L_a at this
+    frame, pipeline/frames/tonemap.py), a small dict of timings and ray counts out.
     """
     t0 = time.perf_counter()
     scene = load_scene(scene_path, scene_hash, camera)

@@ -620,7 +620,8 @@ def segment_done(job: Job, index: int) -> SegmentRecord | None:
     smoothed = smoothed_adaptation(job, info, rec.end)
     for f in frames:
         exr, png = frame_paths(job.out_dir, f)
-        if not frame_is_valid(exr, png, job.settings.width, job.settings.height, frame_hash(job.render_hash, info[f], smoothed[f])):
+        fh = frame_hash(job.render_hash, info[f], smoothed[f])
+        if not frame_is_valid(exr, png, job.settings.width, job.settings.height, fh):
             return None
     return rec
 
