@@ -43,12 +43,12 @@ from pipeline.store.illumination import IlluminationMaps
 
 def composite_task(*, scene_path: str, scene_hash: str, camera: str | None, element_size: float,
                    store_url: str, frame: int, width: int, height: int, spp: int, seed: int,
-                   max_depth: int, area_samples: int, adaptation: float, tonemap: dict,
+                   max_depth: int, area_samples: int, adaptation: float, tonemap: ToneMapping,
                    out_dir: str, metadata: dict) -> dict:
     """Dask task: render one frame, tone-map it and write its EXR and PNG (atomically).
 
-    Plain arguments in (``adaptation`` is the eye's adaptation L_a at this frame, pipeline/frames/tonemap.py), a
-    small dict of timings and ray counts out.
+    Plain values and the frozen ToneMapping in (``adaptation`` is the eye's adaptation L_a at this
+    frame, pipeline/frames/tonemap.py), a small dict of timings and ray counts out.
     """
     t0 = time.perf_counter()
     scene = load_scene(scene_path, scene_hash, camera)
@@ -62,7 +62,7 @@ def composite_task(*, scene_path: str, scene_hash: str, camera: str | None, elem
     exr, png = frame_paths(out_dir, frame)
     write_exr(exr, img.beauty, img.alpha, {"direct": img.direct, "indirect": img.indirect,
                                            "albedo": img.albedo}, {**metadata, "frame": frame})
-    write_png(png, tone(img.beauty, adaptation, ToneMapping(**tonemap)))
+    write_png(png, tone(img.beauty, adaptation, tonemap))
     t3 = time.perf_counter()
     return {"frame": frame, "rays": img.rays, "load_s": t1 - t0, "render_s": t2 - t1,
             "write_s": t3 - t2}

@@ -17,7 +17,7 @@ from pipeline.store.illumination import IlluminationMaps
 
 def reconstruct_task(*, store_url: str, scene_path: str, scene_hash: str, camera: str | None,
                      element_size: float, frames: list[int], fmax: int, mode: str, batches: list[int],
-                     config: dict, aspect: float, max_depth: int, area_samples: int) -> dict:
+                     config: RenderConfig, aspect: float, max_depth: int, area_samples: int) -> dict:
     """Dask task, Steps 4-5 of §5.2 for consecutive frames of one segment: the temporal gather of the
     indirect maps (Condition (1) windows up to F_max/2, pipeline/collection/maps.py), the adaptive spatial
     filter where too few photons were collected, each frame's direct estimate from its own photons
@@ -26,7 +26,7 @@ def reconstruct_task(*, store_url: str, scene_path: str, scene_hash: str, camera
     composite's). Writes the maps; returns per frame
     L_wa, a digest of the maps, the vertices filtered and the mean window length."""
     t0 = time.perf_counter()
-    cfg = RenderConfig.from_dict(config)
+    cfg = config
     scene = load_scene(scene_path, scene_hash, camera)
     elements = load_elements(scene_path, scene_hash, element_size)
     store = PhotonStore.open_shared(store_url)

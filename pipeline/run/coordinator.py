@@ -32,7 +32,7 @@ from __future__ import annotations
 import math
 import time
 from contextlib import contextmanager
-from dataclasses import asdict, dataclass
+from dataclasses import dataclass, fields
 from functools import cached_property
 from pathlib import Path
 from typing import TYPE_CHECKING, Callable, Iterable, Iterator
@@ -48,7 +48,7 @@ from pipeline.errors import LoomError
 from pipeline.frames.camera_paths import render_frame, visible_adaptation
 from pipeline.frames.images import frame_is_valid, frame_paths, write_png
 from pipeline.frames.perceived import camera_flow, displayed_difference
-from pipeline.frames.tonemap import ToneMapping, adapt_in_time
+from pipeline.frames.tonemap import adapt_in_time
 from pipeline.photons.tracing import trace_batch
 from pipeline.scene.scene_cache import load_elements, load_scene
 from pipeline.segments.decisions import (
@@ -72,6 +72,7 @@ from workers.shoot import shoot_task
 
 from .cluster import TASK_RETRIES, completed, group_sizes, run_tasks, submit_grouped, task_key
 from .cluster import result as wait_result
+from .settings import RenderSettings
 from .shoot import shoot_key
 
 if TYPE_CHECKING:
@@ -88,7 +89,8 @@ SHOOT_GROUP, COMPOSITE_GROUP = 8, 4
 
 @dataclass(frozen=True)
 class Job:
-    """Everything a segment task needs, as plain values (it travels to workers)."""
+    """Everything a segment task needs. It travels to workers pickled (frozen dataclasses all
+    through); :meth:`to_dict` and :meth:`from_dict` are its plain-JSON form (plan.json, the report)."""
 
     scene_path: str
     scene_hash: str
@@ -100,13 +102,8 @@ class Job:
     first: int  # first and last frame of the animation the segments cover
     last: int
     selection: tuple  # frames to render (fixed settings may skip frames; guided: first..last)
-    width: int
-    height: int
-    spp: int
-    reflection_depth: int
-    area_samples: int
-    tonemap: dict
-    config: dict
+    settings: RenderSettings  # resolution, spp, reflection depth, area samples, tone mapping
+    config: RenderConfig
     render_hash: str  # what a frame's pixels depend on besides its maps and adaptation
     decision_hash: str  # what the segment decisions depend on
     fmax: int  # F_max of the first segment (--fmax or fmax_initial), or of every frame when fixed
@@ -115,7 +112,14 @@ class Job:
     single_state: bool  # camera-only motion: every frame shares one photon set
 
     def to_dict(self) -> dict:
-        return asdict(self)
+        return {f.name: (getattr(self, f.name).to_dict() if f.name in ("settings", "config") else getattr(self, f.name))
+                for f in fields(self)}
+
+    @classmethod
+    def from_dict(cls, data: dict) -> Job:
+        return cls(**{**data, "selection": tuple(data["selection"]),
+                      "settings": RenderSettings.from_dict(data["settings"]),
+                      "config": RenderConfig.from_dict(data["config"])})
 
 
 @contextmanager
@@ -160,7 +164,7 @@ class SegmentRun:
 
     def __init__(self, job: Job, client: Client | None):
         self.job, self.client = job, client
-        self.config = RenderConfig.from_dict(job.config)
+        self.config = job.config
         # A store swapped for another run's (another scene, photon settings or seed) is refused here
         self.store = PhotonStore.open(job.store_url, mode="r+", scene_hash=job.scene_hash,
                                       config_hash=self.config.photon_hash(job.element_size), seed=self.config.seed)
@@ -302,18 +306,18 @@ class SegmentRun:
                                    fmax=place.fmax, config=self.config, split_parity=True, batches=use,
                                    spatial_filter=self.config.spatial_filter)
         state = self.scene.pose_frame(k)
-        job = self.job
+        job, px = self.job, self.job.settings
         # both halves along one set of camera paths: the bits of two renders at the cost of one
-        img = render_frame(state, self.elements, lit.irradiance[0], width=job.width, height=job.height, spp=job.spp,
-                           seed=self.config.seed, frame=k, max_depth=job.reflection_depth,
-                           area_samples=job.area_samples, also_maps=lit.irradiance[1:])
+        img = render_frame(state, self.elements, lit.irradiance[0], width=px.width, height=px.height, spp=px.spp,
+                           seed=self.config.seed, frame=k, max_depth=px.reflection_depth,
+                           area_samples=px.area_samples, also_maps=lit.irradiance[1:])
         images = [img.beauty, img.also_beauty(0)]
         # L_wa as the frame's own (reconstruct_task): what the camera sees of the halves' mean map
         adaptation = visible_adaptation(state, self.elements, 0.5 * (lit.irradiance[0] + lit.irradiance[1]),
-                                        aspect=job.width / job.height, seed=self.config.seed,
-                                        max_depth=job.reflection_depth, area_samples=job.area_samples)
-        params = ToneMapping(**job.tonemap)
-        flow = camera_flow(self.scene, k, job.width, job.height, params)
+                                        aspect=px.width / px.height, seed=self.config.seed,
+                                        max_depth=px.reflection_depth, area_samples=px.area_samples)
+        params = px.tonemap
+        flow = camera_flow(self.scene, k, px.width, px.height, params)
         result = displayed_difference(images[0], images[1], adaptation, params=params,
                                       aqm_size=self.config.aqm_size, flow=flow)
         counts = window_counts(self.store, batches=use)[place.start - 1:place.end]
@@ -409,13 +413,13 @@ class SegmentRun:
 
     def reconstruct_calls(self, rec: SegmentRecord, targets: dict[int, int]) -> list[tuple[str, dict]]:
         """One reconstruction task per chunk of :func:`frame_chunks` of the segment's frames."""
-        job = self.job
+        job, px = self.job, self.job.settings
         use = self.batches(targets).tolist()
         return [(task_key(f"reconstruct-{job.decision_hash[:8]}-f{chunk[0]:05d}", job.store_url), dict(
             store_url=job.store_url, scene_path=job.scene_path, scene_hash=job.scene_hash, camera=job.camera,
             element_size=job.element_size, frames=chunk, fmax=rec.fmax, mode=rec.temporal,
-            batches=use, config=job.config, aspect=job.width / job.height, max_depth=job.reflection_depth,
-            area_samples=job.area_samples))
+            batches=use, config=job.config, aspect=px.width / px.height, max_depth=px.reflection_depth,
+            area_samples=px.area_samples))
             for chunk in frame_chunks(self.frames_of(rec))]
 
     def _took(self, result: dict) -> None:
@@ -519,7 +523,7 @@ def smoothed_adaptation(job: Job, frames_info: dict[int, dict], upto: int) -> di
     scene = load_scene(job.scene_path, job.scene_hash, job.camera)
     frames = [f for f in job.selection if f <= upto]
     values = adapt_in_time([frames_info[f]["adaptation"] for f in frames],
-                           [scene.timeline.time(f) for f in frames], ToneMapping(**job.tonemap))
+                           [scene.timeline.time(f) for f in frames], job.settings.tonemap)
     return dict(zip(frames, values.tolist()))
 
 
@@ -538,22 +542,23 @@ def composite_calls(job: Job, frames: list[int], frames_info: dict[int, dict], *
     """(key, kwargs) of the composite tasks of the frames in ``frames`` that need one (see
     :func:`composite_frames`); ``frames_info`` holds every rendered frame up to the last of them."""
     smoothed = smoothed_adaptation(job, frames_info, max(frames))
+    px, seed = job.settings, job.config.seed
     calls = []
     for f in frames:
         info = frames_info[f]
         fh = frame_hash(job.render_hash, info, smoothed[f])
         exr, png = frame_paths(job.out_dir, f)
-        if f not in force and frame_is_valid(exr, png, job.width, job.height, fh):
+        if f not in force and frame_is_valid(exr, png, px.width, px.height, fh):
             continue
         calls.append((task_key(f"composite-{fh[:8]}-f{f:05d}", job.store_url, job.out_dir), dict(
             store_url=job.store_url, scene_path=job.scene_path, scene_hash=job.scene_hash, camera=job.camera,
-            element_size=job.element_size, frame=f, width=job.width, height=job.height, spp=job.spp,
-            seed=job.config["seed"], max_depth=job.reflection_depth, area_samples=job.area_samples,
-            adaptation=smoothed[f], tonemap=job.tonemap, out_dir=job.out_dir,
+            element_size=job.element_size, frame=f, width=px.width, height=px.height, spp=px.spp,
+            seed=seed, max_depth=px.reflection_depth, area_samples=px.area_samples,
+            adaptation=smoothed[f], tonemap=px.tonemap, out_dir=job.out_dir,
             metadata=dict(scene=job.scene_path.rsplit("/", 1)[-1], scene_hash=job.scene_hash,
                           camera=job.camera_name, render_hash=job.render_hash, frame_hash=fh,
-                          config_hash=RenderConfig.from_dict(job.config).hash, photons=info["photons"],
-                          seed=job.config["seed"], spp=job.spp, resolution=f"{job.width}x{job.height}",
+                          config_hash=job.config.hash, photons=info["photons"],
+                          seed=seed, spp=px.spp, resolution=f"{px.width}x{px.height}",
                           adaptation=smoothed[f], frame_adaptation=info["adaptation"]))))
     return calls
 
@@ -566,11 +571,10 @@ def _frames_info(job: Job, upto_index: int) -> dict[int, dict]:
     return info
 
 
-def segment_task(job: dict, index: int, force: bool = False) -> dict:
+def segment_task(job: Job, index: int, force: bool = False) -> dict:
     """Dask task for segment ``index``: decide it (if no earlier task did) and the next one, then
     reconstruct and composite its frames. Returns its record as a dict. ``force`` redoes the
     segment's decisions, maps and frames (``loom render --segment``)."""
-    job = Job(**job)
     with fanout() as client:
         run = SegmentRun(job, client)
         prev = read_record(job.out_dir, index - 1) if index else None
@@ -616,7 +620,8 @@ def segment_done(job: Job, index: int) -> SegmentRecord | None:
     smoothed = smoothed_adaptation(job, info, rec.end)
     for f in frames:
         exr, png = frame_paths(job.out_dir, f)
-        if not frame_is_valid(exr, png, job.width, job.height, frame_hash(job.render_hash, info[f], smoothed[f])):
+        fh = frame_hash(job.render_hash, info[f], smoothed[f])
+        if not frame_is_valid(exr, png, job.settings.width, job.settings.height, fh):
             return None
     return rec
 
@@ -656,10 +661,10 @@ def _coordinate(job, client, on_segment, records, index, start) -> list:
         result = {"rays": {}, "batches": 0, "already_done": rec is not None}
         if rec is None or (records and rec.start != start):
             if client is None:
-                result = segment_task(job.to_dict(), index)
+                result = segment_task(job, index)
             else:
                 result = wait_result(client, client.submit(
-                    segment_task, job.to_dict(), index, key=f"segment-{job.decision_hash[:8]}-{index:03d}-"
+                    segment_task, job, index, key=f"segment-{job.decision_hash[:8]}-{index:03d}-"
                     f"{time.time_ns()}", pure=False))
             rec = SegmentRecord.from_dict(result["record"])
         records.append(rec)
@@ -686,10 +691,10 @@ def reprocess(job: Job, client: Client | None, index: int) -> tuple[SegmentRecor
     if old is None:
         raise LoomError(f"segment {index} has no record yet; render first", field="--segment")
     if client is None:
-        result = segment_task(job.to_dict(), index, True)
+        result = segment_task(job, index, True)
     else:
         result = wait_result(client, client.submit(
-            segment_task, job.to_dict(), index, True, pure=False,
+            segment_task, job, index, True, pure=False,
             key=f"segment-{job.decision_hash[:8]}-{index:03d}-redo-{time.time_ns()}"))
     rec = SegmentRecord.from_dict(result["record"])
     rays = {int(f): r for f, r in result["rays"].items()}

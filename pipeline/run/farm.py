@@ -55,7 +55,7 @@ def bounds(job: Job) -> tuple[int, int]:
     n = job.last - job.first + 1
     if job.n_photons is not None or job.single_state:
         return 1, max(1, math.ceil(len(job.selection) / CHUNK_FRAMES))
-    cap = int(job.config["fmax_cap"])
+    cap = job.config.fmax_cap
     longest = min(n, cap + 1 + cap // 2 + 1)
     return max(1, math.ceil(n / (job.fmax + 1))), max(1, math.ceil(longest / CHUNK_FRAMES))
 
@@ -137,7 +137,7 @@ def _plan(out_dir) -> dict:
 def load_job(out_dir: str | Path) -> Job:
     path = Path(out_dir) / PLAN
     try:
-        return Job(**{k: tuple(v) if k == "selection" else v for k, v in json.loads(path.read_text())["job"].items()})
+        return Job.from_dict(json.loads(path.read_text())["job"])
     except FileNotFoundError:
         raise LoomError("has no plan (run `loom plan` first)", path=str(out_dir)) from None
     except (ValueError, KeyError, TypeError) as err:

@@ -22,7 +22,6 @@ import re
 import shutil
 import time
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -34,7 +33,7 @@ from pipeline.errors import LoomError
 from pipeline.frames.camera_paths import RAY_KINDS
 from pipeline.frames.images import frame_paths, write_video
 from pipeline.frames.perceived import viewing_line
-from pipeline.frames.tonemap import LOOK_FIELDS, ToneMapping
+from pipeline.frames.tonemap import LOOK_FIELDS
 from pipeline.paths import check_writable_dir
 from pipeline.report.page import page_parts, write_report
 from pipeline.report.skipped import skipped_work, summary_lines
@@ -46,6 +45,7 @@ from pipeline.store.illumination import IlluminationMaps
 
 from .cluster import connect
 from .coordinator import Job, coordinate, reprocess
+from .settings import MAX_SIDE, RenderSettings
 from .shoot import check_store_location, open_store, plan
 
 if TYPE_CHECKING:
@@ -56,31 +56,6 @@ if TYPE_CHECKING:
     from .coordinator import Job
 
 log = logging.getLogger(__name__)
-MAX_SIDE = 16384
-
-
-@dataclass(frozen=True, kw_only=True)
-class RenderSettings:
-    """What a frame's pixels depend on besides the scene, photons and seed."""
-
-    width: int = 640
-    height: int = 480
-    # jittered camera samples per pixel; the one default of loom render's --spp and of the benchmarks that
-    # render as loom render does (pipeline/cli/render.py RENDER_SPP; 8: docs/10-sampling.md §2)
-    spp: int = 8
-    reflection_depth: int = 4  # mirror/glossy reflections followed per camera path
-    area_samples: int = 2  # area-light (or sky) samples per diffuse hit (scenes with emissive triangles or a sky)
-    tonemap: ToneMapping = field(default_factory=ToneMapping)
-
-    def __post_init__(self) -> None:
-        for name, lo, hi in (("width", 1, MAX_SIDE), ("height", 1, MAX_SIDE), ("spp", 1, 4096),
-                             ("reflection_depth", 0, 64), ("area_samples", 1, 256)):
-            value = getattr(self, name)
-            if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
-                flag = "--resolution" if name in ("width", "height") else f"--{name.replace('_', '-')}"
-                raise LoomError(f"{name} must be an integer in [{lo}, {hi}], got {value!r}", field=flag)
-
-
 def parse_resolution(text: str) -> tuple[int, int]:
     """``"640x480"`` -> (640, 480); anything else, or a zero side, is a one-line LoomError."""
     m = re.fullmatch(r"\s*(\d+)\s*[xX]\s*(\d+)\s*", str(text))
@@ -146,9 +121,7 @@ def prepare_job(scene_path: str | Path, *, frames: str | None, out_dir: str | Pa
     return Job(scene_path=str(scene.path.resolve()), scene_hash=scene.scene_hash, camera=camera,
                camera_name=cam_name, element_size=p.elements.element_size, store_url=store_url,
                out_dir=str(out.resolve()),
-               first=p.frames[0], last=p.frames[-1], selection=tuple(p.frames), width=settings.width,
-               height=settings.height, spp=settings.spp, reflection_depth=settings.reflection_depth,
-               area_samples=settings.area_samples, tonemap=settings.tonemap.to_dict(), config=config.to_dict(),
+               first=p.frames[0], last=p.frames[-1], selection=tuple(p.frames), settings=settings, config=config,
                render_hash=stable_digest(look), decision_hash=stable_digest(decision), fmax=fmax,
                n_photons=n_photons, temporal=temporal,
                single_state=len(set(p.sources[f] for f in p.frames)) == 1 and guided)
@@ -251,7 +224,7 @@ def finish(job: Job, records: list[SegmentRecord], *, rays: dict, batches: int, 
     report = {
         "scene": job.scene_path, "camera": job.camera_name, "frames": list(job.selection),
         "rendered": sorted(rays), "skipped": sorted(set(job.selection) - set(rays)),
-        "resolution": [job.width, job.height], "spp": job.spp,
+        "resolution": [job.settings.width, job.settings.height], "spp": job.settings.spp,
         "photons": "auto" if job.n_photons is None else job.n_photons,
         "segments": [{"index": r.index, "frames": [r.start, r.end], "k": r.k, "fmax": r.fmax,
                       "n_frame": r.n_frame, "d_aqm": r.d_aqm, "capped": r.capped} for r in records],
@@ -263,8 +236,7 @@ def finish(job: Job, records: list[SegmentRecord], *, rays: dict, batches: int, 
         "rays_per_frame": {str(f): rays[f] for f in sorted(rays)},
         "frame_times_s": {str(f): frame_times[f] for f in sorted(frame_times or {})},
         "skipped_work": _skipped(job, scene, rays if ran_here else None, segments_done or []),
-        "settings": {"job": {k: v for k, v in job.to_dict().items() if k not in ("config", "selection")},
-                     "config": job.config},
+        "settings": _settings(job),
     }
     # The video (an ffmpeg process) encodes while this process draws the report's figures: both
     # are the render's last serial steps (docs/13-cluster.md §4)
@@ -289,7 +261,15 @@ def finish(job: Job, records: list[SegmentRecord], *, rays: dict, batches: int, 
 
 def _viewing(job: Job) -> str:
     """The viewing conditions the AQM judged the frames under, with their pixels per degree."""
-    return viewing_line(ToneMapping(**job.tonemap), job.width, job.height, RenderConfig.from_dict(job.config).aqm_size)
+    px = job.settings
+    return viewing_line(px.tonemap, px.width, px.height, job.config.aqm_size)
+
+
+def _settings(job: Job) -> dict:
+    """The report's settings: the job's values, its frame settings among them, and its RenderConfig."""
+    plain = job.to_dict()
+    rest = {k: v for k, v in plain.items() if k not in ("config", "selection", "settings")}
+    return {"job": {**rest, **plain["settings"]}, "config": plain["config"]}
 
 
 def store_size(store_url: str) -> dict:
