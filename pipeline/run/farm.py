@@ -141,7 +141,8 @@ def load_job(out_dir: str | Path) -> Job:
     except FileNotFoundError:
         raise LoomError("has no plan (run `loom plan` first)", path=str(out_dir)) from None
     except (ValueError, KeyError, TypeError) as err:
-        raise LoomError(f"not a photonloom plan ({err})", path=str(path)) from None
+        raise LoomError(f"not a plan this version of photonloom reads ({err}): run `loom plan` again",
+                        path=str(path)) from None
 
 
 # --- the steps -----------------------------------------------------------------------------------
