@@ -84,7 +84,7 @@ def test_readme_starts_with_the_two_set_up_commands():
 
 ORDINALS = ("first|second|third|fourth|fifth|sixth|seventh|eighth|ninth|tenth|eleventh|twelfth|thirteenth|"
             "fourteenth|fifteenth|sixteenth|seventeenth|eighteenth|nineteenth|twentieth|twenty-\\w+|thirtieth")
-# A round of work: "the nineteenth session", "the 3rd round", "a round of work". A round of an
+# A round of work: an ordinal before "session" or "round", or "a round of work". A round of an
 # algorithm ("for this round" of a loop) is not one.
 ROUND = re.compile(rf"\b(?:{ORDINALS}|\d+(?:st|nd|rd|th))[\s-]+(?:session|round)s?\b|\brounds? of work\b", re.I)
 # "session" in prose. Not an identifier (start_new_session, requests.Session) nor a quoted value
@@ -129,11 +129,12 @@ def test_no_file_names_a_date_of_measurement():
 
 
 @pytest.mark.parametrize("line, pattern", [
-    ("Re-measured 2026-12-03, ninth session", DATE),
-    ("(eighth session, 2026-12-03)", ROUND),
+    # Written in two parts, so that this file does not itself name what it forbids
+    ("Re-measured 2026-12-03, ninth " + "session", DATE),
+    ("(eighth " + "session, 2026-12-03)", ROUND),
     ("what this session added", SESSION),
-    ("the twenty-second session's README section", ROUND),
-    ("Unbiased indirect light (issue 11, deliverable 6)", ISSUE),
+    ("the twenty-second " + "session's README section", ROUND),
+    ("Unbiased indirect light (issue " + "11, deliverable 6)", ISSUE),
     ("so #9's cost target is met", HASH_NUMBER),
 ])
 def test_the_patterns_catch_what_they_are_for(line, pattern):
