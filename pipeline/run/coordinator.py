@@ -128,7 +128,7 @@ def fanout() -> Iterator[object | None]:
     when not on a Dask worker (synchronous scheduler): run_tasks then runs them in-process."""
     try:
         get_worker()
-    except (ImportError, ValueError):
+    except ValueError:  # not on a Dask worker
         yield None
         return
     with worker_client() as client:
@@ -154,7 +154,7 @@ def progress(message: str) -> None:
     callback when the task runs in the client's process."""
     try:
         get_worker().log_event(PROGRESS_TOPIC, message)
-    except (ImportError, ValueError):
+    except ValueError:  # not on a Dask worker
         for callback in _local_progress:
             callback(message)
 
