@@ -118,7 +118,8 @@ def bench_render(scene, frames, resolution, spp, workers, n_photons, fmax, skip_
 
 @bench.command("error")
 @click.argument("scene", default="room")
-@click.option("--quick", is_flag=True, help="Small budgets and frame range (under 3 minutes for room).")
+@click.option("--quick", is_flag=True,
+              help="Small budgets and frame range (a few minutes for room once its references are traced).")
 @click.option("--frames", default=None, help="FIRST-LAST (default: the plan's, e.g. 46-90 for room).")
 @click.option("--budgets", default=None, help="N_frame values, comma-separated (default: the plan's).")
 @click.option("--fmax", type=int, default=None, help="F_max of the fixed and adaptive windows.")
