@@ -26,7 +26,6 @@ def reconstruct_task(*, store_url: str, scene_path: str, scene_hash: str, camera
     composite's). Writes the maps; returns per frame
     L_wa, a digest of the maps, the vertices filtered and the mean window length."""
     t0 = time.perf_counter()
-    cfg = config
     scene = load_scene(scene_path, scene_hash, camera)
     elements = load_elements(scene_path, scene_hash, element_size)
     store = PhotonStore.open_shared(store_url)
@@ -37,13 +36,13 @@ def reconstruct_task(*, store_url: str, scene_path: str, scene_hash: str, camera
     # The direct estimate comes from the batch sums the gather holds (no second read of them)
     with counting_io() as io:  # the sums and counts read, the maps written
         for lit in illumination_maps(store, elements, scene, [f - 1 for f in frames], mode=mode, fmax=fmax,
-                                     config=cfg, spatial_filter=cfg.spatial_filter, batches=use,
+                                     config=config, spatial_filter=config.spatial_filter, batches=use,
                                      chunk=len(frames), with_direct=True, times=times):
             f = lit.frame_index + 1
             t1 = time.perf_counter()
             geometry = frame_geometry(scene, elements, f)  # posed once, by the gather
             indirect, direct = lit.irradiance, lit.direct
-            adaptation = visible_adaptation(geometry.state, elements, indirect, aspect=aspect, seed=cfg.seed,
+            adaptation = visible_adaptation(geometry.state, elements, indirect, aspect=aspect, seed=config.seed,
                                             max_depth=max_depth, area_samples=area_samples)
             t2 = time.perf_counter()
             maps.write_frame(lit.frame_index, indirect=indirect, direct=direct, adaptation=adaptation)

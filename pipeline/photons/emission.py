@@ -39,7 +39,7 @@ from pipeline.scene import FrameState
 from pipeline.scene.shading import SurfaceShading
 
 from .raycast import RayCaster
-from .sidedness import one_sided_triangles
+from .sidedness import absorb_back_hits, one_sided_triangles
 
 # Disk radius of directional lights, relative to the radius of the scene's bounds.
 DISK_MARGIN = 1.01
@@ -67,10 +67,7 @@ def projection_map(caster: RayCaster, axis: np.ndarray, center: np.ndarray, radi
     origins = center + tt * a.reshape(-1, 1) + ss * b.reshape(-1, 1) - axis * (radius * 1.05)
     dirs = np.broadcast_to(axis.astype(np.float32), origins.shape)
     tri = caster.intersect(np.ascontiguousarray(origins, np.float32), np.ascontiguousarray(dirs))[0]
-    t = np.maximum(tri, 0)
-    takes = tri >= 0
-    if one_sided is not None:
-        takes &= ~one_sided[t] | (caster.normals[t] @ axis < 0.0)
+    takes = absorb_back_hits(tri, dirs, caster.normals, one_sided) >= 0
     hit = np.pad(takes.reshape(grid, grid), 1)
     keep = np.zeros((grid, grid), bool)
     for di in range(3):
