@@ -48,6 +48,7 @@ from pipeline.errors import LoomError
 from pipeline.frames.camera_paths import render_frame, visible_adaptation
 from pipeline.frames.images import frame_is_valid, frame_paths, write_png
 from pipeline.frames.perceived import camera_flow, displayed_difference
+from pipeline.frames.settings import RenderSettings
 from pipeline.frames.tonemap import adapt_in_time
 from pipeline.photons.tracing import trace_batch
 from pipeline.scene.scene_cache import load_elements, load_scene
@@ -72,7 +73,6 @@ from workers.shoot import shoot_task
 
 from .cluster import TASK_RETRIES, completed, group_sizes, run_tasks, submit_grouped, task_key
 from .cluster import result as wait_result
-from .settings import RenderSettings
 from .shoot import shoot_key
 
 if TYPE_CHECKING:

@@ -33,6 +33,7 @@ from pipeline.errors import LoomError
 from pipeline.frames.camera_paths import RAY_KINDS
 from pipeline.frames.images import frame_paths, write_video
 from pipeline.frames.perceived import viewing_line
+from pipeline.frames.settings import MAX_SIDE, RenderSettings
 from pipeline.frames.tonemap import LOOK_FIELDS
 from pipeline.paths import check_writable_dir
 from pipeline.report.page import page_parts, write_report
@@ -45,7 +46,6 @@ from pipeline.store.illumination import IlluminationMaps
 
 from .cluster import connect
 from .coordinator import Job, coordinate, reprocess
-from .settings import MAX_SIDE, RenderSettings
 from .shoot import check_store_location, open_store, plan
 
 if TYPE_CHECKING:

@@ -5,7 +5,8 @@ from __future__ import annotations
 from dataclasses import asdict, dataclass, field
 
 from pipeline.errors import LoomError
-from pipeline.frames.tonemap import ToneMapping
+
+from .tonemap import ToneMapping
 
 MAX_SIDE = 16384
 
