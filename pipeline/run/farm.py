@@ -34,13 +34,15 @@ import time
 from pathlib import Path
 
 from pipeline.errors import LoomError
+from pipeline.segments.job import Job
+from pipeline.segments.planner import reach_targets
 from pipeline.segments.records import read_record, read_records, record_path, write_record
 from pipeline.store.illumination import IlluminationMaps
 from workers.composite import composite_task
 from workers.reconstruct import reconstruct_task
 
 from .cluster import connect
-from .coordinator import CHUNK_FRAMES, Job, SegmentRun, composite_calls
+from .coordinator import CHUNK_FRAMES, DaskExecutor, composite_calls
 from .render import finish
 
 PLAN = "plan.json"
@@ -62,7 +64,7 @@ def bounds(job: Job) -> tuple[int, int]:
 
 def shoot_chunks(job: Job) -> list[list[int]]:
     """Frames of each shoot target: with fixed settings every frame's photons are known before
-    any decision (``_fixed_record`` traces N_frame for each frame of the selection), so they are
+    any decision (the planner's fixed record traces N_frame for each frame of the selection), so they are
     traced in chunks that make can run side by side; none when the decide step itself must trace
     (guided segments) or when all frames share one photon set (camera-only motion)."""
     if job.n_photons is None or job.single_state:
@@ -182,11 +184,11 @@ def _current(job: Job, i: int):
 
 def _shoot(job: Job, i: int, c: int) -> str:
     """Chunk ``c``'s photons at the fixed N_frame, traced in this process; frames whose batches
-    are already stored are skipped (``SegmentRun.shoot``), so a rerun traces nothing."""
+    are already stored are skipped (``DaskExecutor.shoot``), so a rerun traces nothing."""
     chunks = shoot_chunks(job)
     if i or c >= len(chunks):
         return f"segment {i} chunk {c}: no photons to trace here"
-    run = SegmentRun(job, None)
+    run = DaskExecutor(job, None)
     run.shoot({f: job.n_photons for f in chunks[c]})
     what = f"{run.batches_traced} batch(es) traced" if run.batches_traced else "already traced"
     return f"segment {i} chunk {c}: frames {chunks[c][0]}-{chunks[c][-1]} {what}"
@@ -202,7 +204,7 @@ def _decide(job: Job, i: int) -> str:
     workers = 1 if shoot_chunks(job) else int(_plan(job.out_dir).get("decide_workers", 1))
     start, fmax = (job.first, job.fmax) if prev is None else (prev.end + 1, prev.fmax)
     with connect("synchronous" if workers == 1 else "local", workers) as client:
-        rec = SegmentRun(job, client).record(i, start, fmax)
+        rec = DaskExecutor(job, client).planner().record(i, start, fmax)
     return f"segment {i}: frames {rec.start}-{rec.end}, K {rec.k}, F_max {rec.fmax}, N_frame {rec.n_frame:,}"
 
 
@@ -213,15 +215,14 @@ def _chunk_path(job: Job, i: int, c: int) -> Path:
 def _calls(job: Job, i: int):
     rec, _ = _segment(job, i)
     if rec is None:
-        return None, None, []
+        return None, []
     if rec.end < job.last and rec.guided:
         _current(job, i + 1)  # its decide target must have run: the windows reach its photons
-    run = SegmentRun(job, None)
-    return rec, run, run.reconstruct_calls(rec, run.reach_targets(rec))
+    return rec, DaskExecutor(job, None).reconstruct_calls(rec, reach_targets(job, rec))
 
 
 def _reconstruct(job: Job, i: int, c: int) -> str:
-    rec, _, calls = _calls(job, i)
+    _, calls = _calls(job, i)
     if c >= len(calls):
         return f"segment {i} chunk {c}: none"
     kw = calls[c][1]
@@ -241,7 +242,7 @@ def _infos(job: Job, upto: tuple[int, int]) -> dict[int, dict]:
     """Frame infos of every chunk up to (segment, chunk), from the chunk files."""
     info: dict[int, dict] = {}
     for i in range(upto[0] + 1):
-        _, _, calls = _calls(job, i)
+        _, calls = _calls(job, i)
         for c in range(len(calls) if i < upto[0] else min(upto[1] + 1, len(calls))):
             path = _chunk_path(job, i, c)
             if not path.is_file():
@@ -251,7 +252,7 @@ def _infos(job: Job, upto: tuple[int, int]) -> dict[int, dict]:
 
 
 def _frames(job: Job, i: int, c: int) -> str:
-    _, _, calls = _calls(job, i)
+    _, calls = _calls(job, i)
     if c >= len(calls):
         return f"segment {i} chunk {c}: none"
     frames = calls[c][1]["frames"]
@@ -262,7 +263,7 @@ def _frames(job: Job, i: int, c: int) -> str:
 
 
 def _done(job: Job, i: int) -> str:
-    rec, _, calls = _calls(job, i)
+    rec, calls = _calls(job, i)
     if rec is None:
         return f"segment {i}: none"
     if rec.status != "done":

@@ -40,20 +40,19 @@ from pipeline.report.page import page_parts, write_report
 from pipeline.report.skipped import skipped_work, summary_lines
 from pipeline.scene import read_scene
 from pipeline.scene.scene_cache import keep_scene, load_scene
+from pipeline.segments.job import Job
 from pipeline.segments.records import read_records
 from pipeline.store import PhotonStore, disk_usage, remove_partials
 from pipeline.store.illumination import IlluminationMaps
 
 from .cluster import connect
-from .coordinator import Job, coordinate, reprocess
+from .coordinator import coordinate, reprocess
 from .shoot import check_store_location, open_store, plan
 
 if TYPE_CHECKING:
     from collections.abc import Callable
 
     from pipeline.segments.records import SegmentRecord
-
-    from .coordinator import Job
 
 log = logging.getLogger(__name__)
 def parse_resolution(text: str) -> tuple[int, int]:

@@ -1,4 +1,4 @@
-"""Segment records: what the coordinator decided for each animation segment, on disk (§5.2, Table 1).
+"""Segment records: what the planner decided for each animation segment, on disk (§5.2, Table 1).
 
 One JSON file a segment, ``OUT/segments/segment-NNN.json``, written through a temporary file and
 ``os.replace`` (atomic on POSIX), so a kill leaves the old record or the new one, never half of
@@ -49,7 +49,7 @@ class SegmentRecord:
     fmax_steps: list = field(default_factory=list)  # [{fmax, k, p_me_back, p_me_fwd}] (§5.2.2)
     n_frame_steps: list = field(default_factory=list)  # [{n_frame, d_aqm}] (§5.2.3), d_aqm in %
     capped: bool = False  # the doubling loop stopped at n_frame_max with d_AQM > d_thr
-    windows_at_k: dict = field(default_factory=dict)  # Fig. 5 at K's last d_AQM (coordinator.window_histogram)
+    windows_at_k: dict = field(default_factory=dict)  # Fig. 5 at K's last d_AQM (planner.window_histogram)
     frames: dict = field(default_factory=dict)  # str(frame) -> {adaptation, digest, filtered, window}
     times_s: dict = field(default_factory=dict)
     # bytes its tasks read and wrote through the store, by task kind (pipeline/store counting_io):

@@ -1,0 +1,301 @@
+"""The planner of the animation segments: Steps 1-3 of §5.2 and the end frames' photons for one
+segment at a time, on the pure decisions of pipeline/segments/decisions.py (docs/07-segments.md §2).
+
+For a segment it places the frames, runs the pilot at K (Step 1), grows F_max while p_me >= p_thr
+(Step 2), doubles N_frame while d_AQM of the halves at K exceeds d_thr (Step 3, pipeline/segments/
+halves.py), asks for the end frames' photons (§5.2) and writes the record (pipeline/segments/
+records.py). The pilot, the windows, the maps and the halves are computed in the planner's own
+process; photon batches are what it asks of its :class:`Executor`, which traces them into the
+store. It never touches Dask: pipeline/run/coordinator.py is its Dask executor, which the make
+farm's decide step (pipeline/run/farm.py) runs too.
+
+Which photons a frame uses is fixed by the records: the fewest leading batches holding its
+target (:func:`batches_in_use`, docs/07-segments.md §4), never what else the store holds.
+"""
+from __future__ import annotations
+
+import math
+import time
+from dataclasses import dataclass
+from functools import cached_property
+from typing import TYPE_CHECKING, Protocol
+
+import numpy as np
+
+from pipeline.collection.estimators import vertex_moments
+from pipeline.collection.maps import collection_windows, illumination_maps, step_regions, window_counts
+from pipeline.frames.images import write_png
+from pipeline.photons.tracing import trace_batch
+from pipeline.scene.scene_cache import load_elements, load_scene
+
+from .decisions import (
+    Placement,
+    calibrated_start,
+    doubling_loop,
+    energy_error,
+    fmax_loop,
+    ladder_n_frame,
+    needed_n_frame,
+    p_me,
+    photon_targets,
+    pilot_n_frame,
+    place_segment,
+)
+from .halves import halves_difference
+from .job import Job
+from .records import SegmentRecord, read_record, record_path, write_record
+
+if TYPE_CHECKING:
+    from pipeline.scene import ElementMesh, Scene
+    from pipeline.store import PhotonStore
+
+
+class Executor(Protocol):
+    """What the planner asks of the code that runs it."""
+
+    def shoot(self, targets: dict[int, int]) -> None:
+        """Trace the :func:`next_batches` of ``targets`` ({frame: photons}, frames 1-based) into the
+        store, so that every frame holds at least its target."""
+
+    def progress(self, message: str) -> None:
+        """Show one line of what the planner is deciding."""
+
+
+@dataclass(frozen=True)
+class NextBatch:
+    """The batch a frame lacks: its photons ``photon_start`` .. ``photon_start + n_photons - 1``."""
+
+    frame: int  # 1-based: the frame traced, the source of the frames sharing its photon set
+    batch: int
+    n_photons: int
+    photon_start: int
+
+
+def next_batches(store: PhotonStore, targets: dict[int, int]) -> list[NextBatch]:
+    """One batch more for every frame whose stored batches hold fewer photons than its target
+    (N_frame doubles by one batch, nothing is traced again); frames sharing a photon set (camera-only
+    motion) ask their source frame for the most any of them wants."""
+    sources = store.source_frames()
+    want: dict[int, int] = {}  # per source frame (1-based)
+    for f, n in targets.items():
+        src = int(sources[f - 1]) + 1
+        want[src] = max(want.get(src, 0), int(n))
+    prefix = store.prefixes_for({f - 1: n for f, n in want.items()})
+    short = [f for f in sorted(want) if prefix[f - 1] is None]
+    if not short:
+        return []
+    emitted, n_done = store.emitted(), store.batches_per_frame()
+    return [NextBatch(f, int(n_done[f - 1]), want[f] - int(emitted[f - 1]), int(emitted[f - 1])) for f in short]
+
+
+def batches_in_use(store: PhotonStore, targets: dict[int, int]) -> np.ndarray:
+    """(n_frames,) leading batches in use per store frame for these targets (0 elsewhere)."""
+    use = np.zeros(store.n_frames, np.int64)
+    prefix = store.prefixes_for({f - 1: n for f, n in targets.items()})
+    for f, n in targets.items():
+        nb = prefix[f - 1]
+        if nb is None:
+            raise RuntimeError(f"frame {f} holds fewer than its {n} photons")
+        use[f - 1] = nb
+    return use
+
+
+def known_targets(job: Job, index: int) -> dict[int, int]:
+    """Targets of every decided segment before ``index`` (their photons are in the store)."""
+    out: dict[int, int] = {}
+    for i in range(index):
+        rec = read_record(job.out_dir, i)
+        if rec is not None:
+            out.update(rec.targets())
+    return out
+
+
+def reach_targets(job: Job, rec: SegmentRecord) -> dict[int, int]:
+    """Photon targets of every frame segment ``rec``'s windows may reach: the earlier segments',
+    its own and the next one's (§5.2: a segment's photons are collected by its neighbours)."""
+    if not rec.guided:
+        return {f: job.n_photons for f in job.selection}
+    out = {**known_targets(job, rec.index), **rec.targets()}
+    after = read_record(job.out_dir, rec.index + 1)
+    if after is not None and after.decision_hash == job.decision_hash:
+        out.update(after.targets())
+    return out
+
+
+def window_histogram(back: np.ndarray, fwd: np.ndarray, fmax: int, counts: np.ndarray) -> dict:
+    """Fig. 5: how many elements collect 0..F_max/2 frames back and forward at K, over the elements
+    some photon of the segment hit (``counts``: (frames, E) records; never-hit ones say nothing)."""
+    hit = counts.sum(axis=0) > 0
+    half = max(int(fmax) // 2, int(back.max(initial=0)), int(fwd.max(initial=0)))
+    return {"back": np.bincount(back[hit].astype(np.int64), minlength=half + 1).tolist(),
+            "fwd": np.bincount(fwd[hit].astype(np.int64), minlength=half + 1).tolist(),
+            "elements": int(hit.sum()), "fmax": int(fmax)}
+
+
+class SegmentPlanner:
+    """The segments of ``job`` decided one at a time: :meth:`record` gives a segment's current
+    record, deciding it first when it has none. The seconds of the pilot and of the AQM are added
+    to ``times`` (``shoot_s``, ``aqm_s``), where the executor adds its own."""
+
+    def __init__(self, job: Job, store: PhotonStore, executor: Executor, times: dict[str, float]):
+        self.job, self.store, self.executor, self.times = job, store, executor, times
+        self.config = job.config
+
+    # Loaded when first used: a fixed render's planner never needs them
+    @cached_property
+    def scene(self) -> Scene:
+        return load_scene(self.job.scene_path, self.job.scene_hash, self.job.camera)
+
+    @cached_property
+    def elements(self) -> ElementMesh:
+        return load_elements(self.job.scene_path, self.job.scene_hash, self.job.element_size)
+
+    def record(self, index: int, start: int, fmax: int) -> SegmentRecord:
+        """Segment ``index`` decided for this run: its record if current, else decided now."""
+        rec = read_record(self.job.out_dir, index)
+        if rec is not None and rec.decision_hash == self.job.decision_hash and rec.start == start:
+            return rec
+        return self.decide(index, start, fmax)
+
+    def decide(self, index: int, start: int, fmax: int) -> SegmentRecord:
+        """Steps 1-3 for the segment that begins at ``start`` with F_max ``fmax``; its photons
+        traced and its record written."""
+        job, cfg = self.job, self.config
+        t_start = time.perf_counter()
+        if job.n_photons is not None:  # fixed settings: nothing to decide
+            return self._fixed(index)
+        prior = known_targets(job, index)
+        if job.single_state:  # camera-only motion: one photon set, nothing to collect in time
+            place = Placement(job.first, (job.first + job.last) // 2, job.last, 0)
+        else:
+            place = place_segment(start, fmax, job.last)
+
+        # Step 1: pilot at K, N_frame from Eq. (2)
+        pilot = self._pilot(index, place)
+        start_n = calibrated_start(pilot["n_pilot"] if pilot["n_pilot"] is not None else float("inf"),
+                                   self._carried(index))
+        pilot["n_start"] = start_n if math.isfinite(start_n) else None
+        n = ladder_n_frame(start_n, cfg.n_frame_min, cfg.n_frame_max)
+        t_init = time.perf_counter()
+
+        # Step 2: F_max while p_me >= p_thr (never for camera-only motion: all frames share photons)
+        def p_me_of(at: Placement) -> tuple[float, float]:
+            self.executor.shoot({f: n for f in at.frames})
+            return self._p_me(index, at, {**prior, **{f: n for f in at.frames}})
+
+        temporal = "off" if job.single_state else job.temporal
+        if job.single_state:
+            fmax_steps = []
+        else:
+            place, fmax_steps = fmax_loop(place.start, place.fmax, job.last, p_me_of, p_thr=cfg.p_thr,
+                                          step=cfg.fmax_step, cap=cfg.fmax_cap)
+        t_fmax = time.perf_counter()
+
+        # Step 3: N_frame doubled while d_AQM > d_thr; the record keeps Fig. 5 of the last step
+        windows: list[dict] = []
+
+        def d_aqm_of(n_frame: int) -> float:
+            self.executor.shoot({f: n_frame for f in place.frames})
+            d, at_k = self._d_aqm(index, place, {**prior, **{f: n_frame for f in place.frames}}, temporal)
+            windows.append(at_k)
+            return d
+
+        n, n_steps, capped = doubling_loop(n, d_aqm_of, d_thr=cfg.d_thr, n_max=cfg.n_frame_max)
+        t_n = time.perf_counter()
+
+        # Frames next to an animation end: more photons for their missing neighbours (§5.2)
+        final = photon_targets(place, n, first=job.first, last=job.last, end_factor=cfg.end_photons)
+        self.executor.shoot(final)
+        ends = sorted(f for f, v in final.items() if v != n)
+        rec = SegmentRecord(
+            index=index, start=place.start, end=place.end, k=place.k, fmax=place.fmax, n_frame=n,
+            temporal=temporal, guided=True, decision_hash=job.decision_hash, end_frames=ends,
+            end_factor=cfg.end_photons, pilot=pilot, fmax_steps=fmax_steps, n_frame_steps=n_steps, capped=capped,
+            windows_at_k=windows[-1],
+            times_s={"init_s": t_init - t_start, "fmax_s": t_fmax - t_init, "n_frame_s": t_n - t_fmax,
+                     "decide_s": time.perf_counter() - t_start})
+        write_record(job.out_dir, rec)
+        return rec
+
+    def _fixed(self, index: int) -> SegmentRecord:
+        """--photons N --fmax F: one record over the render's frames, shot at N."""
+        job = self.job
+        t0 = time.perf_counter()
+        self.executor.shoot({f: job.n_photons for f in job.selection})
+        rec = SegmentRecord(index=index, start=job.first, end=job.last, k=(job.first + job.last) // 2,
+                            fmax=job.fmax, n_frame=job.n_photons, temporal=job.temporal, guided=False,
+                            decision_hash=job.decision_hash, times_s={"init_s": time.perf_counter() - t0})
+        write_record(job.out_dir, rec)
+        return rec
+
+    def _add_time(self, key: str, since: float) -> None:
+        self.times[key] = self.times.get(key, 0.0) + time.perf_counter() - since
+
+    # --- Step 1 ------------------------------------------------------------------------------
+    def _pilot(self, index: int, place: Placement) -> dict:
+        """Step 1's probe, traced here in memory, never stored: its photons are the first
+        ``pilot_photons`` of frame K's own stream (counter-based), so the frame's batches hold them
+        anyway. Stored, it was one more batch at every K and one more wave of tasks a segment
+        (docs/07-segments.md §2); read back from the store when K happened to be traced, E would
+        depend on what else ran first."""
+        cfg = self.config
+        n_probe = cfg.pilot_photons
+        t0 = time.perf_counter()
+        batch = trace_batch(self.scene.pose_frame(place.k), self.elements, n_photons=n_probe, photon_start=0,
+                            seed=cfg.seed, frame=place.k, max_depth=cfg.photon_depth)
+        s, q = vertex_moments(*batch.indirect(), self.elements.element_vertices, self.elements.n_vertices)
+        self._add_time("shoot_s", t0)
+        e0 = energy_error(s, q)
+        n_pilot = pilot_n_frame(n_probe, e0, cfg.e_max, place.fmax)
+        self.executor.progress(f"segment {index}: pilot at K {place.k}: E {e0:.3f} with {n_probe:,} "
+                               f"photons -> N_frame {n_pilot:,.0f} (Eq. 2, F_max {place.fmax})")
+        return {"frame": place.k, "n_probe": int(n_probe), "e_probe": e0,
+                "e_target": cfg.e_max * float(np.sqrt(place.fmax + 1)),
+                "n_pilot": n_pilot if np.isfinite(n_pilot) else None}
+
+    def _carried(self, index: int) -> tuple[float, float] | None:
+        """(pilot's N_frame, N_frame needed) of the segment before ``index``, for calibrated_start."""
+        before = read_record(self.job.out_dir, index - 1) if index else None
+        if before is None or not before.guided or not before.pilot.get("n_pilot"):
+            return None
+        return (before.pilot.get("n_pilot"),
+                needed_n_frame(before.n_frame, before.n_frame_steps, before.capped, self.config.d_thr))
+
+    # --- Step 2 ------------------------------------------------------------------------------
+    def _p_me(self, index: int, place: Placement, targets: dict[int, int]) -> tuple[float, float]:
+        use = batches_in_use(self.store, targets)
+        counts = window_counts(self.store, batches=use)
+        emitted = np.array([self.store.photons_in(f, int(use[f])) for f in range(self.store.n_frames)], np.float64)
+        # p_me counts how far Condition (1)'s walks reach each way; a regional step stops a walk as
+        # it stops the collection (pipeline/collection/regional_steps.py)
+        back, fwd = collection_windows(counts, emitted, [place.k - 1], mode="adaptive", fmax=place.fmax,
+                                       config=self.config, regions=step_regions(self.elements, self.config))
+        hit = counts[place.start - 1:place.end].sum(axis=0) > 0
+        pb, pf = p_me(back[0], fwd[0], place.fmax, hit)
+        self.executor.progress(f"segment {index}: F_max {place.fmax}, K {place.k}: p_me {pb:.2f} back, "
+                               f"{pf:.2f} forward")
+        return pb, pf
+
+    # --- Step 3 ------------------------------------------------------------------------------
+    def _d_aqm(self, index: int, place: Placement, targets: dict[int, int], temporal: str) -> tuple[float, dict]:
+        """d_AQM (percent) of I1(K) against I2(K) as the viewer sees them, and Fig. 5's windows at
+        K; the M_AQM picture is written beside the segment record."""
+        t0 = time.perf_counter()
+        use = batches_in_use(self.store, targets)
+        k = place.k
+        # Each half is reconstructed as the final frame will be, spatial filter included (Step 5):
+        # on ATRIUM's 43,000 small elements the filter, not N_frame, removes most of what the
+        # unfiltered halves differ by; judged unfiltered, the loop would trace for noise no frame shows.
+        (lit,) = illumination_maps(self.store, self.elements, self.scene, [k - 1], mode=temporal,
+                                   fmax=place.fmax, config=self.config, split_parity=True, batches=use,
+                                   spatial_filter=self.config.spatial_filter)
+        judged = halves_difference(self.scene, self.elements, lit.irradiance, k, settings=self.job.settings,
+                                   config=self.config)
+        counts = window_counts(self.store, batches=use)[place.start - 1:place.end]
+        at_k = window_histogram(lit.back, lit.fwd, place.fmax, counts)
+        picture = record_path(self.job.out_dir, index).with_suffix(".aqm.png")
+        picture.parent.mkdir(parents=True, exist_ok=True)
+        write_png(picture, judged.picture)
+        self._add_time("aqm_s", t0)
+        self.executor.progress(f"segment {index}: N_frame {targets[k]:,} at K {k}: d_AQM {judged.d_aqm:.2f} %")
+        return judged.d_aqm, at_k
