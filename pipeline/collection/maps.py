@@ -165,7 +165,7 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
     split_parity : also give the even/odd half-photon maps I1, I2 (§5.2.3) instead of the full map.
     spatial_filter : apply the adaptive filter of §5.2.5 with ``config.filter_*``.
     batches : (n_frames,) leading batches in use per store frame (None: every done batch); a
-        segment uses the batches that make up its N_frame (pipeline/run/coordinator.py).
+        segment uses the batches that make up its N_frame (pipeline/segments/planner.py batches_in_use).
     with_direct : also give each frame's mesh-based direct estimate from its own direct photons
         (pipeline/collection/estimators.vertex_irradiance, §4), from the batch sums the gather holds already
         (kind "indirect" only).

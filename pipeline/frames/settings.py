@@ -1,5 +1,5 @@
 """What a frame's pixels depend on besides the scene, photons and seed: ``RenderSettings``, which
-``loom render`` takes and the coordinator's Job carries (pipeline/run/coordinator.py)."""
+``loom render`` takes and the render's Job carries (pipeline/segments/job.py)."""
 from __future__ import annotations
 
 from dataclasses import asdict, dataclass, field

@@ -58,7 +58,7 @@ class PhotonBatch:
     def indirect(self) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """(element, b1, b2, energy) of the records that are not a light's first hit, decoded as
         kernels/record_layout.py lays the key out: what a map made straight from a batch, with no
-        store, sums (the pilot of pipeline/run/coordinator.py, the benchmark's reference)."""
+        store, sums (the pilot of pipeline/segments/planner.py, the benchmark's reference)."""
         keep = (self.key & DIRECT_BIT) == 0
         return self.key[keep] & np.uint32(ELEMENT_MASK), self.bary[keep, 0], self.bary[keep, 1], self.energy[keep]
 

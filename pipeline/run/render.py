@@ -151,8 +151,8 @@ def render(scene_path: str | Path, *, frames: str | None, out_dir: str | Path,
            light: str = "auto", keep_records: bool = False) -> dict:
     """Render ``frames`` of a scene into ``out_dir``; returns the report (also ``report.json``).
 
-    ``n_photons`` None (``--photons auto``): the segment coordinator chooses N_frame and F_max per
-    segment (pipeline/run/coordinator.py, §5.2), ``fmax`` is the first segment's F_max. An integer
+    ``n_photons`` None (``--photons auto``): the segment planner chooses N_frame and F_max per
+    segment (pipeline/segments/planner.py, §5.2), ``fmax`` is the first segment's F_max. An integer
     keeps them fixed for every frame (``--photons N --fmax F``), with ``temporal`` adaptive, fixed
     or off. ``segment`` redoes one segment and the frames that depend on it. ``echo`` gets progress
     lines (and the Dask dashboard link); ``performance_report`` an HTML file for Dask's report.

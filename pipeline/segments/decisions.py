@@ -1,7 +1,7 @@
-"""The pure decisions of the segment coordinator (§5.2): arrays and numbers in, decisions out.
+"""The pure decisions of the segments (§5.2): arrays and numbers in, decisions out.
 
 Nothing here touches Dask, zarr or files, so every rule is tested on synthetic inputs with known
-answers (tests/coordinator/test_segments.py); pipeline/run/coordinator.py only runs them.
+answers (tests/coordinator/test_segments.py); the planner (pipeline/segments/planner.py) only runs them.
 
 * :func:`energy_error`, :func:`pilot_n_frame` — Step 1 (§5.2.1, Eq. 2);
 * :func:`p_me`, :func:`grow_fmax` — Step 2 (§5.2.2);

@@ -1,4 +1,4 @@
-"""The coordinator's pure decisions (pipeline/segments/decisions.py) on synthetic inputs with known answers:
+"""The segments' pure decisions (pipeline/segments/decisions.py) on synthetic inputs with known answers:
 Eq. (2), p_me with a lighting step at a known frame, the doubling loop, segment placement and the
 photons of the frames next to an animation end."""
 from __future__ import annotations

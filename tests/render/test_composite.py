@@ -165,7 +165,7 @@ def test_sample_means_are_the_bits_of_numpys_mean(spp):
 
 @pytest.mark.parametrize("spp", [1, 4])
 def test_maps_rendered_along_one_set_of_paths_have_the_bits_of_their_own_renders(tmp_path, spp):
-    # The AQM's I1, I2 (pipeline/run/coordinator.py d_aqm) share camera paths: each layer must be the
+    # The AQM's I1, I2 (pipeline/segments/halves.py) share camera paths: each layer must be the
     # render of its map alone, through metal and glossy bounces too (paths scattered back into samples)
     from pipeline.scene.builtin import write_builtin
 

@@ -1,0 +1,217 @@
+"""The segment planner (pipeline/segments/planner.py) without Dask: its executor here traces the
+batches the planner asks for in this process (workers/shoot.py's task: real kernels, a real store),
+and what the planner decides and records is checked against the pure decisions and the store."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from pipeline.collection.estimators import vertex_moments
+from pipeline.config import RenderConfig
+from pipeline.frames.settings import RenderSettings
+from pipeline.photons.tracing import trace_batch
+from pipeline.run.shoot import open_store, plan
+from pipeline.scene import read_scene
+from pipeline.scene.builtin import write_builtin
+from pipeline.scene.scene_cache import load_elements
+from pipeline.segments.decisions import (
+    Placement,
+    calibrated_start,
+    energy_error,
+    grow_fmax,
+    ladder_n_frame,
+    needed_n_frame,
+    next_n_frame,
+    pilot_n_frame,
+    place_segment,
+)
+from pipeline.segments.job import Job
+from pipeline.segments.planner import (
+    NextBatch,
+    SegmentPlanner,
+    known_targets,
+    next_batches,
+    reach_targets,
+    window_histogram,
+)
+from pipeline.segments.records import SegmentRecord, read_record, record_path, write_record
+from workers.shoot import shoot_task
+
+# Every step runs on ROOM's frames 60-80 at 48x36: F_max grows 6 -> 10, and N_frame doubles from the
+# rung 2,000 of the cap (the pilot asks about 1,900) to 4,000, where d_AQM falls to 86 %
+CHEAP = RenderConfig.from_dict({"pilot_photons": 2000, "e_max": 0.2, "n_frame_min": 1000, "n_frame_max": 8000,
+                                "d_thr": 0.9, "fmax_initial": 6, "fmax_step": 4, "fmax_cap": 10})
+
+
+class InProcess:
+    """The planner's Executor in this process: each batch :func:`next_batches` names, traced by the
+    photon task itself; progress lines kept."""
+
+    def __init__(self, job: Job, store):
+        self.job, self.store = job, store
+        self.traced: list[NextBatch] = []
+        self.lines: list[str] = []
+
+    def shoot(self, targets: dict[int, int]) -> None:
+        job, cfg = self.job, self.job.config
+        for b in next_batches(self.store, targets):
+            shoot_task(store_url=job.store_url, scene_path=job.scene_path, scene_hash=job.scene_hash,
+                       element_size=job.element_size, frame=b.frame, frame_index=b.frame - 1, batch=b.batch,
+                       n_photons=b.n_photons, photon_start=b.photon_start, seed=cfg.seed,
+                       max_depth=cfg.photon_depth)
+            self.traced.append(b)
+
+    def progress(self, message: str) -> None:
+        self.lines.append(message)
+
+
+def _job(tmp_path, name: str, frames: str, config: RenderConfig = CHEAP, **kw):
+    """A Job over ``frames`` of the built-in scene ``name`` and its fresh store."""
+    scene = read_scene(write_builtin(name, tmp_path / f"{name}.glb"))
+    p = plan(scene, frames, 1, config)
+    url = str(tmp_path / "photons.zarr")
+    store = open_store(p, url, keep_records=False)
+    job = Job(scene_path=str(scene.path), scene_hash=scene.scene_hash, camera=None, camera_name=scene.camera_name,
+              element_size=config.element_size, store_url=url, out_dir=str(tmp_path / "out"), first=p.frames[0],
+              last=p.frames[-1], selection=tuple(p.frames), settings=RenderSettings(width=48, height=36, spp=1),
+              config=config, render_hash="look", decision_hash="decided", fmax=config.fmax_initial,
+              n_photons=None, temporal="adaptive", single_state=False)
+    return replace(job, **kw), store
+
+
+@pytest.fixture(scope="module")
+def decided(tmp_path_factory):
+    """ROOM's first segment of frames 60-80 as the planner decides it."""
+    job, store = _job(tmp_path_factory.mktemp("planner"), "room", "60-80")
+    executor = InProcess(job, store)
+    times: dict[str, float] = {}
+    rec = SegmentPlanner(job, store, executor, times).decide(0, job.first, job.fmax)
+    return job, store, executor, times, rec
+
+
+def test_the_pilot_is_eq2_of_its_own_probe_at_k(decided):
+    job, _, executor, times, rec = decided
+    cfg = job.config
+    elements = load_elements(job.scene_path, job.scene_hash, job.element_size)
+    scene = read_scene(job.scene_path)
+    first = place_segment(job.first, job.fmax, job.last)
+    batch = trace_batch(scene.pose_frame(first.k), elements, n_photons=cfg.pilot_photons, photon_start=0,
+                        seed=cfg.seed, frame=first.k, max_depth=cfg.photon_depth)
+    e = energy_error(*vertex_moments(*batch.indirect(), elements.element_vertices, elements.n_vertices))
+    assert rec.pilot["frame"] == first.k and rec.pilot["e_probe"] == e
+    assert rec.pilot["n_pilot"] == pilot_n_frame(cfg.pilot_photons, e, cfg.e_max, job.fmax)
+    assert rec.pilot["n_start"] == rec.pilot["n_pilot"]  # the first segment: Eq. (2) alone
+    assert times["shoot_s"] > 0 and times["aqm_s"] > 0  # the pilot's and the AQM's seconds, for the record
+
+
+def test_the_loops_follow_the_decisions(decided):
+    job, _, executor, _, rec = decided
+    cfg = job.config
+    fmax = [s["fmax"] for s in rec.fmax_steps]
+    assert fmax[:2] == [6, 10]  # p_me >= p_thr on ROOM's walls
+    for s, after in zip(rec.fmax_steps, fmax[1:] + [None]):
+        assert s["k"] == place_segment(job.first, s["fmax"], job.last).k
+        grown = grow_fmax(s["fmax"], s["p_me_back"], s["p_me_fwd"], p_thr=cfg.p_thr, step=cfg.fmax_step,
+                          cap=cfg.fmax_cap)
+        assert after == grown or (after is None and place_segment(job.first, s["fmax"], job.last).end == job.last)
+    assert Placement(rec.start, rec.k, rec.end, rec.fmax) == place_segment(job.first, fmax[-1], job.last)
+    n = [s["n_frame"] for s in rec.n_frame_steps]
+    d = [s["d_aqm"] for s in rec.n_frame_steps]
+    assert n[0] == ladder_n_frame(rec.pilot["n_start"], cfg.n_frame_min, cfg.n_frame_max)
+    assert n[1:] == [next_n_frame(n[i], d[i] / 100, cfg.d_thr, cfg.n_frame_max) for i in range(len(n) - 1)]
+    assert n == [2000, 4000] and rec.n_frame == 4000 and not rec.capped
+    # one progress line a decision: the pilot, each p_me, each d_AQM
+    assert len(executor.lines) == 1 + len(rec.fmax_steps) + len(rec.n_frame_steps)
+    assert executor.lines[0].startswith(f"segment 0: pilot at K {rec.fmax_steps[0]['k']}")
+
+
+def test_the_store_holds_exactly_the_records_targets(decided):
+    # Each batch added what its frame lacked of the target asked (one batch a doubling), so what a
+    # frame emitted is its final target: N_frame, or end_photons x N_frame next to an animation end
+    job, store, executor, _, rec = decided
+    targets = rec.targets()
+    assert rec.end_frames and all(targets[f] == 2 * rec.n_frame for f in rec.end_frames)
+    emitted = store.emitted()
+    assert {f: int(emitted[f - 1]) for f in range(rec.start, rec.end + 1)} == targets
+    assert not emitted[:rec.start - 1].any()
+    assert next_batches(store, targets) == []
+    assert record_path(job.out_dir, 0).with_suffix(".aqm.png").stat().st_size > 0
+    windows = rec.windows_at_k
+    assert sum(windows["back"]) == sum(windows["fwd"]) == windows["elements"] > 0
+    assert read_record(job.out_dir, 0) == rec
+
+
+def test_a_current_record_is_kept_and_a_stale_one_decided_again(decided):
+    job, store, executor, _, rec = decided
+    traced, lines = len(executor.traced), len(executor.lines)
+    assert SegmentPlanner(job, store, executor, {}).record(0, job.first, job.fmax) == rec
+    assert (len(executor.traced), len(executor.lines)) == (traced, lines)  # nothing traced, nothing measured
+    # A looser d_thr decides again on the stored photons: the first N_frame passes, no batch is traced
+    lenient = replace(job, config=RenderConfig.from_dict({**CHEAP.to_dict(), "d_thr": 0.95}),
+                      decision_hash="lenient", out_dir=job.out_dir + "-lenient")
+    again = SegmentPlanner(lenient, store, executor, {}).record(0, job.first, job.fmax)
+    assert again.decision_hash == "lenient" and len(again.n_frame_steps) == 1
+    assert again.n_frame == rec.n_frame_steps[0]["n_frame"] and len(executor.traced) == traced
+
+
+def test_the_next_segment_starts_after_this_one_on_its_photons_and_its_calibration(decided):
+    job, store, executor, _, rec = decided
+    nxt = SegmentPlanner(job, store, executor, {}).record(1, rec.end + 1, rec.fmax)
+    assert (nxt.start, nxt.end, nxt.fmax_steps[0]["fmax"]) == (rec.end + 1, job.last, rec.fmax)
+    carried = (rec.pilot["n_pilot"], needed_n_frame(rec.n_frame, rec.n_frame_steps, rec.capped, job.config.d_thr))
+    assert nxt.pilot["n_start"] == calibrated_start(nxt.pilot["n_pilot"], carried)
+    # segment 0's photons stay as they were, and each segment traced its own frames only
+    emitted = store.emitted()
+    assert {f: int(emitted[f - 1]) for f in range(job.first, job.last + 1)} == {**rec.targets(), **nxt.targets()}
+    assert not emitted[:job.first - 1].any() and not emitted[job.last:].any()
+    assert reach_targets(job, rec) == {**rec.targets(), **nxt.targets()}
+
+
+def test_fixed_settings_trace_n_at_every_frame_and_decide_nothing(tmp_path):
+    job, store = _job(tmp_path, "room", "3-6", n_photons=1500, fmax=4)
+    executor = InProcess(job, store)
+    rec = SegmentPlanner(job, store, executor, {}).decide(0, job.first, job.fmax)
+    assert (rec.start, rec.end, rec.k, rec.fmax, rec.n_frame, rec.guided) == (3, 6, 4, 4, 1500, False)
+    assert not rec.pilot and not rec.fmax_steps and not rec.n_frame_steps and not executor.lines
+    assert [(b.frame, b.batch, b.n_photons, b.photon_start) for b in executor.traced] == \
+        [(f, 0, 1500, 0) for f in range(3, 7)]
+    assert reach_targets(job, rec) == {f: 1500 for f in range(3, 7)}
+
+
+def test_frames_sharing_a_photon_set_ask_their_source_for_the_most_any_wants(tmp_path):
+    # STATIC's frames all share frame 1's photons (camera-only motion): one batch of the largest
+    # target, then one batch more of what a larger target lacks
+    job, store = _job(tmp_path, "static", "1-30", single_state=True)
+    executor = InProcess(job, store)
+    assert next_batches(store, {1: 100, 5: 300, 30: 200}) == [NextBatch(1, 0, 300, 0)]
+    executor.shoot({1: 100, 5: 300, 30: 200})
+    assert next_batches(store, {f: 300 for f in range(1, 31)}) == []
+    assert next_batches(store, {3: 500}) == [NextBatch(1, 1, 200, 300)]
+
+
+def test_reach_targets_are_the_earlier_own_and_current_next_segments(tmp_path):
+    job, _ = _job(tmp_path, "room", "1-40")
+
+    def rec(index, start, end, n, decision_hash="decided"):
+        return SegmentRecord(index=index, start=start, end=end, k=(start + end) // 2, fmax=end - start,
+                             n_frame=n, temporal="adaptive", guided=True, decision_hash=decision_hash,
+                             end_frames=[1] if start == 1 else [], end_factor=2.0)
+
+    for r in (rec(0, 1, 10, 100), rec(1, 11, 20, 200), rec(2, 21, 30, 300, "stale")):
+        write_record(job.out_dir, r)
+    assert known_targets(job, 2) == {1: 200, **{f: 100 for f in range(2, 11)}, **{f: 200 for f in range(11, 21)}}
+    # the next segment's photons count only when its record is current
+    assert reach_targets(job, read_record(job.out_dir, 1)) == known_targets(job, 2)
+    write_record(job.out_dir, rec(2, 21, 30, 300))
+    assert reach_targets(job, read_record(job.out_dir, 1)) == {**known_targets(job, 2),
+                                                               **{f: 300 for f in range(21, 31)}}
+
+
+def test_window_histogram_counts_the_elements_the_segment_hit():
+    back = np.array([0, 3, 3, 1, 2], np.uint8)
+    fwd = np.array([2, 2, 0, 1, 3], np.uint8)
+    counts = np.array([[1, 0, 2, 0, 0], [0, 1, 0, 3, 0]])  # element 4 never hit: it says nothing
+    h = window_histogram(back, fwd, 6, counts)
+    assert h == {"back": [1, 1, 0, 2], "fwd": [1, 1, 2, 0], "elements": 4, "fmax": 6}
