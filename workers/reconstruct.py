@@ -36,13 +36,13 @@ def reconstruct_task(*, store_url: str, scene_path: str, scene_hash: str, camera
     # The direct estimate comes from the batch sums the gather holds (no second read of them)
     with counting_io() as io:  # the sums and counts read, the maps written
         for lit in illumination_maps(store, elements, scene, [f - 1 for f in frames], mode=mode, fmax=fmax,
-                                     config=config, spatial_filter=config.spatial_filter, batches=use,
+                                     collection=config.collection, filter=config.filter, batches=use,
                                      chunk=len(frames), with_direct=True, times=times):
             f = lit.frame_index + 1
             t1 = time.perf_counter()
             geometry = frame_geometry(scene, elements, f)  # posed once, by the gather
             indirect, direct = lit.irradiance, lit.direct
-            adaptation = visible_adaptation(geometry.state, elements, indirect, aspect=aspect, seed=config.seed,
+            adaptation = visible_adaptation(geometry.state, elements, indirect, aspect=aspect, seed=config.photons.seed,
                                             max_depth=max_depth, area_samples=area_samples)
             t2 = time.perf_counter()
             maps.write_frame(lit.frame_index, indirect=indirect, direct=direct, adaptation=adaptation)

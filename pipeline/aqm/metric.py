@@ -39,7 +39,7 @@ from .masking import mutual_masking
 from .nonlinearity import local_adaptation, nonlinear_contrast
 from .psychometric import P_THRESHOLD, d_aqm, detection_probability
 
-AQM_SIZE = 256  # §6; RenderConfig.aqm_size
+AQM_SIZE = 256  # §6; SegmentConfig.aqm_size
 # Every filter works by FFT, which treats the image as periodic: the left border would meet the right one
 # and the (usually large) luminance step there would mask errors along the borders. Mirroring a margin
 # of a quarter of the longer side around the image makes the borders continuous [decision]; at 256 px

@@ -20,7 +20,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from pipeline.config import RenderConfig
+from pipeline.config import PhotonConfig
 from pipeline.photons.raycast import caster_for
 from pipeline.photons.tracing import trace_batch
 from pipeline.run.cluster import WORKER_ENV
@@ -76,7 +76,7 @@ def _memory_worker(scene_path: str, frame: int, n_photons: int, store_url: str) 
     batch = trace_batch(state, elements, n_photons=n_photons, photon_start=0, seed=0, frame=frame, max_depth=8)
     store = PhotonStore.create(store_url, n_frames=scene.timeline.frames, n_elements=elements.n_elements,
                                frame_numbers=scene.timeline.all_frames(), scene_hash=scene.scene_hash,
-                               config_hash=RenderConfig().photon_hash(elements.element_size), seed=0,
+                               config_hash=PhotonConfig().photon_hash(elements.element_size), seed=0,
                                keep_records=True)  # the bytes a record takes on disk are measured
     t0 = time.perf_counter()
     store.write_batch(frame - 1, 0, key=batch.key, bary=batch.bary, energy=batch.energy,

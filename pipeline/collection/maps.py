@@ -35,7 +35,7 @@ from kernels.filter import adaptive_filter_cl, neighbourhood
 from kernels.gather import frame_sums_flux_cl, irradiance
 from kernels.temporal import MAX_HALF_FMAX, MODES, windows_cl
 from pipeline.collection.estimators import frame_geometry
-from pipeline.config import RenderConfig
+from pipeline.config import CollectionConfig, FilterConfig
 from pipeline.errors import LoomError
 from pipeline.stage_clock import StageClock
 
@@ -79,7 +79,7 @@ def window_counts(store: PhotonStore, frames: Iterable[int] | None = None,
     return store.counts(kind="indirect", frames=frames, batches=batches)
 
 
-def window_reach(fmax: int, mode: str, config: RenderConfig) -> int:
+def window_reach(fmax: int, mode: str, config: CollectionConfig) -> int:
     """Frames of the count table either side of an output frame that its window can depend on:
     F_max/2 frames of walk plus the smoothing half-width of Condition (1)'s rates."""
     return (0 if mode == "off" else int(fmax) // 2) + int(config.smoothing_frames) // 2
@@ -98,7 +98,7 @@ def check_window_options(mode: str, fmax: object) -> None:
 
 
 def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames: npt.ArrayLike, *, mode: str, fmax: int,
-                       config: RenderConfig, counts_from: int = 0,
+                       config: CollectionConfig, counts_from: int = 0,
                        regions: list[np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(len(frames), E) back and fwd windows of the requested frame indices, per run of frames
     with photons (a requested frame without photons is an error).
@@ -139,16 +139,15 @@ def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames: npt.Ar
                           min_extent=config.min_extent, frames=(lo - a, hi - a))
         if steps:
             b, w = clamp_at_steps(b, w, np.arange(lo - a, hi - a), counts[a - counts_from:z - counts_from],
-                                  n_emitted[a:z], regions, config.step_k, config.step_relative)
+                                  n_emitted[a:z], regions, config)
         back[inside] = b[frames[inside] - lo]
         fwd[inside] = w[frames[inside] - lo]
     return back, fwd
 
 
 def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, frames: npt.ArrayLike | None = None,
-                      *, mode: str = "adaptive", fmax: int | None = None,
-                      config: RenderConfig = RenderConfig(), kind: str = "indirect",
-                      split_parity: bool = False, spatial_filter: bool = False,
+                      *, mode: str = "adaptive", fmax: int, collection: CollectionConfig = CollectionConfig(),
+                      filter: FilterConfig | None = None, kind: str = "indirect", split_parity: bool = False,
                       batches: npt.ArrayLike | None = None, chunk: int = 96, with_direct: bool = False,
                       times: dict[str, float] | None = None) -> Iterator[FrameIllumination]:
     """Yield the illumination of every requested frame, in frame order.
@@ -160,10 +159,11 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
     frames : store frame indices (0-based; default all).
     mode : "adaptive" (Condition (1), §5.1; each window's linear fit
         at the frame, docs/05-estimators.md §1.6), "fixed" (+-F_max/2 pooled, always, §6 Fig. 3b) or "off".
-    fmax : F_max in frames (default ``config.fmax_initial``).
+    fmax : F_max in frames.
+    collection : the windows' settings (Condition (1), the regional step test).
+    filter : the adaptive filter of §5.2.5, applied where ``filter.spatial_filter``; None: unfiltered.
     kind : records gathered: "indirect" (the map the compositor reads), "direct" or "all".
     split_parity : also give the even/odd half-photon maps I1, I2 (§5.2.3) instead of the full map.
-    spatial_filter : apply the adaptive filter of §5.2.5 with ``config.filter_*``.
     batches : (n_frames,) leading batches in use per store frame (None: every done batch); a
         segment uses the batches that make up its N_frame (pipeline/run/coordinator.py).
     with_direct : also give each frame's mesh-based direct estimate from its own direct photons
@@ -174,7 +174,6 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
         ``windows_s``, ``sums_s`` (gather), ``filter_s`` (filter and irradiance) and ``direct_s``.
     """
     clock = StageClock(times)
-    fmax = config.fmax_initial if fmax is None else fmax
     check_window_options(mode, fmax)
     if with_direct and kind != "indirect":
         raise ValueError("with_direct comes with the indirect map's batch sums (kind 'indirect')")
@@ -188,7 +187,7 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
         batches = np.asarray(batches, np.int64)
     n_emitted = store.emitted(batches).astype(np.float64)
     # Only the count-table rows the windows can reach (a chunk of 16 frames reads 48 of ROOM's 135)
-    reach = window_reach(fmax, mode, config)
+    reach = window_reach(fmax, mode, collection)
     first = max(0, int(frames.min()) - reach) if len(frames) else 0
     last = min(store.n_frames, int(frames.max()) + 1 + reach) if len(frames) else 0
     if mode == "adaptive":
@@ -196,9 +195,9 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
         counts = window_counts(store, frames=range(first, last), batches=use)
     else:  # the table's values are not read
         counts = np.zeros((last - first, store.n_elements), np.uint32)
-    back, fwd = collection_windows(counts, n_emitted, frames, mode=mode, fmax=fmax, config=config,
-                                   counts_from=first, regions=step_regions(elements, config))
-    hood = _neighbourhood(elements, config.filter_rings, config.filter_angle) if spatial_filter else None
+    back, fwd = collection_windows(counts, n_emitted, frames, mode=mode, fmax=fmax, config=collection,
+                                   counts_from=first, regions=step_regions(elements, collection))
+    hood = _neighbourhood(elements, filter) if filter is not None and filter.spatial_filter else None
     clock.lap("windows_s")
     n_parity = 2 if split_parity else 1
     for start in range(0, len(frames), chunk):
@@ -220,7 +219,7 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
         rings = None
         if hood is not None:  # every map of the chunk in one launch
             irr, rings = adaptive_filter_cl(flux, np.broadcast_to(areas[:, None, :], flux.shape[:-1]), hood,
-                                            photons=config.filter_photons, z=config.filter_z)
+                                            photons=filter.filter_photons, z=filter.filter_z)
         else:
             irr = irradiance(flux, areas[:, None, :])
         clock.lap("filter_s")
@@ -243,15 +242,16 @@ def _mesh_cached(elements, key: tuple, compute):
     return entry[1][key]
 
 
-def _neighbourhood(elements, rings: int, angle: float):
+def _neighbourhood(elements, filter: FilterConfig):
     """The filter's vertex rings of an element mesh, computed once per mesh and process (a
     reconstruction task of 16 frames spent a quarter of its time on them)."""
+    rings, angle = filter.filter_rings, filter.filter_angle
     return _mesh_cached(elements, ("rings", int(rings), float(angle)), lambda: neighbourhood(
         elements.element_vertices, elements.vertex_local, elements.vertex_instance, max_rings=rings,
         max_angle=angle))
 
 
-def step_regions(elements: ElementMesh, config: RenderConfig) -> list[np.ndarray] | None:
+def step_regions(elements: ElementMesh, config: CollectionConfig) -> list[np.ndarray] | None:
     """The element regions of the regional step test (None when ``config.step_levels`` is 0), once
     per mesh and process."""
     if not config.step_levels:

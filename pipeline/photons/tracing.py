@@ -8,7 +8,7 @@ the hit counts as a miss, so nothing is recorded and the path ends. At a diffuse
 (element, barycentrics inside the element, RGB weight, direct = first hit) and bounces
 Lambertian about the shading normal; mirrors reflect, glossy surfaces sample a normalised Phong
 lobe. Russian roulette on the hit's base colour (factor x texture x vertex colour,
-pipeline/scene/shading.py) ends paths, unbiased; ``max_depth`` hits (RenderConfig.photon_depth,
+pipeline/scene/shading.py) ends paths, unbiased; ``max_depth`` hits (PhotonConfig.photon_depth,
 256) is only a safety net for rooms of albedo 1, and the photons it cuts are counted
 (``stats["capped"]``): a cap of 8 cut rho^8 of the light in a closed room (17 % at albedo 0.8,
 tests/stress/test_furnace.py).

@@ -167,7 +167,8 @@ class SegmentRun:
         self.config = job.config
         # A store swapped for another run's (another scene, photon settings or seed) is refused here
         self.store = PhotonStore.open(job.store_url, mode="r+", scene_hash=job.scene_hash,
-                                      config_hash=self.config.photon_hash(job.element_size), seed=self.config.seed)
+                                      config_hash=self.config.photons.photon_hash(job.element_size),
+                                      seed=self.config.photons.seed)
         self.times = {"shoot_s": 0.0, "aqm_s": 0.0, "temporal_s": 0.0}
         self.io_bytes: dict[str, int] = {}  # what the tasks read and wrote (store.counting_io)
         self.batches_traced = 0
@@ -212,11 +213,12 @@ class SegmentRun:
         calls = []
         for f in short:
             n, have, batch = want[f], int(emitted[f - 1]), int(n_done[f - 1])
-            calls.append((shoot_key(self.config, self.job.element_size, f, batch, self.job.store_url), dict(
+            key = shoot_key(self.config.photons, self.job.element_size, f, batch, self.job.store_url)
+            calls.append((key, dict(
                 store_url=self.job.store_url, scene_path=self.job.scene_path, scene_hash=self.job.scene_hash,
                 element_size=self.job.element_size, frame=f, frame_index=f - 1, batch=batch,
-                n_photons=n - have, photon_start=have, seed=self.config.seed,
-                max_depth=self.config.photon_depth)))
+                n_photons=n - have, photon_start=have, seed=self.config.photons.seed,
+                max_depth=self.config.photons.photon_depth)))
         with _writing(self.job.store_url):
             results = run_tasks(self.client, shoot_task, calls, desc="shoot", progress=False,
                                 group=group_sizes(len(calls), len(self.workers()), SHOOT_GROUP))
@@ -263,18 +265,19 @@ class SegmentRun:
         anyway. Stored, it was one more batch at every K and one more wave of tasks a segment (docs/07-segments.md
         §2); read back from the store when K happened to be
         traced, E would depend on what else ran first."""
-        n_probe = self.config.pilot_photons
+        n_probe = self.config.segments.pilot_photons
         t0 = time.perf_counter()
         batch = trace_batch(self.scene.pose_frame(place.k), self.elements, n_photons=n_probe, photon_start=0,
-                            seed=self.config.seed, frame=place.k, max_depth=self.config.photon_depth)
+                            seed=self.config.photons.seed, frame=place.k,
+                            max_depth=self.config.photons.photon_depth)
         s, q = vertex_moments(*batch.indirect(), self.elements.element_vertices, self.elements.n_vertices)
         self.times["shoot_s"] += time.perf_counter() - t0
         e0 = energy_error(s, q)
-        n_pilot = pilot_n_frame(n_probe, e0, self.config.e_max, place.fmax)
+        n_pilot = pilot_n_frame(n_probe, e0, self.config.segments.e_max, place.fmax)
         progress(f"segment {self._index}: pilot at K {place.k}: E {e0:.3f} with {n_probe:,} "
                  f"photons -> N_frame {n_pilot:,.0f} (Eq. 2, F_max {place.fmax})")
         return {"frame": place.k, "n_probe": int(n_probe), "e_probe": e0,
-                "e_target": self.config.e_max * float(np.sqrt(place.fmax + 1)),
+                "e_target": self.config.segments.e_max * float(np.sqrt(place.fmax + 1)),
                 "n_pilot": n_pilot if np.isfinite(n_pilot) else None}
 
     # --- Step 2 ------------------------------------------------------------------------------
@@ -285,8 +288,8 @@ class SegmentRun:
         # p_me counts how far Condition (1)'s walks reach each way; a regional step stops a walk as
         # it stops the collection (pipeline/collection/regional_steps.py)
         back, fwd = collection_windows(counts, emitted, [place.k - 1], mode="adaptive", fmax=place.fmax,
-                                       config=self.config,
-                                       regions=step_regions(self.elements, self.config))
+                                       config=self.config.collection,
+                                       regions=step_regions(self.elements, self.config.collection))
         hit = counts[place.start - 1:place.end].sum(axis=0) > 0
         pb, pf = p_me(back[0], fwd[0], place.fmax, hit)
         progress(f"segment {self._index}: F_max {place.fmax}, K {place.k}: p_me {pb:.2f} back, {pf:.2f} forward")
@@ -303,23 +306,23 @@ class SegmentRun:
         # on ATRIUM's 43,000 small elements the filter, not N_frame, removes most of what the
         # unfiltered halves differ by; judged unfiltered, the loop would trace for noise no frame shows.
         (lit,) = illumination_maps(self.store, self.elements, self.scene, [k - 1], mode=temporal,
-                                   fmax=place.fmax, config=self.config, split_parity=True, batches=use,
-                                   spatial_filter=self.config.spatial_filter)
+                                   fmax=place.fmax, collection=self.config.collection, split_parity=True,
+                                   batches=use, filter=self.config.filter)
         state = self.scene.pose_frame(k)
         job, px = self.job, self.job.settings
         # both halves along one set of camera paths: the bits of two renders at the cost of one
         img = render_frame(state, self.elements, lit.irradiance[0], width=px.width, height=px.height, spp=px.spp,
-                           seed=self.config.seed, frame=k, max_depth=px.reflection_depth,
+                           seed=self.config.photons.seed, frame=k, max_depth=px.reflection_depth,
                            area_samples=px.area_samples, also_maps=lit.irradiance[1:])
         images = [img.beauty, img.also_beauty(0)]
         # L_wa as the frame's own (reconstruct_task): what the camera sees of the halves' mean map
         adaptation = visible_adaptation(state, self.elements, 0.5 * (lit.irradiance[0] + lit.irradiance[1]),
-                                        aspect=px.width / px.height, seed=self.config.seed,
+                                        aspect=px.width / px.height, seed=self.config.photons.seed,
                                         max_depth=px.reflection_depth, area_samples=px.area_samples)
         params = px.tonemap
         flow = camera_flow(self.scene, k, px.width, px.height, params)
         result = displayed_difference(images[0], images[1], adaptation, params=params,
-                                      aqm_size=self.config.aqm_size, flow=flow)
+                                      aqm_size=self.config.segments.aqm_size, flow=flow)
         counts = window_counts(self.store, batches=use)[place.start - 1:place.end]
         self._windows_at_k = window_histogram(lit.back, lit.fwd, place.fmax, counts)
         picture = record_path(job.out_dir, index).with_suffix(".aqm.png")
@@ -331,7 +334,7 @@ class SegmentRun:
 
     # --- Steps 1-3 for one segment -----------------------------------------------------------
     def decide(self, index: int, start: int, fmax: int) -> SegmentRecord:
-        job, cfg = self.job, self.config
+        job, cfg = self.job, self.config.segments
         self._index, self._windows_at_k = index, {}
         t_start = time.perf_counter()
         if job.n_photons is not None:  # fixed settings: nothing to decide
@@ -542,7 +545,7 @@ def composite_calls(job: Job, frames: list[int], frames_info: dict[int, dict], *
     """(key, kwargs) of the composite tasks of the frames in ``frames`` that need one (see
     :func:`composite_frames`); ``frames_info`` holds every rendered frame up to the last of them."""
     smoothed = smoothed_adaptation(job, frames_info, max(frames))
-    px, seed = job.settings, job.config.seed
+    px, seed = job.settings, job.config.photons.seed
     calls = []
     for f in frames:
         info = frames_info[f]

@@ -11,7 +11,7 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
-from pipeline.config import RenderConfig
+from pipeline.config import PhotonConfig
 from pipeline.errors import LoomError
 from pipeline.paths import check_writable_dir
 from pipeline.scene import ElementMesh, Scene, read_scene
@@ -27,7 +27,7 @@ class ShootPlan:
     elements: ElementMesh
     frames: list[int]  # requested frames
     sources: dict[int, int]  # frame -> frame whose photons it uses (itself when traced)
-    config: RenderConfig
+    config: PhotonConfig
     n_photons: int
 
     @property
@@ -42,7 +42,7 @@ def check_store_location(url: str) -> None:
     check_writable_dir(url[len("file://"):] if url.startswith("file://") else url, field="--store")
 
 
-def plan(scene: Scene, frames_spec: str | None, n_photons: int, config: RenderConfig) -> ShootPlan:
+def plan(scene: Scene, frames_spec: str | None, n_photons: int, config: PhotonConfig) -> ShootPlan:
     if not isinstance(n_photons, int) or n_photons <= 0:
         raise LoomError(f"must be a positive number of photons per frame, got {n_photons}", field="--photons")
     try:
@@ -77,7 +77,7 @@ def open_store(p: ShootPlan, url: str, *, keep_records: bool) -> PhotonStore:
     return store
 
 
-def shoot_key(config: RenderConfig, element_size: float, frame: int, batch: int, store_url: str) -> str:
+def shoot_key(config: PhotonConfig, element_size: float, frame: int, batch: int, store_url: str) -> str:
     """The Dask key of photon batch ``batch`` of ``frame`` shot into ``store_url``."""
     name = f"shoot-{config.photon_hash(element_size)[:8]}-s{config.seed}-f{frame:05d}-b{batch:02d}"
     return task_key(name, store_url)
@@ -101,7 +101,7 @@ def tasks(p: ShootPlan, store: PhotonStore, url: str) -> list[tuple[str, dict]]:
 
 
 def shoot(scene_path: str, *, frames: str | None, n_photons: int, store_url: str,
-          config: RenderConfig = RenderConfig(), scheduler: str = "local", workers: int | None = None,
+          config: PhotonConfig = PhotonConfig(), scheduler: str = "local", workers: int | None = None,
           progress: bool = True, light: str = "auto", keep_records: bool = False) -> dict:
     """Trace every requested frame's photons into the store; returns a summary of the run.
     ``light`` none refuses a file without light instead of lighting it by default;

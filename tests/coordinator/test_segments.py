@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from pipeline.collection.maps import collection_windows
-from pipeline.config import RenderConfig
+from pipeline.config import CollectionConfig, SegmentConfig
 from pipeline.scene import read_scene
 from pipeline.segments.decisions import (
     calibrated_start,
@@ -90,7 +90,7 @@ def test_p_me_sees_a_lighting_step_at_a_known_frame(rng):
     counts = rng.poisson(np.broadcast_to(mu, (frames, elements))).astype(np.uint32)
     step = np.arange(elements) < elements // 2
     counts[k + 5:, step] *= 2
-    cfg = RenderConfig(step_levels=0)  # Condition (1) alone: no element mesh for the regional step test
+    cfg = CollectionConfig(step_levels=0)  # Condition (1) alone: no element mesh for the regional step test
     back, fwd = collection_windows(counts, np.full(frames, 40_000.0), [k], mode="adaptive", fmax=20, config=cfg)
     pb, pf = p_me(back[0], fwd[0], 20)
     assert pb > 0.9 and pf == pytest.approx(0.5 * pb, abs=0.03)
@@ -198,38 +198,13 @@ def test_frames_next_to_an_animation_end_get_more_photons():
 def test_an_end_factor_of_one_turns_the_end_photons_off():
     from pipeline.errors import ConfigError
 
-    assert RenderConfig(end_photons=1.0).end_photons == 1.0  # a closed lower bound: 1 is valid
+    assert SegmentConfig(end_photons=1.0).end_photons == 1.0  # a closed lower bound: 1 is valid
     with pytest.raises(ConfigError, match="end_photons"):
-        RenderConfig(end_photons=0.999)
+        SegmentConfig(end_photons=0.999)
     with pytest.raises(ConfigError, match="k_sigma"):  # other float bounds stay open
-        RenderConfig(k_sigma=0.0)
+        CollectionConfig(k_sigma=0.0)
     first = place_segment(1, 10, 100)
     assert set(photon_targets(first, 40_000, first=1, last=100, end_factor=1.0).values()) == {40_000}
-
-
-# --- the config: every field read by one stage --------------------------------------------------
-def test_stage_hashes_cover_only_their_stage():
-    base = RenderConfig()
-    changed = {"d_thr": 0.05, "p_thr": 0.5, "k_sigma": 3.0, "filter_photons": 9.0, "photon_depth": 3}
-    for name, value in changed.items():
-        other = base.replace(**{name: value})
-        stage = next(f.metadata["stage"] for f in __import__("dataclasses").fields(RenderConfig) if f.name == name)
-        for s in ("photons", "collection", "filter", "segments"):
-            assert (other.stage_hash(s) != base.stage_hash(s)) == (s == stage), (name, s)
-    assert base.replace(d_thr=0.05).photon_hash(0.4) == base.photon_hash(0.4)
-    assert base.replace(photon_depth=3).photon_hash(0.4) != base.photon_hash(0.4)
-
-
-def test_every_config_field_is_read_outside_config():
-    import dataclasses
-    import pathlib
-    import re
-
-    root = pathlib.Path(__file__).resolve().parents[2]
-    text = "\n".join(p.read_text() for d in ("pipeline", "workers", "kernels") for p in (root / d).rglob("*.py")
-                     if p.name != "config.py")
-    for f in dataclasses.fields(RenderConfig):
-        assert re.search(rf"\.{f.name}\b", text), f"RenderConfig.{f.name} is read by nothing"
 
 
 def test_camera_flow_is_the_cameras_own_motion(tmp_path):

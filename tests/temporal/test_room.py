@@ -21,7 +21,7 @@ import pytest
 from kernels import colour
 from pipeline.collection.estimators import vertex_irradiance
 from pipeline.collection.maps import illumination_maps
-from pipeline.config import RenderConfig
+from pipeline.config import CollectionConfig, FilterConfig, PhotonConfig
 from pipeline.run.shoot import shoot
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin import write_builtin
@@ -40,9 +40,9 @@ class Room:
         self.scene = read_scene(path)
         self.mesh = ElementMesh.build(self.scene)
         shoot(str(path), frames=f"{K2 - 15}-{K2 + 15}", n_photons=N_FRAME, store_url=str(root / "p.zarr"),
-              config=RenderConfig(), scheduler="synchronous", progress=False, keep_records=True)
+              config=PhotonConfig(), scheduler="synchronous", progress=False, keep_records=True)
         shoot(str(path), frames=str(K2), n_photons=reference_photons, store_url=str(root / "ref.zarr"),
-              config=RenderConfig(seed=1), scheduler="synchronous", progress=False, keep_records=True)
+              config=PhotonConfig(seed=1), scheduler="synchronous", progress=False, keep_records=True)
         self.store = PhotonStore.open(str(root / "p.zarr"))
         ref = PhotonStore.open(str(root / "ref.zarr"))
         self.state = self.scene.pose_frame(K2)
@@ -148,7 +148,7 @@ def test_spatial_filter_repairs_only_where_temporal_collection_falls_short(room)
     share = {}
     for mode in ("off", "adaptive"):
         o = next(illumination_maps(room.store, room.mesh, room.scene, [room.index], mode=mode, fmax=FMAX,
-                                   spatial_filter=True))
+                                   filter=FilterConfig()))
         assert o.rings.shape == (1, room.mesh.n_vertices) and np.isfinite(o.irradiance).all()
         share[mode] = float((o.rings > 0).mean())
     print("share of vertices filtered:", share)
@@ -166,7 +166,7 @@ def test_windows_from_the_reached_count_rows_are_the_whole_tables(room):
     windows computed from the whole table, bit for bit; so are the maps the task writes from them."""
     from pipeline.collection.maps import collection_windows, step_regions, window_reach
 
-    cfg = RenderConfig()
+    cfg = CollectionConfig()
     regions = step_regions(room.mesh, cfg)  # the regional step test reads the same rows
     store = room.store
     counts = store.counts()
@@ -206,7 +206,7 @@ def test_visible_adaptation_with_the_frames_geometry_is_the_same(room):
     from pipeline.collection.estimators import frame_geometry
     from pipeline.frames.camera_paths import visible_adaptation
 
-    irr = next(illumination_maps(room.store, room.mesh, room.scene, [room.index])).irradiance
+    irr = next(illumination_maps(room.store, room.mesh, room.scene, [room.index], fmax=15)).irradiance
     geometry = frame_geometry(room.scene, room.mesh, K2)
     assert np.array_equal(geometry.vertex_areas, room.mesh.vertex_areas(room.state))
     assert frame_geometry(room.scene, room.mesh, K2) is geometry

@@ -6,7 +6,7 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.collection.maps import collection_windows, window_counts
-from pipeline.config import RenderConfig
+from pipeline.config import CollectionConfig
 from pipeline.store import PhotonStore, pack_key
 from tests.store.photonstore_helpers import IDENTITY
 
@@ -36,7 +36,7 @@ def _windows(store, config, frame, counts):
 
 def test_windows_follow_the_indirect_hits(tmp_path):
     store = _store(tmp_path)
-    config = RenderConfig(step_levels=0)  # Condition (1) alone: no element regions needed
+    config = CollectionConfig(step_levels=0)  # Condition (1) alone: no element regions needed
     assert window_counts(store)[:, 0].tolist() == [INDIRECT] * FRAMES
     every = store.counts(kind="all")
     assert every[:, 0].tolist() == [INDIRECT + DIRECT[f >= CHANGE] for f in range(FRAMES)]
