@@ -36,7 +36,7 @@ import numpy as np
 from kernels import colour
 from pipeline.aqm import aqm
 from pipeline.collection.estimators import mesh_adaptation, vertex_irradiance
-from pipeline.collection.maps import illumination_maps, window_counts
+from pipeline.collection.maps import MapRequest, WindowSpec, illumination_maps, window_counts
 from pipeline.config import PhotonConfig, RenderConfig
 from pipeline.errors import LoomError
 from pipeline.frames.camera_paths import render_frame
@@ -114,9 +114,9 @@ def run(photons: Iterable[int] = (10_000, 20_000, 40_000, 80_000), *, fmax: int 
             return [render_frame(state, mesh, irradiance[p], width=width, height=height, spp=spp,
                                  seed=config.photons.seed, frame=K, caster=caster) for p in (0, 1)]
 
-        def maps(pstore, **kw):
-            return next(illumination_maps(pstore, mesh, scene, [index], fmax=fmax, collection=config.collection,
-                                          split_parity=True, **kw))
+        def maps(pstore, mode, filter=None):
+            return next(illumination_maps(pstore, mesh, scene, MapRequest(WindowSpec(mode, fmax), [index], halves=True),
+                                          config.collection, filter))
 
         rows = []
         last = None
@@ -132,9 +132,9 @@ def run(photons: Iterable[int] = (10_000, 20_000, 40_000, 80_000), *, fmax: int 
             d = rec.direct
             direct = vertex_irradiance(rec.element[d], rec.b1[d], rec.b2[d], rec.energy[d], mesh, areas,
                                        rec.photons_emitted)
-            lit = maps(pstore, mode="adaptive")
-            filt = maps(pstore, mode="adaptive", filter=config.filter)
-            fixed = maps(pstore, mode="fixed")
+            lit = maps(pstore, "adaptive")
+            filt = maps(pstore, "adaptive", config.filter)
+            fixed = maps(pstore, "fixed")
             shown = lit.irradiance.mean(axis=0)  # the full map: both halves pooled
             adaptation = mesh_adaptation(state, mesh, direct + shown, width / height)
             images = {name: pair(m.irradiance) for name, m in (("adaptive", lit), ("filter", filt), ("fixed", fixed))}

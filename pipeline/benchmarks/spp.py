@@ -42,7 +42,7 @@ import click
 import numpy as np
 
 from kernels import colour
-from pipeline.collection.maps import illumination_maps
+from pipeline.collection.maps import MapRequest, WindowSpec, illumination_maps
 from pipeline.config import RenderConfig
 from pipeline.frames.camera_paths import render_frame, visible_adaptation
 from pipeline.frames.perceived import displayed_difference
@@ -138,8 +138,8 @@ def run(frames: Iterable[int] = FRAMES, *, spps: Sequence[int] = SPPS, reference
             lo, hi = max(1, k - half), min(scene.timeline.frames, k + half)
             shoot(str(path), frames=f"{lo}-{hi}", n_photons=photons, store_url=url, config=config.photons,
                   scheduler="synchronous", progress=False)
-            (lit,) = illumination_maps(PhotonStore.open(url), mesh, scene, [k - 1], fmax=fmax,
-                                       collection=config.collection)
+            (lit,) = illumination_maps(PhotonStore.open(url), mesh, scene,
+                                       MapRequest(WindowSpec("adaptive", fmax), [k - 1]), config.collection)
             irradiance = lit.irradiance
             state = scene.pose_frame(k)
             caster = caster_for(state)

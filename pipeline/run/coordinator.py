@@ -42,7 +42,14 @@ from distributed import get_worker, worker_client
 
 from pipeline.aqm.visualize import difference_picture
 from pipeline.collection.estimators import vertex_moments
-from pipeline.collection.maps import collection_windows, illumination_maps, step_regions, window_counts
+from pipeline.collection.maps import (
+    MapRequest,
+    WindowSpec,
+    collection_windows,
+    illumination_maps,
+    step_regions,
+    window_counts,
+)
 from pipeline.config import RenderConfig, stable_digest
 from pipeline.errors import LoomError
 from pipeline.frames.camera_paths import render_frame, visible_adaptation
@@ -287,8 +294,8 @@ class SegmentRun:
         emitted = np.array([self.store.photons_in(f, int(use[f])) for f in range(self.store.n_frames)], np.float64)
         # p_me counts how far Condition (1)'s walks reach each way; a regional step stops a walk as
         # it stops the collection (pipeline/collection/regional_steps.py)
-        back, fwd = collection_windows(counts, emitted, [place.k - 1], mode="adaptive", fmax=place.fmax,
-                                       config=self.config.collection,
+        back, fwd = collection_windows(counts, emitted, [place.k - 1], WindowSpec("adaptive", place.fmax),
+                                       self.config.collection,
                                        regions=step_regions(self.elements, self.config.collection))
         hit = counts[place.start - 1:place.end].sum(axis=0) > 0
         pb, pf = p_me(back[0], fwd[0], place.fmax, hit)
@@ -305,9 +312,9 @@ class SegmentRun:
         # Each half is reconstructed as the final frame will be, spatial filter included (Step 5):
         # on ATRIUM's 43,000 small elements the filter, not N_frame, removes most of what the
         # unfiltered halves differ by; judged unfiltered, the loop would trace for noise no frame shows.
-        (lit,) = illumination_maps(self.store, self.elements, self.scene, [k - 1], mode=temporal,
-                                   fmax=place.fmax, collection=self.config.collection, split_parity=True,
-                                   batches=use, filter=self.config.filter)
+        (lit,) = illumination_maps(self.store, self.elements, self.scene,
+                                   MapRequest(WindowSpec(temporal, place.fmax), [k - 1], batches=use, halves=True),
+                                   self.config.collection, self.config.filter)
         state = self.scene.pose_frame(k)
         job, px = self.job, self.job.settings
         # both halves along one set of camera paths: the bits of two renders at the cost of one

@@ -12,7 +12,7 @@ import numpy as np
 import pytest
 
 from kernels.colour import LUMA
-from pipeline.collection.maps import illumination_maps
+from pipeline.collection.maps import MapRequest, WindowSpec, illumination_maps
 from pipeline.config import FilterConfig, PhotonConfig, RenderConfig, SegmentConfig
 from pipeline.frames.camera_paths import render_frame
 from pipeline.frames.perceived import displayed_difference
@@ -48,8 +48,8 @@ class Frames:
         for n in REFERENCE_PHOTONS:
             shoot(str(self.path), frames=str(frame), n_photons=n, store_url=url, config=PhotonConfig(seed=977),
                   scheduler="local", progress=False)
-        (lit,) = illumination_maps(PhotonStore.open(url), self.elements, self.scene, [frame - 1], mode="off",
-                                   fmax=0, split_parity=True)
+        (lit,) = illumination_maps(PhotonStore.open(url), self.elements, self.scene,
+                                   MapRequest(WindowSpec("off", 0), [frame - 1], halves=True))
         return lit.irradiance.mean(axis=0), lit.irradiance
 
     def compare(self, frame: int, irradiance, adaptation: float) -> dict:
@@ -120,8 +120,9 @@ def test_atrium_guided_frames_lose_the_mottling(tmp_path):
     # The measure's own spread at this budget: the guided photons' even and odd halves, each against
     # the reference, are two realisations of the same reconstruction (1.3-1.6 points apart here)
     store = PhotonStore.open(str(tmp_path / "guided" / "photons.zarr"))
-    (halves,) = illumination_maps(store, frames.elements, frames.scene, [k_probe - 1], mode=rec.temporal,
-                                  fmax=rec.fmax, split_parity=True, filter=FilterConfig())
+    (halves,) = illumination_maps(store, frames.elements, frames.scene,
+                                  MapRequest(WindowSpec(rec.temporal, rec.fmax), [k_probe - 1], halves=True),
+                                  filter=FilterConfig())
     spread = abs(frames.compare(k_probe, halves.irradiance[0], adaptation)["d_aqm"]
                  - frames.compare(k_probe, halves.irradiance[1], adaptation)["d_aqm"])
     print(f"ATRIUM K {k_probe}: guided {got['guided']['d_aqm']:.2f} %, reference halves "

@@ -8,7 +8,7 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.collection.maps import collection_windows
+from pipeline.collection.maps import WindowSpec, collection_windows
 from pipeline.config import CollectionConfig, SegmentConfig
 from pipeline.scene import read_scene
 from pipeline.segments.decisions import (
@@ -91,7 +91,7 @@ def test_p_me_sees_a_lighting_step_at_a_known_frame(rng):
     step = np.arange(elements) < elements // 2
     counts[k + 5:, step] *= 2
     cfg = CollectionConfig(step_levels=0)  # Condition (1) alone: no element mesh for the regional step test
-    back, fwd = collection_windows(counts, np.full(frames, 40_000.0), [k], mode="adaptive", fmax=20, config=cfg)
+    back, fwd = collection_windows(counts, np.full(frames, 40_000.0), [k], WindowSpec("adaptive", 20), cfg)
     pb, pf = p_me(back[0], fwd[0], 20)
     assert pb > 0.9 and pf == pytest.approx(0.5 * pb, abs=0.03)
     assert np.all(fwd[0, step] <= 5)

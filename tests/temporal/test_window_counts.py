@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.collection.maps import collection_windows, window_counts
+from pipeline.collection.maps import WindowSpec, collection_windows, window_counts
 from pipeline.config import CollectionConfig
 from pipeline.store import PhotonStore, pack_key
 from tests.store.photonstore_helpers import IDENTITY
@@ -29,8 +29,8 @@ def _store(tmp_path) -> PhotonStore:
 
 
 def _windows(store, config, frame, counts):
-    back, fwd = collection_windows(counts, store.emitted(None).astype(np.float64), [frame], mode="adaptive",
-                                   fmax=8, config=config)
+    back, fwd = collection_windows(counts, store.emitted(None).astype(np.float64), [frame], WindowSpec("adaptive", 8),
+                                   config)
     return int(back[0, 0]), int(fwd[0, 0])
 
 
