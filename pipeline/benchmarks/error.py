@@ -69,13 +69,13 @@ import click
 import numpy as np
 
 from pipeline.collection.estimators import vertex_irradiance
-from pipeline.config import RenderConfig, SegmentConfig
+from pipeline.config import PhotonConfig, RenderConfig, SegmentConfig
 from pipeline.errors import LoomError
 from pipeline.frames.camera_paths import render_frame
 from pipeline.frames.perceived import display_values, displayed_difference
 from pipeline.frames.tonemap import log_average, luminance
 from pipeline.photons.raycast import caster_for
-from pipeline.photons.tracing import trace_batch
+from pipeline.photons.tracing import PhotonRange, trace_batch
 from pipeline.run.cluster import connect
 from pipeline.run.render import RenderSettings, render
 from pipeline.scene import ElementMesh, read_scene
@@ -166,8 +166,7 @@ def reference_map(*, scene_path: str, scene_hash: str, element_size: float, fram
     total = np.zeros((elements.n_vertices, 3))
     for start in range(0, n_photons, REFERENCE_BATCH):
         n = min(REFERENCE_BATCH, n_photons - start)
-        b = trace_batch(state, elements, n_photons=n, photon_start=start, seed=seed, frame=stream,
-                        max_depth=max_depth)
+        b = trace_batch(state, elements, PhotonRange(stream, start, n), PhotonConfig(seed=seed, photon_depth=max_depth))
         total += vertex_irradiance(*b.indirect(), elements, areas, 1)
     return total / n_photons
 

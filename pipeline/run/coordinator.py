@@ -56,7 +56,7 @@ from pipeline.frames.camera_paths import render_frame, visible_adaptation
 from pipeline.frames.images import frame_is_valid, frame_paths, write_png
 from pipeline.frames.perceived import camera_flow, displayed_difference
 from pipeline.frames.tonemap import adapt_in_time
-from pipeline.photons.tracing import trace_batch
+from pipeline.photons.tracing import PhotonRange, trace_batch
 from pipeline.scene.scene_cache import load_elements, load_scene
 from pipeline.segments.decisions import (
     Placement,
@@ -274,9 +274,8 @@ class SegmentRun:
         traced, E would depend on what else ran first."""
         n_probe = self.config.segments.pilot_photons
         t0 = time.perf_counter()
-        batch = trace_batch(self.scene.pose_frame(place.k), self.elements, n_photons=n_probe, photon_start=0,
-                            seed=self.config.photons.seed, frame=place.k,
-                            max_depth=self.config.photons.photon_depth)
+        batch = trace_batch(self.scene.pose_frame(place.k), self.elements, PhotonRange(place.k, 0, n_probe),
+                            self.config.photons)
         s, q = vertex_moments(*batch.indirect(), self.elements.element_vertices, self.elements.n_vertices)
         self.times["shoot_s"] += time.perf_counter() - t0
         e0 = energy_error(s, q)

@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from pipeline.collection.maps import WindowSpec, collection_windows
-from pipeline.config import CollectionConfig, SegmentConfig
+from pipeline.config import CollectionConfig, PhotonConfig, SegmentConfig
 from pipeline.scene import read_scene
 from pipeline.segments.decisions import (
     calibrated_start,
@@ -59,7 +59,7 @@ def test_pilot_on_a_real_static_scene_follows_eq2(tmp_path):
     # The STATIC built-in traced for real: E at N and at 4N differ by 2 (E ~ 1/sqrt(N)), so the
     # pilot's N_frame from either probe agrees within 20 %.
     from pipeline.collection.estimators import vertex_moments
-    from pipeline.photons.tracing import trace_batch
+    from pipeline.photons.tracing import PhotonRange, trace_batch
     from pipeline.scene import ElementMesh
     from pipeline.scene.builtin import write_builtin
 
@@ -68,7 +68,7 @@ def test_pilot_on_a_real_static_scene_follows_eq2(tmp_path):
     state = scene.pose_frame(1)
     errors = {}
     for n in (20_000, 80_000):
-        b = trace_batch(state, elements, n_photons=n, photon_start=0, seed=5, frame=1, max_depth=8)
+        b = trace_batch(state, elements, PhotonRange(1, 0, n), PhotonConfig(seed=5, photon_depth=8))
         from pipeline.store import DIRECT_BIT, ELEMENT_MASK
         indirect = (b.key & np.uint32(DIRECT_BIT)) == 0
         s, q = vertex_moments((b.key[indirect] & np.uint32(ELEMENT_MASK)).astype(np.int64), b.bary[indirect, 0],
