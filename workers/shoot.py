@@ -40,8 +40,7 @@ def shoot_task(*, store_url: str, scene_path: str, scene_hash: str, element_size
         return out
 
     with counting_io() as io:
-        store.write_batch(frame_index, batch, key=result.key, bary=result.bary, energy=result.energy,
-                          photons_emitted=n_photons, photon_start=photon_start, summarise=summarise)
+        store.write_batch(frame_index, batch, result, summarise=summarise)
     t3 = time.perf_counter()
     return {"frame": frame, "batch": batch, "skipped": False, "photons": n_photons,
             "records": len(result.key), "rays": result.rays_cast, "capped": result.stats["capped"],

@@ -24,6 +24,7 @@ from pipeline.config import PhotonConfig
 from pipeline.photons.raycast import caster_for
 from pipeline.photons.tracing import PhotonRange, trace_batch
 from pipeline.run.cluster import WORKER_ENV
+from pipeline.run.shoot import store_identity
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin import BUILTIN_SCENES, write_builtin
 from pipeline.store import PhotonStore
@@ -75,12 +76,11 @@ def _memory_worker(scene_path: str, frame: int, n_photons: int, store_url: str) 
     state = scene.pose_frame(frame)
     batch = trace_batch(state, elements, PhotonRange(frame, 0, n_photons), TRACER)
     store = PhotonStore.create(store_url, n_frames=scene.timeline.frames, n_elements=elements.n_elements,
-                               frame_numbers=scene.timeline.all_frames(), scene_hash=scene.scene_hash,
-                               config_hash=TRACER.photon_hash(elements.element_size), seed=TRACER.seed,
+                               frame_numbers=scene.timeline.all_frames(),
+                               identity=store_identity(scene.scene_hash, elements.element_size, TRACER),
                                keep_records=True)  # the bytes a record takes on disk are measured
     t0 = time.perf_counter()
-    store.write_batch(frame - 1, 0, key=batch.key, bary=batch.bary, energy=batch.energy,
-                      photons_emitted=n_photons, photon_start=0)
+    store.write_batch(frame - 1, 0, batch)
     write_s = time.perf_counter() - t0
     batch_dir = Path(store_url) / "frames" / str(frame - 1) / "0"
     on_disk = sum(f.stat().st_size for f in batch_dir.rglob("*") if f.is_file())

@@ -80,7 +80,7 @@ from workers.shoot import shoot_task
 from .cluster import TASK_RETRIES, completed, group_sizes, run_tasks, submit_grouped, task_key
 from .cluster import result as wait_result
 from .settings import RenderSettings
-from .shoot import shoot_key
+from .shoot import shoot_key, store_identity
 
 if TYPE_CHECKING:
     from distributed import Client
@@ -173,9 +173,8 @@ class SegmentRun:
         self.job, self.client = job, client
         self.config = job.config
         # A store swapped for another run's (another scene, photon settings or seed) is refused here
-        self.store = PhotonStore.open(job.store_url, mode="r+", scene_hash=job.scene_hash,
-                                      config_hash=self.config.photons.photon_hash(job.element_size),
-                                      seed=self.config.photons.seed)
+        self.store = PhotonStore.open(job.store_url, mode="r+",
+                                      identity=store_identity(job.scene_hash, job.element_size, self.config.photons))
         self.times = {"shoot_s": 0.0, "aqm_s": 0.0, "temporal_s": 0.0}
         self.io_bytes: dict[str, int] = {}  # what the tasks read and wrote (store.counting_io)
         self.batches_traced = 0

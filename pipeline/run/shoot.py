@@ -15,7 +15,7 @@ from pipeline.config import PhotonConfig
 from pipeline.errors import LoomError
 from pipeline.paths import check_writable_dir
 from pipeline.scene import ElementMesh, Scene, read_scene
-from pipeline.store import PhotonStore, remove_partials
+from pipeline.store import PhotonStore, StoreIdentity, remove_partials
 from workers.shoot import shoot_task
 
 from .cluster import connect, run_tasks, task_key
@@ -68,13 +68,17 @@ def open_store(p: ShootPlan, url: str, *, keep_records: bool) -> PhotonStore:
     tl = p.scene.timeline
     store = PhotonStore.create(
         url, n_frames=tl.frames, n_elements=p.elements.n_elements, frame_numbers=tl.all_frames(),
-        scene_hash=p.scene.scene_hash, config_hash=p.config.photon_hash(p.elements.element_size),
-        seed=p.config.seed, keep_records=keep_records)
+        identity=store_identity(p.scene.scene_hash, p.elements.element_size, p.config), keep_records=keep_records)
     for f in p.frames:
         src = p.sources[f]
         if src != f and store.source_frame(f - 1) != src - 1:
             store.share_frame(f - 1, src - 1)
     return store
+
+
+def store_identity(scene_hash: str, element_size: float, config: PhotonConfig) -> StoreIdentity:
+    """What the run's photons are made from: a store of another scene, photon settings or seed is refused."""
+    return StoreIdentity(scene_hash, config.photon_hash(element_size), config.seed)
 
 
 def shoot_key(config: PhotonConfig, element_size: float, frame: int, batch: int, store_url: str) -> str:

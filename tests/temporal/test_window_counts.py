@@ -7,6 +7,7 @@ import numpy as np
 
 from pipeline.collection.maps import WindowSpec, collection_windows, window_counts
 from pipeline.config import CollectionConfig
+from pipeline.photons.tracing import PhotonBatch
 from pipeline.store import PhotonStore, pack_key
 from tests.store.photonstore_helpers import IDENTITY
 
@@ -22,9 +23,9 @@ def _store(tmp_path) -> PhotonStore:
         n_direct = DIRECT[f >= CHANGE]
         n = INDIRECT + n_direct
         direct = np.arange(n) < n_direct
-        store.write_batch(f, 0, key=pack_key(np.zeros(n, np.uint32), np.arange(n), direct),
-                          bary=np.zeros((n, 2), np.uint16), energy=np.ones((n, 3), np.float32),
-                          photons_emitted=EMITTED, photon_start=0)
+        store.write_batch(f, 0, PhotonBatch(pack_key(np.zeros(n, np.uint32), np.arange(n), direct),
+                                            np.zeros((n, 2), np.uint16), np.ones((n, 3), np.float32),
+                                            photons_emitted=EMITTED, photon_start=0))
     return PhotonStore.open(url, mode="r", **IDENTITY)
 
 
