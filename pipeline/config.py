@@ -2,16 +2,15 @@
 
 The paper is Myszkowski, Tawara, Akamine, Seidel, *Perception-Guided Global Illumination
 Solution for Animation Rendering*, SIGGRAPH 2001. Section numbers below refer
-to it. Each stage has its own config of the fields it reads: PhotonConfig (tracing and the element
-mesh, §4), CollectionConfig (the temporal windows, §5.1), FilterConfig (the spatial filter, §5.2.5)
-and SegmentConfig (the adjustment loops of §5.2); RenderConfig composes them. All are frozen
-dataclasses, validated when made. A stage config's ``hash`` digests its fields, so a stage's stored
-results are keyed by what they really depend on: changing d_thr re-decides segments
-(pipeline/run/coordinator.py) but keeps the photons, while changing element_size or photon_depth
-refuses the photon store. The user's ``--config`` file is flat (``{"d_thr": 0.02}``):
-:meth:`RenderConfig.from_dict` and :meth:`RenderConfig.to_dict` translate, and
-:attr:`RenderConfig.hash`, the digest of every field that goes into store attributes, task keys and
-EXR headers, is of that flat form.
+to it. Each stage has a frozen config of the fields it reads, validated when made: PhotonConfig
+(§4), CollectionConfig (§5.1), FilterConfig (§5.2.5), SegmentConfig (§5.2); RenderConfig composes
+them. Stored results are keyed by the digests of the stages they depend on (the segment decisions
+by the collection, filter and segment configs' ``hash``, the photon store by
+``PhotonConfig.photon_hash``), so changing d_thr re-decides segments (pipeline/run/coordinator.py)
+but keeps the photons, while changing element_size or photon_depth refuses the photon store.
+``--config`` files are flat (``{"d_thr": 0.02}``): RenderConfig's ``from_dict``/``to_dict``
+translate, and ``RenderConfig.hash`` (store attributes, task keys, EXR headers) digests that flat
+form.
 """
 from __future__ import annotations
 

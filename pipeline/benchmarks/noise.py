@@ -9,7 +9,7 @@ two halves are composited with the same camera samples and direct light into I1(
 * d_AQM of I1 vs I2 (a) on linear values with 1.0 = 100 cd/m^2 (``pipeline.aqm.aqm``, what
   ``loom aqm`` of the EXRs gives), (b) on the displayed values after Ward's tone mapping at the
   frame's adaptation luminance (``pipeline.frames.perceived``), (c) displayed, with the adaptive spatial
-  filter of §5.2.5 applied to both halves (``RenderConfig.filter_*``), and displayed with fixed
+  filter of §5.2.5 applied to both halves (``FilterConfig.filter_*``), and displayed with fixed
   +-F_max/2 windows (every photon of the segment: the least noise temporal pooling can give);
 * the share of vertex maps the filter touched, the mean window length back + fwd + 1 per element,
   p_me back / fwd (share of elements hit in the segment whose window reaches F_max/2 that way), and

@@ -19,7 +19,7 @@ from pipeline.config import (
 from pipeline.errors import ConfigError
 
 ROOT = Path(__file__).resolve().parents[2]
-STAGES = {"photons": PhotonConfig, "collection": CollectionConfig, "filter": FilterConfig,
+STAGE_CONFIGS = {"photons": PhotonConfig, "collection": CollectionConfig, "filter": FilterConfig,
           "segments": SegmentConfig}
 
 # Digests of the defaults and of one changed config, as stores and frames written so far carry them:
@@ -35,12 +35,13 @@ CHANGED_STAGE_HASHES = {"photons": "113f75cd76b23228", "segments": "309235d93348
 def test_the_digests_are_those_of_the_flat_config():
     config = RenderConfig()
     assert config.hash == DEFAULT_HASH
-    assert {name: getattr(config, name).hash for name in STAGES} == DEFAULT_STAGE_HASHES
+    assert {name: getattr(config, name).hash for name in STAGE_CONFIGS} == DEFAULT_STAGE_HASHES
     assert config.photons.photon_hash(0.1) == "87fa24b219af8029"
     assert config.photons.photon_hash(0.25) == "f003b5d02bf593c7"
     changed = RenderConfig.from_dict(CHANGED)
     assert changed.hash == CHANGED_HASH
-    assert {name: getattr(changed, name).hash for name in STAGES} == {**DEFAULT_STAGE_HASHES, **CHANGED_STAGE_HASHES}
+    want = {**DEFAULT_STAGE_HASHES, **CHANGED_STAGE_HASHES}
+    assert {name: getattr(changed, name).hash for name in STAGE_CONFIGS} == want
     assert changed.photons.photon_hash(0.3) == "f38142f466855572"
 
 
@@ -51,7 +52,7 @@ def test_each_stage_hash_covers_only_its_stage():
     for stage, changes in changed.items():
         for name, value in changes.items():
             other = RenderConfig.from_dict({**base.to_dict(), name: value})
-            for s in STAGES:
+            for s in STAGE_CONFIGS:
                 assert (getattr(other, s).hash != getattr(base, s).hash) == (s == stage), (name, s)
     assert base.segments.replace(d_thr=0.05) != base.segments
     assert PhotonConfig(seed=4).photon_hash(0.4) == PhotonConfig().photon_hash(0.4)  # the seed is stored apart
@@ -61,7 +62,7 @@ def test_each_stage_hash_covers_only_its_stage():
 def test_the_flat_form_round_trips_in_the_fields_order():
     config = RenderConfig(photons=PhotonConfig(seed=3), segments=SegmentConfig(d_thr=0.1, fmax_cap=30))
     flat = config.to_dict()
-    assert list(flat) == [f.name for stage in STAGES.values() for f in dataclasses.fields(stage)]
+    assert list(flat) == [f.name for stage in STAGE_CONFIGS.values() for f in dataclasses.fields(stage)]
     assert RenderConfig.from_dict(flat) == config
     assert RenderConfig.from_dict({}) == RenderConfig()
     assert RenderConfig.from_dict({"d_thr": 0.02}).segments.d_thr == 0.02
@@ -100,7 +101,7 @@ def test_bounds_and_the_cross_field_check():
 
 
 def test_every_field_names_its_paper_symbol():
-    for stage in STAGES.values():
+    for stage in STAGE_CONFIGS.values():
         for f in dataclasses.fields(stage):
             assert f.metadata["symbol"].strip(), f"{stage.__name__}.{f.name}"
 
@@ -108,7 +109,7 @@ def test_every_field_names_its_paper_symbol():
 def test_every_config_field_is_read_outside_config():
     text = "\n".join(p.read_text() for d in ("pipeline", "workers", "kernels") for p in (ROOT / d).rglob("*.py")
                      if p.name != "config.py")
-    for stage in STAGES.values():
+    for stage in STAGE_CONFIGS.values():
         for f in dataclasses.fields(stage):
             assert re.search(rf"\.{f.name}\b", text), f"{stage.__name__}.{f.name} is read by nothing"
 
