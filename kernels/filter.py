@@ -19,7 +19,7 @@ Normalising by the area inside the support (sum of hat areas A_u) removes most b
 Support growth (docs/05-estimators.md §1.5): H_0 = {v}; H_r adds ring r, the vertices r edges away over the same
 surface (same instance, vertex normal within ``max_angle`` = 30 deg of v's, reached through such
 vertices only). A vertex is filtered only if r_{H_0} > tau (it "collected too few photons":
-n_eff < 1 / tau^2, ``RenderConfig.filter_photons``); then rings are added until r_H <= tau, up to
+n_eff < 1 / tau^2, ``FilterConfig.filter_photons``); then rings are added until r_H <= tau, up to
 ``max_rings`` (h_max). Before ring r is added, a bias test compares the ring's own estimate with
 the inner one: if |E_ring - E_H| > z sqrt(Var_ring + Var_H) (z = 2.5) the lighting changes across
 the ring (a shadow or highlight edge) and growth stops. An inner region without photons always

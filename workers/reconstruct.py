@@ -7,7 +7,7 @@ import time
 import numpy as np
 
 from pipeline.collection.estimators import frame_geometry, map_digest
-from pipeline.collection.maps import illumination_maps
+from pipeline.collection.maps import MapRequest, WindowSpec, illumination_maps
 from pipeline.config import RenderConfig
 from pipeline.frames.camera_paths import visible_adaptation
 from pipeline.scene.scene_cache import load_elements, load_scene
@@ -35,14 +35,14 @@ def reconstruct_task(*, store_url: str, scene_path: str, scene_hash: str, camera
     times = {"setup_s": time.perf_counter() - t0, "adapt_s": 0.0, "map_write_s": 0.0}
     # The direct estimate comes from the batch sums the gather holds (no second read of them)
     with counting_io() as io:  # the sums and counts read, the maps written
-        for lit in illumination_maps(store, elements, scene, [f - 1 for f in frames], mode=mode, fmax=fmax,
-                                     config=config, spatial_filter=config.spatial_filter, batches=use,
-                                     chunk=len(frames), with_direct=True, times=times):
+        request = MapRequest(WindowSpec(mode, fmax), [f - 1 for f in frames], batches=use, direct=True,
+                             chunk=len(frames))
+        for lit in illumination_maps(store, elements, scene, request, config.collection, config.filter, times=times):
             f = lit.frame_index + 1
             t1 = time.perf_counter()
             geometry = frame_geometry(scene, elements, f)  # posed once, by the gather
             indirect, direct = lit.irradiance, lit.direct
-            adaptation = visible_adaptation(geometry.state, elements, indirect, aspect=aspect, seed=config.seed,
+            adaptation = visible_adaptation(geometry.state, elements, indirect, aspect=aspect, seed=config.photons.seed,
                                             max_depth=max_depth, area_samples=area_samples)
             t2 = time.perf_counter()
             maps.write_frame(lit.frame_index, indirect=indirect, direct=direct, adaptation=adaptation)

@@ -5,7 +5,8 @@ from __future__ import annotations
 import time
 
 from pipeline.collection.batch_sums import summariser
-from pipeline.photons.tracing import trace_batch
+from pipeline.config import PhotonConfig
+from pipeline.photons.tracing import PhotonRange, trace_batch
 from pipeline.scene.scene_cache import load_elements, load_scene
 from pipeline.store import PhotonStore, counting_io
 
@@ -27,8 +28,8 @@ def shoot_task(*, store_url: str, scene_path: str, scene_hash: str, element_size
     elements = load_elements(scene_path, scene_hash, element_size)
     state = scene.pose_frame(frame)
     t1 = time.perf_counter()
-    result = trace_batch(state, elements, n_photons=n_photons, photon_start=photon_start, seed=seed,
-                         frame=frame, max_depth=max_depth)
+    result = trace_batch(state, elements, PhotonRange(frame, photon_start, n_photons),
+                         PhotonConfig(element_size=element_size, seed=seed, photon_depth=max_depth))
     t2 = time.perf_counter()
     summed, summary = [0.0], summariser(elements)
 
@@ -39,8 +40,7 @@ def shoot_task(*, store_url: str, scene_path: str, scene_hash: str, element_size
         return out
 
     with counting_io() as io:
-        store.write_batch(frame_index, batch, key=result.key, bary=result.bary, energy=result.energy,
-                          photons_emitted=n_photons, photon_start=photon_start, summarise=summarise)
+        store.write_batch(frame_index, batch, result, summarise=summarise)
     t3 = time.perf_counter()
     return {"frame": frame, "batch": batch, "skipped": False, "photons": n_photons,
             "records": len(result.key), "rays": result.rays_cast, "capped": result.stats["capped"],

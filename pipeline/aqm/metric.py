@@ -39,7 +39,7 @@ from .masking import mutual_masking
 from .nonlinearity import local_adaptation, nonlinear_contrast
 from .psychometric import P_THRESHOLD, d_aqm, detection_probability
 
-AQM_SIZE = 256  # §6; RenderConfig.aqm_size
+AQM_SIZE = 256  # §6; SegmentConfig.aqm_size
 # Every filter works by FFT, which treats the image as periodic: the left border would meet the right one
 # and the (usually large) luminance step there would mask errors along the borders. Mirroring a margin
 # of a quarter of the longer side around the image makes the borders continuous [decision]; at 256 px
@@ -62,29 +62,42 @@ class AQMResult:
         return self.map > self.threshold
 
 
-def aqm(image_a: npt.ArrayLike, image_b: npt.ArrayLike, *, flow: npt.ArrayLike | None = None,
-        viewing: ViewingConditions = ViewingConditions(), pursuit_gain: float = G_SP, aqm_size: int = AQM_SIZE,
-        names: tuple[str, str] = ("A", "B"), flow_name: str = "flow") -> AQMResult:
+@dataclass(frozen=True)
+class Motion:
+    """How the image moves and how the eye follows it (§6): ``flow``, the image velocity in deg/s of
+    frame pixels, (H, W, 2) vectors or (H, W) speeds, from camera motion (flow.py); ``pursuit_gain``,
+    the eye's smooth-pursuit gain for it (0.82 Daly 1998; 0 = not followed, 1 = fully tracked);
+    ``name`` labels the flow in error messages."""
+
+    flow: npt.ArrayLike
+    pursuit_gain: float = G_SP
+    name: str = "flow"
+
+    def __post_init__(self) -> None:
+        if not 0.0 <= self.pursuit_gain <= 1.0:
+            raise LoomError(f"must lie in [0, 1], got {self.pursuit_gain!r}", field="pursuit_gain")
+
+
+def aqm(image_a: npt.ArrayLike, image_b: npt.ArrayLike, *, motion: Motion | None = None,
+        viewing: ViewingConditions = ViewingConditions(), aqm_size: int = AQM_SIZE,
+        names: tuple[str, str] = ("A", "B")) -> AQMResult:
     """Predict visible differences between two linear-RGB renderings of one frame.
 
     ``image_a``/``image_b``: (H, W, 3|4) linear Rec.709 RGB (or (H, W) relative luminance); 1.0 is the
-    display's peak white (ViewingConditions). ``flow``: image velocity in deg/s of frame pixels,
-    (H, W, 2) vectors or (H, W) speeds, from camera motion (flow.py); None for a still frame.
-    ``pursuit_gain``: smooth-pursuit gain of the eye for that flow (0.82 Daly 1998; 0 = not followed,
-    1 = fully tracked). ``names`` label the inputs in error messages. Symmetric in a and b.
+    display's peak white (ViewingConditions). ``motion``: the frame's image motion; None for a still
+    frame. ``names`` label the inputs in error messages. Symmetric in a and b.
     """
     a = check_image(image_a, names[0])
     b = check_image(image_b, names[1])
     _check_same_size(a, b, names)
     lum_a = display_luminance(relative_luminance(a), viewing, names[0])
     lum_b = display_luminance(relative_luminance(b), viewing, names[1])
-    return aqm_luminance(lum_a, lum_b, flow=flow, viewing=viewing, pursuit_gain=pursuit_gain,
-                         aqm_size=aqm_size, names=names, flow_name=flow_name)
+    return aqm_luminance(lum_a, lum_b, motion=motion, viewing=viewing, aqm_size=aqm_size, names=names)
 
 
-def aqm_luminance(lum_a: npt.ArrayLike, lum_b: npt.ArrayLike, *, flow: npt.ArrayLike | None = None,
-                  viewing: ViewingConditions = ViewingConditions(), pursuit_gain: float = G_SP,
-                  aqm_size: int = AQM_SIZE, names: tuple[str, str] = ("A", "B"), flow_name: str = "flow") -> AQMResult:
+def aqm_luminance(lum_a: npt.ArrayLike, lum_b: npt.ArrayLike, *, motion: Motion | None = None,
+                  viewing: ViewingConditions = ViewingConditions(), aqm_size: int = AQM_SIZE,
+                  names: tuple[str, str] = ("A", "B")) -> AQMResult:
     """:func:`aqm` for inputs already in display luminance, cd/m^2 (H, W); viewing gives only the geometry."""
     lum_a = check_image(lum_a, names[0])
     lum_b = check_image(lum_b, names[1])
@@ -95,8 +108,6 @@ def aqm_luminance(lum_a: npt.ArrayLike, lum_b: npt.ArrayLike, *, flow: npt.Array
         check_luminance(lum, name)
     if not (isinstance(aqm_size, int) and aqm_size >= 16):
         raise LoomError(f"must be an integer >= 16, got {aqm_size!r}", field="aqm_size")
-    if not 0.0 <= pursuit_gain <= 1.0:
-        raise LoomError(f"must lie in [0, 1], got {pursuit_gain!r}", field="pursuit_gain")
 
     full = lum_a.shape
     # Scaling the image and the viewing distance together keeps every visual angle (§6).
@@ -108,8 +119,9 @@ def aqm_luminance(lum_a: npt.ArrayLike, lum_b: npt.ArrayLike, *, flow: npt.Array
 
     adaptation = local_adaptation(lum_a, lum_b, ppd)
     stages = []
-    if flow is not None:
-        v_r = retinal_velocity(_mirror(resample(_check_flow(flow, full, flow_name), shape), pad), pursuit_gain)
+    if motion is not None:
+        flow = _check_flow(motion.flow, full, motion.name)
+        v_r = retinal_velocity(_mirror(resample(flow, shape), pad), motion.pursuit_gain)
         stages.append((velocity_bank(work, ppd), velocity_coordinate(v_r)))
     # Daly's accommodation term r_a takes the distance the eye is focused at, the real one: §6 scales the
     # distance only "to preserve the same spatial frequencies", which the scaled ppd already does.

@@ -9,7 +9,7 @@ from typing import TYPE_CHECKING
 import click
 import numpy as np
 
-from pipeline.aqm import AQM_SIZE, ViewingConditions, aqm, image_velocity
+from pipeline.aqm import AQM_SIZE, Motion, ViewingConditions, aqm, image_velocity
 
 if TYPE_CHECKING:
     from collections.abc import Callable
@@ -49,7 +49,7 @@ def _run_bench(repeat: int, echo: Callable[[str], None]) -> None:
     speed = np.hypot(flow[..., 0], flow[..., 1])
     echo(f"pair: {AQM_SIZE}x{AQM_SIZE}, Monte Carlo-like noise (400 samples), "
          f"flow {speed.min():.1f}..{speed.max():.1f} deg/s")
-    for label, kwargs in (("no flow", {}), ("with flow", {"flow": flow})):
+    for label, kwargs in (("no flow", {}), ("with flow", {"motion": Motion(flow)})):
         start = time.perf_counter()
         d = aqm(a, b, **kwargs).d_aqm
         cold = time.perf_counter() - start

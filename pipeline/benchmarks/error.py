@@ -69,13 +69,13 @@ import click
 import numpy as np
 
 from pipeline.collection.estimators import vertex_irradiance
-from pipeline.config import RenderConfig
+from pipeline.config import PhotonConfig, RenderConfig, SegmentConfig
 from pipeline.errors import LoomError
 from pipeline.frames.camera_paths import render_frame
 from pipeline.frames.perceived import display_values, displayed_difference
 from pipeline.frames.tonemap import log_average, luminance
 from pipeline.photons.raycast import caster_for
-from pipeline.photons.tracing import trace_batch
+from pipeline.photons.tracing import PhotonRange, trace_batch
 from pipeline.run.cluster import connect
 from pipeline.run.render import RenderSettings, render
 from pipeline.scene import ElementMesh, read_scene
@@ -166,8 +166,7 @@ def reference_map(*, scene_path: str, scene_hash: str, element_size: float, fram
     total = np.zeros((elements.n_vertices, 3))
     for start in range(0, n_photons, REFERENCE_BATCH):
         n = min(REFERENCE_BATCH, n_photons - start)
-        b = trace_batch(state, elements, n_photons=n, photon_start=start, seed=seed, frame=stream,
-                        max_depth=max_depth)
+        b = trace_batch(state, elements, PhotonRange(stream, start, n), PhotonConfig(seed=seed, photon_depth=max_depth))
         total += vertex_irradiance(*b.indirect(), elements, areas, 1)
     return total / n_photons
 
@@ -231,7 +230,7 @@ def run_method(client: Client, scene_path: Path, out: Path, plan: Plan, *, metho
     maps = IlluminationMaps.open(str(out / "photons.zarr"))
     indirect = np.stack([np.asarray(maps.read(f - 1), np.float64) for f in range(plan.frames[0], plan.frames[1] + 1)])
     shutil.rmtree(out)
-    return {"method": method, "n_photons": n_photons, "fmax": fmax, "d_thr": config.d_thr if n_photons is None
+    return {"method": method, "n_photons": n_photons, "fmax": fmax, "d_thr": config.segments.d_thr if n_photons is None
             else None, "wall_s": wall, "cpu_s": cpu, "photons": photons, "segments": report["segments"],
             "indirect": indirect}
 
@@ -459,7 +458,7 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, config:
         seeds = (101, 202)
         cache = out_dir / "references" / (reference_key(
             scene_hash=scene.scene_hash, element_size=elements.element_size, frames=plan.frames,
-            n_photons=plan.reference_photons, seeds=seeds, max_depth=config.photon_depth) + ".npz")
+            n_photons=plan.reference_photons, seeds=seeds, max_depth=config.photons.photon_depth) + ".npz")
         with connect("local", workers) as client:
             cached = load_references(cache)
             if cached is not None:
@@ -472,7 +471,7 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, config:
                     futures = [client.submit(reference_map, scene_path=str(Path(path).resolve()),
                                              scene_hash=scene.scene_hash, element_size=elements.element_size,
                                              frame=f, n_photons=plan.reference_photons, seed=seed,
-                                             stream=first, max_depth=config.photon_depth, pure=False)
+                                             stream=first, max_depth=config.photons.photon_depth, pure=False)
                                for f in range(first, last + 1)]
                     refs.append(np.stack(client.gather(futures)))
                 refs = np.stack(refs)
@@ -498,7 +497,7 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, config:
             specs += [(m, dict(n_photons=n, fmax=plan.fmax, temporal=m, config=config))
                       for m in ("fixed", "adaptive") if m in plan.methods for n in plan.budgets]
             specs += [("guided", dict(n_photons=None, fmax=None, temporal="adaptive",
-                                      config=config.replace(d_thr=d)))
+                                      config=config.replace(segments=config.segments.replace(d_thr=d))))
                       for d in plan.d_thr if "guided" in plan.methods]
             # Warm-up, not timed: the workers' first render builds kernels and caches the first run would pay
             run_method(client, path, tmp / "warm-up", plan, **{**specs[0][1], "method": "warm-up"})
@@ -514,7 +513,7 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, config:
                 runs.append(r)
         machine["after"] = announce(tmp, "after", echo)
     ref_photons = 2 * plan.reference_photons * (last - first + 1)
-    basis = reference_basis(plan, runs, config, ref_photons, ref_s)
+    basis = reference_basis(plan, runs, config.segments, ref_photons, ref_s)
     if basis["guided_n_frame"]:
         echo(basis["statement"])
     result = {"scene": Path(path).stem, "plan": {**plan.__dict__, "event": plan.event}, "config": config.to_dict(),
@@ -533,7 +532,7 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, config:
     return result
 
 
-def reference_basis(plan: Plan, runs: list[dict], config: RenderConfig, ref_photons: int, ref_s: float) -> dict:
+def reference_basis(plan: Plan, runs: list[dict], config: SegmentConfig, ref_photons: int, ref_s: float) -> dict:
     """Which budget the reference was sized by and why (module docstring): the largest N_frame the guided
     runs reached, how many times that the reference holds, and what 50x the config's cap would cost at
     the reference's own tracing rate."""

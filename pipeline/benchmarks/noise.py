@@ -9,7 +9,7 @@ two halves are composited with the same camera samples and direct light into I1(
 * d_AQM of I1 vs I2 (a) on linear values with 1.0 = 100 cd/m^2 (``pipeline.aqm.aqm``, what
   ``loom aqm`` of the EXRs gives), (b) on the displayed values after Ward's tone mapping at the
   frame's adaptation luminance (``pipeline.frames.perceived``), (c) displayed, with the adaptive spatial
-  filter of §5.2.5 applied to both halves (``RenderConfig.filter_*``), and displayed with fixed
+  filter of §5.2.5 applied to both halves (``FilterConfig.filter_*``), and displayed with fixed
   +-F_max/2 windows (every photon of the segment: the least noise temporal pooling can give);
 * the share of vertex maps the filter touched, the mean window length back + fwd + 1 per element,
   p_me back / fwd (share of elements hit in the segment whose window reaches F_max/2 that way), and
@@ -36,8 +36,8 @@ import numpy as np
 from kernels import colour
 from pipeline.aqm import aqm
 from pipeline.collection.estimators import mesh_adaptation, vertex_irradiance
-from pipeline.collection.maps import illumination_maps, window_counts
-from pipeline.config import RenderConfig
+from pipeline.collection.maps import MapRequest, WindowSpec, illumination_maps, window_counts
+from pipeline.config import PhotonConfig, RenderConfig
 from pipeline.errors import LoomError
 from pipeline.frames.camera_paths import render_frame
 from pipeline.frames.perceived import displayed_difference
@@ -94,35 +94,35 @@ def run(photons: Iterable[int] = (10_000, 20_000, 40_000, 80_000), *, fmax: int 
         path = write_builtin("room", root / "room.glb")
         scene = read_scene(path)
         own = ElementMesh.build(scene).element_size
-        config = RenderConfig(element_size=own * element_scale)
+        config = RenderConfig(photons=PhotonConfig(element_size=own * element_scale))
         if filter_photons is not None:
-            config = config.replace(filter_photons=filter_photons)
-        mesh = ElementMesh.build(scene, config.element_size)
+            config = config.replace(filter=config.filter.replace(filter_photons=filter_photons))
+        mesh = ElementMesh.build(scene, config.photons.element_size)
         state = scene.pose_frame(K)
         caster = caster_for(state)
         areas = mesh.vertex_areas(state)
         index = K - 1
         half = fmax // 2
-        url = str(root / f"photons-es{config.element_size:g}.zarr")
-        thr = 100.0 * config.d_thr
-        echo(f"ROOM frame {K}: {mesh.n_elements:,} elements (element_size {config.element_size:g} m), "
+        url = str(root / f"photons-es{config.photons.element_size:g}.zarr")
+        thr = 100.0 * config.segments.d_thr
+        echo(f"ROOM frame {K}: {mesh.n_elements:,} elements (element_size {config.photons.element_size:g} m), "
              f"{mesh.n_vertices:,} vertices; frames {K - half}-{K + half}, F_max = {fmax} adaptive; "
-             f"{width}x{height}, {spp} spp; filter_photons {config.filter_photons:g}, "
-             f"filter_rings {config.filter_rings}")
+             f"{width}x{height}, {spp} spp; filter_photons {config.filter.filter_photons:g}, "
+             f"filter_rings {config.filter.filter_rings}")
 
         def pair(irradiance):  # I1(K), I2(K): same camera samples and direct light
-            return [render_frame(state, mesh, irradiance[p], width=width, height=height, spp=spp, seed=config.seed,
-                                 frame=K, caster=caster) for p in (0, 1)]
+            return [render_frame(state, mesh, irradiance[p], width=width, height=height, spp=spp,
+                                 seed=config.photons.seed, frame=K, caster=caster) for p in (0, 1)]
 
-        def maps(pstore, **kw):
-            return next(illumination_maps(pstore, mesh, scene, [index], fmax=fmax, config=config,
-                                          split_parity=True, **kw))
+        def maps(pstore, mode, filter=None):
+            return next(illumination_maps(pstore, mesh, scene, MapRequest(WindowSpec(mode, fmax), [index], halves=True),
+                                          config.collection, filter))
 
         rows = []
         last = None
         for n in sorted(photons):
             t0 = time.perf_counter()
-            shoot(str(path), frames=f"{K - half}-{K + half}", n_photons=int(n), store_url=url, config=config,
+            shoot(str(path), frames=f"{K - half}-{K + half}", n_photons=int(n), store_url=url, config=config.photons,
                   scheduler=scheduler, workers=workers, progress=False, keep_records=True)  # direct from records
             pstore = PhotonStore.open(url)
             if pstore.photons_emitted(index) != n:
@@ -132,22 +132,22 @@ def run(photons: Iterable[int] = (10_000, 20_000, 40_000, 80_000), *, fmax: int 
             d = rec.direct
             direct = vertex_irradiance(rec.element[d], rec.b1[d], rec.b2[d], rec.energy[d], mesh, areas,
                                        rec.photons_emitted)
-            lit = maps(pstore, mode="adaptive", spatial_filter=False)
-            filt = maps(pstore, mode="adaptive", spatial_filter=True)
-            fixed = maps(pstore, mode="fixed", spatial_filter=False)
+            lit = maps(pstore, "adaptive")
+            filt = maps(pstore, "adaptive", config.filter)
+            fixed = maps(pstore, "fixed")
             shown = lit.irradiance.mean(axis=0)  # the full map: both halves pooled
             adaptation = mesh_adaptation(state, mesh, direct + shown, width / height)
             images = {name: pair(m.irradiance) for name, m in (("adaptive", lit), ("filter", filt), ("fixed", fixed))}
 
             def disp(name, images=images, adaptation=adaptation):
                 a, b = images[name]
-                return displayed_difference(a.beauty, b.beauty, adaptation, aqm_size=config.aqm_size).d_aqm
+                return displayed_difference(a.beauty, b.beauty, adaptation, aqm_size=config.segments.aqm_size).d_aqm
 
             a, b = images["adaptive"]
             counts = window_counts(pstore, frames=range(index - half, index + half + 1))
             hit = np.asarray(counts).sum(axis=0) > 0
             back, fwd = lit.back.astype(np.int64), lit.fwd.astype(np.int64)
-            row = dict(n_frame=int(n), d_linear=aqm(a.beauty, b.beauty, aqm_size=config.aqm_size).d_aqm,
+            row = dict(n_frame=int(n), d_linear=aqm(a.beauty, b.beauty, aqm_size=config.segments.aqm_size).d_aqm,
                        d_displayed=disp("adaptive"), d_filtered=disp("filter"), d_fixed=disp("fixed"),
                        filtered=float(np.mean(filt.rings > 0)), mean_window=float(np.mean(back + fwd + 1)),
                        p_me_back=float(np.mean(back[hit] == half)), p_me_fwd=float(np.mean(fwd[hit] == half)),
@@ -165,18 +165,18 @@ def run(photons: Iterable[int] = (10_000, 20_000, 40_000, 80_000), *, fmax: int 
                  f"| {100 * r['p_me_back']:.0f} / {100 * r['p_me_fwd']:.0f} % | {100 * r['sigma_v']:.1f} % "
                  f"| {r['adaptation']:.4f} | {r['ward_m']:.1f} |")
         echo(f"(d_thr = {thr:g} %; {sum(r['seconds'] for r in rows):.0f} s for the rows)")
-        result = dict(rows=rows, elements=mesh.n_elements, element_size=config.element_size)
+        result = dict(rows=rows, elements=mesh.n_elements, element_size=config.photons.element_size)
 
         if calibrate and last is not None:
             shown, direct, adaptation, a = last
-            base = render_frame(state, mesh, shown, width=width, height=height, spp=spp, seed=config.seed,
+            base = render_frame(state, mesh, shown, width=width, height=height, spp=spp, seed=config.photons.seed,
                                 frame=K, caster=caster).beauty
             rng = np.random.default_rng(1)
             layers = [render_frame(state, mesh, shown * rng.standard_normal(mesh.n_vertices)[:, None], width=width,
-                                   height=height, spp=spp, seed=config.seed, frame=K, caster=caster).indirect
+                                   height=height, spp=spp, seed=config.photons.seed, frame=K, caster=caster).indirect
                       for _ in range(2)]
-            amp = noise_for_threshold(base, layers, adaptation, thr, aqm_size=config.aqm_size)
-            step = displayed_difference(base, base * 1.10, adaptation, aqm_size=config.aqm_size).d_aqm
+            amp = noise_for_threshold(base, layers, adaptation, thr, aqm_size=config.segments.aqm_size)
+            step = displayed_difference(base, base * 1.10, adaptation, aqm_size=config.segments.aqm_size).d_aqm
             result.update(noise_at_threshold=amp, uniform_step_10=step)
             n_max = rows[-1]["n_frame"]
             need = n_max * (rows[-1]["sigma_v"] / amp) ** 2

@@ -20,10 +20,11 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from pipeline.config import RenderConfig
+from pipeline.config import PhotonConfig
 from pipeline.photons.raycast import caster_for
-from pipeline.photons.tracing import trace_batch
+from pipeline.photons.tracing import PhotonRange, trace_batch
 from pipeline.run.cluster import WORKER_ENV
+from pipeline.run.shoot import store_identity
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin import BUILTIN_SCENES, write_builtin
 from pipeline.store import PhotonStore
@@ -38,6 +39,7 @@ def _load(scene_path: str):
 
 
 REPEATS = 3  # tracer and raw Embree alternate this many times; the best time of each counts
+TRACER = PhotonConfig(photon_depth=8)  # what is timed: seed 0, paths cut at 8 hits
 
 
 def _worker(scene_path: str, frame: int, n_photons: int, photon_start: int) -> dict:
@@ -46,13 +48,12 @@ def _worker(scene_path: str, frame: int, n_photons: int, photon_start: int) -> d
     scene, elements = _load(scene_path)
     state = scene.pose_frame(frame)
     caster = caster_for(state)
-    trace_batch(state, elements, n_photons=2000, photon_start=10**9, seed=0, frame=frame, max_depth=8)  # warm-up
+    trace_batch(state, elements, PhotonRange(frame, 10**9, 2000), TRACER)  # warm-up
     trace_s = raw_s = float("inf")
     origins = dirs = None
     for _ in range(REPEATS):
         t0 = time.perf_counter()
-        batch = trace_batch(state, elements, n_photons=n_photons, photon_start=photon_start, seed=0,
-                            frame=frame, max_depth=8)
+        batch = trace_batch(state, elements, PhotonRange(frame, photon_start, n_photons), TRACER)
         trace_s = min(trace_s, time.perf_counter() - t0)
         n_raw = batch.rays_cast
         if origins is None:
@@ -73,14 +74,13 @@ def _memory_worker(scene_path: str, frame: int, n_photons: int, store_url: str) 
     """Trace and store one frame of ``n_photons``; peak resident memory of this process."""
     scene, elements = _load(scene_path)
     state = scene.pose_frame(frame)
-    batch = trace_batch(state, elements, n_photons=n_photons, photon_start=0, seed=0, frame=frame, max_depth=8)
+    batch = trace_batch(state, elements, PhotonRange(frame, 0, n_photons), TRACER)
     store = PhotonStore.create(store_url, n_frames=scene.timeline.frames, n_elements=elements.n_elements,
-                               frame_numbers=scene.timeline.all_frames(), scene_hash=scene.scene_hash,
-                               config_hash=RenderConfig().photon_hash(elements.element_size), seed=0,
+                               frame_numbers=scene.timeline.all_frames(),
+                               identity=store_identity(scene.scene_hash, elements.element_size, TRACER),
                                keep_records=True)  # the bytes a record takes on disk are measured
     t0 = time.perf_counter()
-    store.write_batch(frame - 1, 0, key=batch.key, bary=batch.bary, energy=batch.energy,
-                      photons_emitted=n_photons, photon_start=0)
+    store.write_batch(frame - 1, 0, batch)
     write_s = time.perf_counter() - t0
     batch_dir = Path(store_url) / "frames" / str(frame - 1) / "0"
     on_disk = sum(f.stat().st_size for f in batch_dir.rglob("*") if f.is_file())

@@ -42,7 +42,7 @@ import click
 import numpy as np
 
 from kernels import colour
-from pipeline.collection.maps import illumination_maps
+from pipeline.collection.maps import MapRequest, WindowSpec, illumination_maps
 from pipeline.config import RenderConfig
 from pipeline.frames.camera_paths import render_frame, visible_adaptation
 from pipeline.frames.perceived import displayed_difference
@@ -120,7 +120,7 @@ def run(frames: Iterable[int] = FRAMES, *, spps: Sequence[int] = SPPS, reference
         echo: Callable[[str], None] = click.echo) -> dict:
     settings = RenderSettings(width=width, height=height)
     config = RenderConfig()
-    thr = 100.0 * config.d_thr
+    thr = 100.0 * config.segments.d_thr
     ppd = frame_ppd(width, height)
     tmp = tempfile.TemporaryDirectory(prefix="bench-spp-") if store is None else None
     root = Path(tmp.name if tmp else store)
@@ -129,24 +129,26 @@ def run(frames: Iterable[int] = FRAMES, *, spps: Sequence[int] = SPPS, reference
     try:
         path = write_builtin("room", root / "room.glb")
         scene = read_scene(path)
-        mesh = ElementMesh.build(scene, config.element_size)
+        mesh = ElementMesh.build(scene, config.photons.element_size)
         url = str(root / "photons.zarr")
         half = fmax // 2
         echo(f"ROOM at {width}x{height}, {ppd:.1f} pixels/degree; indirect maps of {photons:,} photons a frame, "
              f"F_max = {fmax} adaptive; reference {reference_spp} spp; d_thr = {thr:g} %")
         for k in frames:
             lo, hi = max(1, k - half), min(scene.timeline.frames, k + half)
-            shoot(str(path), frames=f"{lo}-{hi}", n_photons=photons, store_url=url, config=config,
+            shoot(str(path), frames=f"{lo}-{hi}", n_photons=photons, store_url=url, config=config.photons,
                   scheduler="synchronous", progress=False)
-            (lit,) = illumination_maps(PhotonStore.open(url), mesh, scene, [k - 1], fmax=fmax, config=config)
+            (lit,) = illumination_maps(PhotonStore.open(url), mesh, scene,
+                                       MapRequest(WindowSpec("adaptive", fmax), [k - 1]), config.collection)
             irradiance = lit.irradiance
             state = scene.pose_frame(k)
             caster = caster_for(state)
-            adaptation = visible_adaptation(state, mesh, irradiance, aspect=width / height, seed=config.seed,
+            adaptation = visible_adaptation(state, mesh, irradiance, aspect=width / height, seed=config.photons.seed,
                                             max_depth=settings.reflection_depth,
                                             area_samples=settings.area_samples)
 
-            def composite(spp: int, seed: int = config.seed, state=state, caster=caster, irradiance=irradiance, k=k):
+            def composite(spp: int, seed: int = config.photons.seed, state=state, caster=caster, irradiance=irradiance,
+                          k=k):
                 c0, w0 = time.process_time(), time.perf_counter()
                 img = render_frame(state, mesh, irradiance, width=width, height=height, spp=spp, seed=seed, frame=k,
                                    max_depth=settings.reflection_depth, area_samples=settings.area_samples,
@@ -159,7 +161,7 @@ def run(frames: Iterable[int] = FRAMES, *, spps: Sequence[int] = SPPS, reference
 
             def measure(img, cpu, wall, spp, k=k, ref=ref, ref_shown=ref_shown, y_ref=y_ref, adaptation=adaptation):
                 return dict(frame=k, spp=spp, flip=flip_mean(shown(img, adaptation), ref_shown, ppd),
-                            d_aqm=displayed_difference(img, ref, adaptation, aqm_size=config.aqm_size).d_aqm,
+                            d_aqm=displayed_difference(img, ref, adaptation, aqm_size=config.segments.aqm_size).d_aqm,
                             rel_rms=float(np.sqrt(np.mean((img @ LUMA - y_ref) ** 2)) / np.mean(y_ref)),
                             cpu_s=cpu, wall_s=wall)
 
@@ -171,10 +173,10 @@ def run(frames: Iterable[int] = FRAMES, *, spps: Sequence[int] = SPPS, reference
                 extra_spp = int(round((budget - n0) / share))
                 first, cpu = [], 0.0
                 for i in range(n0):
-                    img, c, _ = composite(1, seed=config.seed + 1000 + i)
+                    img, c, _ = composite(1, seed=config.photons.seed + 1000 + i)
                     first.append(img)
                     cpu += c
-                extra, c, _ = composite(extra_spp, seed=config.seed + 2000)
+                extra, c, _ = composite(extra_spp, seed=config.photons.seed + 2000)
                 mask = allot_extra(displayed_spread(first, adaptation), share)
                 cpu += c * float(mask.mean())  # the extra pass traced only in the chosen pixels
                 row = measure(adaptive_image(first, extra, extra_spp, mask), cpu, float("nan"),
@@ -183,7 +185,7 @@ def run(frames: Iterable[int] = FRAMES, *, spps: Sequence[int] = SPPS, reference
                 arows.append(row)
                 echo(_row(row) + f" (adaptive: {row['adaptive']})")
             if seed_check:
-                other, cpu, wall = composite(reference_spp, seed=config.seed + 1)
+                other, cpu, wall = composite(reference_spp, seed=config.photons.seed + 1)
                 floors.append(measure(other, cpu, wall, reference_spp))
                 echo(_row(floors[-1]) + " (a second reference, another seed)")
             echo(f"frame {k}: L_wa {adaptation:.4f}; the reference took {ref_cpu:.1f} s CPU, {ref_wall:.1f} s wall")

@@ -33,7 +33,7 @@ from kernels.gather import (
     window_flux_reference,
 )
 from kernels.temporal import windows_cl, windows_reference
-from pipeline.config import RenderConfig
+from pipeline.config import FilterConfig, PhotonConfig
 from pipeline.run.shoot import shoot
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin import write_builtin
@@ -58,7 +58,7 @@ def _trace_frames(root: Path, frames: str):
     """Shoot real ATRIUM frames; (scene, mesh, store, seconds per traced frame)."""
     path = write_builtin("atrium", root / "atrium.glb")
     summary = shoot(str(path), frames=frames, n_photons=N_PHOTONS, store_url=str(root / "p.zarr"),
-                    config=RenderConfig(), scheduler="synchronous", progress=False)
+                    config=PhotonConfig(), scheduler="synchronous", progress=False)
     scene = read_scene(path)
     return scene, ElementMesh.build(scene), PhotonStore.open(str(root / "p.zarr")), \
         summary["seconds"] / summary["traced_frames"], summary
@@ -115,7 +115,7 @@ def _gather_chunk(cache: dict, photons: "SyntheticPhotons", lo: int, hi: int, n_
 
 def run(trace_frames: int = 3, numpy_frames: int = 4, n_frames: int = N_FRAMES,
         echo: Callable[[str], None] = click.echo) -> dict:
-    config = RenderConfig()
+    config = FilterConfig()
     with tempfile.TemporaryDirectory() as tmp:
         scene, mesh, store, trace_s, summary = _trace_frames(Path(tmp), f"150-{149 + trace_frames}")
         real = store.counts(kind="all", frames=range(149, 149 + trace_frames)).astype(np.float64)

@@ -14,6 +14,7 @@ from pipeline.aqm import (
     AQM_SIZE,
     DISPLAYS,
     G_SP,
+    Motion,
     ViewingConditions,
     aqm,
     aqm_geometry,
@@ -138,8 +139,8 @@ def aqm_command(image_a, image_b, flow_path, flow_units, fps, pursuit_gain, disp
             if fps is None or not fps > 0:
                 raise LoomError("--flow-units px/frame needs a positive --fps", path=flow_path, field="fps")
             flow = pixels_per_frame_to_deg_per_s(flow, fps, viewing.frame_ppd(a.shape[:2]))
-    result = aqm(a, b, flow=flow, viewing=viewing, pursuit_gain=pursuit_gain, aqm_size=aqm_size,
-                 names=(image_a, image_b), flow_name=flow_path or "flow")
+    motion = None if flow is None else Motion(flow, pursuit_gain, flow_path)
+    result = aqm(a, b, motion=motion, viewing=viewing, aqm_size=aqm_size, names=(image_a, image_b))
     h, w = result.map.shape
     click.echo(aqm_geometry(viewing, a.shape[:2], aqm_size).describe(viewing))
     click.echo(f"d_AQM = {result.d_aqm:.3f} % of {h * w} pixels above 1 JND (P > {result.threshold}); "

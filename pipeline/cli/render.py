@@ -10,11 +10,11 @@ from typing import Any, Callable, TypeVar
 import click
 
 from pipeline.aqm.display import DISPLAYS as _DISPLAYS
-from pipeline.config import RenderConfig as _RenderConfig
+from pipeline.config import PhotonConfig as _PhotonConfig
 
 from .scene import CAMERA_HELP, LIGHT_HELP
 
-_PHOTON_DEPTH = _RenderConfig().photon_depth
+_PHOTON_DEPTH = _PhotonConfig().photon_depth
 _PHOTON_DEPTH_HELP = "Safety cap on photon hits (Russian roulette ends paths; pipeline/config.py)."
 _KEEP_HELP = ("Also store every photon hit (20 bytes each, the paper's record) for re-estimation and research; "
               "a render reads only the per-batch counts and sums it always stores.")
@@ -64,10 +64,10 @@ def scheduler_options(f: _F) -> _F:
 def shoot_command(scene_file, frames, photons, store_url, seed, element_size, photon_depth, keep_records, quiet,
                   light, scheduler, workers) -> None:
     """Trace photons for every frame of SCENE_FILE into a photon store (resumable)."""
-    from pipeline.config import RenderConfig
+    from pipeline.config import PhotonConfig
     from pipeline.run.shoot import shoot
 
-    config = RenderConfig(seed=seed, element_size=element_size, photon_depth=photon_depth)
+    config = PhotonConfig(seed=seed, element_size=element_size, photon_depth=photon_depth)
     summary = shoot(scene_file, frames=frames, n_photons=photons, store_url=store_url, config=config,
                     scheduler=scheduler, workers=workers, progress=not quiet, light=light, keep_records=keep_records)
     click.echo(

@@ -3,7 +3,8 @@
 What the render pipeline calls to turn stored photons into per-frame vertex irradiance:
 
 1. windows   from the store's frames x elements count table (never the records), per frame and
-             element, Condition (1) (kernels/temporal.py), ``mode`` adaptive | fixed | off;
+             element, Condition (1) (kernels/temporal.py), as a WindowSpec says: adaptive | fixed |
+             off, up to F_max;
 2. gather    per chunk of output frames the element sums of every frame its windows reach
              (stored with the photons, read once per frame and worker: pipeline/collection/batch_sums.py),
              turned into prefix sums over frames on the device; per output frame the window sums as
@@ -35,7 +36,7 @@ from kernels.filter import adaptive_filter_cl, neighbourhood
 from kernels.gather import frame_sums_flux_cl, irradiance
 from kernels.temporal import MAX_HALF_FMAX, MODES, windows_cl
 from pipeline.collection.estimators import frame_geometry
-from pipeline.config import RenderConfig
+from pipeline.config import CollectionConfig, FilterConfig
 from pipeline.errors import LoomError
 from pipeline.stage_clock import StageClock
 
@@ -48,15 +49,48 @@ if TYPE_CHECKING:
 
 
 @dataclass(frozen=True)
+class WindowSpec:
+    """How far a frame's windows reach: ``mode`` "adaptive" (Condition (1), §5.1; each window's
+    linear fit at the frame, docs/05-estimators.md §1.6), "fixed" (+-F_max/2 pooled, always, §6
+    Fig. 3b) or "off" (the frame alone), and F_max in frames: ``--temporal`` and ``--fmax``, checked
+    when made (:func:`check_window_options`)."""
+
+    mode: str
+    fmax: int
+
+    def __post_init__(self) -> None:
+        check_window_options(self.mode, self.fmax)
+        object.__setattr__(self, "fmax", int(self.fmax))
+
+
+@dataclass(frozen=True)
+class MapRequest:
+    """What :func:`illumination_maps` makes: the maps of ``frames`` (store frame indices, 0-based;
+    None: all) collected over ``windows`` from their first ``batches`` done batches ((n_frames,)
+    per store frame; None: every done batch; a segment uses the batches that make up its N_frame,
+    pipeline/segments/planner.py), ``chunk`` output frames at a time."""
+
+    windows: WindowSpec
+    frames: npt.ArrayLike | None = None
+    batches: npt.ArrayLike | None = None
+    # the even/odd half-photon maps I1, I2 (§5.2.3) instead of the full map
+    halves: bool = False
+    # also each frame's mesh-based direct estimate from its own direct photons
+    # (pipeline/collection/estimators.vertex_irradiance, §4), from the batch sums the gather holds already
+    direct: bool = False
+    chunk: int = 96
+
+
+@dataclass(frozen=True)
 class FrameIllumination:
-    """One frame's reconstructed indirect (or ``kind``) lighting."""
+    """One frame's reconstructed indirect lighting."""
 
     frame_index: int  # store frame index (0-based)
-    irradiance: np.ndarray  # (V, 3) float64 W/m^2, or (2, V, 3) even/odd halves with split_parity
+    irradiance: np.ndarray  # (V, 3) float64 W/m^2, or (2, V, 3) even/odd halves (MapRequest.halves)
     back: np.ndarray  # (E,) uint8: element e collected frames [f - back, f + fwd]
     fwd: np.ndarray  # (E,) uint8
     rings: np.ndarray | None  # (P, V) uint8 filter support taken (0: unfiltered), None: no filter
-    direct: np.ndarray | None = None  # (V, 3) float64 the frame's own direct estimate (with_direct)
+    direct: np.ndarray | None = None  # (V, 3) float64 the frame's own direct estimate (MapRequest.direct)
 
 
 def _runs(has_photons: np.ndarray) -> list[tuple[int, int]]:
@@ -79,10 +113,10 @@ def window_counts(store: PhotonStore, frames: Iterable[int] | None = None,
     return store.counts(kind="indirect", frames=frames, batches=batches)
 
 
-def window_reach(fmax: int, mode: str, config: RenderConfig) -> int:
+def window_reach(windows: WindowSpec, config: CollectionConfig) -> int:
     """Frames of the count table either side of an output frame that its window can depend on:
     F_max/2 frames of walk plus the smoothing half-width of Condition (1)'s rates."""
-    return (0 if mode == "off" else int(fmax) // 2) + int(config.smoothing_frames) // 2
+    return (0 if windows.mode == "off" else windows.fmax // 2) + int(config.smoothing_frames) // 2
 
 
 def check_window_options(mode: str, fmax: object) -> None:
@@ -97,8 +131,8 @@ def check_window_options(mode: str, fmax: object) -> None:
         raise LoomError(f"F_max must be in [0, {2 * MAX_HALF_FMAX}], got {fmax!r}", field="--fmax")
 
 
-def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames: npt.ArrayLike, *, mode: str, fmax: int,
-                       config: RenderConfig, counts_from: int = 0,
+def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames: npt.ArrayLike, windows: WindowSpec,
+                       config: CollectionConfig, *, counts_from: int = 0,
                        regions: list[np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(len(frames), E) back and fwd windows of the requested frame indices, per run of frames
     with photons (a requested frame without photons is an error).
@@ -109,11 +143,7 @@ def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames: npt.Ar
     and the same run ends (``n_emitted`` is of every frame).
 
     With ``config.step_levels`` > 0, adaptive windows also stop at the abrupt changes of the element
-    regions ``regions`` (pipeline/collection/regional_steps.py), which the caller must then give.
-
-    A mode or F_max the user gave outside what the kernel takes is a LoomError naming the option
-    (kernels/temporal.py raises ValueError for a broken contract)."""
-    check_window_options(mode, fmax)
+    regions ``regions`` (pipeline/collection/regional_steps.py), which the caller must then give."""
     frames = np.asarray(frames, np.int64)
     n_emitted = np.asarray(n_emitted, np.float64)
     back = np.zeros((len(frames), counts.shape[1]), np.uint8)
@@ -121,8 +151,8 @@ def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames: npt.Ar
     missing = frames[n_emitted[frames] <= 0] if len(frames) else frames
     if len(missing):
         raise LoomError(f"frame index(es) {missing[:5].tolist()} have no photons; shoot them first")
-    reach = window_reach(fmax, mode, config)
-    steps = mode == "adaptive" and config.step_levels > 0
+    reach = window_reach(windows, config)
+    steps = windows.mode == "adaptive" and config.step_levels > 0
     if steps and regions is None:
         raise ValueError("config.step_levels > 0 needs the element regions")
     for start, stop in _runs(n_emitted > 0):
@@ -134,52 +164,37 @@ def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames: npt.Ar
         if a < counts_from or z > counts_from + counts.shape[0]:
             raise LoomError(f"count rows [{a}, {z}) needed, [{counts_from}, "
                             f"{counts_from + counts.shape[0]}) given")
-        b, w = windows_cl(counts[a - counts_from:z - counts_from], n_emitted[a:z], fmax=fmax, mode=mode,
-                          k_sigma=config.k_sigma, smoothing_frames=config.smoothing_frames,
+        b, w = windows_cl(counts[a - counts_from:z - counts_from], n_emitted[a:z], fmax=windows.fmax,
+                          mode=windows.mode, k_sigma=config.k_sigma, smoothing_frames=config.smoothing_frames,
                           min_extent=config.min_extent, frames=(lo - a, hi - a))
         if steps:
             b, w = clamp_at_steps(b, w, np.arange(lo - a, hi - a), counts[a - counts_from:z - counts_from],
-                                  n_emitted[a:z], regions, config.step_k, config.step_relative)
+                                  n_emitted[a:z], regions, config)
         back[inside] = b[frames[inside] - lo]
         fwd[inside] = w[frames[inside] - lo]
     return back, fwd
 
 
-def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, frames: npt.ArrayLike | None = None,
-                      *, mode: str = "adaptive", fmax: int | None = None,
-                      config: RenderConfig = RenderConfig(), kind: str = "indirect",
-                      split_parity: bool = False, spatial_filter: bool = False,
-                      batches: npt.ArrayLike | None = None, chunk: int = 96, with_direct: bool = False,
+def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, request: MapRequest,
+                      collection: CollectionConfig = CollectionConfig(), filter: FilterConfig | None = None, *,
                       times: dict[str, float] | None = None) -> Iterator[FrameIllumination]:
-    """Yield the illumination of every requested frame, in frame order.
+    """Yield the indirect illumination (the map the compositor reads) of every frame ``request``
+    names, in frame order.
 
     Parameters
     ----------
     store : PhotonStore (pipeline/store) of the scene's photons.
     elements : the ElementMesh the photons were bucketed on; ``scene`` poses frames (vertex areas).
-    frames : store frame indices (0-based; default all).
-    mode : "adaptive" (Condition (1), §5.1; each window's linear fit
-        at the frame, docs/05-estimators.md §1.6), "fixed" (+-F_max/2 pooled, always, §6 Fig. 3b) or "off".
-    fmax : F_max in frames (default ``config.fmax_initial``).
-    kind : records gathered: "indirect" (the map the compositor reads), "direct" or "all".
-    split_parity : also give the even/odd half-photon maps I1, I2 (§5.2.3) instead of the full map.
-    spatial_filter : apply the adaptive filter of §5.2.5 with ``config.filter_*``.
-    batches : (n_frames,) leading batches in use per store frame (None: every done batch); a
-        segment uses the batches that make up its N_frame (pipeline/segments/planner.py batches_in_use).
-    with_direct : also give each frame's mesh-based direct estimate from its own direct photons
-        (pipeline/collection/estimators.vertex_irradiance, §4), from the batch sums the gather holds already
-        (kind "indirect" only).
+    request : the frames, their windows and batches, and what of each frame to give.
+    collection : the windows' settings (Condition (1), the regional step test).
+    filter : the adaptive filter of §5.2.5, applied where ``filter.spatial_filter``; None: unfiltered.
     times : if given, seconds spent are added to its keys ``read_s`` (stored sums or records),
         ``frame_sums_s`` (records summed where a batch has no stored sums, once per worker),
         ``windows_s``, ``sums_s`` (gather), ``filter_s`` (filter and irradiance) and ``direct_s``.
     """
     clock = StageClock(times)
-    fmax = config.fmax_initial if fmax is None else fmax
-    check_window_options(mode, fmax)
-    if with_direct and kind != "indirect":
-        raise ValueError("with_direct comes with the indirect map's batch sums (kind 'indirect')")
-    fmax = int(fmax)
-    frames = np.arange(store.n_frames) if frames is None else np.unique(np.asarray(frames, np.int64))
+    windows, batches = request.windows, request.batches
+    frames = np.arange(store.n_frames) if request.frames is None else np.unique(np.asarray(request.frames, np.int64))
     if len(frames) and (frames.min() < 0 or frames.max() >= store.n_frames):
         raise LoomError(f"frame indices must be in [0, {store.n_frames})")
     if store.n_elements != elements.n_elements:
@@ -188,44 +203,44 @@ def illumination_maps(store: PhotonStore, elements: ElementMesh, scene: Scene, f
         batches = np.asarray(batches, np.int64)
     n_emitted = store.emitted(batches).astype(np.float64)
     # Only the count-table rows the windows can reach (a chunk of 16 frames reads 48 of ROOM's 135)
-    reach = window_reach(fmax, mode, config)
+    reach = window_reach(windows, collection)
     first = max(0, int(frames.min()) - reach) if len(frames) else 0
     last = min(store.n_frames, int(frames.max()) + 1 + reach) if len(frames) else 0
-    if mode == "adaptive":
+    if windows.mode == "adaptive":
         use = None if batches is None else store.shared_batches(batches)[first:last]
         counts = window_counts(store, frames=range(first, last), batches=use)
     else:  # the table's values are not read
         counts = np.zeros((last - first, store.n_elements), np.uint32)
-    back, fwd = collection_windows(counts, n_emitted, frames, mode=mode, fmax=fmax, config=config,
-                                   counts_from=first, regions=step_regions(elements, config))
-    hood = _neighbourhood(elements, config.filter_rings, config.filter_angle) if spatial_filter else None
+    back, fwd = collection_windows(counts, n_emitted, frames, windows, collection, counts_from=first,
+                                   regions=step_regions(elements, collection))
+    hood = _neighbourhood(elements, filter) if filter is not None and filter.spatial_filter else None
     clock.lap("windows_s")
-    n_parity = 2 if split_parity else 1
-    for start in range(0, len(frames), chunk):
-        part = np.arange(start, min(start + chunk, len(frames)))
+    n_parity = 2 if request.halves else 1
+    for start in range(0, len(frames), request.chunk):
+        part = np.arange(start, min(start + request.chunk, len(frames)))
         f = frames[part]
         lo = int((f[:, None] - back[part]).min())
         hi = int((f[:, None] + fwd[part]).max()) + 1
         clock.lap(None)
-        sums = {g: FRAME_SUMS.get(store, g, None if batches is None else int(batches[g]), kind, n_parity,
+        sums = {g: FRAME_SUMS.get(store, g, None if batches is None else int(batches[g]), "indirect", n_parity,
                                   elements, times=times) for g in range(lo, hi)}
         clock.lap(None)  # FrameSums adds its own read_s and frame_sums_s
         flux = frame_sums_flux_cl([sums[g].sums for g in range(lo, hi)], n_emitted[lo:hi], back[part],
                                   fwd[part], f - lo, elements.element_vertices, elements.n_vertices,
-                                  linear=mode == "adaptive")
+                                  linear=windows.mode == "adaptive")
         areas = np.stack([frame_geometry(scene, elements, store.frame_numbers[g]).vertex_areas for g in f.tolist()])
         clock.lap("sums_s")
-        own = [sums[g].direct_irradiance(a) if with_direct else None for g, a in zip(f.tolist(), areas)]
+        own = [sums[g].direct_irradiance(a) if request.direct else None for g, a in zip(f.tolist(), areas)]
         clock.lap("direct_s")
         rings = None
         if hood is not None:  # every map of the chunk in one launch
             irr, rings = adaptive_filter_cl(flux, np.broadcast_to(areas[:, None, :], flux.shape[:-1]), hood,
-                                            photons=config.filter_photons, z=config.filter_z)
+                                            photons=filter.filter_photons, z=filter.filter_z)
         else:
             irr = irradiance(flux, areas[:, None, :])
         clock.lap("filter_s")
         for i, (frame_index, j) in enumerate(zip(f.tolist(), part.tolist())):
-            yield FrameIllumination(frame_index, irr[i] if split_parity else irr[i, 0], back[j], fwd[j],
+            yield FrameIllumination(frame_index, irr[i] if request.halves else irr[i, 0], back[j], fwd[j],
                                     None if rings is None else rings[i], own[i])
 
 
@@ -243,15 +258,16 @@ def _mesh_cached(elements, key: tuple, compute):
     return entry[1][key]
 
 
-def _neighbourhood(elements, rings: int, angle: float):
+def _neighbourhood(elements, filter: FilterConfig):
     """The filter's vertex rings of an element mesh, computed once per mesh and process (a
     reconstruction task of 16 frames spent a quarter of its time on them)."""
+    rings, angle = filter.filter_rings, filter.filter_angle
     return _mesh_cached(elements, ("rings", int(rings), float(angle)), lambda: neighbourhood(
         elements.element_vertices, elements.vertex_local, elements.vertex_instance, max_rings=rings,
         max_angle=angle))
 
 
-def step_regions(elements: ElementMesh, config: RenderConfig) -> list[np.ndarray] | None:
+def step_regions(elements: ElementMesh, config: CollectionConfig) -> list[np.ndarray] | None:
     """The element regions of the regional step test (None when ``config.step_levels`` is 0), once
     per mesh and process."""
     if not config.step_levels:

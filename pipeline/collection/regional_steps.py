@@ -26,6 +26,8 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from pipeline.config import CollectionConfig
+
 if TYPE_CHECKING:
     from pipeline.scene import ElementMesh
 
@@ -84,11 +86,12 @@ def clamp_windows(back: np.ndarray, fwd: np.ndarray, rows: np.ndarray, cut: np.n
 
 
 def clamp_at_steps(back: np.ndarray, fwd: np.ndarray, rows: np.ndarray, counts: np.ndarray,
-                   n_emitted: np.ndarray, regions: list[np.ndarray], k: float,
-                   relative: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`clamp_windows` at the steps of every region level in ``regions``."""
+                   n_emitted: np.ndarray, regions: list[np.ndarray],
+                   config: CollectionConfig) -> tuple[np.ndarray, np.ndarray]:
+    """:func:`clamp_windows` at the steps (``config.step_k``, ``config.step_relative``) of every
+    region level in ``regions``."""
     for level in regions:
-        cut = step_boundaries(counts, n_emitted, level, k, relative)
+        cut = step_boundaries(counts, n_emitted, level, config.step_k, config.step_relative)
         back, fwd = clamp_windows(back, fwd, rows, cut, level)
     return back, fwd
 

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from pipeline.aqm import AQMResult, ViewingConditions, aqm, image_velocity
+from pipeline.aqm import AQMResult, Motion, ViewingConditions, aqm, image_velocity
 from pipeline.aqm.display import DISPLAYS, aqm_geometry
 from pipeline.photons.raycast import caster_for
 
@@ -55,7 +55,7 @@ def displayed_difference(rgb_a: np.ndarray, rgb_b: np.ndarray, adaptation: float
     image velocity of camera motion in deg/s (:func:`camera_flow`), None for a still camera."""
     view = viewing_for(params)
     return aqm(display_values(rgb_a, adaptation, params), display_values(rgb_b, adaptation, params),
-               viewing=view, aqm_size=aqm_size, names=("I1", "I2"), flow=flow)
+               viewing=view, aqm_size=aqm_size, names=("I1", "I2"), motion=None if flow is None else Motion(flow))
 
 
 def camera_flow(scene: Scene, frame: int, width: int, height: int,

@@ -8,7 +8,7 @@ the hit counts as a miss, so nothing is recorded and the path ends. At a diffuse
 (element, barycentrics inside the element, RGB weight, direct = first hit) and bounces
 Lambertian about the shading normal; mirrors reflect, glossy surfaces sample a normalised Phong
 lobe. Russian roulette on the hit's base colour (factor x texture x vertex colour,
-pipeline/scene/shading.py) ends paths, unbiased; ``max_depth`` hits (RenderConfig.photon_depth,
+pipeline/scene/shading.py) ends paths, unbiased; ``max_depth`` hits (PhotonConfig.photon_depth,
 256) is only a safety net for rooms of albedo 1, and the photons it cuts are counted
 (``stats["capped"]``): a cap of 8 cut rho^8 of the light in a closed room (17 % at albedo 0.8,
 tests/stress/test_furnace.py).
@@ -25,13 +25,15 @@ bit 31; two uint16 barycentrics; three float32 weights).
 from __future__ import annotations
 
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import numpy as np
 
-from kernels.emit import AREA, EmitCL, emit_reference
+from kernels.emit import AREA, EmissionTables, EmitCL, emit_reference
 from kernels.record_layout import DIRECT_BIT, ELEMENT_MASK
 from kernels.scatter import KIND_CODE, Hits, ScatterCL, SceneTables, scatter_reference
+from pipeline.config import PhotonConfig
 from pipeline.scene import ElementMesh, FrameState
 from pipeline.scene.shading import SurfaceShading
 
@@ -98,24 +100,32 @@ def _kernels(state: FrameState, elements: ElementMesh, caster: RayCaster, backen
     return found
 
 
-def trace_batch(state: FrameState, elements: ElementMesh, *, n_photons: int, photon_start: int,
-                seed: int, frame: int, max_depth: int, caster: RayCaster | None = None,
-                backend: str = "opencl") -> PhotonBatch:
-    """Trace photons ``photon_start .. photon_start + n_photons - 1`` of ``frame``; return their
-    diffuse-hit records (unsorted; the store sorts)."""
-    if n_photons <= 0:
-        raise ValueError(f"n_photons must be positive, got {n_photons}")
+@dataclass(frozen=True)
+class PhotonRange:
+    """Photons ``start .. start + count - 1`` of Philox stream ``frame``: with the run's seed, the
+    key of their random numbers (kernels/philox.py)."""
+
+    frame: int
+    start: int
+    count: int
+
+
+def trace_batch(state: FrameState, elements: ElementMesh, photons: PhotonRange, config: PhotonConfig, *,
+                caster: RayCaster | None = None, backend: str = "opencl") -> PhotonBatch:
+    """Trace ``photons`` with ``config``'s seed and depth cap in the scene as posed in ``state``;
+    return their diffuse-hit records (unsorted; the store sorts)."""
+    if photons.count <= 0:
+        raise ValueError(f"n_photons must be positive, got {photons.count}")
     caster = caster or caster_for(state)
     emit, scatter, table = _kernels(state, elements, caster, backend)
-    surface = SurfaceShading(state, caster.normals)
-    one_sided = one_sided_triangles(state)
+    tracer = _Tracer(state, caster, table, emit, scatter, SurfaceShading(state, caster.normals),
+                     one_sided_triangles(state), (int(config.seed) & 0xFFFFFFFF, int(photons.frame) & 0xFFFFFFFF),
+                     config.photon_depth)
     rays_before = caster.rays_cast
-    key = (int(seed) & 0xFFFFFFFF, int(frame) & 0xFFFFFFFF)
     parts, capped = [], [0]
-    for lo in range(0, n_photons, CHUNK):
-        photon = photon_start + lo + np.arange(min(CHUNK, n_photons - lo), dtype=np.int64)
-        parts.extend(_trace_wavefront(state, caster, table, emit, scatter, photon, key, max_depth, surface,
-                                      capped, one_sided))
+    for lo in range(0, photons.count, CHUNK):
+        photon = photons.start + lo + np.arange(min(CHUNK, photons.count - lo), dtype=np.int64)
+        parts.extend(_trace_wavefront(tracer, photon, capped))
     if parts:
         key_out = np.concatenate([p[0] for p in parts])
         bary = np.concatenate([p[1] for p in parts])
@@ -123,27 +133,44 @@ def trace_batch(state: FrameState, elements: ElementMesh, *, n_photons: int, pho
     else:
         key_out, bary, energy = np.empty(0, np.uint32), np.empty((0, 2), np.uint16), np.empty((0, 3), np.float32)
     direct = int(np.count_nonzero(key_out & DIRECT_BIT))
-    return PhotonBatch(key_out, bary, energy, n_photons, photon_start, caster.rays_cast - rays_before,
+    return PhotonBatch(key_out, bary, energy, photons.count, photons.start, caster.rays_cast - rays_before,
                        {"records": len(key_out), "direct": direct, "capped": capped[0]})
 
 
-def _trace_wavefront(state, caster, table, emit, scatter, photon, key, max_depth, surface, capped, one_sided=None):
+@dataclass(frozen=True)
+class _Tracer:
+    """What every wavefront of one batch reads: the posed scene, its rays, the kernels and their
+    tables, the surfaces' shading, the single-sided triangles, the Philox key and the depth cap."""
+
+    state: FrameState
+    caster: RayCaster
+    table: EmissionTables
+    emit: Callable
+    scatter: Callable
+    surface: SurfaceShading
+    one_sided: np.ndarray | None
+    key: tuple[int, int]
+    max_depth: int
+
+
+def _trace_wavefront(tracer: _Tracer, photon: np.ndarray, capped: list[int]):
     """Yield (key, bary, energy) record arrays of one wavefront of photons, bounce by bounce; add
-    the photons still alive after ``max_depth`` hits to ``capped[0]``. The base colour and shading
-    normal at each hit come from ``surface`` (pipeline/scene/shading.py)."""
-    origins, dirs, beta, emitter = emit(photon, key)
+    the photons still alive after ``tracer.max_depth`` hits to ``capped[0]``. The base colour and
+    shading normal at each hit come from ``tracer.surface`` (pipeline/scene/shading.py)."""
+    state, caster, table, surface, key = tracer.state, tracer.caster, tracer.table, tracer.surface, tracer.key
+    origins, dirs, beta, emitter = tracer.emit(photon, key)
     if surface.emission_varies:  # emissive textures: weight by the texture at each origin
         beta = beta * textured_emission_weights(table, surface, caster, photon, emitter, key)
-    for depth in range(max_depth):
+    for depth in range(tracer.max_depth):
         if not len(photon):
             return
         tri, u, v, dist = caster.intersect(origins, dirs)
-        tri = absorb_back_hits(tri, dirs, caster.normals, one_sided)
+        tri = absorb_back_hits(tri, dirs, caster.normals, tracer.one_sided)
         if depth == 0 and any(li.definition.range is not None for li in state.lights):
             beta = beta * _range_window(state, table, emitter, dist)[:, None]
         hits = Hits(tri, u, v, dirs, beta, photon, albedo=surface.base_color(tri, u, v) if surface.varies else None,
                     shading=surface.normal(tri, u, v) if surface.smooth else None)
-        bounce = scatter(hits, depth, key)  # misses end there
+        bounce = tracer.scatter(hits, depth, key)  # misses end there
         # Keep the recorded hits and the survivors, in order (np.take: several times faster than
         # fancy indexing for rows of 2-D arrays)
         rec = np.flatnonzero(bounce.recorded)

@@ -45,7 +45,7 @@ from workers.shoot import shoot_task
 
 from .cluster import TASK_RETRIES, completed, group_sizes, run_tasks, submit_grouped, task_key
 from .cluster import result as wait_result
-from .shoot import shoot_key
+from .shoot import shoot_key, store_identity
 
 if TYPE_CHECKING:
     from distributed import Client
@@ -103,8 +103,8 @@ class DaskExecutor:
         self.job, self.client = job, client
         self.config = job.config
         # A store swapped for another run's (another scene, photon settings or seed) is refused here
-        self.store = PhotonStore.open(job.store_url, mode="r+", scene_hash=job.scene_hash,
-                                      config_hash=self.config.photon_hash(job.element_size), seed=self.config.seed)
+        self.store = PhotonStore.open(job.store_url, mode="r+",
+                                      identity=store_identity(job.scene_hash, job.element_size, self.config.photons))
         self.times = {"shoot_s": 0.0, "aqm_s": 0.0, "temporal_s": 0.0}
         self.io_bytes: dict[str, int] = {}  # what the tasks read and wrote (store.counting_io)
         self.batches_traced = 0
@@ -135,11 +135,11 @@ class DaskExecutor:
         """Trace one batch more for every frame whose stored batches hold fewer than its target."""
         t0 = time.perf_counter()
         job = self.job
-        calls = [(shoot_key(self.config, job.element_size, b.frame, b.batch, job.store_url), dict(
+        calls = [(shoot_key(self.config.photons, job.element_size, b.frame, b.batch, job.store_url), dict(
             store_url=job.store_url, scene_path=job.scene_path, scene_hash=job.scene_hash,
             element_size=job.element_size, frame=b.frame, frame_index=b.frame - 1, batch=b.batch,
-            n_photons=b.n_photons, photon_start=b.photon_start, seed=self.config.seed,
-            max_depth=self.config.photon_depth)) for b in next_batches(self.store, targets)]
+            n_photons=b.n_photons, photon_start=b.photon_start, seed=self.config.photons.seed,
+            max_depth=self.config.photons.photon_depth)) for b in next_batches(self.store, targets)]
         with _writing(job.store_url):
             results = run_tasks(self.client, shoot_task, calls, desc="shoot", progress=False,
                                 group=group_sizes(len(calls), len(self.workers()), SHOOT_GROUP))
@@ -274,7 +274,7 @@ def composite_calls(job: Job, frames: list[int], frames_info: dict[int, dict], *
     """(key, kwargs) of the composite tasks of the frames in ``frames`` that need one (see
     :func:`composite_frames`); ``frames_info`` holds every rendered frame up to the last of them."""
     smoothed = smoothed_adaptation(job, frames_info, max(frames))
-    px, seed = job.settings, job.config.seed
+    px, seed = job.settings, job.config.photons.seed
     calls = []
     for f in frames:
         info = frames_info[f]

@@ -57,7 +57,7 @@ def bounds(job: Job) -> tuple[int, int]:
     n = job.last - job.first + 1
     if job.n_photons is not None or job.single_state:
         return 1, max(1, math.ceil(len(job.selection) / CHUNK_FRAMES))
-    cap = job.config.fmax_cap
+    cap = job.config.segments.fmax_cap
     longest = min(n, cap + 1 + cap // 2 + 1)
     return max(1, math.ceil(n / (job.fmax + 1))), max(1, math.ceil(longest / CHUNK_FRAMES))
 

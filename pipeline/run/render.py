@@ -83,16 +83,17 @@ def prepare_job(scene_path: str | Path, *, frames: str | None, out_dir: str | Pa
     out = Path(out_dir)
     check_out_dir(out)
     scene = read_scene(scene_path, camera=camera, light=light)
-    p = plan(scene, frames, n_photons if n_photons is not None else 1, config)
+    p = plan(scene, frames, n_photons if n_photons is not None else 1, config.photons)
     store_url = store_url or str(out / "photons.zarr")
     check_store_location(store_url)
     cam_name = scene.camera_name  # a node's, or "auto" (pipeline/scene/default_camera.py)
-    fmax = config.fmax_initial if fmax is None else fmax
+    fmax = config.segments.fmax_initial if fmax is None else fmax
     check_window_options(temporal, fmax)
     guided = n_photons is None
     if guided:
-        if fmax > config.fmax_cap:
-            raise LoomError(f"the first segment's F_max {fmax} exceeds fmax_cap {config.fmax_cap}", field="--fmax")
+        if fmax > config.segments.fmax_cap:
+            raise LoomError(f"the first segment's F_max {fmax} exceeds fmax_cap {config.segments.fmax_cap}",
+                            field="--fmax")
         if p.frames != list(range(p.frames[0], p.frames[-1] + 1)):
             raise LoomError("--photons auto renders a contiguous range of frames (segments are ranges), "
                             f"got {frames!r}", field="--frames")
@@ -101,16 +102,16 @@ def prepare_job(scene_path: str | Path, *, frames: str | None, out_dir: str | Pa
                             f"--temporal {temporal}", field="--temporal")
 
     _create_outputs(out, store_url, p, keep_records)
-    photon_hash = config.photon_hash(p.elements.element_size)
-    look = dict(scene_hash=scene.scene_hash, camera=cam_name, seed=config.seed, photon_hash=photon_hash,
+    photon_hash = config.photons.photon_hash(p.elements.element_size)
+    look = dict(scene_hash=scene.scene_hash, camera=cam_name, seed=config.photons.seed, photon_hash=photon_hash,
                 width=settings.width, height=settings.height, spp=settings.spp,
                 reflection_depth=settings.reflection_depth, area_samples=settings.area_samples,
                 tonemap=settings.tonemap.to_dict())
     # The AQM judges with Ward's operator whatever the look (pipeline/frames/tonemap.py): a new look re-decides nothing
     decision = dict(look, tonemap={k: v for k, v in look["tonemap"].items() if k not in LOOK_FIELDS},
                     first=p.frames[0], last=p.frames[-1], fmax=fmax, n_photons=n_photons,
-                    temporal=temporal, selection=p.frames, **{s: config.stage_hash(s) for s in
-                                                               ("collection", "filter", "segments")})
+                    temporal=temporal, selection=p.frames, collection=config.collection.hash,
+                    filter=config.filter.hash, segments=config.segments.hash)
     if not guided:  # fixed settings read no segment parameter
         decision.pop("segments")
     # Absolute paths: tasks and farm recipes run elsewhere, and in other working directories
@@ -261,7 +262,7 @@ def finish(job: Job, records: list[SegmentRecord], *, rays: dict, batches: int, 
 def _viewing(job: Job) -> str:
     """The viewing conditions the AQM judged the frames under, with their pixels per degree."""
     px = job.settings
-    return viewing_line(px.tonemap, px.width, px.height, job.config.aqm_size)
+    return viewing_line(px.tonemap, px.width, px.height, job.config.segments.aqm_size)
 
 
 def _settings(job: Job) -> dict:

@@ -11,11 +11,11 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
-from pipeline.config import RenderConfig
+from pipeline.config import PhotonConfig
 from pipeline.errors import LoomError
 from pipeline.paths import check_writable_dir
 from pipeline.scene import ElementMesh, Scene, read_scene
-from pipeline.store import PhotonStore, remove_partials
+from pipeline.store import PhotonStore, StoreIdentity, remove_partials
 from workers.shoot import shoot_task
 
 from .cluster import connect, run_tasks, task_key
@@ -27,7 +27,7 @@ class ShootPlan:
     elements: ElementMesh
     frames: list[int]  # requested frames
     sources: dict[int, int]  # frame -> frame whose photons it uses (itself when traced)
-    config: RenderConfig
+    config: PhotonConfig
     n_photons: int
 
     @property
@@ -42,7 +42,7 @@ def check_store_location(url: str) -> None:
     check_writable_dir(url[len("file://"):] if url.startswith("file://") else url, field="--store")
 
 
-def plan(scene: Scene, frames_spec: str | None, n_photons: int, config: RenderConfig) -> ShootPlan:
+def plan(scene: Scene, frames_spec: str | None, n_photons: int, config: PhotonConfig) -> ShootPlan:
     if not isinstance(n_photons, int) or n_photons <= 0:
         raise LoomError(f"must be a positive number of photons per frame, got {n_photons}", field="--photons")
     try:
@@ -68,8 +68,7 @@ def open_store(p: ShootPlan, url: str, *, keep_records: bool) -> PhotonStore:
     tl = p.scene.timeline
     store = PhotonStore.create(
         url, n_frames=tl.frames, n_elements=p.elements.n_elements, frame_numbers=tl.all_frames(),
-        scene_hash=p.scene.scene_hash, config_hash=p.config.photon_hash(p.elements.element_size),
-        seed=p.config.seed, keep_records=keep_records)
+        identity=store_identity(p.scene.scene_hash, p.elements.element_size, p.config), keep_records=keep_records)
     for f in p.frames:
         src = p.sources[f]
         if src != f and store.source_frame(f - 1) != src - 1:
@@ -77,7 +76,12 @@ def open_store(p: ShootPlan, url: str, *, keep_records: bool) -> PhotonStore:
     return store
 
 
-def shoot_key(config: RenderConfig, element_size: float, frame: int, batch: int, store_url: str) -> str:
+def store_identity(scene_hash: str, element_size: float, config: PhotonConfig) -> StoreIdentity:
+    """What the run's photons are made from: a store of another scene, photon settings or seed is refused."""
+    return StoreIdentity(scene_hash, config.photon_hash(element_size), config.seed)
+
+
+def shoot_key(config: PhotonConfig, element_size: float, frame: int, batch: int, store_url: str) -> str:
     """The Dask key of photon batch ``batch`` of ``frame`` shot into ``store_url``."""
     name = f"shoot-{config.photon_hash(element_size)[:8]}-s{config.seed}-f{frame:05d}-b{batch:02d}"
     return task_key(name, store_url)
@@ -101,7 +105,7 @@ def tasks(p: ShootPlan, store: PhotonStore, url: str) -> list[tuple[str, dict]]:
 
 
 def shoot(scene_path: str, *, frames: str | None, n_photons: int, store_url: str,
-          config: RenderConfig = RenderConfig(), scheduler: str = "local", workers: int | None = None,
+          config: PhotonConfig = PhotonConfig(), scheduler: str = "local", workers: int | None = None,
           progress: bool = True, light: str = "auto", keep_records: bool = False) -> dict:
     """Trace every requested frame's photons into the store; returns a summary of the run.
     ``light`` none refuses a file without light instead of lighting it by default;

@@ -31,18 +31,18 @@ class HalvesDifference:
 def halves_difference(scene: Scene, elements: ElementMesh, halves: np.ndarray, k: int, *,
                       settings: RenderSettings, config: RenderConfig) -> HalvesDifference:
     """d_AQM of frame ``k`` lit by ``halves[0]`` against ``halves[1]`` ((2, V, 3) irradiance, the
-    even and odd photons' maps of pipeline/collection/maps.py ``split_parity``)."""
+    even and odd photons' maps of pipeline/collection/maps.py, ``MapRequest.halves``)."""
     state = scene.pose_frame(k)
     px = settings
     img = render_frame(state, elements, halves[0], width=px.width, height=px.height, spp=px.spp,
-                       seed=config.seed, frame=k, max_depth=px.reflection_depth,
+                       seed=config.photons.seed, frame=k, max_depth=px.reflection_depth,
                        area_samples=px.area_samples, also_maps=halves[1:])
     images = [img.beauty, img.also_beauty(0)]
     # L_wa as the frame's own (workers/reconstruct.py): what the camera sees of the halves' mean map
     adaptation = visible_adaptation(state, elements, 0.5 * (halves[0] + halves[1]),
-                                    aspect=px.width / px.height, seed=config.seed,
+                                    aspect=px.width / px.height, seed=config.photons.seed,
                                     max_depth=px.reflection_depth, area_samples=px.area_samples)
     flow = camera_flow(scene, k, px.width, px.height, px.tonemap)
     result = displayed_difference(images[0], images[1], adaptation, params=px.tonemap,
-                                  aqm_size=config.aqm_size, flow=flow)
+                                  aqm_size=config.segments.aqm_size, flow=flow)
     return HalvesDifference(float(result.d_aqm), difference_picture(images[0], result.visible))

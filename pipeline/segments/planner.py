@@ -23,9 +23,16 @@ from typing import TYPE_CHECKING, Protocol
 import numpy as np
 
 from pipeline.collection.estimators import vertex_moments
-from pipeline.collection.maps import collection_windows, illumination_maps, step_regions, window_counts
+from pipeline.collection.maps import (
+    MapRequest,
+    WindowSpec,
+    collection_windows,
+    illumination_maps,
+    step_regions,
+    window_counts,
+)
 from pipeline.frames.images import write_png
-from pipeline.photons.tracing import trace_batch
+from pipeline.photons.tracing import PhotonRange, trace_batch
 from pipeline.scene.scene_cache import load_elements, load_scene
 
 from .decisions import (
@@ -160,7 +167,7 @@ class SegmentPlanner:
     def decide(self, index: int, start: int, fmax: int) -> SegmentRecord:
         """Steps 1-3 for the segment that begins at ``start`` with F_max ``fmax``; its photons
         traced and its record written."""
-        job, cfg = self.job, self.config
+        job, cfg = self.job, self.config.segments
         t_start = time.perf_counter()
         if job.n_photons is not None:  # fixed settings: nothing to decide
             return self._fixed(index)
@@ -238,11 +245,11 @@ class SegmentPlanner:
         anyway. Stored, it was one more batch at every K and one more wave of tasks a segment
         (docs/07-segments.md §2); read back from the store when K happened to be traced, E would
         depend on what else ran first."""
-        cfg = self.config
+        cfg = self.config.segments
         n_probe = cfg.pilot_photons
         t0 = time.perf_counter()
-        batch = trace_batch(self.scene.pose_frame(place.k), self.elements, n_photons=n_probe, photon_start=0,
-                            seed=cfg.seed, frame=place.k, max_depth=cfg.photon_depth)
+        batch = trace_batch(self.scene.pose_frame(place.k), self.elements, PhotonRange(place.k, 0, n_probe),
+                            self.config.photons)
         s, q = vertex_moments(*batch.indirect(), self.elements.element_vertices, self.elements.n_vertices)
         self._add_time("shoot_s", t0)
         e0 = energy_error(s, q)
@@ -259,7 +266,7 @@ class SegmentPlanner:
         if before is None or not before.guided or not before.pilot.get("n_pilot"):
             return None
         return (before.pilot.get("n_pilot"),
-                needed_n_frame(before.n_frame, before.n_frame_steps, before.capped, self.config.d_thr))
+                needed_n_frame(before.n_frame, before.n_frame_steps, before.capped, self.config.segments.d_thr))
 
     # --- Step 2 ------------------------------------------------------------------------------
     def _p_me(self, index: int, place: Placement, targets: dict[int, int]) -> tuple[float, float]:
@@ -268,8 +275,9 @@ class SegmentPlanner:
         emitted = np.array([self.store.photons_in(f, int(use[f])) for f in range(self.store.n_frames)], np.float64)
         # p_me counts how far Condition (1)'s walks reach each way; a regional step stops a walk as
         # it stops the collection (pipeline/collection/regional_steps.py)
-        back, fwd = collection_windows(counts, emitted, [place.k - 1], mode="adaptive", fmax=place.fmax,
-                                       config=self.config, regions=step_regions(self.elements, self.config))
+        back, fwd = collection_windows(counts, emitted, [place.k - 1], WindowSpec("adaptive", place.fmax),
+                                       self.config.collection,
+                                       regions=step_regions(self.elements, self.config.collection))
         hit = counts[place.start - 1:place.end].sum(axis=0) > 0
         pb, pf = p_me(back[0], fwd[0], place.fmax, hit)
         self.executor.progress(f"segment {index}: F_max {place.fmax}, K {place.k}: p_me {pb:.2f} back, "
@@ -286,9 +294,9 @@ class SegmentPlanner:
         # Each half is reconstructed as the final frame will be, spatial filter included (Step 5):
         # on ATRIUM's 43,000 small elements the filter, not N_frame, removes most of what the
         # unfiltered halves differ by; judged unfiltered, the loop would trace for noise no frame shows.
-        (lit,) = illumination_maps(self.store, self.elements, self.scene, [k - 1], mode=temporal,
-                                   fmax=place.fmax, config=self.config, split_parity=True, batches=use,
-                                   spatial_filter=self.config.spatial_filter)
+        (lit,) = illumination_maps(self.store, self.elements, self.scene,
+                                   MapRequest(WindowSpec(temporal, place.fmax), [k - 1], batches=use, halves=True),
+                                   self.config.collection, self.config.filter)
         judged = halves_difference(self.scene, self.elements, lit.irradiance, k, settings=self.job.settings,
                                    config=self.config)
         counts = window_counts(self.store, batches=use)[place.start - 1:place.end]

@@ -129,6 +129,7 @@ from .photon_store import (
     FORMAT_VERSION,
     RECORD_CHUNK,
     PhotonStore,
+    StoreIdentity,
     counting_io,
     disk_usage,
     remove_partials,
@@ -150,5 +151,5 @@ from .records import (
 __all__ = ["counting_io", "disk_usage", "remove_partials",
            "BARY_SCALE", "BATCH_FIELDS", "BATCH_MAGIC", "CATEGORIES", "DIRECT_BIT", "ELEMENT_BITS",
            "ELEMENT_MASK", "FORMAT", "FORMAT_VERSION", "PARITY_BIT", "RECORD_BYTES",
-           "RECORD_CHUNK", "FrameRecords", "PhotonStore", "pack_key", "records_digest",
+           "RECORD_CHUNK", "FrameRecords", "PhotonStore", "StoreIdentity", "pack_key", "records_digest",
            "sort_records"]

@@ -15,9 +15,9 @@ import zlib
 from collections import OrderedDict
 from collections.abc import Callable, Iterable, Iterator
 from contextlib import contextmanager
-from dataclasses import dataclass
+from dataclasses import asdict, dataclass
 from pathlib import Path
-from typing import NamedTuple, TypeVar
+from typing import TYPE_CHECKING, NamedTuple, TypeVar
 
 import numcodecs.blosc
 import numpy as np
@@ -50,6 +50,9 @@ from .records import (
     unpack_records,
     valid_records,
 )
+
+if TYPE_CHECKING:
+    from pipeline.photons.tracing import PhotonBatch
 
 log = logging.getLogger(__name__)
 T = TypeVar("T")
@@ -309,6 +312,17 @@ class _Prepared:
     summary: np.ndarray | None  # little-endian u32 words (write_batch's summarise)
 
 
+@dataclass(frozen=True)
+class StoreIdentity:
+    """What a store's photons were made from: the scene, the photon settings' digest
+    (pipeline/config.py PhotonConfig.photon_hash) and the run seed. A store never holds photons of
+    two identities: it refuses to open or be made again with another."""
+
+    scene_hash: str
+    config_hash: str
+    seed: int
+
+
 def make_store(url: str | os.PathLike[str], read_only: bool) -> LocalStore | FsspecStore:
     """LocalStore for paths and file:// URLs (atomic renames), FsspecStore for other URLs."""
     text = os.fspath(url)
@@ -426,11 +440,10 @@ class PhotonStore:
     # --- making and opening ---------------------------------------------------------------
     @classmethod
     def create(cls, url: str | os.PathLike[str], *, n_frames: int, n_elements: int, frame_numbers: Iterable[int],
-               scene_hash: str, config_hash: str, seed: int, keep_records: bool,
-               max_batches: int = 16) -> PhotonStore:
+               identity: StoreIdentity, keep_records: bool, max_batches: int = 16) -> PhotonStore:
         """Make the group and every fixed-size array; on an existing identical store, open it.
 
-        Only the coordinator calls this. A store made with other identity attributes is refused.
+        Only the coordinator calls this. A store made with another identity or shape is refused.
         ``keep_records``: store every batch's raw hit records (20 bytes each) beside its sums, for
         re-estimation and research; without them a batch is its counts and sums alone.
         """
@@ -438,28 +451,28 @@ class PhotonStore:
         n_frames = as_int(n_frames, "n_frames", where, 1)
         n_elements = as_int(n_elements, "n_elements", where, 1, ELEMENT_MASK + 2)
         max_batches = as_int(max_batches, "max_batches", where, 1, 1025)
-        seed = as_int(seed, "seed", where, 0)
+        seed = as_int(identity.seed, "seed", where, 0)
         frame_numbers = [as_int(n, "frame number", where, -(1 << 62)) for n in frame_numbers]
         if len(frame_numbers) != n_frames:
             raise LoomError(f"{len(frame_numbers)} frame_numbers for {n_frames} frames", path=where)
-        for name, value in (("scene_hash", scene_hash), ("config_hash", config_hash)):
+        for name, value in (("scene_hash", identity.scene_hash), ("config_hash", identity.config_hash)):
             if not isinstance(value, str) or not value:
                 raise LoomError(f"{name} must be a non-empty string", path=where)
         if not isinstance(keep_records, bool):
             raise TypeError(f"keep_records must be a bool, not {keep_records!r}")  # a caller's bug
-        identity = dict(scene_hash=scene_hash, config_hash=config_hash, seed=seed, keep_records=keep_records,
-                        n_frames=n_frames, n_elements=n_elements, frame_numbers=frame_numbers,
-                        max_batches=max_batches)
+        attrs = dict(scene_hash=identity.scene_hash, config_hash=identity.config_hash, seed=seed,
+                     keep_records=keep_records, n_frames=n_frames, n_elements=n_elements,
+                     frame_numbers=frame_numbers, max_batches=max_batches)
         try:
             store = make_store(url, read_only=False)
             root = _open_root(store, where, "r+")
             if root is not None:
-                _check_identity(dict(root.attrs), identity, where)
+                _check_identity(dict(root.attrs), attrs, where)
                 if root.attrs.get("complete"):
                     return cls(root, where, "r+")
             else:
                 root = zarr.create_group(store=store, attributes=dict(
-                    format=FORMAT, format_version=FORMAT_VERSION, complete=False, **identity,
+                    format=FORMAT, format_version=FORMAT_VERSION, complete=False, **attrs,
                     record_layout=cls._layout_description(), count_categories=list(CATEGORIES),
                     batch_fields=list(BATCH_FIELDS)))
             cls._make_arrays(root, n_frames, n_elements, max_batches, keep_records)
@@ -490,9 +503,10 @@ class PhotonStore:
             root.require_group("frames")
 
     @classmethod
-    def open(cls, url: str | os.PathLike[str], *, scene_hash: str | None = None, config_hash: str | None = None,
-             seed: int | None = None, keep_records: bool | None = None, mode: str = "r") -> PhotonStore:
-        """Open an existing store, refusing one made with another scene, config or seed."""
+    def open(cls, url: str | os.PathLike[str], *, identity: StoreIdentity | None = None,
+             keep_records: bool | None = None, mode: str = "r") -> PhotonStore:
+        """Open an existing store, refusing one made with another ``identity`` (scene, photon
+        settings or seed) or, if given, ``keep_records``."""
         where = os.fspath(url)
         if mode not in ("r", "r+"):
             raise ValueError(f"mode must be 'r' or 'r+', not {mode!r}")  # a caller's bug, not the user's
@@ -503,8 +517,8 @@ class PhotonStore:
             raise LoomError(f"cannot open photon store: {err.strerror or err}", path=where) from None
         if root is None:
             raise LoomError("no photon store here", path=where)
-        _check_identity(dict(root.attrs), dict(scene_hash=scene_hash, config_hash=config_hash,
-                                               seed=seed, keep_records=keep_records), where)
+        expected = {} if identity is None else asdict(identity)
+        _check_identity(dict(root.attrs), dict(expected, keep_records=keep_records), where)
         if not root.attrs.get("complete"):
             raise LoomError("photon store creation was interrupted; run create again", path=where)
         return cls(root, where, mode)
@@ -722,10 +736,10 @@ class PhotonStore:
         if self.mode != "r+":
             raise LoomError("photon store is open read-only (mode='r')", path=self.url)
 
-    def write_batch(self, frame_index: int, batch: int, *, key: npt.ArrayLike, bary: npt.ArrayLike,
-                    energy: npt.ArrayLike, photons_emitted: int, photon_start: int,
+    def write_batch(self, frame_index: int, batch: int, photons: PhotonBatch, *,
                     summarise: Callable[[np.ndarray, np.ndarray, np.ndarray], np.ndarray] | None = None) -> bool:
-        """Write one batch, its batch object last. Returns False if it was already done.
+        """Write one batch of ``photons`` (their records and the range of photons emitted), its batch
+        object last. Returns False if it was already done.
 
         Rerunning a batch rewrites identical bytes; a done batch is only compared by digest and
         a different one is refused (non-deterministic tracer). Batch b needs b-1 done.
@@ -738,7 +752,7 @@ class PhotonStore:
         """
         if summarise is None and not self.keep_records:
             raise ValueError("a store without records needs the batch's summary (summarise)")  # a caller's bug
-        prepared = self._prepare(frame_index, batch, key, bary, energy, photons_emitted, photon_start, summarise)
+        prepared = self._prepare(frame_index, batch, photons, summarise)
         done = self._header(prepared.frame, prepared.batch)
         if done is not None:
             if tuple(done[:len(BATCH_FIELDS)]) == prepared.row:
@@ -750,8 +764,7 @@ class PhotonStore:
         self._mark_done(prepared)
         return True
 
-    def _prepare(self, frame_index, batch, key, bary, energy, photons_emitted, photon_start,
-                 summarise) -> _Prepared:
+    def _prepare(self, frame_index, batch, photons: PhotonBatch, summarise) -> _Prepared:
         """Validate a batch, make its counts and summary, and sort its records if they are kept
         (reads only the previous batch's header). The digest is of the sorted records where they
         are kept, else of the summary and counts: what the batch stores."""
@@ -762,9 +775,9 @@ class PhotonStore:
         if src != f:
             raise LoomError(f"frame {f} shares the photons of frame {src}; write to {src}",
                             path=where)
-        key, bary, energy = check_records(key, bary, energy, self.n_elements, where)
-        emitted = as_int(photons_emitted, "photons_emitted", where, 1)
-        start = as_int(photon_start, "photon_start", where, 0)
+        key, bary, energy = check_records(photons.key, photons.bary, photons.energy, self.n_elements, where)
+        emitted = as_int(photons.photons_emitted, "photons_emitted", where, 1)
+        start = as_int(photons.photon_start, "photon_start", where, 0)
         expected_start = 0
         if b > 0:
             prev = self._header(f, b - 1)

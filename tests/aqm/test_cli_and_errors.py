@@ -7,7 +7,7 @@ import pytest
 from aqm_data import SIZE, monte_carlo
 from click.testing import CliRunner
 
-from pipeline.aqm import aqm
+from pipeline.aqm import Motion, aqm
 from pipeline.cli import main
 from pipeline.errors import LoomError
 
@@ -60,10 +60,12 @@ def test_bad_input_is_one_line_error(shaded_scene, make_b, field):
 def test_bad_flow_is_one_line_error(frames):
     a, b = frames
     with pytest.raises(LoomError) as err:
-        aqm(a, b, flow=np.full((SIZE, SIZE), np.nan))
+        aqm(a, b, motion=Motion(np.full((SIZE, SIZE), np.nan)))
     assert "\n" not in str(err.value)
     with pytest.raises(LoomError):
-        aqm(a, b, flow=np.zeros((SIZE, SIZE - 1, 2)))
+        aqm(a, b, motion=Motion(np.zeros((SIZE, SIZE - 1, 2))))
+    with pytest.raises(LoomError, match="pursuit_gain: must lie in"):
+        Motion(np.zeros((SIZE, SIZE, 2)), pursuit_gain=1.5)
 
 
 @pytest.fixture

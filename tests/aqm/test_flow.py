@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from aqm_data import SIZE, monte_carlo
 
-from pipeline.aqm import ViewingConditions, aqm, image_velocity
+from pipeline.aqm import Motion, ViewingConditions, aqm, image_velocity
 from pipeline.aqm.flow import focal_pixels, warp_displacement
 from pipeline.errors import LoomError
 
@@ -99,5 +99,5 @@ def test_camera_flow_lowers_d_aqm_of_untracked_noise(shaded_scene):
                           following=translation(x=-0.05))
     a, b = monte_carlo(shaded_scene, 800, 1), monte_carlo(shaded_scene, 800, 2)
     still = aqm(a, b, viewing=viewing).d_aqm
-    moving = aqm(a, b, flow=flow, viewing=viewing, pursuit_gain=0.0).d_aqm
+    moving = aqm(a, b, motion=Motion(flow, pursuit_gain=0.0), viewing=viewing).d_aqm
     assert 0 < moving < still

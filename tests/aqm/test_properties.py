@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 from aqm_data import SIZE, grating, monte_carlo, smooth_noise, threshold_contrast
 
-from pipeline.aqm import ViewingConditions, aqm, aqm_luminance
+from pipeline.aqm import Motion, ViewingConditions, aqm, aqm_luminance
 from pipeline.aqm.csf import daly_csf
 
 FREQUENCIES = (0.5, 1, 2, 4, 8, 16)
@@ -28,7 +28,7 @@ def noisy_pair(shaded_scene):
 @pytest.mark.parametrize("speed", [None, 5.0])
 def test_identical_images_give_zero(shaded_scene, speed):
     flow = None if speed is None else np.full(shaded_scene.shape[:2], speed)
-    result = aqm(shaded_scene, shaded_scene.copy(), flow=flow)
+    result = aqm(shaded_scene, shaded_scene.copy(), motion=None if flow is None else Motion(flow))
     assert result.d_aqm == 0.0
     assert not result.map.any()
 
@@ -36,8 +36,8 @@ def test_identical_images_give_zero(shaded_scene, speed):
 @pytest.mark.parametrize("with_flow", [False, True])
 def test_metric_is_symmetric(noisy_pair, with_flow):
     a, b = noisy_pair
-    flow = np.full(a.shape[:2] + (2,), 3.0) if with_flow else None
-    ab, ba = aqm(a, b, flow=flow, viewing=NATIVE), aqm(b, a, flow=flow, viewing=NATIVE)
+    motion = Motion(np.full(a.shape[:2] + (2,), 3.0)) if with_flow else None
+    ab, ba = aqm(a, b, motion=motion, viewing=NATIVE), aqm(b, a, motion=motion, viewing=NATIVE)
     assert 0 < ab.d_aqm < 100
     np.testing.assert_allclose(ab.map, ba.map, rtol=0, atol=1e-12)
     assert ab.d_aqm == ba.d_aqm
@@ -103,7 +103,7 @@ def moving_grating(grating_viewing):
 
 def test_untracked_motion_lowers_visibility(moving_grating):
     run, flow = moving_grating
-    still, moving = run(), run(flow=flow, pursuit_gain=0.0)
+    still, moving = run(), run(motion=Motion(flow, pursuit_gain=0.0))
     assert still.d_aqm >= 50.0  # zero crossings of the grating stay invisible
     assert moving.map.max() < 0.5 * still.map.max()
     assert moving.d_aqm < still.d_aqm
@@ -111,13 +111,13 @@ def test_untracked_motion_lowers_visibility(moving_grating):
 
 def test_tracked_motion_as_visible_as_static(moving_grating):
     run, flow = moving_grating
-    np.testing.assert_allclose(run(flow=flow, pursuit_gain=1.0).map, run().map, rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(run(motion=Motion(flow, pursuit_gain=1.0)).map, run().map, rtol=1e-9, atol=1e-12)
 
 
 def test_pursuit_gain_orders_visibility(moving_grating):
     """Daly's 0.82 smooth pursuit leaves a retinal velocity between full tracking and none."""
     run, flow = moving_grating
-    peaks = [run(flow=flow, pursuit_gain=g).map.max() for g in (0.0, 0.82, 1.0)]
+    peaks = [run(motion=Motion(flow, pursuit_gain=g)).map.max() for g in (0.0, 0.82, 1.0)]
     assert peaks[0] < peaks[1] < peaks[2]
 
 

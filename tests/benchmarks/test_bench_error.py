@@ -204,14 +204,14 @@ def test_the_reference_basis_says_what_the_uncapped_guided_run_reached():
     """The guided runs are uncapped (as loom render runs them), the reference stays 50x the largest budget,
     and the output says how many times the guided run's largest N_frame it holds and what 50x the cap costs."""
     from pipeline.benchmarks.error import reference_basis
-    from pipeline.config import RenderConfig
+    from pipeline.config import SegmentConfig
 
     plan = Plan((1, 4), (1_000, 2_000), 2, (0.5,))
     runs = [{"method": "per-frame", "segments": []},
             {"method": "guided", "segments": [{"n_frame": 4_000}, {"n_frame": 16_000}]}]
-    basis = reference_basis(plan, runs, RenderConfig(), ref_photons=2 * 100_000 * 4, ref_s=8.0)
+    basis = reference_basis(plan, runs, SegmentConfig(), ref_photons=2 * 100_000 * 4, ref_s=8.0)
     assert basis["sized_by"] == "largest budget" and basis["guided_n_frame"] == 16_000
     assert basis["factor_of_guided"] == 100_000 / 16_000
     assert basis["cap_reference_photons"] == 50 * 1_280_000 and basis["cap_reference_s"] == 8.0 * 640
     assert "reached N_frame 16,000" in basis["statement"] and "under 50x" in basis["statement"]
-    assert reference_basis(plan, runs[:1], RenderConfig(), 800_000, 8.0)["statement"] == ""
+    assert reference_basis(plan, runs[:1], SegmentConfig(), 800_000, 8.0)["statement"] == ""

@@ -12,8 +12,8 @@ import numpy as np
 import pytest
 
 from kernels.colour import LUMA
-from pipeline.collection.maps import illumination_maps
-from pipeline.config import RenderConfig
+from pipeline.collection.maps import MapRequest, WindowSpec, illumination_maps
+from pipeline.config import FilterConfig, PhotonConfig, RenderConfig, SegmentConfig
 from pipeline.frames.camera_paths import render_frame
 from pipeline.frames.perceived import displayed_difference
 from pipeline.run.render import RenderSettings, render
@@ -46,10 +46,10 @@ class Frames:
         """(full, (even, odd)) indirect maps of ``REFERENCE_PHOTONS`` of the frame's own photons."""
         url = str(self.tmp / f"ref-{frame}.zarr")
         for n in REFERENCE_PHOTONS:
-            shoot(str(self.path), frames=str(frame), n_photons=n, store_url=url, config=RenderConfig(seed=977),
+            shoot(str(self.path), frames=str(frame), n_photons=n, store_url=url, config=PhotonConfig(seed=977),
                   scheduler="local", progress=False)
-        (lit,) = illumination_maps(PhotonStore.open(url), self.elements, self.scene, [frame - 1], mode="off",
-                                   split_parity=True)
+        (lit,) = illumination_maps(PhotonStore.open(url), self.elements, self.scene,
+                                   MapRequest(WindowSpec("off", 0), [frame - 1], halves=True))
         return lit.irradiance.mean(axis=0), lit.irradiance
 
     def compare(self, frame: int, irradiance, adaptation: float) -> dict:
@@ -63,7 +63,7 @@ class Frames:
         return {"d_aqm": d, "floor_halves": floor, "rel_rms": rel}
 
 
-def _check_records(records, config: RenderConfig):
+def _check_records(records, config: SegmentConfig):
     for r in records:
         print(f"segment {r.index}: frames {r.start}-{r.end} K {r.k} F_max {r.fmax} N_frame {r.n_frame:,} "
               f"d_AQM {r.d_aqm:.2f} % {'(cap)' if r.capped else ''} steps {r.n_frame_steps}")
@@ -76,7 +76,7 @@ def test_room_guided_frames_match_the_converged_reference(tmp_path):
     from pipeline.segments.records import read_records
 
     records = read_records(tmp_path / "out")
-    _check_records(records, RenderConfig())
+    _check_records(records, SegmentConfig())
     assert records[0].start == 1 and records[-1].end == 135 and len(report["rendered"]) == 135
     frames = Frames(path, tmp_path)
     maps = IlluminationMaps.open(str(tmp_path / "out" / "photons.zarr"))
@@ -103,11 +103,12 @@ def test_atrium_guided_frames_lose_the_mottling(tmp_path):
     frames_spec, k_probe = "136-166", 151
     guided = render(path, frames=frames_spec, out_dir=tmp_path / "guided", settings=SETTINGS, progress=False)
     old = render(path, frames=frames_spec, out_dir=tmp_path / "old", settings=SETTINGS, n_photons=40_000,
-                 fmax=15, temporal="adaptive", config=RenderConfig(spatial_filter=False), progress=False)
+                 fmax=15, temporal="adaptive", config=RenderConfig(filter=FilterConfig(spatial_filter=False)),
+                 progress=False)
     from pipeline.segments.records import read_records
 
     records = read_records(tmp_path / "guided")
-    _check_records(records, RenderConfig())
+    _check_records(records, SegmentConfig())
     assert sum(v["filtered"] for r in records for v in r.frames.values()) > 0  # Step 5 where windows stay short
     frames = Frames(path, tmp_path)
     rec = next(r for r in records if r.start <= k_probe <= r.end)
@@ -119,9 +120,9 @@ def test_atrium_guided_frames_lose_the_mottling(tmp_path):
     # The measure's own spread at this budget: the guided photons' even and odd halves, each against
     # the reference, are two realisations of the same reconstruction (1.3-1.6 points apart here)
     store = PhotonStore.open(str(tmp_path / "guided" / "photons.zarr"))
-    (halves,) = illumination_maps(store, frames.elements, frames.scene, [k_probe - 1], mode=rec.temporal,
-                                  fmax=rec.fmax, config=RenderConfig(), split_parity=True,
-                                  spatial_filter=RenderConfig().spatial_filter)
+    (halves,) = illumination_maps(store, frames.elements, frames.scene,
+                                  MapRequest(WindowSpec(rec.temporal, rec.fmax), [k_probe - 1], halves=True),
+                                  filter=FilterConfig())
     spread = abs(frames.compare(k_probe, halves.irradiance[0], adaptation)["d_aqm"]
                  - frames.compare(k_probe, halves.irradiance[1], adaptation)["d_aqm"])
     print(f"ATRIUM K {k_probe}: guided {got['guided']['d_aqm']:.2f} %, reference halves "

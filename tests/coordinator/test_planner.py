@@ -11,7 +11,7 @@ import pytest
 from pipeline.collection.estimators import vertex_moments
 from pipeline.config import RenderConfig
 from pipeline.frames.settings import RenderSettings
-from pipeline.photons.tracing import trace_batch
+from pipeline.photons.tracing import PhotonRange, trace_batch
 from pipeline.run.shoot import open_store, plan
 from pipeline.scene import read_scene
 from pipeline.scene.builtin import write_builtin
@@ -55,7 +55,7 @@ class InProcess:
         self.lines: list[str] = []
 
     def shoot(self, targets: dict[int, int]) -> None:
-        job, cfg = self.job, self.job.config
+        job, cfg = self.job, self.job.config.photons
         for b in next_batches(self.store, targets):
             shoot_task(store_url=job.store_url, scene_path=job.scene_path, scene_hash=job.scene_hash,
                        element_size=job.element_size, frame=b.frame, frame_index=b.frame - 1, batch=b.batch,
@@ -74,9 +74,9 @@ def _job(tmp_path, name: str, frames: str, config: RenderConfig = CHEAP, **kw):
     url = str(tmp_path / "photons.zarr")
     store = open_store(p, url, keep_records=False)
     job = Job(scene_path=str(scene.path), scene_hash=scene.scene_hash, camera=None, camera_name=scene.camera_name,
-              element_size=config.element_size, store_url=url, out_dir=str(tmp_path / "out"), first=p.frames[0],
+              element_size=config.photons.element_size, store_url=url, out_dir=str(tmp_path / "out"), first=p.frames[0],
               last=p.frames[-1], selection=tuple(p.frames), settings=RenderSettings(width=48, height=36, spp=1),
-              config=config, render_hash="look", decision_hash="decided", fmax=config.fmax_initial,
+              config=config, render_hash="look", decision_hash="decided", fmax=config.segments.fmax_initial,
               n_photons=None, temporal="adaptive", single_state=False)
     return replace(job, **kw), store
 
@@ -93,12 +93,12 @@ def decided(tmp_path_factory):
 
 def test_the_pilot_is_eq2_of_its_own_probe_at_k(decided):
     job, _, executor, times, rec = decided
-    cfg = job.config
+    cfg = job.config.segments
     elements = load_elements(job.scene_path, job.scene_hash, job.element_size)
     scene = read_scene(job.scene_path)
     first = place_segment(job.first, job.fmax, job.last)
-    batch = trace_batch(scene.pose_frame(first.k), elements, n_photons=cfg.pilot_photons, photon_start=0,
-                        seed=cfg.seed, frame=first.k, max_depth=cfg.photon_depth)
+    batch = trace_batch(scene.pose_frame(first.k), elements, PhotonRange(first.k, 0, cfg.pilot_photons),
+                        job.config.photons)
     e = energy_error(*vertex_moments(*batch.indirect(), elements.element_vertices, elements.n_vertices))
     assert rec.pilot["frame"] == first.k and rec.pilot["e_probe"] == e
     assert rec.pilot["n_pilot"] == pilot_n_frame(cfg.pilot_photons, e, cfg.e_max, job.fmax)
@@ -108,7 +108,7 @@ def test_the_pilot_is_eq2_of_its_own_probe_at_k(decided):
 
 def test_the_loops_follow_the_decisions(decided):
     job, _, executor, _, rec = decided
-    cfg = job.config
+    cfg = job.config.segments
     fmax = [s["fmax"] for s in rec.fmax_steps]
     assert fmax[:2] == [6, 10]  # p_me >= p_thr on ROOM's walls
     for s, after in zip(rec.fmax_steps, fmax[1:] + [None]):
@@ -160,7 +160,8 @@ def test_the_next_segment_starts_after_this_one_on_its_photons_and_its_calibrati
     job, store, executor, _, rec = decided
     nxt = SegmentPlanner(job, store, executor, {}).record(1, rec.end + 1, rec.fmax)
     assert (nxt.start, nxt.end, nxt.fmax_steps[0]["fmax"]) == (rec.end + 1, job.last, rec.fmax)
-    carried = (rec.pilot["n_pilot"], needed_n_frame(rec.n_frame, rec.n_frame_steps, rec.capped, job.config.d_thr))
+    needed = needed_n_frame(rec.n_frame, rec.n_frame_steps, rec.capped, job.config.segments.d_thr)
+    carried = (rec.pilot["n_pilot"], needed)
     assert nxt.pilot["n_start"] == calibrated_start(nxt.pilot["n_pilot"], carried)
     # segment 0's photons stay as they were, and each segment traced its own frames only
     emitted = store.emitted()

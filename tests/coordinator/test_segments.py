@@ -8,8 +8,8 @@ import math
 import numpy as np
 import pytest
 
-from pipeline.collection.maps import collection_windows
-from pipeline.config import RenderConfig
+from pipeline.collection.maps import WindowSpec, collection_windows
+from pipeline.config import CollectionConfig, PhotonConfig, SegmentConfig
 from pipeline.scene import read_scene
 from pipeline.segments.decisions import (
     calibrated_start,
@@ -59,7 +59,7 @@ def test_pilot_on_a_real_static_scene_follows_eq2(tmp_path):
     # The STATIC built-in traced for real: E at N and at 4N differ by 2 (E ~ 1/sqrt(N)), so the
     # pilot's N_frame from either probe agrees within 20 %.
     from pipeline.collection.estimators import vertex_moments
-    from pipeline.photons.tracing import trace_batch
+    from pipeline.photons.tracing import PhotonRange, trace_batch
     from pipeline.scene import ElementMesh
     from pipeline.scene.builtin import write_builtin
 
@@ -68,7 +68,7 @@ def test_pilot_on_a_real_static_scene_follows_eq2(tmp_path):
     state = scene.pose_frame(1)
     errors = {}
     for n in (20_000, 80_000):
-        b = trace_batch(state, elements, n_photons=n, photon_start=0, seed=5, frame=1, max_depth=8)
+        b = trace_batch(state, elements, PhotonRange(1, 0, n), PhotonConfig(seed=5, photon_depth=8))
         from pipeline.store import DIRECT_BIT, ELEMENT_MASK
         indirect = (b.key & np.uint32(DIRECT_BIT)) == 0
         s, q = vertex_moments((b.key[indirect] & np.uint32(ELEMENT_MASK)).astype(np.int64), b.bary[indirect, 0],
@@ -90,8 +90,8 @@ def test_p_me_sees_a_lighting_step_at_a_known_frame(rng):
     counts = rng.poisson(np.broadcast_to(mu, (frames, elements))).astype(np.uint32)
     step = np.arange(elements) < elements // 2
     counts[k + 5:, step] *= 2
-    cfg = RenderConfig(step_levels=0)  # Condition (1) alone: no element mesh for the regional step test
-    back, fwd = collection_windows(counts, np.full(frames, 40_000.0), [k], mode="adaptive", fmax=20, config=cfg)
+    cfg = CollectionConfig(step_levels=0)  # Condition (1) alone: no element mesh for the regional step test
+    back, fwd = collection_windows(counts, np.full(frames, 40_000.0), [k], WindowSpec("adaptive", 20), cfg)
     pb, pf = p_me(back[0], fwd[0], 20)
     assert pb > 0.9 and pf == pytest.approx(0.5 * pb, abs=0.03)
     assert np.all(fwd[0, step] <= 5)
@@ -198,38 +198,13 @@ def test_frames_next_to_an_animation_end_get_more_photons():
 def test_an_end_factor_of_one_turns_the_end_photons_off():
     from pipeline.errors import ConfigError
 
-    assert RenderConfig(end_photons=1.0).end_photons == 1.0  # a closed lower bound: 1 is valid
+    assert SegmentConfig(end_photons=1.0).end_photons == 1.0  # a closed lower bound: 1 is valid
     with pytest.raises(ConfigError, match="end_photons"):
-        RenderConfig(end_photons=0.999)
+        SegmentConfig(end_photons=0.999)
     with pytest.raises(ConfigError, match="k_sigma"):  # other float bounds stay open
-        RenderConfig(k_sigma=0.0)
+        CollectionConfig(k_sigma=0.0)
     first = place_segment(1, 10, 100)
     assert set(photon_targets(first, 40_000, first=1, last=100, end_factor=1.0).values()) == {40_000}
-
-
-# --- the config: every field read by one stage --------------------------------------------------
-def test_stage_hashes_cover_only_their_stage():
-    base = RenderConfig()
-    changed = {"d_thr": 0.05, "p_thr": 0.5, "k_sigma": 3.0, "filter_photons": 9.0, "photon_depth": 3}
-    for name, value in changed.items():
-        other = base.replace(**{name: value})
-        stage = next(f.metadata["stage"] for f in __import__("dataclasses").fields(RenderConfig) if f.name == name)
-        for s in ("photons", "collection", "filter", "segments"):
-            assert (other.stage_hash(s) != base.stage_hash(s)) == (s == stage), (name, s)
-    assert base.replace(d_thr=0.05).photon_hash(0.4) == base.photon_hash(0.4)
-    assert base.replace(photon_depth=3).photon_hash(0.4) != base.photon_hash(0.4)
-
-
-def test_every_config_field_is_read_outside_config():
-    import dataclasses
-    import pathlib
-    import re
-
-    root = pathlib.Path(__file__).resolve().parents[2]
-    text = "\n".join(p.read_text() for d in ("pipeline", "workers", "kernels") for p in (root / d).rglob("*.py")
-                     if p.name != "config.py")
-    for f in dataclasses.fields(RenderConfig):
-        assert re.search(rf"\.{f.name}\b", text), f"RenderConfig.{f.name} is read by nothing"
 
 
 def test_camera_flow_is_the_cameras_own_motion(tmp_path):

@@ -11,7 +11,7 @@ import pytest
 from click.testing import CliRunner
 
 from pipeline.cli import main
-from pipeline.config import RenderConfig
+from pipeline.config import PhotonConfig
 from pipeline.errors import LoomError
 from pipeline.run.shoot import plan, shoot, tasks
 from pipeline.scene import read_scene
@@ -154,7 +154,7 @@ def test_photons_fill_the_room_frames(scenes, tmp_path):
 def test_two_stores_never_share_a_task_key(scenes, tmp_path):
     # A key the cluster still holds returns the earlier task's result without running it, so the
     # same batches shot into two stores must have different keys (the second store stayed empty)
-    p = plan(read_scene(scenes["cornell"]), "1-2", 2_000, RenderConfig())
+    p = plan(read_scene(scenes["cornell"]), "1-2", 2_000, PhotonConfig())
     keys = {}
     for name in ("a", "b"):
         url = str(tmp_path / f"{name}.zarr")

@@ -13,10 +13,11 @@ import numpy as np
 import pytest
 
 from kernels.camera import camera_rays_reference
+from pipeline.config import PhotonConfig
 from pipeline.frames.camera_paths import render_frame
 from pipeline.frames.random_numbers import frame_key
 from pipeline.photons.raycast import caster_for
-from pipeline.photons.tracing import trace_batch
+from pipeline.photons.tracing import PhotonRange, trace_batch
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin import shapes
 from pipeline.scene.builtin.gltf_builder import GltfBuilder
@@ -178,7 +179,7 @@ def test_colour_bleeding_follows_the_checker(tmp_path):
     b.set_scene_extras({"photonloom": {"element_size": 0.05}})
     scene = read_scene(b.write(tmp_path / "bleed.glb"))
     elements, state = ElementMesh.build(scene), scene.pose_frame(1)
-    batch = trace_batch(state, elements, n_photons=400_000, photon_start=0, seed=5, frame=1, max_depth=2)
+    batch = trace_batch(state, elements, PhotonRange(1, 0, 400_000), PhotonConfig(seed=5, photon_depth=2))
     elem = (batch.key & ELEMENT_MASK).astype(np.int64)
     centre = elements.element_positions(state)[elem].mean(axis=1)
     on_wall = (np.abs(centre[:, 2] + HALF) < 1e-6) & ((batch.key & DIRECT_BIT) == 0) & (centre[:, 1] < 0.3)
@@ -229,8 +230,8 @@ def test_furnace_with_a_constant_texture_equals_the_factor(tmp_path):
         path, rho = _furnace(tmp_path / f"furnace{int(textured)}.glb", 188, textured)
         scene = read_scene(path)
         elements, state = ElementMesh.build(scene), scene.pose_frame(1)
-        batches = [trace_batch(state, elements, n_photons=N_FURNACE, photon_start=k * N_FURNACE, seed=7, frame=1,
-                               max_depth=200) for k in range(16)]
+        batches = [trace_batch(state, elements, PhotonRange(1, k * N_FURNACE, N_FURNACE),
+                               PhotonConfig(seed=7, photon_depth=200)) for k in range(16)]
         out[textured] = batches
     phi = 4 * np.pi * 3.0
     for a, b in zip(out[False], out[True]):
@@ -287,7 +288,7 @@ def test_emissive_texture_emits_where_its_texels_are_bright(tmp_path):
         elements, state = ElementMesh.build(scene), scene.pose_frame(1)
         rows = []
         for j in range(k):
-            bt = trace_batch(state, elements, n_photons=n, photon_start=j * n, seed=11, frame=1, max_depth=1)
+            bt = trace_batch(state, elements, PhotonRange(1, j * n, n), PhotonConfig(seed=11, photon_depth=1))
             x = elements.element_positions(state)[(bt.key & ELEMENT_MASK).astype(np.int64)].mean(axis=1)[:, 0]
             e = bt.energy[:, 0].astype(np.float64) / n
             rows.append([e[x < 0].sum(), e[x >= 0].sum()])

@@ -18,9 +18,10 @@ import pytest
 
 from kernels.camera import camera_rays_reference
 from pipeline.collection.estimators import vertex_irradiance
+from pipeline.config import PhotonConfig
 from pipeline.frames.camera_paths import render_frame
 from pipeline.frames.random_numbers import frame_key
-from pipeline.photons.tracing import trace_batch
+from pipeline.photons.tracing import PhotonRange, trace_batch
 from pipeline.scene import ElementMesh, Scene, read_scene
 from pipeline.scene.builtin.gltf_builder import GltfBuilder
 from pipeline.scene.builtin.shapes import look_at, merge, quad
@@ -139,7 +140,7 @@ def _triangle_irradiance(state, elements, n, batches, *, direct=None, max_depth=
                                            .transpose(1, 0, 2))), axis=1)
     out = np.zeros((batches, len(state.faces), 3))
     for k in range(batches):
-        b = trace_batch(state, elements, n_photons=n, photon_start=k * n, seed=seed, frame=1, max_depth=max_depth)
+        b = trace_batch(state, elements, PhotonRange(1, k * n, n), PhotonConfig(seed=seed, photon_depth=max_depth))
         keep = np.ones(len(b.key), bool) if direct is None else ((b.key >> np.uint32(31)) == 1) == direct
         tri = elements.element_triangle[(b.key[keep] & np.uint32(0x3FFFFFFF)).astype(np.int64)]
         for c in range(3):
@@ -222,7 +223,7 @@ def test_composited_furnace_makes_the_white_solid_vanish(tmp_path):
     state = scene.pose_frame(1)  # the auto camera sees the front, the step, the inner wall and the right side
     elements = ElementMesh.build(scene)
     n = 400_000
-    b = trace_batch(state, elements, n_photons=n, photon_start=0, seed=1, frame=1, max_depth=16)
+    b = trace_batch(state, elements, PhotonRange(1, 0, n), PhotonConfig(seed=1, photon_depth=16))
     indirect = (b.key >> np.uint32(31)) == 0
     element = (b.key[indirect] & np.uint32(0x3FFFFFFF)).astype(np.int64)
     e_map = vertex_irradiance(element, b.bary[indirect, 0], b.bary[indirect, 1], b.energy[indirect],

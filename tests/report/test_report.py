@@ -15,7 +15,7 @@ from click.testing import CliRunner
 from PIL import Image
 
 from pipeline.cli import main
-from pipeline.config import RenderConfig
+from pipeline.config import RenderConfig, SegmentConfig
 from pipeline.run.render import RenderSettings, render
 from pipeline.scene.builtin import write_builtin
 from pipeline.segments.records import read_records
@@ -46,7 +46,7 @@ def rendered(tmp_path_factory):
     scene = write_builtin("room", tmp / "room.glb")
     out = tmp / "out"
     kw = dict(frames="60-80", out_dir=out, settings=RenderSettings(width=96, height=72, spp=1),
-              config=RenderConfig(**CHEAP), scheduler="synchronous", progress=False)
+              config=RenderConfig(segments=SegmentConfig(**CHEAP)), scheduler="synchronous", progress=False)
     first = render(scene, **kw)
     again = render(scene, **kw)  # everything is done: the rerun says what it skipped
     return out, first, again

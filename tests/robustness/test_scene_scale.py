@@ -12,7 +12,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.photons.tracing import trace_batch
+from pipeline.config import PhotonConfig
+from pipeline.photons.tracing import PhotonRange, trace_batch
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin import cornell, shapes
 from pipeline.scene.builtin.gltf_builder import GltfBuilder
@@ -37,7 +38,7 @@ def _box_light(tmp_path, backdrop: float | None):
     box_instances = [i for i, inst in enumerate(scene.instances) if not inst.name.startswith("backdrop")]
     out = []
     for k in range(K):
-        batch = trace_batch(state, elements, n_photons=N, photon_start=k * N, seed=3, frame=1, max_depth=50)
+        batch = trace_batch(state, elements, PhotonRange(1, k * N, N), PhotonConfig(seed=3, photon_depth=50))
         elem = (batch.key & ELEMENT_MASK).astype(np.int64)
         tri = np.searchsorted(elements.triangle_offset, elem, side="right") - 1
         on_box = np.isin(state.triangle_instance[tri], box_instances)
@@ -84,7 +85,7 @@ def test_furnace_far_from_the_origin(tmp_path, distance):
     phi = 4 * np.pi * intensity
     indirect = []
     for k in range(K):
-        batch = trace_batch(state, elements, n_photons=N, photon_start=k * N, seed=5, frame=1, max_depth=200)
+        batch = trace_batch(state, elements, PhotonRange(1, k * N, N), PhotonConfig(seed=5, photon_depth=200))
         direct = (batch.key & DIRECT_BIT) > 0
         assert np.isclose(batch.energy[direct, 0].astype(np.float64).sum() / N, phi, rtol=1e-5)
         indirect.append(batch.energy[~direct, 0].astype(np.float64).sum() / N)

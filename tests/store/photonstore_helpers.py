@@ -9,13 +9,15 @@ from pathlib import Path
 
 import numpy as np
 
-from pipeline.store import PhotonStore, pack_key
+from pipeline.photons.tracing import PhotonBatch
+from pipeline.store import PhotonStore, StoreIdentity, pack_key
 
-IDENTITY = dict(scene_hash="scene-abc", config_hash="cfg-123", seed=7, keep_records=True)  # the tests read records
+MADE_BY = StoreIdentity(scene_hash="scene-abc", config_hash="cfg-123", seed=7)
+IDENTITY = dict(identity=MADE_BY, keep_records=True)  # the tests read records
 
 
 def make_batch(frame: int, batch: int, n: int, n_elements: int, *, photon_start: int = 0,
-               seed: int = 7) -> dict:
+               seed: int = 7) -> PhotonBatch:
     """A random but reproducible batch: skewed element ids, both flags, albedo-like energies."""
     rng = np.random.default_rng([seed, frame, batch])
     lit = np.random.default_rng(n_elements).lognormal(0.0, 1.0, n_elements)  # the "scene"
@@ -30,8 +32,7 @@ def make_batch(frame: int, batch: int, n: int, n_elements: int, *, photon_start:
     albedo = np.array([[0.8, 0.1, 0.1], [0.7, 0.7, 0.7], [0.2, 0.6, 0.3]], np.float32)
     energy = albedo[rng.integers(0, 3, n)] ** rng.integers(0, 4, n)[:, None].astype(np.float32)
     energy = (energy * rng.uniform(0.5, 2.0, (n, 1))).astype(np.float32)
-    return dict(key=key, bary=bary, energy=energy, photons_emitted=max(n // 2, 1),
-                photon_start=photon_start)
+    return PhotonBatch(key, bary, energy, photons_emitted=max(n // 2, 1), photon_start=photon_start)
 
 
 def write_frame(url: str, frame: int, sizes: list[int], n_elements: int,
@@ -42,9 +43,9 @@ def write_frame(url: str, frame: int, sizes: list[int], n_elements: int,
     for b, n in enumerate(sizes):
         batch = make_batch(frame, b, n, n_elements, photon_start=start)
         if only is None or b in only:
-            store.write_batch(frame, b, **batch)
+            store.write_batch(frame, b, batch)
             written[b] = batch
-        start += batch["photons_emitted"]
+        start += batch.photons_emitted
     return written
 
 

@@ -9,7 +9,8 @@ import os
 import numpy as np
 import pytest
 
-from pipeline.store import PhotonStore, direct_write
+from pipeline.photons.tracing import PhotonBatch
+from pipeline.store import PhotonStore, StoreIdentity, direct_write
 from pipeline.store.photon_store import _write_object
 from pipeline.store.records import sort_records_reference
 
@@ -70,7 +71,7 @@ def test_store_batches_read_back_the_same_with_and_without_a_summary(tmp_path):
     rng = np.random.default_rng(5)
     n_el = 64
     store = PhotonStore.create(tmp_path / "s.zarr", n_frames=2, n_elements=n_el, frame_numbers=[1, 2],
-                               scene_hash="s", config_hash="c", seed=0, keep_records=True)
+                               identity=StoreIdentity("s", "c", 0), keep_records=True)
     written = {}
     for f, summarise in ((0, lambda *records: np.arange(7, dtype=np.uint32)), (1, None)):
         n = 5000
@@ -78,7 +79,7 @@ def test_store_batches_read_back_the_same_with_and_without_a_summary(tmp_path):
                | (rng.integers(0, 2, n).astype(np.uint32) << np.uint32(30)))
         bary = rng.integers(0, 30000, (n, 2)).astype(np.uint16)
         energy = rng.random((n, 3)).astype(np.float32)
-        assert store.write_batch(f, 0, key=key, bary=bary, energy=energy, photons_emitted=2 * n, photon_start=0,
+        assert store.write_batch(f, 0, PhotonBatch(key, bary, energy, photons_emitted=2 * n, photon_start=0),
                                  summarise=summarise)
         written[f] = (key, bary, energy)
     # Past the page cache: none of the record pages are cached (on a disk file system; tmpfs

@@ -4,13 +4,15 @@ from __future__ import annotations
 import json
 import pickle
 import time
+from dataclasses import asdict, replace
 
 import numpy as np
 import pytest
 import zarr
-from photonstore_helpers import IDENTITY, contents, make_batch, snapshot, write_frame
+from photonstore_helpers import IDENTITY, MADE_BY, contents, make_batch, snapshot, write_frame
 
 from pipeline.errors import LoomError
+from pipeline.photons.tracing import PhotonBatch
 from pipeline.store import (
     CATEGORIES,
     ELEMENT_MASK,
@@ -27,9 +29,11 @@ N_ELEMENTS = 500
 
 
 def create(url, n_frames=4, n_elements=N_ELEMENTS, **overrides) -> PhotonStore:
+    """A store of the test identity, but for ``overrides`` (of its identity's fields too)."""
+    made_by = {k: overrides.pop(k) for k in asdict(MADE_BY) if k in overrides}
     args = dict(IDENTITY, n_frames=n_frames, n_elements=n_elements,
                 frame_numbers=list(range(101, 101 + n_frames)), max_batches=4)
-    args.update(overrides)
+    args.update(overrides, identity=replace(MADE_BY, **made_by))
     return PhotonStore.create(url, **args)
 
 
@@ -39,8 +43,8 @@ def store(tmp_path) -> PhotonStore:
 
 
 def expected_sorted(batch: dict):
-    order = sort_records(batch["key"], batch["bary"], batch["energy"])
-    return batch["key"][order], batch["bary"][order], batch["energy"][order]
+    order = sort_records(batch.key, batch.bary, batch.energy)
+    return batch.key[order], batch.bary[order], batch.energy[order]
 
 
 def check_consistent(records: FrameRecords, n_elements: int) -> None:
@@ -59,13 +63,13 @@ def test01_record_is_20_bytes_and_described(store):
     attrs = dict(zarr.open_group(store.url, mode="r").attrs)
     assert attrs["record_layout"]["record_bytes"] == 20
     assert attrs["format_version"] == 5 and attrs["frame_numbers"] == [101, 102, 103, 104]
-    assert {k: attrs[k] for k in IDENTITY} == IDENTITY
+    assert {k: attrs[k] for k in asdict(MADE_BY)} == asdict(MADE_BY) and attrs["keep_records"] is True
 
 
 @pytest.mark.parametrize("n", [0, 1, 20_000])
 def test02_round_trip(store, n):
     batch = make_batch(1, 0, n, N_ELEMENTS)
-    assert store.write_batch(1, 0, **batch) is True
+    assert store.write_batch(1, 0, batch) is True
     assert store.is_done(1, 0) and not store.is_done(1, 1) and store.done_batches(1) == [0]
     got = store.read_frame(1)
     key, bary, energy = expected_sorted(batch)
@@ -73,7 +77,7 @@ def test02_round_trip(store, n):
     np.testing.assert_array_equal(np.stack([got.b1, got.b2], axis=1), bary)
     np.testing.assert_array_equal(got.energy, energy)
     check_consistent(got, N_ELEMENTS)
-    assert got.photons_emitted == store.photons_emitted(1) == batch["photons_emitted"]
+    assert got.photons_emitted == store.photons_emitted(1) == batch.photons_emitted
     np.testing.assert_array_equal(store.counts(frames=[1])[0], np.diff(got.offsets))
     assert store.counts(frames=[0]).sum() == 0 and store.done_batches(0) == []
 
@@ -83,7 +87,7 @@ def test03_merged_batches(store):
     got = store.read_frame(2)
     check_consistent(got, N_ELEMENTS)
     assert got.batches == (0, 1, 2) and len(got) == 12000
-    assert got.photons_emitted == sum(b["photons_emitted"] for b in batches.values())
+    assert got.photons_emitted == sum(b.photons_emitted for b in batches.values())
     # Within an element, batch 0's records come first, then batch 1's, then batch 2's
     parts = [store.read_frame(2, batches=[b]) for b in range(3)]
     for e in (0, 1, 7, N_ELEMENTS - 1):
@@ -91,29 +95,30 @@ def test03_merged_batches(store):
         expect = np.concatenate([p.key[p.offsets[e]:p.offsets[e + 1]] for p in parts])
         np.testing.assert_array_equal(got.key[lo:hi], expect)
     sub = store.read_frame(2, batches=[0, 2])
-    assert len(sub) == 9000 and sub.photons_emitted == batches[0]["photons_emitted"] * 3
+    assert len(sub) == 9000 and sub.photons_emitted == batches[0].photons_emitted * 3
     np.testing.assert_array_equal(store.counts(frames=[2])[0], np.diff(got.offsets))
 
 
 def test04_input_order_does_not_matter(tmp_path):
     batch = make_batch(0, 0, 5000, 50)  # 100 hits per element: many equal (element, key) pairs
-    batch["bary"][::3] = 0  # and many records equal but for their energy
-    flipped = {k: v[::-1].copy() if isinstance(v, np.ndarray) else v for k, v in batch.items()}
+    batch.bary[::3] = 0  # and many records equal but for their energy
+    flipped = replace(batch, key=batch.key[::-1].copy(), bary=batch.bary[::-1].copy(),
+                      energy=batch.energy[::-1].copy())
     a, b = create(tmp_path / "a", n_elements=50), create(tmp_path / "b", n_elements=50)
-    a.write_batch(0, 0, **batch)
-    b.write_batch(0, 0, **flipped)
+    a.write_batch(0, 0, batch)
+    b.write_batch(0, 0, flipped)
     assert contents(tmp_path / "a") == contents(tmp_path / "b")
 
 
 def test05_rewrite_is_idempotent_and_refuses_other_photons(store, tmp_path):
     batch = make_batch(0, 0, 4000, N_ELEMENTS)
-    store.write_batch(0, 0, **batch)
+    store.write_batch(0, 0, batch)
     before = snapshot(tmp_path / "run.zarr")
-    assert store.write_batch(0, 0, **batch) is False
+    assert store.write_batch(0, 0, batch) is False
     assert snapshot(tmp_path / "run.zarr") == before  # not even rewritten: same inode and mtime
-    other = dict(batch, energy=batch["energy"] * np.float32(2))
+    other = replace(batch, energy=batch.energy * np.float32(2))
     with pytest.raises(LoomError, match="already done with different photons"):
-        store.write_batch(0, 0, **other)
+        store.write_batch(0, 0, other)
     assert snapshot(tmp_path / "run.zarr") == before
 
 
@@ -122,7 +127,7 @@ def test06_append_leaves_earlier_batches_untouched(store, tmp_path):
     write_frame(store.url, 1, [3000], N_ELEMENTS)
     before = snapshot(tmp_path / "run.zarr")
     b1 = make_batch(0, 1, 6000, N_ELEMENTS, photon_start=1500)
-    store.write_batch(0, 1, **b1)
+    store.write_batch(0, 1, b1)
     after = snapshot(tmp_path / "run.zarr")
     assert {k: after[k] for k in before} == before  # same bytes, inode and mtime
     new = sorted(set(after) - set(before))
@@ -136,19 +141,17 @@ def test07_crash_before_done_marker(tmp_path):
     batches = write_frame(crashed.url, 3, [2000], N_ELEMENTS)
     write_frame(clean.url, 3, [2000, 2000], N_ELEMENTS)
     second = make_batch(3, 1, 2000, N_ELEMENTS, photon_start=1000)
-    crashed._write_payload(crashed._prepare(3, 1, **{"key": second["key"], "bary": second["bary"],
-                                                     "energy": second["energy"],
-                                                     "photons_emitted": 1000,
-                                                     "photon_start": 1000, "summarise": None}))
+    assert (second.photons_emitted, second.photon_start) == (1000, 1000)
+    crashed._write_payload(crashed._prepare(3, 1, second, None))
     assert (tmp_path / "crashed/frames/3/1/c.0.0").exists()
     assert not crashed.is_done(3, 1) and crashed.done_batches(3) == [0]
     assert len(crashed.read_frame(3)) == 2000 and crashed.photons_emitted(3) == 1000
     np.testing.assert_array_equal(crashed.counts(frames=[3])[0],
-                                  np.bincount(batches[0]["key"] & ELEMENT_MASK,
+                                  np.bincount(batches[0].key & ELEMENT_MASK,
                                               minlength=N_ELEMENTS))
     with pytest.raises(LoomError, match="batch 1 is not done"):
-        crashed.write_batch(3, 2, **make_batch(3, 2, 10, N_ELEMENTS, photon_start=2000))
-    assert crashed.write_batch(3, 1, **second) is True
+        crashed.write_batch(3, 2, make_batch(3, 2, 10, N_ELEMENTS, photon_start=2000))
+    assert crashed.write_batch(3, 1, second) is True
     assert contents(tmp_path / "crashed") == contents(tmp_path / "clean")
 
 
@@ -180,7 +183,7 @@ def test09_create_refuses_another_run(store, attr, value):
 @pytest.mark.parametrize("attr, value", [("scene_hash", "x"), ("config_hash", "y"), ("seed", 0)])
 def test10_open_refuses_another_run(store, attr, value):
     with pytest.raises(LoomError, match=f"{attr}: store was made with {attr}="):
-        PhotonStore.open(store.url, **{attr: value})
+        PhotonStore.open(store.url, identity=replace(MADE_BY, **{attr: value}))
     assert PhotonStore.open(store.url, **IDENTITY).n_elements == N_ELEMENTS
 
 
@@ -220,11 +223,8 @@ def test13_unwritable_path(tmp_path):
     assert "\n" not in str(err.value)
 
 
-def _bad(**changes):
-    batch = make_batch(0, 0, 50, N_ELEMENTS)
-    args = dict(frame_index=0, batch=0, **batch)
-    args.update(changes)
-    return args
+def _bad(frame_index=0, batch=0, **changes):
+    return frame_index, batch, replace(make_batch(0, 0, 50, N_ELEMENTS), **changes)
 
 
 @pytest.mark.parametrize("args, message", [
@@ -245,7 +245,7 @@ def _bad(**changes):
 ], ids=lambda v: v if isinstance(v, str) else "")
 def test14_bad_input(store, tmp_path, args, message):
     with pytest.raises(LoomError, match=message) as err:
-        store.write_batch(**args)
+        store.write_batch(*args)
     assert "\n" not in str(err.value) and str(err.value).startswith(store.url)
     assert not list((tmp_path / "run.zarr/frames").rglob("c"))  # no record chunk written
     assert store.done_batches(0) == []
@@ -270,7 +270,7 @@ def test16_read_only(store):
     reader = PhotonStore.open(store.url, mode="r")
     assert len(reader.read_frame(0)) == 100
     with pytest.raises(LoomError, match="read-only"):
-        reader.write_batch(0, 1, **make_batch(0, 1, 10, N_ELEMENTS, photon_start=50))
+        reader.write_batch(0, 1, make_batch(0, 1, 10, N_ELEMENTS, photon_start=50))
     with pytest.raises(LoomError, match="read-only"):
         reader.share_frame(1, 0)
 
@@ -311,7 +311,7 @@ def test18_shared_frames(store):
     np.testing.assert_array_equal(table[1], table[0])
     np.testing.assert_array_equal(reader.batches_per_frame(), [2, 2, 2, 1])
     with pytest.raises(LoomError, match="frame 1 shares the photons of frame 0; write to 0"):
-        store.write_batch(1, 2, **make_batch(1, 2, 10, N_ELEMENTS, photon_start=3000))
+        store.write_batch(1, 2, make_batch(1, 2, 10, N_ELEMENTS, photon_start=3000))
     for f, g, message in [(1, 3, "frame 1 already shares frame 0"), (3, 3, "its own photons"),
                           (3, 1, "frame 1 itself shares frame 0; share with 0"),
                           (0, 3, "other frames share frame 0"),
@@ -331,9 +331,8 @@ def test19_atrium_size_count_table(tmp_path):
         for b in range(2 if f % 10 == 0 else 1):
             n = 200
             key = rng.integers(0, n_elements, n).astype(np.uint32) | np.uint32(f % 2) << 31
-            store.write_batch(f, b, key=key, bary=np.zeros((n, 2), np.uint16),
-                              energy=np.ones((n, 3), np.float32), photons_emitted=100,
-                              photon_start=start)
+            store.write_batch(f, b, PhotonBatch(key, np.zeros((n, 2), np.uint16), np.ones((n, 3), np.float32),
+                                                photons_emitted=100, photon_start=start))
             start += 100
             np.add.at(expect[f], key & ELEMENT_MASK, 1)
     reader = PhotonStore.open(tmp_path / "atrium")
@@ -386,7 +385,7 @@ def test24_batch_array_is_plain_zarr(store):
     from pipeline.store.records import pack_records, unpack_records
 
     batch = make_batch(2, 0, 3000, N_ELEMENTS)
-    store.write_batch(2, 0, **batch)
+    store.write_batch(2, 0, batch)
     rows = zarr.open_array(store.url, path="frames/2/0", mode="r")[...]
     key, bary, energy = expected_sorted(batch)
     np.testing.assert_array_equal(rows, pack_records(key, bary, energy))
@@ -449,8 +448,8 @@ def _write(store, frame, sizes, summarise=None, sizes_from=0):
     for b, n in enumerate(sizes):
         batch = make_batch(frame, b, n, N_ELEMENTS, photon_start=start)
         if b >= sizes_from:
-            out.append(store.write_batch(frame, b, **batch, summarise=summarise))
-        start += batch["photons_emitted"]
+            out.append(store.write_batch(frame, b, batch, summarise=summarise))
+        start += batch.photons_emitted
     return out
 
 
@@ -532,11 +531,11 @@ def test30_a_writer_adds_to_the_running_counts_it_wrote_without_reading_them(tmp
     start = 0
     for b, n in enumerate([3000, 3000, 6000]):
         batch = make_batch(1, b, n, N_ELEMENTS, photon_start=start)
-        start += batch["photons_emitted"]
+        start += batch.photons_emitted
         with counting_io() as same:
-            one.write_batch(1, b, **batch, summarise=_element_hits)
+            one.write_batch(1, b, batch, summarise=_element_hits)
         with counting_io() as other:
-            PhotonStore.open(fresh.url, mode="r+").write_batch(1, b, **batch, summarise=_element_hits)
+            PhotonStore.open(fresh.url, mode="r+").write_batch(1, b, batch, summarise=_element_hits)
         assert same["read_bytes"] == 0 and (other["read_bytes"] > 0) == (b > 0)
     assert contents(tmp_path / "one") == contents(tmp_path / "fresh")
     np.testing.assert_array_equal(PhotonStore.open(one.url).counts(frames=[1]), fresh.counts(frames=[1]))
@@ -548,9 +547,9 @@ def test31_a_store_without_records_refuses_unknown_elements_too(tmp_path, elemen
     counted, summed or written, even the largest id."""
     store = create(tmp_path / "s.zarr", keep_records=False)
     batch = make_batch(0, 0, 50, N_ELEMENTS)
-    batch["key"][7] = (batch["key"][7] & ~np.uint32(ELEMENT_MASK)) | np.uint32(element)
+    batch.key[7] = (batch.key[7] & ~np.uint32(ELEMENT_MASK)) | np.uint32(element)
     with pytest.raises(LoomError, match=f"element id {element} >= n_elements {N_ELEMENTS}") as err:
-        store.write_batch(0, 0, **batch, summarise=_element_hits)
+        store.write_batch(0, 0, batch, summarise=_element_hits)
     assert "\n" not in str(err.value) and store.done_batches(0) == []
     assert not (tmp_path / "s.zarr" / "batch").exists()
 
@@ -561,13 +560,13 @@ def test32_a_summarisers_hit_counts_are_taken_when_they_add_up(tmp_path):
     (4, n_elements) integers adding up to the records are a caller's bug."""
     plain, given = (create(tmp_path / name, keep_records=False) for name in ("plain", "given"))
     batch = make_batch(0, 0, 4000, N_ELEMENTS)
-    plain.write_batch(0, 0, **batch, summarise=_element_hits)
-    given.write_batch(0, 0, **batch, summarise=lambda k, b, e: (_element_hits(k, b, e),
+    plain.write_batch(0, 0, batch, summarise=_element_hits)
+    given.write_batch(0, 0, batch, summarise=lambda k, b, e: (_element_hits(k, b, e),
                                                                  category_counts(k, N_ELEMENTS)))
     assert contents(tmp_path / "plain") == contents(tmp_path / "given")
-    wrong = category_counts(batch["key"], N_ELEMENTS)
+    wrong = category_counts(batch.key, N_ELEMENTS)
     wrong[0, 0] += 1
     for counts in (wrong, wrong[:, :-1], wrong.astype(np.float64)):
         with pytest.raises(TypeError, match="hit counts"):
-            given.write_batch(1, 0, **batch, summarise=lambda k, b, e, c=counts: (_element_hits(k, b, e), c))
+            given.write_batch(1, 0, batch, summarise=lambda k, b, e, c=counts: (_element_hits(k, b, e), c))
     assert given.done_batches(1) == []

@@ -29,12 +29,12 @@ def assert_batch_intact(store: PhotonStore, frame: int, batch: int, start: int, 
     """A done batch holds exactly the records it was given; returns its photons emitted."""
     expect = make_batch(frame, batch, n, N_ELEMENTS, photon_start=start)
     got = store.read_frame(frame, batches=[batch])
-    order = sort_records(expect["key"], expect["bary"], expect["energy"])
-    np.testing.assert_array_equal(got.key, expect["key"][order])
-    np.testing.assert_array_equal(got.energy, expect["energy"][order])
-    np.testing.assert_array_equal(np.stack([got.b1, got.b2], 1), expect["bary"][order])
-    assert got.photons_emitted == expect["photons_emitted"]
-    return expect["photons_emitted"]
+    order = sort_records(expect.key, expect.bary, expect.energy)
+    np.testing.assert_array_equal(got.key, expect.key[order])
+    np.testing.assert_array_equal(got.energy, expect.energy[order])
+    np.testing.assert_array_equal(np.stack([got.b1, got.b2], 1), expect.bary[order])
+    assert got.photons_emitted == expect.photons_emitted
+    return expect.photons_emitted
 
 
 def test01_concurrent_writers_in_processes(tmp_path):
@@ -69,8 +69,8 @@ WRITER = textwrap.dedent("""
     start = 0
     for b, n in enumerate({sizes!r}):
         batch = make_batch(0, b, n, {n_elements}, photon_start=start)
-        store.write_batch(0, b, **batch)
-        start += batch["photons_emitted"]
+        store.write_batch(0, b, batch)
+        start += batch.photons_emitted
         print("done", b, flush=True)
 """)
 

@@ -16,7 +16,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.config import RenderConfig
+from pipeline.config import FilterConfig, RenderConfig
 from pipeline.run.render import RenderSettings, render
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin.gltf_builder import GltfBuilder
@@ -72,7 +72,8 @@ def _long_double_map(records, select, elements, areas):
 def test_1e8_photons_accumulate_without_drift(tmp_path):
     path = _scene(tmp_path / "tile.glb")
     out = tmp_path / "out"
-    render(path, frames="1", out_dir=out, n_photons=N, temporal="off", config=RenderConfig(spatial_filter=False),
+    render(path, frames="1", out_dir=out, n_photons=N, temporal="off",
+           config=RenderConfig(filter=FilterConfig(spatial_filter=False)),
            settings=RenderSettings(width=16, height=12, spp=1), scheduler="synchronous", progress=False,
            keep_records=True)
     scene = read_scene(path)

@@ -12,7 +12,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.config import RenderConfig
+from pipeline.config import PhotonConfig, RenderConfig
 from pipeline.frames.images import frame_paths, read_exr
 from pipeline.run.render import RenderSettings, render
 from pipeline.scene import ElementMesh, read_scene
@@ -69,7 +69,7 @@ def test_a_depth_cap_of_eight_loses_rho_to_the_seventh(tmp_path):
     indirect light, 79 %, which the 1 % tolerance above rejects."""
     path = furnace_box(tmp_path / "furnace.glb", rho=RHO, radiance=L)
     render(path, frames="1", out_dir=tmp_path / "out", n_photons=100_000, temporal="off",
-           config=RenderConfig(photon_depth=8), settings=RenderSettings(width=8, height=6, spp=1),
+           config=RenderConfig(photons=PhotonConfig(photon_depth=8)), settings=RenderSettings(width=8, height=6, spp=1),
            scheduler="synchronous", progress=False)
     scene = read_scene(path)
     areas = ElementMesh.build(scene).vertex_areas(scene.pose_frame(1))

@@ -11,8 +11,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from pipeline.config import PhotonConfig
 from pipeline.frames.images import frame_paths, read_exr
-from pipeline.photons.tracing import trace_batch
+from pipeline.photons.tracing import PhotonRange, trace_batch
 from pipeline.run.render import RenderSettings, render
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.store import DIRECT_BIT
@@ -57,7 +58,7 @@ def test_total_flux_is_unbiased_with_both_lights(tmp_path):
     scene = read_scene(lit_room(tmp_path / "both.glb", dim_ratio=RATIO))
     elements = ElementMesh.build(scene)
     state = scene.pose_frame(1)
-    batch = trace_batch(state, elements, n_photons=N, photon_start=0, seed=3, frame=1, max_depth=256)
+    batch = trace_batch(state, elements, PhotonRange(1, 0, N), PhotonConfig(seed=3, photon_depth=256))
     direct = (batch.key & DIRECT_BIT) > 0
     flux = batch.energy[direct].astype(np.float64).sum(axis=0) / N
     # every photon's first hit is on a wall (closed rooms): the direct records carry all the flux

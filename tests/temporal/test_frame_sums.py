@@ -48,15 +48,15 @@ def _store(tmp_path, sizes, *, keep_records=True, name="p.zarr", elements=N_ELEM
     start = 0
     for b, n in enumerate(sizes):
         batch = make_batch(0, b, n, elements, photon_start=start)
-        store.write_batch(0, b, **batch, summarise=summariser(_elements(n_elements=elements)))
-        start += batch["photons_emitted"]
+        store.write_batch(0, b, batch, summarise=summariser(_elements(n_elements=elements)))
+        start += batch.photons_emitted
     return PhotonStore.open(url, mode="r", **identity)
 
 
 def _grouped(batch, n_elements=N_ELEMENTS):
     """A batch's records as the shoot task sums them: grouped by element, the writer's order kept
     within an element (a stable argsort here, a radix sort in the store)."""
-    key, bary, energy = (np.asarray(batch[k]) for k in ("key", "bary", "energy"))
+    key, bary, energy = (np.asarray(getattr(batch, k)) for k in ("key", "bary", "energy"))
     order = np.argsort(key & np.uint32(ELEMENT_MASK), kind="stable")
     offsets = np.zeros(n_elements + 1, np.int64)
     np.cumsum(np.bincount(key & np.uint32(ELEMENT_MASK), minlength=n_elements), out=offsets[1:])
@@ -72,7 +72,7 @@ def _want(sizes, n_parity):
     for b, n in enumerate(sizes):
         batch = make_batch(0, b, n, N_ELEMENTS, photon_start=start)
         parts.append(_grouped(batch))
-        start += batch["photons_emitted"]
+        start += batch.photons_emitted
     split, flux = [], []
     for r in parts:
         sums, f = _float64_summary(r)
@@ -144,7 +144,7 @@ def test_a_store_without_records_writes_none_and_refuses_to_read_them(tmp_path):
     # a writer without a summary is a caller's bug there: the sums are all the store keeps
     writer = PhotonStore.open(store.url, mode="r+")
     with pytest.raises(ValueError, match="needs the batch's summary"):
-        writer.write_batch(0, 2, **make_batch(0, 2, 100, N_ELEMENTS, photon_start=writer.photons_emitted(0)))
+        writer.write_batch(0, 2, make_batch(0, 2, 100, N_ELEMENTS, photon_start=writer.photons_emitted(0)))
 
 
 def test_sparse_sums_hold_only_what_a_batch_hit():

@@ -7,9 +7,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.collection.maps import collection_windows
+from pipeline.collection.maps import WindowSpec, collection_windows
 from pipeline.collection.regional_steps import clamp_windows, element_regions, step_boundaries
-from pipeline.config import RenderConfig
+from pipeline.config import CollectionConfig, PhotonConfig
 from pipeline.scene import read_scene
 
 RATE = 30.0  # hits an element a frame: Condition (1) alone cannot see a 40 % change at this count
@@ -76,9 +76,9 @@ def test_windows_stop_at_a_jump_condition_1_alone_misses():
     emitted = np.full(len(counts), 1e4)
     levels = [regions]
     frames = np.arange(4, 26)
-    paper = collection_windows(counts, emitted, frames, mode="adaptive", fmax=14, config=RenderConfig(step_levels=0))
-    ours = collection_windows(counts, emitted, frames, mode="adaptive", fmax=14,
-                              config=RenderConfig(step_levels=1, step_relative=0.01), regions=levels)
+    paper = collection_windows(counts, emitted, frames, WindowSpec("adaptive", 14), CollectionConfig(step_levels=0))
+    ours = collection_windows(counts, emitted, frames, WindowSpec("adaptive", 14),
+                              CollectionConfig(step_levels=1, step_relative=0.01), regions=levels)
     elements = regions == 1
 
     def crossing(back, fwd):
@@ -92,13 +92,13 @@ def test_windows_stop_at_a_jump_condition_1_alone_misses():
 def test_a_chunks_windows_do_not_depend_on_the_rows_around_it():
     counts, regions = _table(frames=40, steps=((20, 2, 0.6), (9, 0, 1.5)))
     emitted = np.full(len(counts), 1e4)
-    config = RenderConfig(step_levels=1, step_relative=0.01)
-    whole = collection_windows(counts, emitted, np.arange(40), mode="adaptive", fmax=14, config=config,
+    config = CollectionConfig(step_levels=1, step_relative=0.01)
+    whole = collection_windows(counts, emitted, np.arange(40), WindowSpec("adaptive", 14), config,
                                regions=[regions])
     for lo in (0, 13, 26):
         frames = np.arange(lo, min(lo + 13, 40))
         first = max(0, lo - 8)
-        part = collection_windows(counts[first:], emitted, frames, mode="adaptive", fmax=14, config=config,
+        part = collection_windows(counts[first:], emitted, frames, WindowSpec("adaptive", 14), config,
                                   regions=[regions], counts_from=first)
         assert (part[0] == whole[0][frames]).all() and (part[1] == whole[1][frames]).all()
 
@@ -118,8 +118,8 @@ def test_regions_follow_instances_and_cells():
 def test_levels_need_regions():
     counts, _ = _table(steps=())
     with pytest.raises(ValueError):
-        collection_windows(counts, np.full(len(counts), 1e4), [5], mode="adaptive", fmax=8,
-                           config=RenderConfig(step_levels=2))
+        collection_windows(counts, np.full(len(counts), 1e4), [5], WindowSpec("adaptive", 8),
+                           CollectionConfig(step_levels=2))
 
 
 @pytest.fixture(scope="module")
@@ -136,7 +136,7 @@ def room_jump(tmp_path_factory):
     for name, event in (("jump", 71), ("steady", 500)):  # 500: after the last frame, no jump
         path = write_scene("room", root / f"{name}.glb", event)
         shoot(str(path), frames="63-79", n_photons=20_000, store_url=str(root / f"{name}.zarr"),
-              config=RenderConfig(), scheduler="synchronous", progress=False)
+              config=PhotonConfig(), scheduler="synchronous", progress=False)
         scene = read_scene(path)
         out[name] = (ElementMesh.build(scene), PhotonStore.open(str(root / f"{name}.zarr")))
     return out
@@ -145,11 +145,11 @@ def room_jump(tmp_path_factory):
 def _windows_around_the_jump(mesh, store, levels):
     from pipeline.collection.maps import step_regions
 
-    config = RenderConfig(step_levels=levels)
+    config = CollectionConfig(step_levels=levels)
     frames = np.arange(64, 79)
     counts = store.counts(kind="all")
-    back, fwd = collection_windows(counts, store.emitted(None).astype(float), frames - 1, mode="adaptive",
-                                   fmax=14, config=config, regions=step_regions(mesh, config))
+    back, fwd = collection_windows(counts, store.emitted(None).astype(float), frames - 1, WindowSpec("adaptive", 14),
+                                   config, regions=step_regions(mesh, config))
     hit = counts.sum(axis=0) > 0
     crosses = (frames[:, None] - back.astype(int) <= 70) & (frames[:, None] + fwd.astype(int) >= 71)
     return back, fwd, crosses[np.isin(frames, (70, 71))][:, hit].mean()

@@ -20,8 +20,8 @@ import pytest
 
 from kernels import colour
 from pipeline.collection.estimators import vertex_irradiance
-from pipeline.collection.maps import illumination_maps
-from pipeline.config import RenderConfig
+from pipeline.collection.maps import MapRequest, WindowSpec, illumination_maps
+from pipeline.config import CollectionConfig, FilterConfig, PhotonConfig
 from pipeline.run.shoot import shoot
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin import write_builtin
@@ -40,9 +40,9 @@ class Room:
         self.scene = read_scene(path)
         self.mesh = ElementMesh.build(self.scene)
         shoot(str(path), frames=f"{K2 - 15}-{K2 + 15}", n_photons=N_FRAME, store_url=str(root / "p.zarr"),
-              config=RenderConfig(), scheduler="synchronous", progress=False, keep_records=True)
+              config=PhotonConfig(), scheduler="synchronous", progress=False, keep_records=True)
         shoot(str(path), frames=str(K2), n_photons=reference_photons, store_url=str(root / "ref.zarr"),
-              config=RenderConfig(seed=1), scheduler="synchronous", progress=False, keep_records=True)
+              config=PhotonConfig(seed=1), scheduler="synchronous", progress=False, keep_records=True)
         self.store = PhotonStore.open(str(root / "p.zarr"))
         ref = PhotonStore.open(str(root / "ref.zarr"))
         self.state = self.scene.pose_frame(K2)
@@ -57,7 +57,8 @@ class Room:
         return self.names.index(name)
 
     def frame(self, mode: str, fmax: int = FMAX):
-        return next(illumination_maps(self.store, self.mesh, self.scene, [self.index], mode=mode, fmax=fmax))
+        request = MapRequest(WindowSpec(mode, fmax), [self.index])
+        return next(illumination_maps(self.store, self.mesh, self.scene, request))
 
     def highlight(self) -> np.ndarray:
         """Floor vertices within 0.5 m of the aircraft's ground point at K2."""
@@ -135,7 +136,7 @@ def test_c_adaptive_cuts_static_wall_flicker(room):
     flicker = {}
     for mode in ("off", "adaptive"):
         maps = np.array([o.irradiance @ LUMA for o in illumination_maps(
-            room.store, room.mesh, room.scene, frames, mode=mode, fmax=FMAX)])[:, walls]
+            room.store, room.mesh, room.scene, MapRequest(WindowSpec(mode, FMAX), frames))])[:, walls]
         flicker[mode] = float(np.mean(np.sqrt(np.mean(np.diff(maps, axis=0) ** 2, axis=1)) / maps.mean()))
     print("static-wall flicker (rms frame-to-frame change / mean):", flicker,
           "ratio", flicker["off"] / flicker["adaptive"])
@@ -147,8 +148,8 @@ def test_spatial_filter_repairs_only_where_temporal_collection_falls_short(room)
     leaves far fewer of them than each frame's own photons."""
     share = {}
     for mode in ("off", "adaptive"):
-        o = next(illumination_maps(room.store, room.mesh, room.scene, [room.index], mode=mode, fmax=FMAX,
-                                   spatial_filter=True))
+        o = next(illumination_maps(room.store, room.mesh, room.scene, MapRequest(WindowSpec(mode, FMAX), [room.index]),
+                                   filter=FilterConfig()))
         assert o.rings.shape == (1, room.mesh.n_vertices) and np.isfinite(o.irradiance).all()
         share[mode] = float((o.rings > 0).mean())
     print("share of vertices filtered:", share)
@@ -166,21 +167,21 @@ def test_windows_from_the_reached_count_rows_are_the_whole_tables(room):
     windows computed from the whole table, bit for bit; so are the maps the task writes from them."""
     from pipeline.collection.maps import collection_windows, step_regions, window_reach
 
-    cfg = RenderConfig()
+    cfg = CollectionConfig()
     regions = step_regions(room.mesh, cfg)  # the regional step test reads the same rows
     store = room.store
     counts = store.counts()
     emitted = store.emitted().astype(np.float64)
     assert np.array_equal(emitted, [store.photons_emitted(f) for f in range(store.n_frames)])
-    reach = window_reach(FMAX, "adaptive", cfg)
+    reach = window_reach(WindowSpec("adaptive", FMAX), cfg)
     for frames in ([room.index], list(range(K2 - 16, K2 + 4)), [K2 + 10, K2 + 14]):
-        whole = collection_windows(counts, emitted, frames, mode="adaptive", fmax=FMAX, config=cfg, regions=regions)
+        whole = collection_windows(counts, emitted, frames, WindowSpec("adaptive", FMAX), cfg, regions=regions)
         lo, hi = max(0, min(frames) - reach), min(store.n_frames, max(frames) + 1 + reach)
-        part = collection_windows(counts[lo:hi], emitted, frames, mode="adaptive", fmax=FMAX, config=cfg,
+        part = collection_windows(counts[lo:hi], emitted, frames, WindowSpec("adaptive", FMAX), cfg,
                                   counts_from=lo, regions=regions)
         assert all(np.array_equal(a, b) for a, b in zip(whole, part))
     with pytest.raises(Exception, match="count rows"):
-        collection_windows(counts[K2:], emitted, [K2], mode="adaptive", fmax=FMAX, config=cfg, counts_from=K2,
+        collection_windows(counts[K2:], emitted, [K2], WindowSpec("adaptive", FMAX), cfg, counts_from=K2,
                            regions=regions)
 
 
@@ -206,7 +207,8 @@ def test_visible_adaptation_with_the_frames_geometry_is_the_same(room):
     from pipeline.collection.estimators import frame_geometry
     from pipeline.frames.camera_paths import visible_adaptation
 
-    irr = next(illumination_maps(room.store, room.mesh, room.scene, [room.index])).irradiance
+    request = MapRequest(WindowSpec("adaptive", 15), [room.index])
+    irr = next(illumination_maps(room.store, room.mesh, room.scene, request)).irradiance
     geometry = frame_geometry(room.scene, room.mesh, K2)
     assert np.array_equal(geometry.vertex_areas, room.mesh.vertex_areas(room.state))
     assert frame_geometry(room.scene, room.mesh, K2) is geometry

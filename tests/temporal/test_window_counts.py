@@ -5,8 +5,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from pipeline.collection.maps import collection_windows, window_counts
-from pipeline.config import RenderConfig
+from pipeline.collection.maps import WindowSpec, collection_windows, window_counts
+from pipeline.config import CollectionConfig
+from pipeline.photons.tracing import PhotonBatch
 from pipeline.store import PhotonStore, pack_key
 from tests.store.photonstore_helpers import IDENTITY
 
@@ -22,21 +23,21 @@ def _store(tmp_path) -> PhotonStore:
         n_direct = DIRECT[f >= CHANGE]
         n = INDIRECT + n_direct
         direct = np.arange(n) < n_direct
-        store.write_batch(f, 0, key=pack_key(np.zeros(n, np.uint32), np.arange(n), direct),
-                          bary=np.zeros((n, 2), np.uint16), energy=np.ones((n, 3), np.float32),
-                          photons_emitted=EMITTED, photon_start=0)
+        store.write_batch(f, 0, PhotonBatch(pack_key(np.zeros(n, np.uint32), np.arange(n), direct),
+                                            np.zeros((n, 2), np.uint16), np.ones((n, 3), np.float32),
+                                            photons_emitted=EMITTED, photon_start=0))
     return PhotonStore.open(url, mode="r", **IDENTITY)
 
 
 def _windows(store, config, frame, counts):
-    back, fwd = collection_windows(counts, store.emitted(None).astype(np.float64), [frame], mode="adaptive",
-                                   fmax=8, config=config)
+    back, fwd = collection_windows(counts, store.emitted(None).astype(np.float64), [frame], WindowSpec("adaptive", 8),
+                                   config)
     return int(back[0, 0]), int(fwd[0, 0])
 
 
 def test_windows_follow_the_indirect_hits(tmp_path):
     store = _store(tmp_path)
-    config = RenderConfig(step_levels=0)  # Condition (1) alone: no element regions needed
+    config = CollectionConfig(step_levels=0)  # Condition (1) alone: no element regions needed
     assert window_counts(store)[:, 0].tolist() == [INDIRECT] * FRAMES
     every = store.counts(kind="all")
     assert every[:, 0].tolist() == [INDIRECT + DIRECT[f >= CHANGE] for f in range(FRAMES)]

@@ -5,10 +5,13 @@ SE = std / sqrt(K). Records are turned back into world positions through the ele
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
-from pipeline.photons.tracing import trace_batch
+from pipeline.config import PhotonConfig
+from pipeline.photons.tracing import PhotonRange, trace_batch
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin.gltf_builder import GltfBuilder
 from pipeline.store import DIRECT_BIT, ELEMENT_MASK, PARITY_BIT
@@ -29,8 +32,8 @@ def _load(b, tmp_path, name, element_size):
 
 def _batches(state, elements, n, max_depth=8):
     """K independent batches: disjoint photon index ranges of one frame."""
-    return [trace_batch(state, elements, n_photons=n, photon_start=b * n, seed=7, frame=1,
-                        max_depth=max_depth) for b in range(K)]
+    return [trace_batch(state, elements, PhotonRange(1, b * n, n), PhotonConfig(seed=7, photon_depth=max_depth))
+            for b in range(K)]
 
 
 def _positions(batch, elements, state):
@@ -148,13 +151,14 @@ def test_deterministic_and_parity_split(tmp_path):
     b.add_node("box", _closed_box(b, white))
     b.add_node("lamp", light=b.add_point_light("lamp", (1, 1, 1), 1.0), translation=(1, 1, 1))
     scene, elements, state = _load(b, tmp_path, "det.glb", 0.5)
-    kw = dict(n_photons=3001, photon_start=17, seed=3, frame=5, max_depth=6)
-    one = trace_batch(state, elements, **kw)
-    two = trace_batch(state, elements, **kw)
+    photons, config = PhotonRange(frame=5, start=17, count=3001), PhotonConfig(seed=3, photon_depth=6)
+    one = trace_batch(state, elements, photons, config)
+    two = trace_batch(state, elements, photons, config)
     for name in ("key", "bary", "energy"):
         assert getattr(one, name).tobytes() == getattr(two, name).tobytes()
-    for change in ({"seed": 4}, {"frame": 6}, {"photon_start": 18}):
-        other = trace_batch(state, elements, **{**kw, **change})
+    for other_photons, other_config in ((photons, config.replace(seed=4)), (replace(photons, frame=6), config),
+                                        (replace(photons, start=18), config)):
+        other = trace_batch(state, elements, other_photons, other_config)
         assert one.key.tobytes() != other.key.tobytes()
     # photon indices 17..3017: 1501 odd, 1500 even; their direct hits split exactly so
     direct = (one.key & DIRECT_BIT) > 0
@@ -191,9 +195,9 @@ def glossy_room(tmp_path_factory):
 def test_opencl_tracer_equals_numpy_reference(glossy_room):
     """The bounce kernel and its NumPy twin give bit-identical records over whole photon paths."""
     scene, elements, state = glossy_room
-    kw = dict(n_photons=20_000, photon_start=0, seed=11, frame=3, max_depth=12)
-    cl = trace_batch(state, elements, backend="opencl", **kw)
-    ref = trace_batch(state, elements, backend="numpy", **kw)
+    photons, config = PhotonRange(frame=3, start=0, count=20_000), PhotonConfig(seed=11, photon_depth=12)
+    cl = trace_batch(state, elements, photons, config, backend="opencl")
+    ref = trace_batch(state, elements, photons, config, backend="numpy")
     assert cl.rays_cast == ref.rays_cast and len(cl.key) > 20_000
     for a, b in zip(_sorted_records(cl), _sorted_records(ref)):
         assert a.tobytes() == b.tobytes()
@@ -202,10 +206,10 @@ def test_opencl_tracer_equals_numpy_reference(glossy_room):
 def test_records_do_not_depend_on_batch_boundaries(glossy_room):
     """Photon i's path depends only on (seed, frame, i): one batch equals two half batches."""
     scene, elements, state = glossy_room
-    kw = dict(seed=2, frame=9, max_depth=8)
-    whole = trace_batch(state, elements, n_photons=6000, photon_start=0, **kw)
-    first = trace_batch(state, elements, n_photons=2500, photon_start=0, **kw)
-    rest = trace_batch(state, elements, n_photons=3500, photon_start=2500, **kw)
+    config = PhotonConfig(seed=2, photon_depth=8)
+    whole = trace_batch(state, elements, PhotonRange(9, 0, 6000), config)
+    first = trace_batch(state, elements, PhotonRange(9, 0, 2500), config)
+    rest = trace_batch(state, elements, PhotonRange(9, 2500, 3500), config)
     from pipeline.photons.tracing import PhotonBatch
 
     halves = PhotonBatch(np.concatenate([first.key, rest.key]), np.concatenate([first.bary, rest.bary]),
