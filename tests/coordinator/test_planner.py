@@ -70,7 +70,7 @@ class InProcess:
 def _job(tmp_path, name: str, frames: str, config: RenderConfig = CHEAP, **kw):
     """A Job over ``frames`` of the built-in scene ``name`` and its fresh store."""
     scene = read_scene(write_builtin(name, tmp_path / f"{name}.glb"))
-    p = plan(scene, frames, 1, config)
+    p = plan(scene, frames, 1, config.photons)
     url = str(tmp_path / "photons.zarr")
     store = open_store(p, url, keep_records=False)
     job = Job(scene_path=str(scene.path), scene_hash=scene.scene_hash, camera=None, camera_name=scene.camera_name,
