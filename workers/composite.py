@@ -32,37 +32,50 @@ pipeline/frames/area_lights.py (emissive triangles and the sky), pipeline/frames
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 
-from pipeline.frames.camera_paths import render_frame
+from pipeline.frames.camera_paths import CameraPaths, render_frame
 from pipeline.frames.images import frame_paths, write_exr, write_png
-from pipeline.frames.tonemap import ToneMapping
+from pipeline.frames.settings import RenderSettings
 from pipeline.frames.tonemap import tonemap as tone
-from pipeline.scene.scene_cache import load_elements, load_scene
+from pipeline.scene.scene_cache import SceneRef
 from pipeline.store.illumination import IlluminationMaps
 
 
-def composite_task(*, scene_path: str, scene_hash: str, camera: str | None, element_size: float,
-                   store_url: str, frame: int, width: int, height: int, spp: int, seed: int,
-                   max_depth: int, area_samples: int, adaptation: float, tonemap: ToneMapping,
-                   out_dir: str, metadata: dict) -> dict:
+@dataclass(frozen=True)
+class CompositeRequest:
+    """Frame ``frame`` of ``scene`` with its indirect map from the store at ``store_url``, rendered
+    and tone mapped as ``settings`` say at the eye's adaptation L_a ``adaptation``
+    (pipeline/frames/tonemap.py), its random numbers keyed by ``seed``; its EXR and PNG written to
+    ``out_dir``, the EXR carrying ``metadata``."""
+
+    scene: SceneRef
+    store_url: str
+    frame: int
+    settings: RenderSettings
+    seed: int
+    adaptation: float
+    out_dir: str
+    metadata: dict
+
+
+def composite_task(request: CompositeRequest) -> dict:
     """Dask task: render one frame, tone-map it and write its EXR and PNG (atomically).
 
-    Plain values and the frozen ToneMapping in (``adaptation`` is the eye's adaptation L_a at this
-    frame, pipeline/frames/tonemap.py), a small dict of timings and ray counts out.
+    A frozen request in, a small dict of timings and ray counts out.
     """
     t0 = time.perf_counter()
-    scene = load_scene(scene_path, scene_hash, camera)
-    elements = load_elements(scene_path, scene_hash, element_size)
+    frame = request.frame
+    scene, elements = request.scene.scene(), request.scene.elements()
     state = scene.pose_frame(frame)
-    irradiance = IlluminationMaps.open_shared(store_url).read(frame - 1, "indirect")
+    irradiance = IlluminationMaps.open_shared(request.store_url).read(frame - 1, "indirect")
     t1 = time.perf_counter()
-    img = render_frame(state, elements, irradiance, width=width, height=height, spp=spp, seed=seed,
-                       frame=frame, max_depth=max_depth, area_samples=area_samples)
+    img = render_frame(state, elements, irradiance, CameraPaths.of(request.settings, request.seed, frame))
     t2 = time.perf_counter()
-    exr, png = frame_paths(out_dir, frame)
+    exr, png = frame_paths(request.out_dir, frame)
     write_exr(exr, img.beauty, img.alpha, {"direct": img.direct, "indirect": img.indirect,
-                                           "albedo": img.albedo}, {**metadata, "frame": frame})
-    write_png(png, tone(img.beauty, adaptation, tonemap))
+                                           "albedo": img.albedo}, {**request.metadata, "frame": frame})
+    write_png(png, tone(img.beauty, request.adaptation, request.settings.tonemap))
     t3 = time.perf_counter()
     return {"frame": frame, "rays": img.rays, "load_s": t1 - t0, "render_s": t2 - t1,
             "write_s": t3 - t2}

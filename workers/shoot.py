@@ -3,33 +3,42 @@ its counts and sums to the photon store."""
 from __future__ import annotations
 
 import time
+from dataclasses import dataclass
 
 from pipeline.collection.batch_sums import summariser
 from pipeline.config import PhotonConfig
 from pipeline.photons.tracing import PhotonRange, trace_batch
-from pipeline.scene.scene_cache import load_elements, load_scene
+from pipeline.scene.scene_cache import SceneRef
 from pipeline.store import PhotonStore, counting_io
 
 
-def shoot_task(*, store_url: str, scene_path: str, scene_hash: str, element_size: float,
-               frame: int, frame_index: int, batch: int, n_photons: int, photon_start: int,
-               seed: int, max_depth: int) -> dict:
-    """Dask task: trace (frame, batch) and write its counts and sums (and its records, if the store
-    keeps them) to the photon store; skip it if done.
+@dataclass(frozen=True)
+class ShootRequest:
+    """Batch ``batch`` of frame ``photons.frame``: ``photons`` traced with ``config``'s seed and
+    depth cap in ``scene``, written to the store at ``store_url``."""
 
-    Plain arguments in, a small dict of counters out; runs the same with or without a cluster.
+    scene: SceneRef
+    store_url: str
+    batch: int
+    photons: PhotonRange
+    config: PhotonConfig
+
+
+def shoot_task(request: ShootRequest) -> dict:
+    """Dask task: trace the request's batch and write its counts and sums (and its records, if the
+    store keeps them) to the photon store; skip it if done.
+
+    A frozen request in, a small dict of counters out; runs the same with or without a cluster.
     """
-
-    store = PhotonStore.open_shared(store_url, mode="r+")
-    if store.is_done(frame_index, batch):
+    frame, batch, n_photons = request.photons.frame, request.batch, request.photons.count
+    store = PhotonStore.open_shared(request.store_url, mode="r+")
+    if store.is_done(frame - 1, batch):
         return {"frame": frame, "batch": batch, "skipped": True}
     t0 = time.perf_counter()
-    scene = load_scene(scene_path, scene_hash)
-    elements = load_elements(scene_path, scene_hash, element_size)
+    scene, elements = request.scene.scene(), request.scene.elements()
     state = scene.pose_frame(frame)
     t1 = time.perf_counter()
-    result = trace_batch(state, elements, PhotonRange(frame, photon_start, n_photons),
-                         PhotonConfig(element_size=element_size, seed=seed, photon_depth=max_depth))
+    result = trace_batch(state, elements, request.photons, request.config)
     t2 = time.perf_counter()
     summed, summary = [0.0], summariser(elements)
 
@@ -40,7 +49,7 @@ def shoot_task(*, store_url: str, scene_path: str, scene_hash: str, element_size
         return out
 
     with counting_io() as io:
-        store.write_batch(frame_index, batch, result, summarise=summarise)
+        store.write_batch(frame - 1, batch, result, summarise=summarise)
     t3 = time.perf_counter()
     return {"frame": frame, "batch": batch, "skipped": False, "photons": n_photons,
             "records": len(result.key), "rays": result.rays_cast, "capped": result.stats["capped"],

@@ -71,13 +71,14 @@ import numpy as np
 from pipeline.collection.estimators import vertex_irradiance
 from pipeline.config import PhotonConfig, RenderConfig, SegmentConfig
 from pipeline.errors import LoomError
-from pipeline.frames.camera_paths import render_frame
+from pipeline.frames.camera_paths import CameraPaths, render_frame
 from pipeline.frames.perceived import display_values, displayed_difference
+from pipeline.frames.settings import RenderSettings
 from pipeline.frames.tonemap import log_average, luminance
 from pipeline.photons.raycast import caster_for
 from pipeline.photons.tracing import PhotonRange, trace_batch
 from pipeline.run.cluster import connect
-from pipeline.run.render import RenderSettings, render
+from pipeline.run.render import render
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin import BUILTIN_SCENES
 from pipeline.scene.scene_cache import load_elements, load_scene
@@ -246,8 +247,8 @@ class Evaluation:
         self.casters = [caster_for(s) for s in self.states]
         self.areas = np.stack([elements.vertex_areas(s) for s in self.states])
         self.highlight = highlight
-        self._render = lambda i, m: render_frame(self.states[i], elements, m, width=plan.width, height=plan.height,
-                                                 spp=plan.spp, seed=0, frame=self.frames[i],
+        self._render = lambda i, m: render_frame(self.states[i], elements, m,
+                                                 CameraPaths(plan.width, plan.height, plan.spp, 0, self.frames[i]),
                                                  caster=self.casters[i]).beauty
         self.ref_images = self.images(refs[0])
         self.adaptation = log_average(luminance(self.ref_images))  # the frozen tone mapping's L_wa

@@ -23,7 +23,7 @@ import numpy as np
 from embreex import mesh_construction, rtcore_scene
 
 from kernels.camera import camera_rays_reference
-from pipeline.frames.camera_paths import CHUNK_RAYS, render_frame
+from pipeline.frames.camera_paths import CHUNK_RAYS, CameraPaths, render_frame
 from pipeline.photons.raycast import caster_for
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin import BUILTIN_SCENES, write_builtin
@@ -63,13 +63,13 @@ def bench_scene(path: str | Path, *, width: int, height: int, spp: int, repeat: 
     elements = ElementMesh.build(scene)
     irradiance = np.full((elements.n_vertices, 3), 0.5)
     caster = caster_for(state)
-    args = dict(width=width, height=height, spp=spp, seed=0, frame=frame, caster=caster)
-    img = render_frame(state, elements, irradiance, **args)  # warm-up
+    paths = CameraPaths(width, height, spp, 0, frame)
+    img = render_frame(state, elements, irradiance, paths, caster=caster)  # warm-up
     raw_cast = _raw_caster(state, width, height)
     frame_s, raw_s = [], []
     for _ in range(repeat):
         t0 = time.perf_counter()
-        img = render_frame(state, elements, irradiance, **args)
+        img = render_frame(state, elements, irradiance, paths, caster=caster)
         t1 = time.perf_counter()
         raw_cast()
         frame_s.append(t1 - t0)

@@ -39,7 +39,7 @@ from pipeline.collection.estimators import mesh_adaptation, vertex_irradiance
 from pipeline.collection.maps import MapRequest, WindowSpec, illumination_maps, window_counts
 from pipeline.config import PhotonConfig, RenderConfig
 from pipeline.errors import LoomError
-from pipeline.frames.camera_paths import render_frame
+from pipeline.frames.camera_paths import CameraPaths, render_frame
 from pipeline.frames.perceived import displayed_difference
 from pipeline.frames.tonemap import ToneMapping, ward_scale
 from pipeline.photons.raycast import caster_for
@@ -100,6 +100,7 @@ def run(photons: Iterable[int] = (10_000, 20_000, 40_000, 80_000), *, fmax: int 
         mesh = ElementMesh.build(scene, config.photons.element_size)
         state = scene.pose_frame(K)
         caster = caster_for(state)
+        paths = CameraPaths(width, height, spp, config.photons.seed, K)
         areas = mesh.vertex_areas(state)
         index = K - 1
         half = fmax // 2
@@ -111,8 +112,7 @@ def run(photons: Iterable[int] = (10_000, 20_000, 40_000, 80_000), *, fmax: int 
              f"filter_rings {config.filter.filter_rings}")
 
         def pair(irradiance):  # I1(K), I2(K): same camera samples and direct light
-            return [render_frame(state, mesh, irradiance[p], width=width, height=height, spp=spp,
-                                 seed=config.photons.seed, frame=K, caster=caster) for p in (0, 1)]
+            return [render_frame(state, mesh, irradiance[p], paths, caster=caster) for p in (0, 1)]
 
         def maps(pstore, mode, filter=None):
             return next(illumination_maps(pstore, mesh, scene, MapRequest(WindowSpec(mode, fmax), [index], halves=True),
@@ -169,11 +169,10 @@ def run(photons: Iterable[int] = (10_000, 20_000, 40_000, 80_000), *, fmax: int 
 
         if calibrate and last is not None:
             shown, direct, adaptation, a = last
-            base = render_frame(state, mesh, shown, width=width, height=height, spp=spp, seed=config.photons.seed,
-                                frame=K, caster=caster).beauty
+            base = render_frame(state, mesh, shown, paths, caster=caster).beauty
             rng = np.random.default_rng(1)
-            layers = [render_frame(state, mesh, shown * rng.standard_normal(mesh.n_vertices)[:, None], width=width,
-                                   height=height, spp=spp, seed=config.photons.seed, frame=K, caster=caster).indirect
+            layers = [render_frame(state, mesh, shown * rng.standard_normal(mesh.n_vertices)[:, None], paths,
+                                   caster=caster).indirect
                       for _ in range(2)]
             amp = noise_for_threshold(base, layers, adaptation, thr, aqm_size=config.segments.aqm_size)
             step = displayed_difference(base, base * 1.10, adaptation, aqm_size=config.segments.aqm_size).d_aqm

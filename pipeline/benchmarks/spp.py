@@ -44,10 +44,10 @@ import numpy as np
 from kernels import colour
 from pipeline.collection.maps import MapRequest, WindowSpec, illumination_maps
 from pipeline.config import RenderConfig
-from pipeline.frames.camera_paths import render_frame, visible_adaptation
+from pipeline.frames.camera_paths import CameraPaths, render_frame, visible_adaptation
 from pipeline.frames.perceived import displayed_difference
+from pipeline.frames.settings import RenderSettings
 from pipeline.photons.raycast import caster_for
-from pipeline.run.render import RenderSettings
 from pipeline.run.shoot import shoot
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin import write_builtin
@@ -143,16 +143,13 @@ def run(frames: Iterable[int] = FRAMES, *, spps: Sequence[int] = SPPS, reference
             irradiance = lit.irradiance
             state = scene.pose_frame(k)
             caster = caster_for(state)
-            adaptation = visible_adaptation(state, mesh, irradiance, aspect=width / height, seed=config.photons.seed,
-                                            max_depth=settings.reflection_depth,
-                                            area_samples=settings.area_samples)
+            adaptation = visible_adaptation(state, mesh, irradiance, settings, config.photons.seed)
 
             def composite(spp: int, seed: int = config.photons.seed, state=state, caster=caster, irradiance=irradiance,
                           k=k):
                 c0, w0 = time.process_time(), time.perf_counter()
-                img = render_frame(state, mesh, irradiance, width=width, height=height, spp=spp, seed=seed, frame=k,
-                                   max_depth=settings.reflection_depth, area_samples=settings.area_samples,
-                                   caster=caster)
+                paths = CameraPaths(width, height, spp, seed, k, settings.reflection_depth, settings.area_samples)
+                img = render_frame(state, mesh, irradiance, paths, caster=caster)
                 return img.beauty, time.process_time() - c0, time.perf_counter() - w0
 
             ref, ref_cpu, ref_wall = composite(reference_spp)

@@ -14,6 +14,7 @@ whose light and view do not change gets the same L_wa however its objects move b
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import cached_property
 from typing import Sequence
 
 import numpy as np
@@ -28,6 +29,7 @@ from .area_lights import area_light, sky_light
 from .camera_hits import CameraHits
 from .punctual_lights import punctual_light
 from .random_numbers import DIMS_PER_DEPTH, frame_key, uniform
+from .settings import RenderSettings
 from .shading_tables import ShadingTables
 
 CHUNK_RAYS = 1 << 14  # camera samples per wavefront: a working set two workers keep in the shared L3
@@ -51,11 +53,36 @@ class FrameImage:
         return self.direct + self.also_indirect[i]
 
 
-def render_frame(state: FrameState, elements: ElementMesh | None, irradiance: np.ndarray | None, *, width: int,
-                 height: int, spp: int, seed: int, frame: int, max_depth: int = 4,
-                 area_samples: int = 2, caster: RayCaster | None = None,
-                 chunk_rays: int = CHUNK_RAYS, also_maps: Sequence[np.ndarray] = ()) -> FrameImage:
-    """Render one frame; ``irradiance`` (V, 3) is the indirect map (None: no indirect light).
+@dataclass(frozen=True)
+class CameraPaths:
+    """The camera paths of one frame: ``spp`` jittered samples a pixel of a ``width`` x ``height``
+    image, up to ``max_depth`` reflections, ``area_samples`` area-light (or sky) samples a diffuse
+    hit, their random numbers keyed by (``seed``, ``frame``) (pipeline/frames/random_numbers.py)."""
+
+    width: int
+    height: int
+    spp: int
+    seed: int
+    frame: int
+    max_depth: int = 4
+    area_samples: int = 2
+
+    @classmethod
+    def of(cls, settings: RenderSettings, seed: int, frame: int) -> CameraPaths:
+        """The paths of ``frame`` as ``settings`` render it."""
+        return cls(settings.width, settings.height, settings.spp, seed, frame, settings.reflection_depth,
+                   settings.area_samples)
+
+    @cached_property
+    def key(self) -> int:
+        """The 64-bit key of the paths' random numbers."""
+        return frame_key(self.seed, self.frame)
+
+
+def render_frame(state: FrameState, elements: ElementMesh | None, irradiance: np.ndarray | None,
+                 paths: CameraPaths, *, caster: RayCaster | None = None, chunk_rays: int = CHUNK_RAYS,
+                 also_maps: Sequence[np.ndarray] = ()) -> FrameImage:
+    """Render one frame along ``paths``; ``irradiance`` (V, 3) is the indirect map (None: no indirect light).
 
     ``also_maps``: more (V, 3) maps whose indirect layers come from the same camera paths
     (``FrameImage.also_indirect``): the paths never depend on the map, so each layer has the bits
@@ -65,9 +92,9 @@ def render_frame(state: FrameState, elements: ElementMesh | None, irradiance: np
     if also_maps and irradiance is None:
         raise ValueError("also_maps needs a first map")
     caster = caster or caster_for(state)
-    sh = ShadingTables(state, elements, irradiance, caster, area_samples, also_maps)
-    key = frame_key(seed, frame)
-    n_pixels = width * height
+    sh = ShadingTables(state, elements, irradiance, caster, paths.area_samples, also_maps)
+    spp = paths.spp
+    n_pixels = paths.width * paths.height
     n_layers = 3 + len(also_maps)
     # direct, indirect, albedo, then the indirect layers of also_maps: contiguous planes
     layers = np.zeros((n_layers, n_pixels, 3), np.float32)
@@ -79,15 +106,14 @@ def render_frame(state: FrameState, elements: ElementMesh | None, irradiance: np
         hi = min(n_pixels, lo + chunk_pixels)
         counter = np.arange(lo * spp, hi * spp, dtype=np.int64)
         if spp == 1:  # samples are pixels: trace straight into the layers
-            alpha[lo:hi] = trace_samples(state, sh, key, counter, spp, width, height, max_depth,
-                                         rays, layers[:, lo:hi])
+            alpha[lo:hi] = trace_samples(state, sh, paths, counter, rays, layers[:, lo:hi])
         else:  # mean over each pixel's samples (consecutive counters), in a fixed order
             out = samples[:, :len(counter)]
             out.fill(0)
-            cover = trace_samples(state, sh, key, counter, spp, width, height, max_depth, rays, out)
+            cover = trace_samples(state, sh, paths, counter, rays, out)
             sample_means(out.reshape(n_layers, hi - lo, spp, 3), layers[:, lo:hi])
             alpha[lo:hi] = cover.reshape(hi - lo, spp).mean(axis=1)
-    shape = (height, width, 3)
+    shape = (paths.height, paths.width, 3)
     direct, indirect, albedo, *also = (layers[i].reshape(shape) for i in range(n_layers))
     return FrameImage(direct + indirect, direct, indirect, albedo, alpha.reshape(shape[:2]), rays, also)
 
@@ -102,14 +128,16 @@ def sample_means(samples: np.ndarray, out: np.ndarray) -> None:
     out /= np.float32(samples.shape[2])
 
 
-def trace_samples(state: FrameState, sh: ShadingTables, key: int, counter: np.ndarray, spp: int, width: int,
-                  height: int, max_depth: int, rays: dict[str, int], out: np.ndarray) -> np.ndarray:
+def trace_samples(state: FrameState, sh: ShadingTables, paths: CameraPaths, counter: np.ndarray,
+                  rays: dict[str, int], out: np.ndarray) -> np.ndarray:
     """Add direct, indirect and albedo (and the indirect layers of ``sh.also``) of the camera
-    samples ``counter`` into ``out`` (L, n, 3), zero on entry; returns their coverage (n,)."""
+    samples ``counter`` of ``paths`` into ``out`` (L, n, 3), zero on entry; returns their coverage (n,)."""
     n = len(counter)
     cover = np.zeros(n, np.float32)
+    key, max_depth = paths.key, paths.max_depth
     cam = state.camera  # jittered camera rays (random dimensions 0 and 1), kernels/camera.cl
-    dirs = camera_rays_cl(key, int(counter[0]), n, spp, width, height, cam.definition.yfov, cam.to_world[:3, :3])
+    dirs = camera_rays_cl(key, int(counter[0]), n, paths.spp, paths.width, paths.height, cam.definition.yfov,
+                          cam.to_world[:3, :3])
     origins = np.broadcast_to(cam.position.astype(np.float32), dirs.shape)
     path = None  # sample index of every live ray; None while it is 0..n-1
     throughput = None  # None while it is all ones (camera rays)
@@ -235,12 +263,13 @@ def adaptation_size(aspect: float, width: int = ADAPTATION_WIDTH) -> tuple[int, 
     return width, max(1, int(round(width / float(aspect))))
 
 
-def visible_adaptation(state: FrameState, elements: ElementMesh, indirect: np.ndarray, *, aspect: float,
-                       seed: int, max_depth: int, area_samples: int, width: int = ADAPTATION_WIDTH) -> float:
+def visible_adaptation(state: FrameState, elements: ElementMesh, indirect: np.ndarray, settings: RenderSettings,
+                       seed: int) -> float:
     """L_wa (radiance units) of the frame ``state`` lit by the indirect map ``indirect`` (V, 3), as
-    its camera sees it: pixels whose paths saw nothing (no geometry, no sky) are left out."""
-    w, h = adaptation_size(aspect, width)
-    img = render_frame(state, elements, indirect, width=w, height=h, spp=1, seed=seed,
-                       frame=ADAPTATION_KEY_FRAME, max_depth=max_depth, area_samples=area_samples)
+    its camera sees it with the reflections and area samples of ``settings``: pixels whose paths
+    saw nothing (no geometry, no sky) are left out."""
+    w, h = adaptation_size(settings.width / settings.height)
+    img = render_frame(state, elements, indirect, CameraPaths(w, h, 1, seed, ADAPTATION_KEY_FRAME,
+                                                              settings.reflection_depth, settings.area_samples))
     seen = (img.alpha > 0) | (img.beauty.max(axis=-1) > 0)
     return image_adaptation(img.beauty, seen)

@@ -259,12 +259,12 @@ def group_sizes(n_calls: int, n_workers: int, largest: int, left: int | None = N
     return sizes
 
 
-def run_group(func: Callable, kwargs: list[dict]) -> list:
-    """Dask task: ``func(**kw)`` for each ``kw`` in order (see :func:`grouped`)."""
-    return [func(**kw) for kw in kwargs]
+def run_group(func: Callable, requests: list) -> list:
+    """Dask task: ``func(request)`` for each request in order (see :func:`grouped`)."""
+    return [func(request) for request in requests]
 
 
-def grouped(calls: list[tuple[str, dict]], sizes: int | list[int]) -> list[tuple[str, list[tuple[str, dict]]]]:
+def grouped(calls: list[tuple[str, Any]], sizes: int | list[int]) -> list[tuple[str, list[tuple[str, Any]]]]:
     """Consecutive runs of ``sizes`` calls (one size for all, or :func:`group_sizes`), each under a
     key naming its first call, its size and a digest of all its keys (a group with other members
     never reuses another's result)."""
@@ -284,17 +284,18 @@ def grouped(calls: list[tuple[str, dict]], sizes: int | list[int]) -> list[tuple
     return out
 
 
-def submit_grouped(client: Client, func: Callable, calls: list[tuple[str, dict]], sizes: int | list[int],
-                   **options: Any) -> dict[Future, list[str]]:
-    """Submit ``calls`` in groups of ``sizes`` (:func:`grouped`, :func:`run_group`); {future: its calls' keys}."""
-    return {client.submit(run_group, func, [kw for _, kw in members], key=key, retries=TASK_RETRIES, pure=False,
-                          **options): [k for k, _ in members]
+def submit_grouped(client: Client, func: Callable, calls: list[tuple[str, Any]], sizes: int | list[int], *,
+                   priority: int = 0) -> dict[Future, list[str]]:
+    """Submit ``calls`` in groups of ``sizes`` (:func:`grouped`, :func:`run_group`) at Dask's ``priority``;
+    {future: its calls' keys}."""
+    return {client.submit(run_group, func, [request for _, request in members], key=key, retries=TASK_RETRIES,
+                          pure=False, priority=priority): [k for k, _ in members]
             for key, members in grouped(calls, sizes)}
 
 
-def run_tasks(client: Client | None, func: Callable, calls: Iterable[tuple[str, dict]], *, desc: str,
+def run_tasks(client: Client | None, func: Callable, calls: Iterable[tuple[str, Any]], *, desc: str,
               progress: bool = True, group: int | list[int] = 1) -> dict[str, object]:
-    """Run ``func(**kwargs)`` for every ``(key, kwargs)`` and return ``{key: result}``.
+    """Run ``func(request)`` for every ``(key, request)`` and return ``{key: result}``.
 
     On a cluster, tasks are submitted with their key (a readable label that also makes a
     resubmission of the same work reuse it) and ``TASK_RETRIES`` retries, ``group`` calls to a task
@@ -307,8 +308,8 @@ def run_tasks(client: Client | None, func: Callable, calls: Iterable[tuple[str, 
                dynamic_ncols=True, leave=False)
     try:
         if client is None:
-            for key, kwargs in calls:
-                results[key] = func(**kwargs)
+            for key, request in calls:
+                results[key] = func(request)
                 bar.update()
             return results
         members = submit_grouped(client, func, calls, group)

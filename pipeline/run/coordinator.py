@@ -26,22 +26,24 @@ from __future__ import annotations
 import time
 from contextlib import contextmanager
 from pathlib import Path
-from typing import TYPE_CHECKING, Callable, Iterable, Iterator
+from typing import TYPE_CHECKING, Callable, Iterable, Iterator, Sequence
 
 from distributed import get_worker, worker_client
 
+from pipeline.collection.maps import WindowSpec
 from pipeline.config import stable_digest
 from pipeline.errors import LoomError
 from pipeline.frames.images import frame_is_valid, frame_paths
 from pipeline.frames.tonemap import adapt_in_time
+from pipeline.photons.tracing import PhotonRange
 from pipeline.scene.scene_cache import load_scene
 from pipeline.segments.job import Job
 from pipeline.segments.planner import SegmentPlanner, batches_in_use, next_batches, reach_targets
 from pipeline.segments.records import DIRECTORY, SegmentRecord, read_record, record_index, write_record
 from pipeline.store import PhotonStore
-from workers.composite import composite_task
-from workers.reconstruct import reconstruct_task
-from workers.shoot import shoot_task
+from workers.composite import CompositeRequest, composite_task
+from workers.reconstruct import ReconstructRequest, reconstruct_task
+from workers.shoot import ShootRequest, shoot_task
 
 from .cluster import TASK_RETRIES, completed, group_sizes, run_tasks, submit_grouped, task_key
 from .cluster import result as wait_result
@@ -135,11 +137,10 @@ class DaskExecutor:
         """Trace one batch more for every frame whose stored batches hold fewer than its target."""
         t0 = time.perf_counter()
         job = self.job
-        calls = [(shoot_key(self.config.photons, job.element_size, b.frame, b.batch, job.store_url), dict(
-            store_url=job.store_url, scene_path=job.scene_path, scene_hash=job.scene_hash,
-            element_size=job.element_size, frame=b.frame, frame_index=b.frame - 1, batch=b.batch,
-            n_photons=b.n_photons, photon_start=b.photon_start, seed=self.config.photons.seed,
-            max_depth=self.config.photons.photon_depth)) for b in next_batches(self.store, targets)]
+        calls = [(shoot_key(self.config.photons, job.element_size, b.frame, b.batch, job.store_url),
+                  ShootRequest(job.scene_ref, job.store_url, b.batch, PhotonRange(b.frame, b.photon_start, b.n_photons),
+                               self.config.photons))
+                 for b in next_batches(self.store, targets)]
         with _writing(job.store_url):
             results = run_tasks(self.client, shoot_task, calls, desc="shoot", progress=False,
                                 group=group_sizes(len(calls), len(self.workers()), SHOOT_GROUP))
@@ -153,16 +154,14 @@ class DaskExecutor:
         sel = set(self.job.selection)
         return [f for f in range(rec.start, rec.end + 1) if f in sel]
 
-    def reconstruct_calls(self, rec: SegmentRecord, targets: dict[int, int]) -> list[tuple[str, dict]]:
+    def reconstruct_calls(self, rec: SegmentRecord, targets: dict[int, int]) -> list[tuple[str, ReconstructRequest]]:
         """One reconstruction task per chunk of :func:`frame_chunks` of the segment's frames."""
-        job, px = self.job, self.job.settings
-        use = batches_in_use(self.store, targets).tolist()
-        return [(task_key(f"reconstruct-{job.decision_hash[:8]}-f{chunk[0]:05d}", job.store_url), dict(
-            store_url=job.store_url, scene_path=job.scene_path, scene_hash=job.scene_hash, camera=job.camera,
-            element_size=job.element_size, frames=chunk, fmax=rec.fmax, mode=rec.temporal,
-            batches=use, config=job.config, aspect=px.width / px.height, max_depth=px.reflection_depth,
-            area_samples=px.area_samples))
-            for chunk in frame_chunks(self.frames_of(rec))]
+        job = self.job
+        use = tuple(batches_in_use(self.store, targets).tolist())
+        windows = WindowSpec(rec.temporal, rec.fmax)
+        return [(task_key(f"reconstruct-{job.decision_hash[:8]}-f{chunk[0]:05d}", job.store_url),
+                 ReconstructRequest(job.scene_ref, job.store_url, tuple(chunk), windows, use, job.config, job.settings))
+                for chunk in frame_chunks(self.frames_of(rec))]
 
     def _took(self, result: dict) -> None:
         self.add_times(result.get("times", {}), result.get("times", {}).keys())
@@ -190,16 +189,16 @@ class DaskExecutor:
         forced = frozenset(self.frames_of(rec)) if force else frozenset()
         info, out, written = dict(before), {}, {}
 
-        def take(result: dict, chunk_frames: list[int]) -> list[tuple[str, dict]]:
+        def take(result: dict, chunk_frames: tuple[int, ...]) -> list[tuple[str, CompositeRequest]]:
             self._took(result)
             out.update(result["frames"])
             info.update({int(f): v for f, v in result["frames"].items()})
             return composite_calls(self.job, chunk_frames, info, force=forced)
 
         if self.client is None:
-            for _, kw in calls:
-                for _, ckw in take(reconstruct_task(**kw), kw["frames"]):
-                    r = composite_task(**ckw)
+            for _, request in calls:
+                for _, composite in take(reconstruct_task(request), request.frames):
+                    r = composite_task(composite)
                     written[int(r["frame"])] = r
             self.times["temporal_s"] += time.perf_counter() - t0
             return out, written
@@ -211,16 +210,17 @@ class DaskExecutor:
         # Priorities: a worker takes its chunks in frame order (so composites can follow chunk by
         # chunk and its batch-sums cache sees the frames of the chunk before) and any reconstruction
         # before any composite (the temporal stage is not slowed by the ray tracing it feeds).
-        chunk_of = {submit(reconstruct_task, key=key, retries=TASK_RETRIES, pure=False, priority=len(calls) - i,
+        chunk_of = {submit(reconstruct_task, request, key=key, retries=TASK_RETRIES, pure=False,
+                           priority=len(calls) - i,
                            workers=[workers[i * len(workers) // len(calls)]] if workers else None,
-                           allow_other_workers=True, **kw): i
-                    for i, (key, kw) in enumerate(calls)}
+                           allow_other_workers=True): i
+                    for i, (key, request) in enumerate(calls)}
         ready, following, composites = {}, 0, {}
         for future, result in completed(self.client, list(chunk_of)):
             ready[chunk_of[future]] = result
             while following in ready:
-                todo = take(ready.pop(following), calls[following][1]["frames"])
-                left = sum(len(kw["frames"]) for _, kw in calls[following:])  # the segment's frames from here
+                todo = take(ready.pop(following), calls[following][1].frames)
+                left = sum(len(request.frames) for _, request in calls[following:])  # the segment's frames from here
                 composites.update(submit_grouped(self.client, composite_task, todo, group_sizes(
                     len(todo), len(workers), COMPOSITE_GROUP, left=left), priority=0))
                 following += 1
@@ -259,7 +259,7 @@ def smoothed_adaptation(job: Job, frames_info: dict[int, dict], upto: int) -> di
     return dict(zip(frames, values.tolist()))
 
 
-def composite_frames(job: Job, client: Client | None, frames: list[int], frames_info: dict[int, dict], *,
+def composite_frames(job: Job, client: Client | None, frames: Sequence[int], frames_info: dict[int, dict], *,
                      force: frozenset = frozenset()) -> dict[int, dict]:
     """Composite every frame of ``frames`` whose files do not carry its current frame hash (and
     those in ``force``); returns the composite task's result (rays per kind, timings) of every frame
@@ -269,9 +269,9 @@ def composite_frames(job: Job, client: Client | None, frames: list[int], frames_
     return {int(r["frame"]): r for r in done.values()}
 
 
-def composite_calls(job: Job, frames: list[int], frames_info: dict[int, dict], *,
-                    force: frozenset = frozenset()) -> list[tuple[str, dict]]:
-    """(key, kwargs) of the composite tasks of the frames in ``frames`` that need one (see
+def composite_calls(job: Job, frames: Sequence[int], frames_info: dict[int, dict], *,
+                    force: frozenset = frozenset()) -> list[tuple[str, CompositeRequest]]:
+    """(key, request) of the composite tasks of the frames in ``frames`` that need one (see
     :func:`composite_frames`); ``frames_info`` holds every rendered frame up to the last of them."""
     smoothed = smoothed_adaptation(job, frames_info, max(frames))
     px, seed = job.settings, job.config.photons.seed
@@ -282,16 +282,13 @@ def composite_calls(job: Job, frames: list[int], frames_info: dict[int, dict], *
         exr, png = frame_paths(job.out_dir, f)
         if f not in force and frame_is_valid(exr, png, px.width, px.height, fh):
             continue
-        calls.append((task_key(f"composite-{fh[:8]}-f{f:05d}", job.store_url, job.out_dir), dict(
-            store_url=job.store_url, scene_path=job.scene_path, scene_hash=job.scene_hash, camera=job.camera,
-            element_size=job.element_size, frame=f, width=px.width, height=px.height, spp=px.spp,
-            seed=seed, max_depth=px.reflection_depth, area_samples=px.area_samples,
-            adaptation=smoothed[f], tonemap=px.tonemap, out_dir=job.out_dir,
-            metadata=dict(scene=job.scene_path.rsplit("/", 1)[-1], scene_hash=job.scene_hash,
-                          camera=job.camera_name, render_hash=job.render_hash, frame_hash=fh,
-                          config_hash=job.config.hash, photons=info["photons"],
-                          seed=seed, spp=px.spp, resolution=f"{px.width}x{px.height}",
-                          adaptation=smoothed[f], frame_adaptation=info["adaptation"]))))
+        metadata = dict(scene=job.scene_path.rsplit("/", 1)[-1], scene_hash=job.scene_hash,
+                        camera=job.camera_name, render_hash=job.render_hash, frame_hash=fh,
+                        config_hash=job.config.hash, photons=info["photons"],
+                        seed=seed, spp=px.spp, resolution=f"{px.width}x{px.height}",
+                        adaptation=smoothed[f], frame_adaptation=info["adaptation"])
+        calls.append((task_key(f"composite-{fh[:8]}-f{f:05d}", job.store_url, job.out_dir),
+                      CompositeRequest(job.scene_ref, job.store_url, f, px, seed, smoothed[f], job.out_dir, metadata)))
     return calls
 
 

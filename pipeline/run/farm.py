@@ -225,17 +225,18 @@ def _reconstruct(job: Job, i: int, c: int) -> str:
     _, calls = _calls(job, i)
     if c >= len(calls):
         return f"segment {i} chunk {c}: none"
-    kw = calls[c][1]
+    request = calls[c][1]
+    frames = request.frames
     path = _chunk_path(job, i, c)
     if path.is_file():
         saved = json.loads(path.read_text())
         maps = IlluminationMaps.open(job.store_url)
-        if saved.get("decision_hash") == job.decision_hash and all(maps.is_done(f - 1) for f in kw["frames"]):
-            return f"segment {i} chunk {c}: frames {kw['frames'][0]}-{kw['frames'][-1]} already reconstructed"
-    result = reconstruct_task(**kw)
+        if saved.get("decision_hash") == job.decision_hash and all(maps.is_done(f - 1) for f in frames):
+            return f"segment {i} chunk {c}: frames {frames[0]}-{frames[-1]} already reconstructed"
+    result = reconstruct_task(request)
     _atomic(path, json.dumps({"decision_hash": job.decision_hash, "frames": result["frames"],
                               "times": result.get("times", {})}, sort_keys=True))
-    return f"segment {i} chunk {c}: frames {kw['frames'][0]}-{kw['frames'][-1]} reconstructed"
+    return f"segment {i} chunk {c}: frames {frames[0]}-{frames[-1]} reconstructed"
 
 
 def _infos(job: Job, upto: tuple[int, int]) -> dict[int, dict]:
@@ -255,10 +256,10 @@ def _frames(job: Job, i: int, c: int) -> str:
     _, calls = _calls(job, i)
     if c >= len(calls):
         return f"segment {i} chunk {c}: none"
-    frames = calls[c][1]["frames"]
+    frames = calls[c][1].frames
     todo = composite_calls(job, frames, _infos(job, (i, c)))
-    for _, kw in todo:
-        composite_task(**kw)
+    for _, request in todo:
+        composite_task(request)
     return f"segment {i} chunk {c}: {len(todo)} of frames {frames[0]}-{frames[-1]} written"
 
 

@@ -14,9 +14,11 @@ from dataclasses import dataclass
 from pipeline.config import PhotonConfig
 from pipeline.errors import LoomError
 from pipeline.paths import check_writable_dir
+from pipeline.photons.tracing import PhotonRange
 from pipeline.scene import ElementMesh, Scene, read_scene
+from pipeline.scene.scene_cache import SceneRef
 from pipeline.store import PhotonStore, StoreIdentity, remove_partials
-from workers.shoot import shoot_task
+from workers.shoot import ShootRequest, shoot_task
 
 from .cluster import connect, run_tasks, task_key
 
@@ -43,6 +45,8 @@ def check_store_location(url: str) -> None:
 
 
 def plan(scene: Scene, frames_spec: str | None, n_photons: int, config: PhotonConfig) -> ShootPlan:
+    """The frames of ``frames_spec`` to give ``n_photons`` each, traced with ``config``, and whose
+    photons each frame uses; a bad count or frame list is a one-line LoomError."""
     if not isinstance(n_photons, int) or n_photons <= 0:
         raise LoomError(f"must be a positive number of photons per frame, got {n_photons}", field="--photons")
     try:
@@ -87,8 +91,9 @@ def shoot_key(config: PhotonConfig, element_size: float, frame: int, batch: int,
     return task_key(name, store_url)
 
 
-def tasks(p: ShootPlan, store: PhotonStore, url: str) -> list[tuple[str, dict]]:
-    """(key, kwargs) of every batch still to trace."""
+def tasks(p: ShootPlan, store: PhotonStore, url: str) -> list[tuple[str, ShootRequest]]:
+    """(key, request) of every batch still to trace."""
+    scene = SceneRef(str(p.scene.path), p.scene.scene_hash, None, p.elements.element_size)
     out = []
     for f in p.traced_frames:
         done = store.done_batches(f - 1)
@@ -96,11 +101,8 @@ def tasks(p: ShootPlan, store: PhotonStore, url: str) -> list[tuple[str, dict]]:
         if have >= p.n_photons:
             continue
         batch = len(done)
-        out.append((shoot_key(p.config, p.elements.element_size, f, batch, url), dict(
-            store_url=url, scene_path=str(p.scene.path), scene_hash=p.scene.scene_hash,
-            element_size=p.elements.element_size, frame=f, frame_index=f - 1, batch=batch,
-            n_photons=p.n_photons - have, photon_start=have, seed=p.config.seed,
-            max_depth=p.config.photon_depth)))
+        out.append((shoot_key(p.config, p.elements.element_size, f, batch, url),
+                    ShootRequest(scene, url, batch, PhotonRange(f, have, p.n_photons - have), p.config)))
     return out
 
 

@@ -1,10 +1,12 @@
 """Per-process cache of loaded scenes and element meshes, so a worker parses a file once.
 
-Tasks pass the scene's path and hash; a file that changed since the run began (another hash) is
-refused, so a worker never traces a different scene than the coordinator planned.
+Tasks name their scene with a :class:`SceneRef` (its path and hash); a file that changed since the
+run began (another hash) is refused, so a worker never traces a different scene than the
+coordinator planned.
 """
 from __future__ import annotations
 
+from dataclasses import dataclass
 from functools import lru_cache
 
 from pipeline.errors import SceneError
@@ -41,3 +43,20 @@ def keep_scene(path: str, camera: str | None, scene: Scene) -> None:
 @lru_cache(maxsize=2)
 def load_elements(path: str, scene_hash: str, element_size: float) -> ElementMesh:
     return ElementMesh.build(load_scene(path, scene_hash), element_size)
+
+
+@dataclass(frozen=True)
+class SceneRef:
+    """A scene as tasks name it: the file, the hash it must still have, the camera (None: the
+    file's first) and the resolved element size of its element mesh."""
+
+    path: str
+    scene_hash: str
+    camera: str | None
+    element_size: float
+
+    def scene(self) -> Scene:
+        return load_scene(self.path, self.scene_hash, self.camera)
+
+    def elements(self) -> ElementMesh:
+        return load_elements(self.path, self.scene_hash, self.element_size)

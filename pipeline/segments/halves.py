@@ -14,7 +14,7 @@ import numpy as np
 
 from pipeline.aqm.visualize import difference_picture
 from pipeline.config import RenderConfig
-from pipeline.frames.camera_paths import render_frame, visible_adaptation
+from pipeline.frames.camera_paths import CameraPaths, render_frame, visible_adaptation
 from pipeline.frames.perceived import camera_flow, displayed_difference
 from pipeline.frames.settings import RenderSettings
 
@@ -34,14 +34,10 @@ def halves_difference(scene: Scene, elements: ElementMesh, halves: np.ndarray, k
     even and odd photons' maps of pipeline/collection/maps.py, ``MapRequest.halves``)."""
     state = scene.pose_frame(k)
     px = settings
-    img = render_frame(state, elements, halves[0], width=px.width, height=px.height, spp=px.spp,
-                       seed=config.photons.seed, frame=k, max_depth=px.reflection_depth,
-                       area_samples=px.area_samples, also_maps=halves[1:])
+    img = render_frame(state, elements, halves[0], CameraPaths.of(px, config.photons.seed, k), also_maps=halves[1:])
     images = [img.beauty, img.also_beauty(0)]
     # L_wa as the frame's own (workers/reconstruct.py): what the camera sees of the halves' mean map
-    adaptation = visible_adaptation(state, elements, 0.5 * (halves[0] + halves[1]),
-                                    aspect=px.width / px.height, seed=config.photons.seed,
-                                    max_depth=px.reflection_depth, area_samples=px.area_samples)
+    adaptation = visible_adaptation(state, elements, 0.5 * (halves[0] + halves[1]), px, config.photons.seed)
     flow = camera_flow(scene, k, px.width, px.height, px.tonemap)
     result = displayed_difference(images[0], images[1], adaptation, params=px.tonemap,
                                   aqm_size=config.segments.aqm_size, flow=flow)

@@ -6,6 +6,7 @@ from dataclasses import dataclass, fields
 
 from pipeline.config import RenderConfig
 from pipeline.frames.settings import RenderSettings
+from pipeline.scene.scene_cache import SceneRef
 
 
 @dataclass(frozen=True)
@@ -31,6 +32,11 @@ class Job:
     n_photons: int | None  # None: guided (--photons auto); else fixed N_frame
     temporal: str  # adaptive | fixed | off
     single_state: bool  # camera-only motion: every frame shares one photon set
+
+    @property
+    def scene_ref(self) -> SceneRef:
+        """The scene as the job's tasks load it."""
+        return SceneRef(self.scene_path, self.scene_hash, self.camera, self.element_size)
 
     def to_dict(self) -> dict:
         return {f.name: (getattr(self, f.name).to_dict() if f.name in ("settings", "config") else getattr(self, f.name))

@@ -14,9 +14,10 @@ import pytest
 from kernels.colour import LUMA
 from pipeline.collection.maps import MapRequest, WindowSpec, illumination_maps
 from pipeline.config import FilterConfig, PhotonConfig, RenderConfig, SegmentConfig
-from pipeline.frames.camera_paths import render_frame
+from pipeline.frames.camera_paths import CameraPaths, render_frame
 from pipeline.frames.perceived import displayed_difference
-from pipeline.run.render import RenderSettings, render
+from pipeline.frames.settings import RenderSettings
+from pipeline.run.render import render
 from pipeline.run.shoot import shoot
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin import write_builtin
@@ -39,8 +40,8 @@ class Frames:
         self.elements = ElementMesh.build(self.scene)
 
     def beauty(self, frame: int, irradiance) -> np.ndarray:
-        return render_frame(self.scene.pose_frame(frame), self.elements, irradiance, width=SETTINGS.width,
-                            height=SETTINGS.height, spp=SETTINGS.spp, seed=0, frame=frame).beauty
+        return render_frame(self.scene.pose_frame(frame), self.elements, irradiance,
+                            CameraPaths(SETTINGS.width, SETTINGS.height, SETTINGS.spp, seed=0, frame=frame)).beauty
 
     def reference(self, frame: int) -> tuple[np.ndarray, np.ndarray]:
         """(full, (even, odd)) indirect maps of ``REFERENCE_PHOTONS`` of the frame's own photons."""

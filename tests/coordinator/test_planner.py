@@ -37,7 +37,7 @@ from pipeline.segments.planner import (
     window_histogram,
 )
 from pipeline.segments.records import SegmentRecord, read_record, record_path, write_record
-from workers.shoot import shoot_task
+from workers.shoot import ShootRequest, shoot_task
 
 # Every step runs on ROOM's frames 60-80 at 48x36: F_max grows 6 -> 10, and N_frame doubles from the
 # rung 2,000 of the cap (the pilot asks about 1,900) to 4,000, where d_AQM falls to 86 %
@@ -57,10 +57,8 @@ class InProcess:
     def shoot(self, targets: dict[int, int]) -> None:
         job, cfg = self.job, self.job.config.photons
         for b in next_batches(self.store, targets):
-            shoot_task(store_url=job.store_url, scene_path=job.scene_path, scene_hash=job.scene_hash,
-                       element_size=job.element_size, frame=b.frame, frame_index=b.frame - 1, batch=b.batch,
-                       n_photons=b.n_photons, photon_start=b.photon_start, seed=cfg.seed,
-                       max_depth=cfg.photon_depth)
+            shoot_task(ShootRequest(job.scene_ref, job.store_url, b.batch,
+                                    PhotonRange(b.frame, b.photon_start, b.n_photons), cfg))
             self.traced.append(b)
 
     def progress(self, message: str) -> None:

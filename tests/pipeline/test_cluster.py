@@ -105,7 +105,7 @@ def test_a_chunks_groups_shrink_with_the_calls_after_it():
 
 
 def test_groups_cover_the_calls_in_order_under_keys_their_members_decide():
-    calls = [(f"job-{i}", {"i": i}) for i in range(7)]
+    calls = [(f"job-{i}", i) for i in range(7)]
     groups = grouped(calls, 3)
     assert [[k for k, _ in members] for _, members in groups] == [
         ["job-0", "job-1", "job-2"], ["job-3", "job-4", "job-5"], ["job-6"]]
@@ -125,7 +125,7 @@ def _square(x: int) -> dict:
 
 
 def test_grouped_tasks_give_every_call_its_own_result_on_a_cluster():
-    calls = [(f"square-{i}", {"x": i}) for i in range(11)]
+    calls = [(f"square-{i}", i) for i in range(11)]
     with connect("local", 2) as client:
         results = run_tasks(client, _square, calls, desc="square", progress=False, group=4)
     assert sorted(results) == sorted(k for k, _ in calls)

@@ -5,35 +5,38 @@ counter-based random numbers), so the comparison has no sampling error for punct
 """
 from __future__ import annotations
 
+from dataclasses import replace
+
 import numpy as np
 import pytest
 
 from kernels.camera import camera_rays_reference
-from pipeline.frames.camera_paths import render_frame, sample_means
-from pipeline.frames.random_numbers import frame_key
+from pipeline.frames.camera_paths import CHUNK_RAYS, CameraPaths, render_frame, sample_means
 from pipeline.scene import ElementMesh, read_scene
 from tests.render.scenes import EYE, LAMP, area_scene, mirror_scene, plane_scene
 
 W, H, SPP = 40, 30, 4
+PATHS = CameraPaths(W, H, SPP, seed=3, frame=1)
 
 
-def _render(path, irradiance=None, **kw):
+def _render(path, irradiance=None, chunk_rays=CHUNK_RAYS, **kw):
+    """The state of frame 1, its image along PATHS with ``kw`` changed, and those paths."""
     scene = read_scene(path)
     state = scene.pose_frame(1)
     elements = ElementMesh.build(scene)
-    args = dict(width=W, height=H, spp=SPP, seed=3, frame=1)
-    args.update(kw)
-    return state, render_frame(state, elements, irradiance, **args), args
+    paths = replace(PATHS, **kw)
+    return state, render_frame(state, elements, irradiance, paths, chunk_rays=chunk_rays), paths
 
 
-def _sample_points(state, width, height, spp, seed, frame):
+def _sample_points(state, paths):
     """(H, W, spp, 3) points where the compositor's camera samples meet the plane y = 0."""
     cam = state.camera
-    d = camera_rays_reference(frame_key(seed, frame), 0, width * height * spp, spp, width, height,
+    n = paths.width * paths.height * paths.spp
+    d = camera_rays_reference(paths.key, 0, n, paths.spp, paths.width, paths.height,
                               cam.definition.yfov, cam.to_world[:3, :3]).astype(np.float64)
     origin = cam.position
     t = -origin[1] / d[:, 1]
-    return (origin + t[:, None] * d).reshape(height, width, spp, 3)
+    return (origin + t[:, None] * d).reshape(paths.height, paths.width, paths.spp, 3)
 
 
 def _point_irradiance(p, lamp, intensity):
@@ -45,8 +48,8 @@ def _point_irradiance(p, lamp, intensity):
 @pytest.mark.parametrize("light", ["point", "spot", "directional"])
 def test_diffuse_plane_direct_radiance_is_analytic(tmp_path, light):
     albedo = np.array([0.5, 0.6, 0.7])
-    state, img, args = _render(plane_scene(tmp_path / "p.glb", light=light, albedo=albedo))
-    p = _sample_points(state, **{k: args[k] for k in ("width", "height", "spp", "seed", "frame")})
+    state, img, paths = _render(plane_scene(tmp_path / "p.glb", light=light, albedo=albedo))
+    p = _sample_points(state, paths)
     if light == "point":
         e = _point_irradiance(p, LAMP, 1.0)[..., None] * [10.0, 9.0, 8.0]
     elif light == "spot":  # glTF fall-off: squared linear ramp of cos between outer and inner cone
@@ -69,8 +72,8 @@ def test_diffuse_plane_direct_radiance_is_analytic(tmp_path, light):
 def test_glossy_highlight_of_a_point_light_is_analytic(tmp_path):
     rho, roughness = np.array([0.9, 0.8, 0.7]), 0.4
     path = plane_scene(tmp_path / "g.glb", albedo=rho, roughness=roughness)
-    state, img, args = _render(path, max_depth=1)
-    p = _sample_points(state, **{k: args[k] for k in ("width", "height", "spp", "seed", "frame")})
+    state, img, paths = _render(path, max_depth=1)
+    p = _sample_points(state, paths)
     view = (p - EYE) / np.linalg.norm(p - EYE, axis=-1, keepdims=True)
     mirror = view * [1, -1, 1]  # reflected about the plane's normal +y
     to_lamp = (LAMP - p) / np.linalg.norm(LAMP - p, axis=-1, keepdims=True)
@@ -86,8 +89,8 @@ def test_glossy_highlight_of_a_point_light_is_analytic(tmp_path):
 
 
 def test_fully_occluded_pixels_have_no_direct_light(tmp_path):
-    state, img, args = _render(plane_scene(tmp_path / "o.glb", occluder=True))
-    p = _sample_points(state, **{k: args[k] for k in ("width", "height", "spp", "seed", "frame")})
+    state, img, paths = _render(plane_scene(tmp_path / "o.glb", occluder=True))
+    p = _sample_points(state, paths)
     # Where the segment from a plane point to the lamp crosses y = 1 (the occluder's plane)
     s = (1.0 - p[..., 1]) / (LAMP[1] - p[..., 1])
     x = p + s[..., None] * (LAMP - p)
@@ -173,9 +176,9 @@ def test_maps_rendered_along_one_set_of_paths_have_the_bits_of_their_own_renders
     state, elements = scene.pose_frame(1), ElementMesh.build(scene)
     rng = np.random.default_rng(5)
     maps = [rng.uniform(0.0, 2.0, (elements.n_vertices, 3)) for _ in range(3)]
-    args = dict(width=W, height=H, spp=spp, seed=3, frame=1)
-    alone = [render_frame(state, elements, m, **args) for m in maps]
-    shared = render_frame(state, elements, maps[0], also_maps=np.stack(maps[1:]), **args)  # rows of a stack
+    paths = replace(PATHS, spp=spp)
+    alone = [render_frame(state, elements, m, paths) for m in maps]
+    shared = render_frame(state, elements, maps[0], paths, also_maps=np.stack(maps[1:]))  # rows of a stack
     assert shared.rays == alone[0].rays and shared.rays["reflection"] > 0
     assert np.array_equal(shared.beauty, alone[0].beauty) and np.array_equal(shared.indirect, alone[0].indirect)
     for i, one in enumerate(alone[1:]):
@@ -183,4 +186,4 @@ def test_maps_rendered_along_one_set_of_paths_have_the_bits_of_their_own_renders
         assert np.array_equal(shared.also_beauty(i), one.beauty)
     assert not np.array_equal(alone[1].indirect, alone[2].indirect)  # the maps do show
     with pytest.raises(ValueError):
-        render_frame(state, elements, None, also_maps=maps[1:], **args)
+        render_frame(state, elements, None, paths, also_maps=maps[1:])

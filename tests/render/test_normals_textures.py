@@ -14,7 +14,7 @@ import pytest
 
 from kernels.camera import camera_rays_reference
 from pipeline.config import PhotonConfig
-from pipeline.frames.camera_paths import render_frame
+from pipeline.frames.camera_paths import CameraPaths, render_frame
 from pipeline.frames.random_numbers import frame_key
 from pipeline.photons.raycast import caster_for
 from pipeline.photons.tracing import PhotonRange, trace_batch
@@ -54,7 +54,7 @@ def _sphere_render(path, width=48, height=48, spp=8):
     """Direct layer and the analytic Lambert value rho/pi E max(0, n.l) with n the sphere's own
     normal at each sample's hit point on the mesh (pixel = mean of its samples)."""
     state = read_scene(path).pose_frame(1)
-    img = render_frame(state, None, None, width=width, height=height, spp=spp, seed=SEED, frame=1)
+    img = render_frame(state, None, None, CameraPaths(width, height, spp, seed=SEED, frame=1))
     d = _sample_dirs(state, width, height, spp)
     origin = np.broadcast_to(state.camera.position, d.shape)
     tri, _, _, t = caster_for(state).intersect(origin, d)
@@ -150,7 +150,7 @@ def test_checker_texture_in_the_frame_and_its_transform(tmp_path, offset):
     transform = None if offset is None else {"offset": list(offset)}
     state = read_scene(_top_view(tmp_path / "top.glb", transform)).pose_frame(1)
     w = h = 64
-    img = render_frame(state, None, None, width=w, height=h, spp=4, seed=SEED, frame=1)
+    img = render_frame(state, None, None, CameraPaths(w, h, 4, seed=SEED, frame=1))
     want = _expected_cells(state, w, h, 4, offset or (0.0, 0.0))
     inside = want >= 0
     assert inside.mean() > 0.7
@@ -308,7 +308,7 @@ def test_emissive_texture_in_the_frame(tmp_path):
     scene = read_scene(_panel_scene(tmp_path / "panel.glb", True))
     assert "no base-colour textures; emissive textures on 1 material(s)" in surface_lines(scene)[0]
     state = scene.pose_frame(1)
-    img = render_frame(state, None, None, width=w, height=h, spp=1, seed=SEED, frame=1)
+    img = render_frame(state, None, None, CameraPaths(w, h, 1, seed=SEED, frame=1))
     d = _sample_dirs(state, w, h, 1)
     o = state.camera.position
     p = (o + ((PANEL_H - o[1]) / d[:, 1])[:, None] * d).reshape(h, w, 3)
@@ -326,7 +326,7 @@ def test_emissive_texture_in_area_lighting(tmp_path):
     out = {}
     for textured in (True, False):
         state = read_scene(_panel_scene(tmp_path / f"down{int(textured)}.glb", textured, look_up=False)).pose_frame(1)
-        img = render_frame(state, None, None, width=w, height=h, spp=4, seed=SEED, frame=1, area_samples=64)
+        img = render_frame(state, None, None, CameraPaths(w, h, 4, seed=SEED, frame=1, area_samples=64))
         out[textured] = img.direct[..., 0].astype(np.float64)
     left, right = np.s_[:, : w // 2 - 1], np.s_[:, w // 2 + 1:]  # the camera's x is the world's x
     for half in (left, right):

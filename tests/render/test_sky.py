@@ -19,7 +19,7 @@ import pytest
 from kernels.camera import camera_rays_reference
 from pipeline.collection.estimators import vertex_irradiance
 from pipeline.config import PhotonConfig
-from pipeline.frames.camera_paths import render_frame
+from pipeline.frames.camera_paths import CameraPaths, render_frame
 from pipeline.frames.random_numbers import frame_key
 from pipeline.photons.tracing import PhotonRange, trace_batch
 from pipeline.scene import ElementMesh, Scene, read_scene
@@ -68,7 +68,7 @@ def test_plane_direct_radiance_under_sun_and_sky_is_analytic(tmp_path, case):
     scene = _lit(_unlit_plane(tmp_path / "p.glb"), sun=case != "sky",
                  sky=None if case == "sun" else Sky(ZENITH, GROUND))
     state = scene.pose_frame(1)  # the auto camera: the plane from 20 degrees above its horizon
-    img = render_frame(state, None, None, width=48, height=32, spp=2, seed=5, frame=1, area_samples=3)
+    img = render_frame(state, None, None, CameraPaths(48, 32, 2, seed=5, frame=1, area_samples=3))
     e = {"sky": np.pi * np.array(ZENITH), "sun": SUN_E, "both": SUN_E + np.pi * np.array(ZENITH)}[case]
     on = img.alpha == 1.0
     assert on.sum() > 100
@@ -84,7 +84,7 @@ def test_rays_leaving_the_scene_show_the_sky(tmp_path):
     scene = _lit(_unlit_plane(tmp_path / "h.glb", camera=(eye, target, yfov)), sun=True, sky=Sky(ZENITH, GROUND))
     state = scene.pose_frame(1)
     w, h = 40, 30
-    img = render_frame(state, None, None, width=w, height=h, spp=1, seed=2, frame=1)
+    img = render_frame(state, None, None, CameraPaths(w, h, 1, seed=2, frame=1))
     cam = state.camera
     d = camera_rays_reference(frame_key(2, 1), 0, w * h, 1, w, h, cam.definition.yfov,
                               cam.to_world[:3, :3]).reshape(h, w, 3)
@@ -103,7 +103,7 @@ def test_a_mirror_reflects_the_sky(tmp_path):
     mirror = b.add_material("mirror", ALBEDO, metallic=1.0, roughness=0.0)
     b.add_node("plane", b.add_mesh("plane", quad_y(2.0), UP_FACES, material=mirror))
     scene = _lit(b.write(tmp_path / "m.glb"), sun=True, sky=Sky(ZENITH, GROUND))
-    img = render_frame(scene.pose_frame(1), None, None, width=32, height=24, spp=1, seed=1, frame=1)
+    img = render_frame(scene.pose_frame(1), None, None, CameraPaths(32, 24, 1, seed=1, frame=1))
     on = img.alpha == 1.0
     assert on.sum() > 30
     np.testing.assert_allclose(img.direct[on], np.broadcast_to(ALBEDO * np.array(ZENITH), (on.sum(), 3)), rtol=1e-6)
@@ -124,8 +124,7 @@ def test_sky_under_an_occluder_matches_the_view_factor(tmp_path):
     path = _unlit_plane(tmp_path / "o.glb", half=10.0, camera=((0.0, 0.5, 0.0), (0.0, 0.0, 0.0), 0.01),
                         occluder=(0.5, 1.0))
     scene = _lit(path, sun=False, sky=Sky(ZENITH, (0.0, 0.0, 0.0)))
-    img = render_frame(scene.pose_frame(1), None, None, width=20, height=15, spp=16, seed=9, frame=1,
-                       area_samples=16)
+    img = render_frame(scene.pose_frame(1), None, None, CameraPaths(20, 15, 16, seed=9, frame=1, area_samples=16))
     f = _square_view_factor(0.5, 1.0)
     assert abs(f - 0.2394) < 1e-3
     expected = ALBEDO * np.array(ZENITH) * (1.0 - f)
@@ -228,7 +227,7 @@ def test_composited_furnace_makes_the_white_solid_vanish(tmp_path):
     element = (b.key[indirect] & np.uint32(0x3FFFFFFF)).astype(np.int64)
     e_map = vertex_irradiance(element, b.bary[indirect, 0], b.bary[indirect, 1], b.energy[indirect],
                               elements, elements.vertex_areas(state), n)
-    img = render_frame(state, elements, e_map, width=64, height=48, spp=4, seed=3, frame=1, area_samples=8)
+    img = render_frame(state, elements, e_map, CameraPaths(64, 48, 4, seed=3, frame=1, area_samples=8))
     on = img.alpha == 1.0
     shaded = on & (img.direct[..., 0] < 0.96 * level)  # the concave faces
     assert on.mean() > 0.2 and shaded.sum() > 150

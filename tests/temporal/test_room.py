@@ -206,12 +206,13 @@ def test_shared_store_caches_decoded_frames_read_only(room):
 def test_visible_adaptation_with_the_frames_geometry_is_the_same(room):
     from pipeline.collection.estimators import frame_geometry
     from pipeline.frames.camera_paths import visible_adaptation
+    from pipeline.frames.settings import RenderSettings
 
     request = MapRequest(WindowSpec("adaptive", 15), [room.index])
     irr = next(illumination_maps(room.store, room.mesh, room.scene, request)).irradiance
     geometry = frame_geometry(room.scene, room.mesh, K2)
     assert np.array_equal(geometry.vertex_areas, room.mesh.vertex_areas(room.state))
     assert frame_geometry(room.scene, room.mesh, K2) is geometry
-    kw = dict(aspect=4 / 3, seed=1, max_depth=2, area_samples=1)
-    assert visible_adaptation(room.state, room.mesh, irr, **kw) == visible_adaptation(
-        geometry.state, room.mesh, irr, **kw) > 0
+    settings = RenderSettings(width=640, height=480, reflection_depth=2, area_samples=1)
+    assert visible_adaptation(room.state, room.mesh, irr, settings, 1) == visible_adaptation(
+        geometry.state, room.mesh, irr, settings, 1) > 0
