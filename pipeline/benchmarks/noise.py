@@ -43,7 +43,7 @@ from pipeline.frames.camera_paths import CameraPaths, render_frame
 from pipeline.frames.perceived import displayed_difference
 from pipeline.frames.tonemap import ToneMapping, ward_scale
 from pipeline.photons.raycast import caster_for
-from pipeline.run.shoot import shoot
+from pipeline.run.shoot import plan, shoot
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin import write_builtin
 from pipeline.store import PhotonStore
@@ -122,8 +122,9 @@ def run(photons: Iterable[int] = (10_000, 20_000, 40_000, 80_000), *, fmax: int 
         last = None
         for n in sorted(photons):
             t0 = time.perf_counter()
-            shoot(str(path), frames=f"{K - half}-{K + half}", n_photons=int(n), store_url=url, config=config.photons,
-                  scheduler=scheduler, workers=workers, progress=False, keep_records=True)  # direct from records
+            # the records kept: the direct estimate below is made from them
+            shoot(plan(scene, f"{K - half}-{K + half}", int(n), config.photons), url, keep_records=True,
+                  scheduler=scheduler, workers=workers, progress=False)
             pstore = PhotonStore.open(url)
             if pstore.photons_emitted(index) != n:
                 raise LoomError(f"holds {pstore.photons_emitted(index):,} photons for frame {K}, more than "

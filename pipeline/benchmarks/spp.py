@@ -48,7 +48,7 @@ from pipeline.frames.camera_paths import CameraPaths, render_frame, visible_adap
 from pipeline.frames.perceived import displayed_difference
 from pipeline.frames.settings import RenderSettings
 from pipeline.photons.raycast import caster_for
-from pipeline.run.shoot import shoot
+from pipeline.run.shoot import plan, shoot
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin import write_builtin
 from pipeline.store import PhotonStore
@@ -136,8 +136,7 @@ def run(frames: Iterable[int] = FRAMES, *, spps: Sequence[int] = SPPS, reference
              f"F_max = {fmax} adaptive; reference {reference_spp} spp; d_thr = {thr:g} %")
         for k in frames:
             lo, hi = max(1, k - half), min(scene.timeline.frames, k + half)
-            shoot(str(path), frames=f"{lo}-{hi}", n_photons=photons, store_url=url, config=config.photons,
-                  scheduler="synchronous", progress=False)
+            shoot(plan(scene, f"{lo}-{hi}", photons, config.photons), url, scheduler="synchronous", progress=False)
             (lit,) = illumination_maps(PhotonStore.open(url), mesh, scene,
                                        MapRequest(WindowSpec("adaptive", fmax), [k - 1]), config.collection)
             irradiance = lit.irradiance

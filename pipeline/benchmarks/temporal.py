@@ -34,7 +34,7 @@ from kernels.gather import (
 )
 from kernels.temporal import windows_cl, windows_reference
 from pipeline.config import FilterConfig, PhotonConfig
-from pipeline.run.shoot import shoot
+from pipeline.run.shoot import plan, shoot
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin import write_builtin
 from pipeline.store import PhotonStore
@@ -56,10 +56,9 @@ def _timed(fn, *args, **kw):
 
 def _trace_frames(root: Path, frames: str):
     """Shoot real ATRIUM frames; (scene, mesh, store, seconds per traced frame)."""
-    path = write_builtin("atrium", root / "atrium.glb")
-    summary = shoot(str(path), frames=frames, n_photons=N_PHOTONS, store_url=str(root / "p.zarr"),
-                    config=PhotonConfig(), scheduler="synchronous", progress=False)
-    scene = read_scene(path)
+    scene = read_scene(write_builtin("atrium", root / "atrium.glb"))
+    summary = shoot(plan(scene, frames, N_PHOTONS, PhotonConfig()), str(root / "p.zarr"), scheduler="synchronous",
+                    progress=False)
     return scene, ElementMesh.build(scene), PhotonStore.open(str(root / "p.zarr")), \
         summary["seconds"] / summary["traced_frames"], summary
 

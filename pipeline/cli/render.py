@@ -65,11 +65,13 @@ def shoot_command(scene_file, frames, photons, store_url, seed, element_size, ph
                   light, scheduler, workers) -> None:
     """Trace photons for every frame of SCENE_FILE into a photon store (resumable)."""
     from pipeline.config import PhotonConfig
-    from pipeline.run.shoot import shoot
+    from pipeline.run.shoot import plan, shoot
+    from pipeline.scene import read_scene
 
     config = PhotonConfig(seed=seed, element_size=element_size, photon_depth=photon_depth)
-    summary = shoot(scene_file, frames=frames, n_photons=photons, store_url=store_url, config=config,
-                    scheduler=scheduler, workers=workers, progress=not quiet, light=light, keep_records=keep_records)
+    p = plan(read_scene(scene_file, light=light), frames, photons, config)
+    summary = shoot(p, store_url, keep_records=keep_records, scheduler=scheduler, workers=workers,
+                    progress=not quiet)
     click.echo(
         f"shot {summary['frames']} frames ({summary['traced_frames']} traced, {summary['shared_frames']} "
         f"sharing a traced frame's photons): {summary['tasks']} batches run, {summary['skipped']} already "

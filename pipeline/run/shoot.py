@@ -15,7 +15,7 @@ from pipeline.config import PhotonConfig
 from pipeline.errors import LoomError
 from pipeline.paths import check_writable_dir
 from pipeline.photons.tracing import PhotonRange
-from pipeline.scene import ElementMesh, Scene, read_scene
+from pipeline.scene import ElementMesh, Scene
 from pipeline.scene.scene_cache import SceneRef
 from pipeline.store import PhotonStore, StoreIdentity, remove_partials
 from workers.shoot import ShootRequest, shoot_task
@@ -106,14 +106,10 @@ def tasks(p: ShootPlan, store: PhotonStore, url: str) -> list[tuple[str, ShootRe
     return out
 
 
-def shoot(scene_path: str, *, frames: str | None, n_photons: int, store_url: str,
-          config: PhotonConfig = PhotonConfig(), scheduler: str = "local", workers: int | None = None,
-          progress: bool = True, light: str = "auto", keep_records: bool = False) -> dict:
-    """Trace every requested frame's photons into the store; returns a summary of the run.
-    ``light`` none refuses a file without light instead of lighting it by default;
-    ``keep_records`` stores the raw hit records beside the counts and sums."""
-    scene = read_scene(scene_path, light=light)
-    p = plan(scene, frames, n_photons, config)
+def shoot(p: ShootPlan, store_url: str, *, keep_records: bool = False, scheduler: str = "local",
+          workers: int | None = None, progress: bool = True) -> dict:
+    """Trace the photons of every frame of the plan ``p`` into the store at ``store_url``; returns a
+    summary of the run. ``keep_records`` stores the raw hit records beside the counts and sums."""
     check_store_location(store_url)
     t0 = time.perf_counter()
     # The cluster is up before the store is created: a scheduler that cannot start or be reached

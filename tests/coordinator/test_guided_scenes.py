@@ -18,7 +18,7 @@ from pipeline.frames.camera_paths import CameraPaths, render_frame
 from pipeline.frames.perceived import displayed_difference
 from pipeline.frames.settings import RenderSettings
 from pipeline.run.render import render
-from pipeline.run.shoot import shoot
+from pipeline.run.shoot import plan, shoot
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin import write_builtin
 from pipeline.store import PhotonStore
@@ -47,8 +47,7 @@ class Frames:
         """(full, (even, odd)) indirect maps of ``REFERENCE_PHOTONS`` of the frame's own photons."""
         url = str(self.tmp / f"ref-{frame}.zarr")
         for n in REFERENCE_PHOTONS:
-            shoot(str(self.path), frames=str(frame), n_photons=n, store_url=url, config=PhotonConfig(seed=977),
-                  scheduler="local", progress=False)
+            shoot(plan(self.scene, str(frame), n, PhotonConfig(seed=977)), url, scheduler="local", progress=False)
         (lit,) = illumination_maps(PhotonStore.open(url), self.elements, self.scene,
                                    MapRequest(WindowSpec("off", 0), [frame - 1], halves=True))
         return lit.irradiance.mean(axis=0), lit.irradiance

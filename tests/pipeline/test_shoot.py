@@ -30,14 +30,14 @@ def scenes(tmp_path_factory):
 def reference(scenes, tmp_path_factory):
     """An uninterrupted synchronous shoot of cornell frames 1-12."""
     url = str(tmp_path_factory.mktemp("ref") / "ref.zarr")
-    shoot(scenes["cornell"], frames="1-12", n_photons=6000, store_url=url, scheduler="synchronous",
-          progress=False, keep_records=True)
+    shoot(plan(read_scene(scenes["cornell"]), "1-12", 6000, PhotonConfig()), url,
+          scheduler="synchronous", progress=False, keep_records=True)
     return url
 
 
 def test_camera_only_frames_share_one_photon_set(scenes, tmp_path):
     url = str(tmp_path / "s.zarr")
-    summary = shoot(scenes["static"], frames=None, n_photons=4000, store_url=url,
+    summary = shoot(plan(read_scene(scenes["static"]), None, 4000, PhotonConfig()), url,
                     scheduler="synchronous", progress=False, keep_records=True)
     assert summary["traced_frames"] == 1 and summary["tasks"] == 1
     store = PhotonStore.open(url)
@@ -48,11 +48,11 @@ def test_camera_only_frames_share_one_photon_set(scenes, tmp_path):
 
 def test_more_photons_append_a_batch_without_touching_the_first(scenes, reference, tmp_path):
     url = str(tmp_path / "grow.zarr")
-    shoot(scenes["cornell"], frames="1-12", n_photons=6000, store_url=url, scheduler="synchronous",
-          progress=False, keep_records=True)
+    shoot(plan(read_scene(scenes["cornell"]), "1-12", 6000, PhotonConfig()), url,
+          scheduler="synchronous", progress=False, keep_records=True)
     assert store_fingerprint(url) == store_fingerprint(reference)
     before = PhotonStore.open(url).read_frame(3, batches=[0])
-    summary = shoot(scenes["cornell"], frames="4", n_photons=12000, store_url=url,
+    summary = shoot(plan(read_scene(scenes["cornell"]), "4", 12000, PhotonConfig()), url,
                     scheduler="synchronous", progress=False, keep_records=True)
     assert summary["tasks"] == 1 and summary["photons"] == 6000
     store = PhotonStore.open(url)
@@ -63,7 +63,7 @@ def test_more_photons_append_a_batch_without_touching_the_first(scenes, referenc
 
 
 def test_rerun_skips_done_batches(scenes, reference):
-    summary = shoot(scenes["cornell"], frames="1-12", n_photons=6000, store_url=reference,
+    summary = shoot(plan(read_scene(scenes["cornell"]), "1-12", 6000, PhotonConfig()), reference,
                     scheduler="synchronous", progress=False, keep_records=True)
     assert summary["tasks"] == 0
 
@@ -134,16 +134,16 @@ def test_unwritable_store_path(scenes, tmp_path):
 
 def test_file_url_store(scenes, reference, tmp_path):
     url = "file://" + str(tmp_path / "url.zarr")
-    shoot(scenes["cornell"], frames="1-12", n_photons=6000, store_url=url, scheduler="synchronous",
-          progress=False, keep_records=True)
+    shoot(plan(read_scene(scenes["cornell"]), "1-12", 6000, PhotonConfig()), url,
+          scheduler="synchronous", progress=False, keep_records=True)
     assert store_fingerprint(url) == store_fingerprint(reference)
 
 
 def test_photons_fill_the_room_frames(scenes, tmp_path):
     """A ROOM frame's records land on many elements and the count table agrees with the records."""
     url = str(tmp_path / "room.zarr")
-    shoot(scenes["room"], frames="60", n_photons=5000, store_url=url, scheduler="synchronous",
-          progress=False, keep_records=True)
+    shoot(plan(read_scene(scenes["room"]), "60", 5000, PhotonConfig()), url,
+          scheduler="synchronous", progress=False, keep_records=True)
     store = PhotonStore.open(url)
     recs = store.read_frame(59)
     counts = store.counts("all", frames=[59])[0]
@@ -158,7 +158,7 @@ def test_two_stores_never_share_a_task_key(scenes, tmp_path):
     keys = {}
     for name in ("a", "b"):
         url = str(tmp_path / f"{name}.zarr")
-        shoot(scenes["cornell"], frames="1-2", n_photons=1_000, store_url=url, scheduler="synchronous",
-              progress=False)
+        shoot(plan(read_scene(scenes["cornell"]), "1-2", 1_000, PhotonConfig()), url,
+              scheduler="synchronous", progress=False)
         keys[name] = [k for k, _ in tasks(p, PhotonStore.open(url), url)]  # the second batch of each frame
     assert len(keys["a"]) == len(keys["b"]) == 2 and not set(keys["a"]) & set(keys["b"])

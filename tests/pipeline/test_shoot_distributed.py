@@ -15,8 +15,10 @@ from pathlib import Path
 
 import pytest
 
+from pipeline.config import PhotonConfig
 from pipeline.run.cluster import WORKER_ENV
-from pipeline.run.shoot import shoot
+from pipeline.run.shoot import plan, shoot
+from pipeline.scene import read_scene
 from tests.pipeline.shoot_helpers import store_fingerprint
 
 DASK = str(Path(sys.executable).with_name("dask"))
@@ -75,15 +77,14 @@ def cornell(tmp_path_factory):
 @pytest.fixture(scope="module")
 def synchronous_store(cornell, tmp_path_factory):
     url = str(tmp_path_factory.mktemp("sync") / "sync.zarr")
-    shoot(cornell, frames=FRAMES, n_photons=PHOTONS, store_url=url, scheduler="synchronous", progress=False)
+    shoot(plan(read_scene(cornell), FRAMES, PHOTONS, PhotonConfig()), url, scheduler="synchronous", progress=False)
     return url
 
 
 def test_cluster_run_equals_synchronous_run(dask_cluster, cornell, synchronous_store, tmp_path):
     address, _ = dask_cluster
     url = str(tmp_path / "cluster.zarr")
-    summary = shoot(cornell, frames=FRAMES, n_photons=PHOTONS, store_url=url, scheduler=address,
-                    progress=False)
+    summary = shoot(plan(read_scene(cornell), FRAMES, PHOTONS, PhotonConfig()), url, scheduler=address, progress=False)
     assert summary["tasks"] == 16
     assert store_fingerprint(url) == store_fingerprint(synchronous_store)
 
@@ -95,7 +96,7 @@ def test_worker_killed_mid_run_still_gives_identical_store(dask_cluster, cornell
 
     def run():
         try:
-            outcome["summary"] = shoot(cornell, frames=FRAMES, n_photons=PHOTONS, store_url=url,
+            outcome["summary"] = shoot(plan(read_scene(cornell), FRAMES, PHOTONS, PhotonConfig()), url,
                                        scheduler=address, progress=False)
         except BaseException as err:  # reported by the assertion below
             outcome["error"] = err

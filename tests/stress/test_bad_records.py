@@ -17,9 +17,11 @@ import numpy as np
 import pytest
 import zarr
 
+from pipeline.config import PhotonConfig
 from pipeline.frames.images import EXR_CHANNELS, frame_paths, read_exr
 from pipeline.run.render import RenderSettings, render
-from pipeline.run.shoot import shoot
+from pipeline.run.shoot import plan, shoot
+from pipeline.scene import read_scene
 from pipeline.store import PhotonStore
 from tests.stress.scenes import lit_room
 
@@ -52,8 +54,8 @@ def _damage(url: str, frame_index: int, values) -> None:
 def _run(tmp, name, values):
     scene = lit_room(tmp / "room.glb", frames=FRAMES)
     url = str(tmp / f"{name}.zarr")
-    shoot(str(scene), frames=f"1-{FRAMES}", n_photons=N, store_url=url, scheduler="synchronous", progress=False,
-          keep_records=True)
+    shoot(plan(read_scene(str(scene)), f"1-{FRAMES}", N, PhotonConfig()), url,
+          scheduler="synchronous", progress=False, keep_records=True)
     _damage(url, 1, values)
     out = tmp / name
     render(scene, frames=f"1-{FRAMES}", out_dir=out, n_photons=N, store_url=url, scheduler="synchronous",

@@ -127,7 +127,7 @@ def room_jump(tmp_path_factory):
     """ROOM frames 63-79 at 20,000 photons a frame, with and without the error benchmark's light
     jump at frame 71 (pipeline/benchmarks/error.py): real photons in a real store."""
     from pipeline.benchmarks.error import write_scene
-    from pipeline.run.shoot import shoot
+    from pipeline.run.shoot import plan, shoot
     from pipeline.scene import ElementMesh
     from pipeline.store import PhotonStore
 
@@ -135,9 +135,9 @@ def room_jump(tmp_path_factory):
     out = {}
     for name, event in (("jump", 71), ("steady", 500)):  # 500: after the last frame, no jump
         path = write_scene("room", root / f"{name}.glb", event)
-        shoot(str(path), frames="63-79", n_photons=20_000, store_url=str(root / f"{name}.zarr"),
-              config=PhotonConfig(), scheduler="synchronous", progress=False)
         scene = read_scene(path)
+        shoot(plan(scene, "63-79", 20_000, PhotonConfig()), str(root / f"{name}.zarr"), scheduler="synchronous",
+              progress=False)
         out[name] = (ElementMesh.build(scene), PhotonStore.open(str(root / f"{name}.zarr")))
     return out
 

@@ -22,7 +22,7 @@ from kernels import colour
 from pipeline.collection.estimators import vertex_irradiance
 from pipeline.collection.maps import MapRequest, WindowSpec, illumination_maps
 from pipeline.config import CollectionConfig, FilterConfig, PhotonConfig
-from pipeline.run.shoot import shoot
+from pipeline.run.shoot import plan, shoot
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin import write_builtin
 from pipeline.store import PhotonStore
@@ -39,10 +39,10 @@ class Room:
         path = write_builtin("room", root / "room.glb")
         self.scene = read_scene(path)
         self.mesh = ElementMesh.build(self.scene)
-        shoot(str(path), frames=f"{K2 - 15}-{K2 + 15}", n_photons=N_FRAME, store_url=str(root / "p.zarr"),
-              config=PhotonConfig(), scheduler="synchronous", progress=False, keep_records=True)
-        shoot(str(path), frames=str(K2), n_photons=reference_photons, store_url=str(root / "ref.zarr"),
-              config=PhotonConfig(seed=1), scheduler="synchronous", progress=False, keep_records=True)
+        shoot(plan(self.scene, f"{K2 - 15}-{K2 + 15}", N_FRAME, PhotonConfig()), str(root / "p.zarr"),
+              scheduler="synchronous", progress=False, keep_records=True)
+        shoot(plan(self.scene, str(K2), reference_photons, PhotonConfig(seed=1)), str(root / "ref.zarr"),
+              scheduler="synchronous", progress=False, keep_records=True)
         self.store = PhotonStore.open(str(root / "p.zarr"))
         ref = PhotonStore.open(str(root / "ref.zarr"))
         self.state = self.scene.pose_frame(K2)
