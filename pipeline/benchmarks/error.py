@@ -78,7 +78,7 @@ from pipeline.frames.tonemap import log_average, luminance
 from pipeline.photons.raycast import caster_for
 from pipeline.photons.tracing import PhotonRange, trace_batch
 from pipeline.run.cluster import connect
-from pipeline.run.render import render
+from pipeline.run.render import RenderRequest, render
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin import BUILTIN_SCENES
 from pipeline.scene.scene_cache import load_elements, load_scene
@@ -220,9 +220,9 @@ def run_method(client: Client, scene_path: Path, out: Path, plan: Plan, *, metho
     """One timed ``loom render`` of the plan's frames; its indirect maps and what it cost."""
     settings = RenderSettings(width=plan.width, height=plan.height, spp=plan.spp)
     cpu0, t0 = _cpu_seconds(client), time.perf_counter()
-    report = render(scene_path, frames=f"{plan.frames[0]}-{plan.frames[1]}", out_dir=out, settings=settings,
-                    n_photons=n_photons, config=config, scheduler=client.scheduler.address, progress=False,
-                    temporal=temporal, fmax=fmax)
+    report = render(RenderRequest(scene_path=scene_path, frames=f"{plan.frames[0]}-{plan.frames[1]}", out_dir=out,
+                                  settings=settings, n_photons=n_photons, config=config, temporal=temporal, fmax=fmax),
+                    scheduler=client.scheduler.address)
     wall = time.perf_counter() - t0
     cpu = _cpu_seconds(client) - cpu0
     store = PhotonStore.open(str(out / "photons.zarr"))

@@ -44,9 +44,10 @@ from typing import TYPE_CHECKING
 
 import click
 
+from pipeline.frames.settings import RenderSettings
 from pipeline.report.tables import ROWS, stage_table, store_size_line
 from pipeline.run.cluster import connect
-from pipeline.run.render import RenderSettings, render
+from pipeline.run.render import RenderRequest, render
 from pipeline.scene.builtin import BUILTIN_SCENES, write_builtin
 from pipeline.segments.records import read_records
 
@@ -60,9 +61,9 @@ if TYPE_CHECKING:
 def run_render(scene: Path, out: Path, *, frames: str | None, width: int, height: int, spp: int, workers: int,
                n_photons: int | None, fmax: int | None) -> dict:
     t0 = time.perf_counter()
-    report = render(scene, frames=frames, out_dir=out, settings=RenderSettings(width=width, height=height, spp=spp),
-                    n_photons=n_photons, fmax=fmax, temporal="adaptive", scheduler="local", workers=workers,
-                    progress=False)
+    report = render(RenderRequest(scene_path=scene, frames=frames, out_dir=out,
+                                  settings=RenderSettings(width=width, height=height, spp=spp), n_photons=n_photons,
+                                  fmax=fmax, temporal="adaptive"), scheduler="local", workers=workers)
     wall = time.perf_counter() - t0
     records = read_records(out)
     table = stage_table(records)

@@ -7,7 +7,7 @@ import click
 
 from pipeline.errors import LoomError
 
-from .render import job_arguments, job_options
+from .render import job_options, render_request
 
 
 @click.command("plan")
@@ -22,8 +22,7 @@ def plan_command(loom_command, decide_workers, **job) -> None:
     from pipeline.run.farm import bounds, write_plan
     from pipeline.run.render import prepare_job
 
-    args = job_arguments(**job)
-    made = prepare_job(args.pop("scene_path"), **args)
+    made = prepare_job(render_request(**job))
     path = write_plan(made, loom_command, decide_workers)
     segments, chunks = bounds(made)
     click.echo(f"wrote {path}: up to {segments} segment(s) x {chunks} chunk(s) of frames; "

@@ -5,7 +5,7 @@ The job options (what a render makes) are shared with ``loom plan`` (farm.py).
 from __future__ import annotations
 
 import logging
-from typing import Any, Callable, TypeVar
+from typing import TYPE_CHECKING, Any, Callable, TypeVar
 
 import click
 
@@ -13,6 +13,9 @@ from pipeline.aqm.display import DISPLAYS as _DISPLAYS
 from pipeline.config import PhotonConfig as _PhotonConfig
 
 from .scene import CAMERA_HELP, LIGHT_HELP
+
+if TYPE_CHECKING:
+    from pipeline.run.render import RenderRequest
 
 _PHOTON_DEPTH = _PhotonConfig().photon_depth
 _PHOTON_DEPTH_HELP = "Safety cap on photon hits (Russian roulette ends paths; pipeline/config.py)."
@@ -24,12 +27,12 @@ _F = TypeVar("_F", bound=Callable[..., Any])
 
 class _RenderSpp:
     """The default of every option that means a render's camera samples per pixel: RenderSettings.spp
-    (pipeline/run/render.py), its one owner. Read when click needs it, since importing pipeline.run.render
-    when the CLI starts would cost every loom command about 0.3 s: click calls it for the value and
-    shows str() of it in --help (a plain function would show "(dynamic)")."""
+    (pipeline/frames/settings.py), its one owner. Read when click needs it, since importing the frame
+    stage when the CLI starts would cost every loom command its start-up: click calls it for the value
+    and shows str() of it in --help (a plain function would show "(dynamic)")."""
 
     def __call__(self) -> int:
-        from pipeline.run.render import RenderSettings
+        from pipeline.frames.settings import RenderSettings
 
         return RenderSettings.spp
 
@@ -143,28 +146,29 @@ def job_options(f: _F) -> _F:
     return f
 
 
-def job_arguments(scene_file: str, frames: str | None, out_dir: str, resolution: str, spp: int, photons: int | None,
-                  fmax: int | None, temporal: str, store_url: str | None, keep_records: bool, camera: str | None,
-                  seed: int,
-                  reflection_depth: int, photon_depth: int, d_thr: float | None, config_file: str | None,
-                  light: str = "auto", tonemap: str = "filmic", exposure: float = 0.0,
-                  element_size: float | None = None, display: str = "standard_fhd", fill: str = "full_screen") -> dict:
-    """The keyword arguments of pipeline.run.render.prepare_job / render from the job options."""
+def render_request(scene_file: str, frames: str | None, out_dir: str, resolution: str, spp: int,
+                   photons: int | None, fmax: int | None, temporal: str, store_url: str | None, keep_records: bool,
+                   camera: str | None, seed: int, reflection_depth: int, photon_depth: int, d_thr: float | None,
+                   config_file: str | None, light: str = "auto", tonemap: str = "filmic", exposure: float = 0.0,
+                   element_size: float | None = None, display: str = "standard_fhd",
+                   fill: str = "full_screen") -> RenderRequest:
+    """The RenderRequest (pipeline/run/render.py) of the job options: one parameter per option."""
     from pipeline.config import RenderConfig, load_config
+    from pipeline.frames.settings import RenderSettings
     from pipeline.frames.tonemap import ToneMapping
-    from pipeline.run.render import RenderSettings, parse_resolution
+    from pipeline.run.render import RenderRequest, parse_resolution
 
     width, height = parse_resolution(resolution)
     fields = load_config(config_file) if config_file else {}
     fields.update(seed=seed, photon_depth=photon_depth, **({} if d_thr is None else {"d_thr": d_thr}),
                   **({} if element_size is None else {"element_size": element_size}))
-    return dict(scene_path=scene_file, frames=frames, out_dir=out_dir, n_photons=photons, fmax=fmax,
-                temporal=temporal, store_url=store_url, keep_records=keep_records, camera=camera,
-                config=RenderConfig.from_dict(fields),
-                light=light,
-                settings=RenderSettings(width=width, height=height, spp=spp, reflection_depth=reflection_depth,
-                                        tonemap=ToneMapping(operator=tonemap, exposure=exposure, display=display,
-                                                            fill=fill)))
+    return RenderRequest(scene_path=scene_file, frames=frames, out_dir=out_dir, n_photons=photons, fmax=fmax,
+                         temporal=temporal, store_url=store_url, keep_records=keep_records, camera=camera,
+                         config=RenderConfig.from_dict(fields), light=light,
+                         settings=RenderSettings(width=width, height=height, spp=spp,
+                                                 reflection_depth=reflection_depth,
+                                                 tonemap=ToneMapping(operator=tonemap, exposure=exposure,
+                                                                     display=display, fill=fill)))
 
 
 @click.command("render")
@@ -185,9 +189,8 @@ def render_command(segment, quiet, verbose, performance_report, scheduler, worke
 
     if verbose:
         logging.getLogger("pipeline").setLevel(logging.INFO)
-    args = job_arguments(**job)
-    report = render(args.pop("scene_path"), **args, scheduler=scheduler, workers=workers, progress=not quiet,
-                    segment=segment, echo=None if quiet else click.echo, performance_report=performance_report)
+    report = render(render_request(**job), scheduler=scheduler, workers=workers, segment=segment,
+                    echo=None if quiet else click.echo, performance_report=performance_report)
     t, out_dir = report["times_s"], job["out_dir"]
     click.echo(f"rendered {len(report['rendered'])} frames ({len(report['skipped'])} already done) "
                f"at {report['resolution'][0]}x{report['resolution'][1]}, {report['spp']} spp in "

@@ -277,8 +277,7 @@ def _done(job: Job, i: int) -> str:
 
 
 def _finish(job: Job) -> str:
-    report = finish(job, read_records(job.out_dir), rays={}, batches=0, t_start=time.perf_counter(),
-                    ran_here=False)
+    report = finish(job, read_records(job.out_dir), None, time.perf_counter())
     return f"finished: {report['video']}"
 
 

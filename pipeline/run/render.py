@@ -22,6 +22,7 @@ import re
 import shutil
 import time
 from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass, field
 from pathlib import Path
 from typing import TYPE_CHECKING
 
@@ -52,6 +53,7 @@ from .shoot import check_store_location, open_store, plan
 if TYPE_CHECKING:
     from collections.abc import Callable
 
+    from pipeline.scene import Scene
     from pipeline.segments.records import SegmentRecord
 
 log = logging.getLogger(__name__)
@@ -71,23 +73,40 @@ def check_out_dir(out: Path) -> None:
     check_writable_dir(out, field="--out")
 
 
-def prepare_job(scene_path: str | Path, *, frames: str | None, out_dir: str | Path,
-                settings: RenderSettings = RenderSettings(), n_photons: int | None = None,
-                store_url: str | None = None, camera: str | None = None,
-                config: RenderConfig = RenderConfig(), temporal: str = "adaptive", fmax: int | None = None,
-                light: str = "auto", keep_records: bool = False) -> Job:
-    """Check every input (one-line LoomErrors, before anything is written), then create the output
-    folder, the photon store (with the raw hit records if ``keep_records``) and its illumination
-    arrays (only the client creates arrays: zarr 3 has no locks) and return the coordinator's Job
-    (pipeline/run/coordinator.py)."""
-    out = Path(out_dir)
+@dataclass(frozen=True, kw_only=True)
+class RenderRequest:
+    """What a render is asked to make, as ``loom render`` and ``loom plan`` take it (their job
+    options), before :func:`prepare_job` checks it and resolves it into the Job."""
+
+    scene_path: str | Path
+    frames: str | None = None  # a frame list (pipeline/scene/timeline.py); None: every frame
+    out_dir: str | Path
+    settings: RenderSettings = RenderSettings()
+    config: RenderConfig = RenderConfig()
+    n_photons: int | None = None  # None: guided (--photons auto); else N_frame of every frame
+    fmax: int | None = None  # the first segment's F_max, or every frame's when fixed (None: fmax_initial)
+    temporal: str = "adaptive"  # adaptive | fixed | off (fixed settings only)
+    store_url: str | None = None  # None: OUT/photons.zarr
+    camera: str | None = None  # None: the file's first camera
+    light: str = "auto"  # none: refuse a file without light instead of lighting it by default
+    keep_records: bool = False  # also store every photon hit (a render reads only the counts and sums)
+
+
+def prepare_job(request: RenderRequest) -> Job:
+    """Check every input of ``request`` (one-line LoomErrors, before anything is written), then
+    create the output folder, the photon store (with the raw hit records if ``keep_records``) and
+    its illumination arrays (only the client creates arrays: zarr 3 has no locks) and return the
+    coordinator's Job (pipeline/run/coordinator.py)."""
+    r, config = request, request.config
+    n_photons, temporal, frames = r.n_photons, r.temporal, r.frames
+    out = Path(r.out_dir)
     check_out_dir(out)
-    scene = read_scene(scene_path, camera=camera, light=light)
+    scene = read_scene(r.scene_path, camera=r.camera, light=r.light)
     p = plan(scene, frames, n_photons if n_photons is not None else 1, config.photons)
-    store_url = store_url or str(out / "photons.zarr")
+    store_url = r.store_url or str(out / "photons.zarr")
     check_store_location(store_url)
     cam_name = scene.camera_name  # a node's, or "auto" (pipeline/scene/default_camera.py)
-    fmax = config.segments.fmax_initial if fmax is None else fmax
+    fmax = config.segments.fmax_initial if r.fmax is None else r.fmax
     check_window_options(temporal, fmax)
     guided = n_photons is None
     if guided:
@@ -101,7 +120,8 @@ def prepare_job(scene_path: str | Path, *, frames: str | None, out_dir: str | Pa
             raise LoomError("--photons auto collects photons adaptively (§5.2); use --photons N for "
                             f"--temporal {temporal}", field="--temporal")
 
-    _create_outputs(out, store_url, p, keep_records)
+    _create_outputs(out, store_url, p, r.keep_records)
+    settings = r.settings
     photon_hash = config.photons.photon_hash(p.elements.element_size)
     look = dict(scene_hash=scene.scene_hash, camera=cam_name, seed=config.photons.seed, photon_hash=photon_hash,
                 width=settings.width, height=settings.height, spp=settings.spp,
@@ -117,8 +137,8 @@ def prepare_job(scene_path: str | Path, *, frames: str | None, out_dir: str | Pa
     # Absolute paths: tasks and farm recipes run elsewhere, and in other working directories
     if "://" not in store_url:
         store_url = str(Path(store_url).resolve())
-    keep_scene(str(scene.path.resolve()), camera, scene)  # for finish(), and tasks run in this process
-    return Job(scene_path=str(scene.path.resolve()), scene_hash=scene.scene_hash, camera=camera,
+    keep_scene(str(scene.path.resolve()), r.camera, scene)  # for finish(), and tasks run in this process
+    return Job(scene_path=str(scene.path.resolve()), scene_hash=scene.scene_hash, camera=r.camera,
                camera_name=cam_name, element_size=p.elements.element_size, store_url=store_url,
                out_dir=str(out.resolve()),
                first=p.frames[0], last=p.frames[-1], selection=tuple(p.frames), settings=settings, config=config,
@@ -143,62 +163,70 @@ def _create_outputs(out: Path, store_url: str, p, keep_records: bool) -> None:
         raise LoomError(f"cannot create the output: {err.strerror or err}", path=str(out), field="--out") from None
 
 
-def render(scene_path: str | Path, *, frames: str | None, out_dir: str | Path,
-           settings: RenderSettings = RenderSettings(), n_photons: int | None = None,
-           store_url: str | None = None, camera: str | None = None,
-           config: RenderConfig = RenderConfig(), scheduler: str = "local", workers: int | None = None,
-           progress: bool = True, temporal: str = "adaptive", fmax: int | None = None,
-           segment: int | None = None, echo: Callable[[str], None] | None = None, performance_report: str | None = None,
-           light: str = "auto", keep_records: bool = False) -> dict:
-    """Render ``frames`` of a scene into ``out_dir``; returns the report (also ``report.json``).
+@dataclass
+class RenderTally:
+    """What the segment tasks of this process reported, for the report: the rays and seconds of each
+    frame written, the segments found done already, the photon batches traced."""
 
-    ``n_photons`` None (``--photons auto``): the segment planner chooses N_frame and F_max per
-    segment (pipeline/segments/planner.py, §5.2), ``fmax`` is the first segment's F_max. An integer
-    keeps them fixed for every frame (``--photons N --fmax F``), with ``temporal`` adaptive, fixed
-    or off. ``segment`` redoes one segment and the frames that depend on it. ``echo`` gets progress
-    lines (and the Dask dashboard link); ``performance_report`` an HTML file for Dask's report.
-    ``keep_records`` also stores every photon hit (a render reads only the counts and sums).
+    rays: dict[int, dict] = field(default_factory=dict)
+    frame_times: dict[int, dict] = field(default_factory=dict)
+    segments_done: list[dict] = field(default_factory=list)
+    batches: int = 0
+
+    def add(self, rec: SegmentRecord, result: dict) -> None:
+        """Count a segment task's ``result`` (pipeline/run/coordinator.py segment_task) for ``rec``."""
+        self.rays.update({int(f): r for f, r in result["rays"].items()})
+        self.frame_times.update({int(f): t for f, t in result.get("frame_times", {}).items()})
+        if result.get("already_done"):
+            self.segments_done.append({"index": rec.index, "frames": [rec.start, rec.end]})
+        self.batches += result["batches"]
+
+
+def segment_line(rec: SegmentRecord, result: dict) -> str:
+    """The progress line of a finished segment."""
+    d = f", d_AQM {rec.d_aqm:.2f} %" if rec.d_aqm is not None else ""
+    cap = " (n_frame_max reached)" if rec.capped else ""
+    return (f"segment {rec.index}: frames {rec.start}-{rec.end}, K {rec.k}, F_max {rec.fmax}, "
+            f"N_frame {rec.n_frame:,}{d}{cap}; {len(result['rays'])} frames written")
+
+
+def render(request: RenderRequest, *, scheduler: str = "local", workers: int | None = None,
+           segment: int | None = None, echo: Callable[[str], None] | None = None,
+           performance_report: str | None = None) -> dict:
+    """Render what ``request`` asks for; returns the report (also ``report.json``).
+
+    ``request.n_photons`` None (``--photons auto``): the segment planner chooses N_frame and F_max
+    per segment (pipeline/segments/planner.py, §5.2), ``fmax`` is the first segment's F_max. An
+    integer keeps them fixed for every frame (``--photons N --fmax F``), with ``temporal`` adaptive,
+    fixed or off. ``scheduler`` and ``workers`` as pipeline/run/cluster.py connect takes them.
+    ``segment`` redoes one segment and the frames that depend on it. ``echo`` gets progress lines
+    (and the Dask dashboard link); ``performance_report`` an HTML file for Dask's report.
     """
     if segment is not None and segment < 0:
         raise LoomError(f"must be a segment index >= 0, got {segment}", field="--segment")
     t_start = time.perf_counter()
-    rays: dict[int, dict] = {}
-    frame_times: dict[int, dict] = {}
-    segments_done: list[dict] = []
-    batches = 0
+    tally = RenderTally()
 
-    def report_segment(rec, result):
-        nonlocal batches
-        rays.update({int(f): r for f, r in result["rays"].items()})
-        frame_times.update({int(f): t for f, t in result.get("frame_times", {}).items()})
-        if result.get("already_done"):
-            segments_done.append({"index": rec.index, "frames": [rec.start, rec.end]})
-        batches += result["batches"]
-        if echo is None:
-            return
-        d = f", d_AQM {rec.d_aqm:.2f} %" if rec.d_aqm is not None else ""
-        cap = " (n_frame_max reached)" if rec.capped else ""
-        echo(f"segment {rec.index}: frames {rec.start}-{rec.end}, K {rec.k}, F_max {rec.fmax}, "
-             f"N_frame {rec.n_frame:,}{d}{cap}; {len(result['rays'])} frames written")
+    def on_segment(rec: SegmentRecord, result: dict) -> None:
+        tally.add(rec, result)
+        if echo is not None:
+            echo(segment_line(rec, result))
 
     # The scheduler is reached before anything is written: an address with nothing listening
     # leaves no output folder behind. The report, video and figures (finish) are made while the
     # cluster closes: both are serial ends of the run (docs/13-cluster.md §4).
     with ThreadPoolExecutor(1) as pool:
         with connect(scheduler, workers, performance_report=performance_report, echo=echo) as client:
-            job = prepare_job(scene_path, frames=frames, out_dir=out_dir, settings=settings, n_photons=n_photons,
-                              store_url=store_url, camera=camera, config=config, temporal=temporal, fmax=fmax,
-                              light=light, keep_records=keep_records)
+            job = prepare_job(request)
             if echo is not None:
                 echo(_viewing(job))
             if segment is not None:
-                report_segment(*reprocess(job, client, segment))
+                on_segment(*reprocess(job, client, segment))
                 records = read_records(job.out_dir)
             else:
-                records = coordinate(job, client, on_segment=report_segment,
+                records = coordinate(job, client, on_segment=on_segment,
                                      on_progress=None if echo is None else (lambda line: echo(f"  {line}")))
-            finishing = pool.submit(finish, job, records, rays=rays, batches=batches, t_start=t_start,
-                                    frame_times=frame_times, segments_done=segments_done)
+            finishing = pool.submit(finish, job, records, tally, t_start)
         report = finishing.result()
     if echo is not None:
         for line in summary_lines(report["skipped_work"]):
@@ -213,12 +241,13 @@ def _timed(func: Callable, *args) -> float:
     return time.perf_counter() - t0
 
 
-def finish(job: Job, records: list[SegmentRecord], *, rays: dict, batches: int, t_start: float,
-           frame_times: dict | None = None, segments_done: list | None = None, ran_here: bool = True) -> dict:
+def finish(job: Job, records: list[SegmentRecord], tally: RenderTally | None, t_start: float) -> dict:
     """The segment figure, ``preview.mp4``, ``report.json`` and ``report.html`` (pipeline/report/page.py)
-    of a rendered job. ``ran_here`` False: the frames were written by other processes (a farm's
-    recipes), whose ray counts and timings this one does not know."""
+    of a rendered job, timed from ``t_start``. ``tally`` None: the frames were written by other
+    processes (a farm's recipes), whose ray counts and timings this one does not know."""
     out = Path(job.out_dir)
+    rays = {} if tally is None else tally.rays
+    frame_times = {} if tally is None else tally.frame_times
     video = out / "preview.mp4"
     scene = load_scene(job.scene_path, job.scene_hash, job.camera)
     report = {
@@ -231,11 +260,11 @@ def finish(job: Job, records: list[SegmentRecord], *, rays: dict, batches: int, 
         "viewing": _viewing(job),
         "store": job.store_url, "store_size": store_size(job.store_url), "video": str(video),
         "render_hash": job.render_hash,
-        "photon_batches_traced": batches, "times_s": {},
+        "photon_batches_traced": 0 if tally is None else tally.batches, "times_s": {},
         "rays": {k: sum(r[k] for r in rays.values()) for k in RAY_KINDS},
         "rays_per_frame": {str(f): rays[f] for f in sorted(rays)},
-        "frame_times_s": {str(f): frame_times[f] for f in sorted(frame_times or {})},
-        "skipped_work": _skipped(job, scene, rays if ran_here else None, segments_done or []),
+        "frame_times_s": {str(f): frame_times[f] for f in sorted(frame_times)},
+        "skipped_work": _skipped(job, scene, tally),
         "settings": _settings(job),
     }
     # The video (an ffmpeg process) encodes while this process draws the report's figures: both
@@ -285,13 +314,13 @@ def store_size(store_url: str) -> dict:
             (parts["photons"] + parts["records"]) / photons}
 
 
-def _skipped(job, scene, rays: dict | None, segments_done: list) -> dict:
+def _skipped(job: Job, scene: Scene, tally: RenderTally | None) -> dict:
     """pipeline/report/skipped.py's account of the frames of ``job``, from the store's sharing table."""
     store = PhotonStore.open(job.store_url)
     sources = {f: store.source_frame(f - 1) + 1 for f in job.selection}
     return skipped_work(job.selection, sources=sources, has_specular=scene.has_specular,
-                        has_area_lights=scene.has_area_lights, rays=rays, segments_done=segments_done,
-                        has_sky=scene.sky is not None)
+                        has_area_lights=scene.has_area_lights, rays=None if tally is None else tally.rays,
+                        segments_done=[] if tally is None else tally.segments_done, has_sky=scene.sky is not None)
 
 
 def _remove_leftovers(out: Path, store_url: str) -> None:

@@ -17,7 +17,7 @@ from pipeline.config import FilterConfig, PhotonConfig, RenderConfig, SegmentCon
 from pipeline.frames.camera_paths import CameraPaths, render_frame
 from pipeline.frames.perceived import displayed_difference
 from pipeline.frames.settings import RenderSettings
-from pipeline.run.render import render
+from pipeline.run.render import RenderRequest, render
 from pipeline.run.shoot import plan, shoot
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin import write_builtin
@@ -72,7 +72,7 @@ def _check_records(records, config: SegmentConfig):
 
 def test_room_guided_frames_match_the_converged_reference(tmp_path):
     path = write_builtin("room", tmp_path / "room.glb")
-    report = render(path, frames=None, out_dir=tmp_path / "out", settings=SETTINGS, progress=False)
+    report = render(RenderRequest(scene_path=path, frames=None, out_dir=tmp_path / "out", settings=SETTINGS))
     from pipeline.segments.records import read_records
 
     records = read_records(tmp_path / "out")
@@ -101,10 +101,10 @@ def test_room_guided_frames_match_the_converged_reference(tmp_path):
 def test_atrium_guided_frames_lose_the_mottling(tmp_path):
     path = write_builtin("atrium", tmp_path / "atrium.glb")
     frames_spec, k_probe = "136-166", 151
-    guided = render(path, frames=frames_spec, out_dir=tmp_path / "guided", settings=SETTINGS, progress=False)
-    old = render(path, frames=frames_spec, out_dir=tmp_path / "old", settings=SETTINGS, n_photons=40_000,
-                 fmax=15, temporal="adaptive", config=RenderConfig(filter=FilterConfig(spatial_filter=False)),
-                 progress=False)
+    guided = render(RenderRequest(scene_path=path, frames=frames_spec, out_dir=tmp_path / "guided", settings=SETTINGS))
+    old = render(RenderRequest(scene_path=path, frames=frames_spec, out_dir=tmp_path / "old", settings=SETTINGS,
+                               n_photons=40_000, fmax=15, temporal="adaptive",
+                               config=RenderConfig(filter=FilterConfig(spatial_filter=False))))
     from pipeline.segments.records import read_records
 
     records = read_records(tmp_path / "guided")

@@ -7,8 +7,9 @@ import OpenImageIO as oiio
 import pytest
 
 from pipeline.frames.images import frame_paths, read_exr
+from pipeline.frames.settings import RenderSettings
 from pipeline.frames.tonemap import ToneMapping, adapt_in_time, image_adaptation
-from pipeline.run.render import RenderSettings, render
+from pipeline.run.render import RenderRequest, render
 from pipeline.segments.records import read_record
 from tests.render.adaptation_scenes import FPS, box_scene
 
@@ -18,8 +19,8 @@ SETTINGS = RenderSettings(width=64, height=48, spp=1)
 
 def _render(tmp, photons: int, **scene):
     out = tmp / "out"
-    render(box_scene(tmp / "box.glb", frames=FRAMES, **scene), frames=f"1-{FRAMES}", out_dir=out,
-           settings=SETTINGS, n_photons=photons, scheduler="synchronous", progress=False)
+    render(RenderRequest(scene_path=box_scene(tmp / "box.glb", frames=FRAMES, **scene), frames=f"1-{FRAMES}",
+                         out_dir=out, settings=SETTINGS, n_photons=photons), scheduler="synchronous")
     return out
 
 

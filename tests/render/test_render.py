@@ -13,18 +13,17 @@ from click.testing import CliRunner
 from pipeline.cli import main
 from pipeline.config import RenderConfig
 from pipeline.frames.images import EXR_CHANNELS, frame_paths, read_exr
-from pipeline.run.render import RenderSettings, render
+from pipeline.frames.settings import RenderSettings
+from pipeline.run.render import RenderRequest, render
 from pipeline.scene import read_scene
 from tests.render.scenes import plane_scene
 
 SMALL = RenderSettings(width=32, height=24, spp=1)
 
 
-def _render(scene, out, frames="1-3", **kw):
-    args = dict(frames=frames, out_dir=out, settings=SMALL, n_photons=3000, scheduler="synchronous",
-                progress=False)
-    args.update(kw)
-    return render(scene, **args)
+def _render(scene, out, frames="1-3", keep_records=False):
+    return render(RenderRequest(scene_path=scene, frames=frames, out_dir=out, settings=SMALL, n_photons=3000,
+                                keep_records=keep_records), scheduler="synchronous")
 
 
 @pytest.fixture(scope="module")

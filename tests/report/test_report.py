@@ -16,7 +16,8 @@ from PIL import Image
 
 from pipeline.cli import main
 from pipeline.config import RenderConfig, SegmentConfig
-from pipeline.run.render import RenderSettings, render
+from pipeline.frames.settings import RenderSettings
+from pipeline.run.render import RenderRequest, render
 from pipeline.scene.builtin import write_builtin
 from pipeline.segments.records import read_records
 from tests.report.browser import load
@@ -45,10 +46,11 @@ def rendered(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("report")
     scene = write_builtin("room", tmp / "room.glb")
     out = tmp / "out"
-    kw = dict(frames="60-80", out_dir=out, settings=RenderSettings(width=96, height=72, spp=1),
-              config=RenderConfig(segments=SegmentConfig(**CHEAP)), scheduler="synchronous", progress=False)
-    first = render(scene, **kw)
-    again = render(scene, **kw)  # everything is done: the rerun says what it skipped
+    request = RenderRequest(scene_path=scene, frames="60-80", out_dir=out,
+                            settings=RenderSettings(width=96, height=72, spp=1),
+                            config=RenderConfig(segments=SegmentConfig(**CHEAP)))
+    first = render(request, scheduler="synchronous")
+    again = render(request, scheduler="synchronous")  # everything is done: the rerun says what it skipped
     return out, first, again
 
 

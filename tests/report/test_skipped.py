@@ -54,7 +54,8 @@ def test_a_sky_is_sampled_like_an_area_light_and_is_not_called_skipped(tmp_path)
                      segments_done=[], has_sky=True)
     assert "area-light sampling" not in {i["what"] for i in s["per_frame"]["1"]}
     # end to end: a plane with no light of its own renders under the default sun and sky
-    from pipeline.run.render import RenderSettings, render
+    from pipeline.frames.settings import RenderSettings
+    from pipeline.run.render import RenderRequest, render
     from pipeline.scene.builtin.gltf_builder import GltfBuilder
     from tests.render.scenes import UP_FACES, camera, quad_y
 
@@ -63,8 +64,9 @@ def test_a_sky_is_sampled_like_an_area_light_and_is_not_called_skipped(tmp_path)
     camera(b, (0.0, 3.0, 0.0), (0.0, 0.0, 0.0))
     b.set_scene_extras({"photonloom": {"element_size": 1.0}})
     scene = b.write(tmp_path / "unlit.glb")
-    report = render(scene, frames="1", out_dir=tmp_path / "out", settings=RenderSettings(width=16, height=12, spp=1),
-                    n_photons=500, scheduler="synchronous", progress=False)
+    report = render(RenderRequest(scene_path=scene, frames="1", out_dir=tmp_path / "out",
+                                  settings=RenderSettings(width=16, height=12, spp=1), n_photons=500),
+                    scheduler="synchronous")
     assert report["rays"]["area"] > 0
     assert report["skipped_work"]["frames_skipping"].get("area-light sampling", 0) == 0
     assert "frames with no area-light sampling: 0 of 1" in summary_lines(report["skipped_work"])

@@ -5,15 +5,16 @@ from __future__ import annotations
 import numpy as np
 
 from pipeline.frames.images import frame_paths, read_exr
-from pipeline.run.render import RenderSettings, render
+from pipeline.frames.settings import RenderSettings
+from pipeline.run.render import RenderRequest, render
 from tests.scene.deforming_assets import animated_morph_cube, rigged_simple
 
 SETTINGS = RenderSettings(width=64, height=48, spp=1)
 
 
 def _frames(scene_path, out):
-    report = render(scene_path, frames="1-3", out_dir=out, settings=SETTINGS, n_photons=3000,
-                    scheduler="synchronous", progress=False)
+    report = render(RenderRequest(scene_path=scene_path, frames="1-3", out_dir=out, settings=SETTINGS, n_photons=3000),
+                    scheduler="synchronous")
     assert report["rendered"] == [1, 2, 3]
     rgb = []
     for f in (1, 3):

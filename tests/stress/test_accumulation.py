@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from pipeline.config import FilterConfig, RenderConfig
-from pipeline.run.render import RenderSettings, render
+from pipeline.frames.settings import RenderSettings
+from pipeline.run.render import RenderRequest, render
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin.gltf_builder import GltfBuilder
 from pipeline.scene.builtin.shapes import look_at
@@ -72,10 +73,10 @@ def _long_double_map(records, select, elements, areas):
 def test_1e8_photons_accumulate_without_drift(tmp_path):
     path = _scene(tmp_path / "tile.glb")
     out = tmp_path / "out"
-    render(path, frames="1", out_dir=out, n_photons=N, temporal="off",
-           config=RenderConfig(filter=FilterConfig(spatial_filter=False)),
-           settings=RenderSettings(width=16, height=12, spp=1), scheduler="synchronous", progress=False,
-           keep_records=True)
+    render(RenderRequest(scene_path=path, frames="1", out_dir=out, n_photons=N, temporal="off",
+                         config=RenderConfig(filter=FilterConfig(spatial_filter=False)),
+                         settings=RenderSettings(width=16, height=12, spp=1), keep_records=True),
+           scheduler="synchronous")
     scene = read_scene(path)
     elements = ElementMesh.build(scene)
     areas = elements.vertex_areas(scene.pose_frame(1)).astype(np.longdouble)

@@ -19,7 +19,8 @@ import zarr
 
 from pipeline.config import PhotonConfig
 from pipeline.frames.images import EXR_CHANNELS, frame_paths, read_exr
-from pipeline.run.render import RenderSettings, render
+from pipeline.frames.settings import RenderSettings
+from pipeline.run.render import RenderRequest, render
 from pipeline.run.shoot import plan, shoot
 from pipeline.scene import read_scene
 from pipeline.store import PhotonStore
@@ -58,9 +59,9 @@ def _run(tmp, name, values):
           scheduler="synchronous", progress=False, keep_records=True)
     _damage(url, 1, values)
     out = tmp / name
-    render(scene, frames=f"1-{FRAMES}", out_dir=out, n_photons=N, store_url=url, scheduler="synchronous",
-           keep_records=True, settings=RenderSettings(width=40, height=30, spp=1), progress=False,
-           temporal="adaptive", fmax=4)
+    render(RenderRequest(scene_path=scene, frames=f"1-{FRAMES}", out_dir=out, n_photons=N, store_url=url,
+                         keep_records=True, settings=RenderSettings(width=40, height=30, spp=1), temporal="adaptive",
+                         fmax=4), scheduler="synchronous")
     return url, [read_exr(frame_paths(out, f)[0])[0] for f in range(1, FRAMES + 1)]
 
 

@@ -14,7 +14,8 @@ import pytest
 
 from pipeline.config import PhotonConfig, RenderConfig
 from pipeline.frames.images import frame_paths, read_exr
-from pipeline.run.render import RenderSettings, render
+from pipeline.frames.settings import RenderSettings
+from pipeline.run.render import RenderRequest, render
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.store.illumination import IlluminationMaps
 from tests.stress.scenes import furnace_box
@@ -26,9 +27,8 @@ RHO, L = 0.8, 0.5
 def furnace(tmp_path_factory):
     tmp = tmp_path_factory.mktemp("furnace")
     path = furnace_box(tmp / "furnace.glb", rho=RHO, radiance=L)
-    report = render(path, frames="1", out_dir=tmp / "out", n_photons=200_000, temporal="off",
-                    settings=RenderSettings(width=40, height=30, spp=8), scheduler="synchronous",
-                    progress=False)
+    report = render(RenderRequest(scene_path=path, frames="1", out_dir=tmp / "out", n_photons=200_000, temporal="off",
+                                  settings=RenderSettings(width=40, height=30, spp=8)), scheduler="synchronous")
     scene = read_scene(path)
     elements = ElementMesh.build(scene)
     areas = elements.vertex_areas(scene.pose_frame(1))
@@ -68,9 +68,9 @@ def test_a_depth_cap_of_eight_loses_rho_to_the_seventh(tmp_path):
     """The test has power: the old cap (8 hits, 7 of them indirect) keeps 1 - rho^7 of the
     indirect light, 79 %, which the 1 % tolerance above rejects."""
     path = furnace_box(tmp_path / "furnace.glb", rho=RHO, radiance=L)
-    render(path, frames="1", out_dir=tmp_path / "out", n_photons=100_000, temporal="off",
-           config=RenderConfig(photons=PhotonConfig(photon_depth=8)), settings=RenderSettings(width=8, height=6, spp=1),
-           scheduler="synchronous", progress=False)
+    render(RenderRequest(scene_path=path, frames="1", out_dir=tmp_path / "out", n_photons=100_000, temporal="off",
+                         config=RenderConfig(photons=PhotonConfig(photon_depth=8)),
+                         settings=RenderSettings(width=8, height=6, spp=1)), scheduler="synchronous")
     scene = read_scene(path)
     areas = ElementMesh.build(scene).vertex_areas(scene.pose_frame(1))
     indirect = IlluminationMaps.open(str(tmp_path / "out" / "photons.zarr")).read(0, "indirect").astype(np.float64)

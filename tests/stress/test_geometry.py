@@ -17,7 +17,8 @@ import numpy as np
 import pytest
 
 from pipeline.frames.images import EXR_CHANNELS, frame_paths, read_exr
-from pipeline.run.render import RenderSettings, render
+from pipeline.frames.settings import RenderSettings
+from pipeline.run.render import RenderRequest, render
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.elements import MAX_SPLIT
 from pipeline.store.illumination import IlluminationMaps
@@ -48,8 +49,8 @@ def _ground(b):
 def _run(tmp, name, extra):
     path = lit_room(tmp / f"{name}.glb", extra=extra, frames=2)
     out = tmp / name
-    render(path, frames="1-2", out_dir=out, n_photons=N, temporal="off", scheduler="synchronous",
-           settings=RenderSettings(width=40, height=30, spp=2), progress=False)
+    render(RenderRequest(scene_path=path, frames="1-2", out_dir=out, n_photons=N, temporal="off",
+                         settings=RenderSettings(width=40, height=30, spp=2)), scheduler="synchronous")
     scene = read_scene(path)
     elements = ElementMesh.build(scene)
     state = scene.pose_frame(1)

@@ -13,8 +13,9 @@ import pytest
 
 from pipeline.config import PhotonConfig
 from pipeline.frames.images import frame_paths, read_exr
+from pipeline.frames.settings import RenderSettings
 from pipeline.photons.tracing import PhotonRange, trace_batch
-from pipeline.run.render import RenderSettings, render
+from pipeline.run.render import RenderRequest, render
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.store import DIRECT_BIT
 from pipeline.store.illumination import IlluminationMaps
@@ -28,8 +29,8 @@ def _far_room_indirect(tmp, name, **kw):
     """Area-weighted mean indirect irradiance (RGB) of the dim lamp's room, and the frame."""
     path = lit_room(tmp / f"{name}.glb", dim_ratio=RATIO, **kw)
     out = tmp / name
-    render(path, frames="1", out_dir=out, n_photons=N, temporal="off", scheduler="synchronous",
-           settings=RenderSettings(width=32, height=24, spp=1), progress=False)
+    render(RenderRequest(scene_path=path, frames="1", out_dir=out, n_photons=N, temporal="off",
+                         settings=RenderSettings(width=32, height=24, spp=1)), scheduler="synchronous")
     scene = read_scene(path)
     elements = ElementMesh.build(scene)
     state = scene.pose_frame(1)

@@ -13,18 +13,19 @@ import numpy as np
 import pytest
 
 from pipeline.frames.images import EXR_CHANNELS, frame_paths, read_exr
-from pipeline.run.render import RenderSettings, render
+from pipeline.frames.settings import RenderSettings
+from pipeline.run.render import RenderRequest, render
 from tests.stress.scenes import lit_room
 
 FRAMES = 3
 SETTINGS = RenderSettings(width=40, height=30, spp=2)
 
 
-def _render(tmp, scale: float, **kw):
+def _render(tmp, scale: float):
     out = tmp / f"out{scale:g}"
     scene = lit_room(tmp / f"room{scale:g}.glb", scale=scale, frames=FRAMES)
-    render(scene, frames=f"1-{FRAMES}", out_dir=out, n_photons=20_000, settings=SETTINGS,
-           scheduler="synchronous", progress=False, **kw)
+    render(RenderRequest(scene_path=scene, frames=f"1-{FRAMES}", out_dir=out, n_photons=20_000, settings=SETTINGS),
+           scheduler="synchronous")
     return [read_exr(frame_paths(out, f)[0])[0] for f in range(1, FRAMES + 1)]
 
 
