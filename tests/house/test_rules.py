@@ -1,6 +1,7 @@
 """House rules a newcomer can rely on, checked on the source itself so they stay true: kernels sit
-below the pipeline, each fact has one owner, public functions carry type hints and the layout note
-(docs/02-layout.md) names every module (the README and citations: tests/house/test_readme.py)."""
+below the pipeline, each fact has one owner, public functions carry type hints, no function takes
+more than a handful of parameters and the layout note (docs/02-layout.md) names every module (the
+README and citations: tests/house/test_readme.py)."""
 from __future__ import annotations
 
 import ast
@@ -65,6 +66,64 @@ def test_public_functions_have_type_hints():
             if gaps:
                 missing.append(f"{_rel(path)}:{fn.lineno} {name}: {', '.join(gaps)}")
     assert not missing, "\n".join(missing)
+
+
+MAX_PARAMETERS = 8
+# Exempt from MAX_PARAMETERS: the CLI's commands take one parameter per click option, the glTF
+# builder's add_* helpers mirror the glTF fields, and the benchmarks spell out what they measure.
+PARAMETER_EXEMPT = ("pipeline/cli/", "pipeline/benchmarks/", "pipeline/scene/builtin/gltf_builder.py")
+# Functions allowed more parameters than MAX_PARAMETERS, as "path qualified.name": reason.
+MANY_PARAMETERS: dict[str, str] = {}
+
+
+def _parameter_counts(tree: ast.Module, where: str):
+    """("where:line qualified.name", count) of every function and method in ``tree``, nested ones
+    too, counting positional, keyword-only, *args and **kwargs parameters but not self or cls."""
+    def visit(node, prefix):
+        for child in ast.iter_child_nodes(node):
+            if isinstance(child, (ast.FunctionDef, ast.AsyncFunctionDef)):
+                a = child.args
+                params = [p for p in a.posonlyargs + a.args + a.kwonlyargs if p.arg not in ("self", "cls")]
+                params += [p for p in (a.vararg, a.kwarg) if p is not None]
+                yield f"{where}:{child.lineno} {prefix}{child.name}", len(params)
+                yield from visit(child, f"{prefix}{child.name}.")
+            elif isinstance(child, ast.ClassDef):
+                yield from visit(child, f"{prefix}{child.name}.")
+            else:
+                yield from visit(child, prefix)
+    yield from visit(tree, "")
+
+
+def _too_many(tree: ast.Module, where: str) -> list[str]:
+    return [f"{name} takes {n} parameters" for name, n in _parameter_counts(tree, where)
+            if n > MAX_PARAMETERS and f"{where} {name.split(' ', 1)[1]}" not in MANY_PARAMETERS]
+
+
+def test_no_function_takes_more_than_a_handful_of_parameters():
+    """Parameters that travel together are one small typed object (a request, the RenderSettings,
+    the Job); a mode flag that selects another computation is another function."""
+    found = []
+    for path in _sources("pipeline", "workers"):
+        if not _rel(path).startswith(PARAMETER_EXEMPT):
+            found += _too_many(ast.parse(path.read_text()), _rel(path))
+    assert not found, f"more than {MAX_PARAMETERS} parameters:\n" + "\n".join(found)
+
+
+def test_the_parameter_count_names_the_offender():
+    source = ("class Task:\n"
+              "    def run(self, a, b, c, d, e, f, g, h, *, i):\n"
+              "        def inner(a, b, c, d, e, f, g, *rest, **options): ...\n"
+              "    def fits(self, a, b, c, d, e, f, g, h): ...\n")
+    assert _too_many(ast.parse(source), "workers/example.py") == [
+        "workers/example.py:2 Task.run takes 9 parameters", "workers/example.py:3 Task.run.inner takes 9 parameters"]
+
+
+def test_every_parameter_exception_is_needed_and_has_a_reason():
+    counts = {f"{_rel(p)} {name.split(' ', 1)[1]}": n for p in _sources("pipeline", "workers")
+              for name, n in _parameter_counts(ast.parse(p.read_text()), _rel(p))}
+    for name, reason in MANY_PARAMETERS.items():
+        assert reason.strip(), name
+        assert counts.get(name, 0) > MAX_PARAMETERS, f"MANY_PARAMETERS entry {name!r} is not needed: remove it"
 
 
 # Each fact, the pattern that defines it, and its one owner.
