@@ -44,7 +44,7 @@ and d_AQM (every ``--aqm-every``-th frame, on the workers); on the same frames t
 frames as their PNGs show them at that adaptation (error_measures.displayed_flip, as ``loom bench
 spp`` computes it, at the AQM's pixels per degree); the flicker of the error field
 (vertex maps and displayed frames); the Fig. 3 highlight's energy (ROOM: floor vertices within
-0.5 m under the aircraft, tests/temporal/test_room.py; elsewhere the brightest 2 % of the
+0.5 m under the aircraft, tests/collection/test_room.py; elsewhere the brightest 2 % of the
 reference's indirect light) against the reference's; the lag after an abrupt lighting change.
 Frames are composited here from each run's indirect maps with the same camera samples and direct
 light (workers/composite.py), so image differences are in the indirect light only.

@@ -10,7 +10,7 @@ import time
 
 from pipeline.frames.images import frame_paths
 from pipeline.segments.records import read_records
-from tests.pipeline.test_shoot_distributed import dask_cluster  # noqa: F401  (the fixture)
+from tests.run.test_shoot_distributed import dask_cluster  # noqa: F401  (the fixture)
 
 CHEAP = {"pilot_photons": 2000, "n_frame_min": 1000, "n_frame_max": 8000, "d_thr": 0.45,
          "fmax_initial": 6, "fmax_step": 4, "fmax_cap": 10}

@@ -14,8 +14,8 @@ import pytest
 
 from pipeline.frames.images import frame_paths
 from pipeline.segments.records import read_records
-from tests.pipeline.shoot_helpers import store_fingerprint
-from tests.pipeline.test_shoot_distributed import dask_cluster  # noqa: F401  (the fixture)
+from tests.run.shoot_helpers import store_fingerprint
+from tests.run.test_shoot_distributed import dask_cluster  # noqa: F401  (the fixture)
 
 pytestmark = [pytest.mark.slow, pytest.mark.timeout(3600)]  # minutes of rendering, not a hang
 CHEAP = {"pilot_photons": 2000, "n_frame_min": 1000, "n_frame_max": 16000, "d_thr": 0.45,

@@ -57,7 +57,7 @@ def test_a_sky_is_sampled_like_an_area_light_and_is_not_called_skipped(tmp_path)
     from pipeline.frames.settings import RenderSettings
     from pipeline.run.render import RenderRequest, render
     from pipeline.scene.builtin.gltf_builder import GltfBuilder
-    from tests.render.scenes import UP_FACES, camera, quad_y
+    from tests.frames.scenes import UP_FACES, camera, quad_y
 
     b = GltfBuilder()
     b.add_node("plane", b.add_mesh("plane", quad_y(2.0), UP_FACES, material=b.add_material("plane", (0.5,) * 3)))

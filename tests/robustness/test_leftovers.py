@@ -12,7 +12,7 @@ from pathlib import Path
 
 import pytest
 
-from tests.pipeline.shoot_helpers import store_fingerprint
+from tests.run.shoot_helpers import store_fingerprint
 
 ROOT = Path(__file__).resolve().parents[2]
 LOOM = [sys.executable, "-m", "pipeline"]

@@ -13,8 +13,8 @@ from pipeline.errors import SceneError
 from pipeline.scene import read_scene
 from pipeline.scene.default_camera import YFOV_DEG, framing_camera
 from tests.conftest import basic_builder
-from tests.render.scenes import plane_scene
-from tests.render.unlit_scenes import box_in_box
+from tests.frames.scenes import plane_scene
+from tests.scene.unlit_scenes import box_in_box
 
 
 def _camera_coordinates(camera, points):

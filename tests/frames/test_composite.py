@@ -13,7 +13,7 @@ import pytest
 from kernels.camera import camera_rays_reference
 from pipeline.frames.camera_paths import CHUNK_RAYS, CameraPaths, render_frame, sample_means
 from pipeline.scene import ElementMesh, read_scene
-from tests.render.scenes import EYE, LAMP, area_scene, mirror_scene, plane_scene
+from tests.frames.scenes import EYE, LAMP, area_scene, mirror_scene, plane_scene
 
 W, H, SPP = 40, 30, 4
 PATHS = CameraPaths(W, H, SPP, seed=3, frame=1)

@@ -24,7 +24,7 @@ from pipeline.scene.builtin.gltf_builder import GltfBuilder
 from pipeline.scene.summary import surface_lines
 from pipeline.scene.textures import srgb_to_linear
 from pipeline.store import DIRECT_BIT, ELEMENT_MASK
-from tests.render.scenes import UP_FACES
+from tests.frames.scenes import UP_FACES
 
 SUN = np.array([-0.4, -0.5, -1.0]) / np.linalg.norm([-0.4, -0.5, -1.0])  # direction the light travels
 SUN_E = 3.0  # irradiance on a surface facing the sun

@@ -17,7 +17,7 @@ from pipeline.run.shoot import plan, shoot, tasks
 from pipeline.scene import read_scene
 from pipeline.scene.builtin import write_builtin
 from pipeline.store import PhotonStore
-from tests.pipeline.shoot_helpers import store_fingerprint
+from tests.run.shoot_helpers import store_fingerprint
 
 
 @pytest.fixture(scope="module")

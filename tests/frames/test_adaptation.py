@@ -11,7 +11,7 @@ from pipeline.frames.settings import RenderSettings
 from pipeline.frames.tonemap import ToneMapping, adapt_in_time, image_adaptation
 from pipeline.run.render import RenderRequest, render
 from pipeline.segments.records import read_record
-from tests.render.adaptation_scenes import FPS, box_scene
+from tests.frames.adaptation_scenes import FPS, box_scene
 
 FRAMES = 24
 SETTINGS = RenderSettings(width=64, height=48, spp=1)

@@ -7,7 +7,7 @@ import subprocess
 import sys
 from pathlib import Path
 
-from tests.render.scenes import plane_scene
+from tests.frames.scenes import plane_scene
 
 RENDERS = 4
 

@@ -19,7 +19,7 @@ from pipeline.config import PhotonConfig
 from pipeline.run.cluster import WORKER_ENV
 from pipeline.run.shoot import plan, shoot
 from pipeline.scene import read_scene
-from tests.pipeline.shoot_helpers import store_fingerprint
+from tests.run.shoot_helpers import store_fingerprint
 
 DASK = str(Path(sys.executable).with_name("dask"))
 FRAMES, PHOTONS = "1-16", 30_000

@@ -16,7 +16,7 @@ from pipeline.frames.images import EXR_CHANNELS, frame_paths, read_exr
 from pipeline.frames.settings import RenderSettings
 from pipeline.run.render import RenderRequest, render
 from pipeline.scene import read_scene
-from tests.render.scenes import plane_scene
+from tests.frames.scenes import plane_scene
 
 SMALL = RenderSettings(width=32, height=24, spp=1)
 

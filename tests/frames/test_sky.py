@@ -27,7 +27,7 @@ from pipeline.scene.builtin.gltf_builder import GltfBuilder
 from pipeline.scene.builtin.shapes import look_at, merge, quad
 from pipeline.scene.default_lights import SUN_COLOR, SUN_ELEVATION, SUN_IRRADIANCE, default_sun
 from pipeline.scene.sky import Sky
-from tests.render.scenes import UP_FACES, quad_y
+from tests.frames.scenes import UP_FACES, quad_y
 
 ALBEDO = np.array([0.5, 0.6, 0.7])
 ZENITH = (0.2, 0.3, 0.4)

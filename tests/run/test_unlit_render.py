@@ -10,7 +10,7 @@ from click.testing import CliRunner
 from pipeline.cli import main
 from pipeline.frames.images import frame_paths, read_exr
 from pipeline.scene import read_scene
-from tests.render.unlit_scenes import FRAMES, INNER, SLIDE, box_in_box
+from tests.scene.unlit_scenes import FRAMES, INNER, SLIDE, box_in_box
 
 W, H = 64, 48
 
