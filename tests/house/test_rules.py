@@ -68,7 +68,7 @@ def test_public_functions_have_type_hints():
     assert not missing, "\n".join(missing)
 
 
-MAX_PARAMETERS = 8
+MAX_PARAMETERS = 8  # docs/02-layout.md §4
 # Exempt from MAX_PARAMETERS: the CLI's commands take one parameter per click option, the glTF
 # builder's add_* helpers mirror the glTF fields, and the benchmarks spell out what they measure.
 PARAMETER_EXEMPT = ("pipeline/cli/", "pipeline/benchmarks/", "pipeline/scene/builtin/gltf_builder.py")
