@@ -97,16 +97,16 @@ def prepare_job(request: RenderRequest) -> Job:
     create the output folder, the photon store (with the raw hit records if ``keep_records``) and
     its illumination arrays (only the client creates arrays: zarr 3 has no locks) and return the
     coordinator's Job (pipeline/run/coordinator.py)."""
-    r, config = request, request.config
-    n_photons, temporal, frames = r.n_photons, r.temporal, r.frames
-    out = Path(r.out_dir)
+    config, settings = request.config, request.settings
+    n_photons, temporal, frames = request.n_photons, request.temporal, request.frames
+    out = Path(request.out_dir)
     check_out_dir(out)
-    scene = read_scene(r.scene_path, camera=r.camera, light=r.light)
+    scene = read_scene(request.scene_path, camera=request.camera, light=request.light)
     p = plan(scene, frames, n_photons if n_photons is not None else 1, config.photons)
-    store_url = r.store_url or str(out / "photons.zarr")
+    store_url = request.store_url or str(out / "photons.zarr")
     check_store_location(store_url)
     cam_name = scene.camera_name  # a node's, or "auto" (pipeline/scene/default_camera.py)
-    fmax = config.segments.fmax_initial if r.fmax is None else r.fmax
+    fmax = config.segments.fmax_initial if request.fmax is None else request.fmax
     check_window_options(temporal, fmax)
     guided = n_photons is None
     if guided:
@@ -120,8 +120,7 @@ def prepare_job(request: RenderRequest) -> Job:
             raise LoomError("--photons auto collects photons adaptively (§5.2); use --photons N for "
                             f"--temporal {temporal}", field="--temporal")
 
-    _create_outputs(out, store_url, p, r.keep_records)
-    settings = r.settings
+    _create_outputs(out, store_url, p, request.keep_records)
     photon_hash = config.photons.photon_hash(p.elements.element_size)
     look = dict(scene_hash=scene.scene_hash, camera=cam_name, seed=config.photons.seed, photon_hash=photon_hash,
                 width=settings.width, height=settings.height, spp=settings.spp,
@@ -137,8 +136,8 @@ def prepare_job(request: RenderRequest) -> Job:
     # Absolute paths: tasks and farm recipes run elsewhere, and in other working directories
     if "://" not in store_url:
         store_url = str(Path(store_url).resolve())
-    keep_scene(str(scene.path.resolve()), r.camera, scene)  # for finish(), and tasks run in this process
-    return Job(scene_path=str(scene.path.resolve()), scene_hash=scene.scene_hash, camera=r.camera,
+    keep_scene(str(scene.path.resolve()), request.camera, scene)  # for finish(), and tasks run in this process
+    return Job(scene_path=str(scene.path.resolve()), scene_hash=scene.scene_hash, camera=request.camera,
                camera_name=cam_name, element_size=p.elements.element_size, store_url=store_url,
                out_dir=str(out.resolve()),
                first=p.frames[0], last=p.frames[-1], selection=tuple(p.frames), settings=settings, config=config,
