@@ -27,9 +27,9 @@ _F = TypeVar("_F", bound=Callable[..., Any])
 
 class _RenderSpp:
     """The default of every option that means a render's camera samples per pixel: RenderSettings.spp
-    (pipeline/frames/settings.py), its one owner. Read when click needs it, since importing the frame
-    stage when the CLI starts would cost every loom command its start-up: click calls it for the value
-    and shows str() of it in --help (a plain function would show "(dynamic)")."""
+    (pipeline/frames/settings.py), its one owner, read when click needs it, so that the CLI imports the
+    frame stage only for a command that uses it: click calls it for the value and shows str() of it in
+    --help (a plain function would show "(dynamic)")."""
 
     def __call__(self) -> int:
         from pipeline.frames.settings import RenderSettings
