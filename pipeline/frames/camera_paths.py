@@ -266,7 +266,7 @@ def adaptation_size(aspect: float, width: int = ADAPTATION_WIDTH) -> tuple[int, 
 def visible_adaptation(state: FrameState, elements: ElementMesh, indirect: np.ndarray, settings: RenderSettings,
                        seed: int) -> float:
     """L_wa (radiance units) of the frame ``state`` lit by the indirect map ``indirect`` (V, 3), as
-    its camera sees it with the reflections and area samples of ``settings``: pixels whose paths
+    its camera sees it at the aspect, reflections and area samples of ``settings``: pixels whose paths
     saw nothing (no geometry, no sky) are left out."""
     w, h = adaptation_size(settings.width / settings.height)
     img = render_frame(state, elements, indirect, CameraPaths(w, h, 1, seed, ADAPTATION_KEY_FRAME,
