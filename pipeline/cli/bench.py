@@ -46,7 +46,8 @@ def bench_aqm(repeat):
 def bench_frame(scenes, resolution, spp, repeat):
     """Milliseconds per frame and rays/s vs raw embreex (default scenes: ROOM and ATRIUM)."""
     from pipeline.benchmarks.frame import run
-    from pipeline.run.render import RenderSettings, parse_resolution
+    from pipeline.frames.settings import RenderSettings
+    from pipeline.run.render import parse_resolution
 
     width, height = parse_resolution(resolution)
     RenderSettings(width=width, height=height, spp=spp)  # validates spp
