@@ -8,7 +8,10 @@ answers (tests/coordinator/test_segments.py); the planner (pipeline/segments/pla
 * :func:`ladder_n_frame`, :func:`next_n_frame` — Step 3 (§5.2.3; the ladder is ours), one doubling a
   step as the paper's; :func:`doublings_ahead` extrapolates what a capped segment still lacked;
 * :func:`place_segment`, :func:`photon_targets` — where segments lie and how many photons each
-  frame gets (the first and last segments compensate their missing neighbour, §5.2).
+  frame gets (the first and last segments compensate their missing neighbour, §5.2);
+* :func:`lighting_steps`, :func:`keyframe_off_steps` — a segment an abrupt lighting change divides
+  is judged away from it, and the frames beside it are compensated as the ends are (ours,
+  docs/07-segments.md §8).
 """
 from __future__ import annotations
 
@@ -233,25 +236,67 @@ def place_segment(start: int, fmax: int, last: int) -> Placement:
     return Placement(start, k, end, fmax)
 
 
-def end_frames(first: int, last: int, fmax: int) -> set[int]:
-    """Frames within F_max/2 of an end of the animation: their windows lack one side."""
+def end_frames(first: int, last: int, fmax: int, steps: Iterable[int] = ()) -> set[int]:
+    """Frames within F_max/2 of an end of the animation, or of a lighting step (a frame ``s`` of
+    ``steps`` begins after one: frames ``s - F_max/2 .. s + F_max/2 - 1``): their windows lack one
+    side."""
     half = fmax // 2
-    return {f for f in range(first, last + 1) if f - first < half or last - f < half}
+    near = {f for f in range(first, last + 1) if f - first < half or last - f < half}
+    for s in steps:
+        near.update(f for f in range(max(first, s - half), min(last, s + half - 1) + 1))
+    return near
 
 
 def photon_targets(placement: Placement, n_frame: int, *, first: int, last: int, end_factor: float,
-                   frames: Iterable[int] | None = None) -> dict[int, int]:
+                   steps: Iterable[int] = ()) -> dict[int, int]:
     """Photons each frame of a segment traces: N_frame, and ``end_factor`` x N_frame for frames
     within F_max/2 of the animation's first or last frame (§5.2: "for the very first and last
-    animation segments the lack of those extra frames is compensated by tracing more photons").
+    animation segments the lack of those extra frames is compensated by tracing more photons"),
+    or of a lighting step of ``steps`` (:func:`lighting_steps`), where the windows stop as at an end.
 
     Why 2x by default: the end frame itself collects F_max/2 + 1 frames instead of F_max + 1,
     about half the photons, so doubling the frames it can reach restores its pooled count; the
     frames further in miss less and are over-served a little.
     """
-    frames = placement.frames if frames is None else list(frames)
-    ends = end_frames(first, last, placement.fmax)
-    return {f: frame_photons(n_frame, end_factor if f in ends else 1.0) for f in frames}
+    ends = end_frames(first, last, placement.fmax, steps)
+    return {f: frame_photons(n_frame, end_factor if f in ends else 1.0) for f in placement.frames}
+
+
+def lighting_steps(back: np.ndarray, considered: np.ndarray, frames: list[int], p_thr: float) -> list[int]:
+    """Frames of a segment that begin after an abrupt change of the lighting: frame ``f`` (not the
+    first) whose windows reach back to ``f - 1`` for fewer than ``p_thr`` of the ``considered``
+    elements.
+
+    ``back`` (F, E) window extents at ``frames`` (consecutive; kernels/temporal.py with the regional
+    step test, pipeline/collection/regional_steps.py). Condition (1) keeps at least ``min_extent``
+    frames, so inside steady lighting nearly every element collects its previous frame (ROOM: at
+    least 96 % at every frame); only a step cuts most windows at once (ROOM's switched light: 3 %).
+    p_thr is §5.2.2's share below which collecting over frames does not pay.
+    """
+    back = np.asarray(back)
+    mask = np.asarray(considered, bool)
+    n = int(mask.sum())
+    if n == 0:
+        return []
+    return [f for i, f in enumerate(frames) if i > 0 and np.count_nonzero((back[i] >= 1) & mask) / n < p_thr]
+
+
+def keyframe_off_steps(place: Placement, steps: Iterable[int]) -> Placement:
+    """``place`` with K in the middle of its longest run of frames no lighting step divides.
+
+    §5.2.3 judges N_frame at K and "assumes it valid for all frames in a given segment", which
+    holds where the lighting changes little over the segment (§5.2.3). A K on a step is the
+    segment's worst frame: its windows reach one way only, and ROOM's switched light at K asked 8x
+    the photons the frames 8 or more away need (docs/07-segments.md §8). Ties go to the run whose
+    middle is nearest the paper's K, then to the earlier.
+    """
+    cuts = sorted(s for s in set(steps) if place.start < s <= place.end)
+    if not cuts:
+        return place
+    bounds = [place.start, *cuts, place.end + 1]
+    runs = [(a, b - 1) for a, b in zip(bounds[:-1], bounds[1:])]
+    a, b = min(runs, key=lambda r: (-(r[1] - r[0]), abs((r[0] + r[1]) // 2 - place.k), r[0]))
+    return Placement(place.start, (a + b) // 2, place.end, place.fmax)
 
 
 def frame_photons(n_frame: int, factor: float) -> int:

@@ -41,7 +41,9 @@ from .decisions import (
     doubling_loop,
     energy_error,
     fmax_loop,
+    keyframe_off_steps,
     ladder_n_frame,
+    lighting_steps,
     needed_n_frame,
     p_me,
     photon_targets,
@@ -198,25 +200,38 @@ class SegmentPlanner:
                                           step=cfg.fmax_step, cap=cfg.fmax_cap)
         t_fmax = time.perf_counter()
 
-        # Step 3: N_frame doubled while d_AQM > d_thr; the record keeps Fig. 5 of the last step
+        # A lighting step inside the segment: K moves off it, and the frames beside it are
+        # compensated as an animation's end frames are (docs/07-segments.md §8)
+        at_n = {**prior, **{f: n for f in place.frames}}
+        steps = [] if job.single_state else self._lighting_steps(index, place, at_n)
+        place = keyframe_off_steps(place, steps)
+
+        def targets_of(n_frame: int) -> dict[int, int]:
+            return photon_targets(place, n_frame, first=job.first, last=job.last, end_factor=cfg.end_photons,
+                                  steps=steps)
+
+        # Step 3: N_frame doubled while d_AQM > d_thr, K judged with the photons its frames will have
+        # (the end and step frames' included); the record keeps Fig. 5 of the last step
         windows: list[dict] = []
 
         def d_aqm_of(n_frame: int) -> float:
-            self.executor.shoot({f: n_frame for f in place.frames})
-            d, at_k = self._d_aqm(index, place, {**prior, **{f: n_frame for f in place.frames}}, temporal)
+            targets = targets_of(n_frame)
+            self.executor.shoot(targets)
+            d, at_k = self._d_aqm(index, place, {**prior, **targets}, temporal)
             windows.append(at_k)
+            beside = f" ({targets[place.k]:,} at K, beside an end or a step)" if targets[place.k] != n_frame else ""
+            self.executor.progress(f"segment {index}: N_frame {n_frame:,}{beside} at K {place.k}: d_AQM {d:.2f} %")
             return d
 
         n, n_steps, capped = doubling_loop(n, d_aqm_of, d_thr=cfg.d_thr, n_max=cfg.n_frame_max)
         t_n = time.perf_counter()
 
-        # Frames next to an animation end: more photons for their missing neighbours (§5.2)
-        final = photon_targets(place, n, first=job.first, last=job.last, end_factor=cfg.end_photons)
-        self.executor.shoot(final)
+        final = targets_of(n)
+        self.executor.shoot(final)  # a doubling loop that ended lower than it measured
         ends = sorted(f for f, v in final.items() if v != n)
         rec = SegmentRecord(
             index=index, start=place.start, end=place.end, k=place.k, fmax=place.fmax, n_frame=n,
-            temporal=temporal, guided=True, decision_hash=job.decision_hash, end_frames=ends,
+            temporal=temporal, guided=True, decision_hash=job.decision_hash, end_frames=ends, steps=steps,
             end_factor=cfg.end_photons, pilot=pilot, fmax_steps=fmax_steps, n_frame_steps=n_steps, capped=capped,
             windows_at_k=windows[-1],
             times_s={"init_s": t_init - t_start, "fmax_s": t_fmax - t_init, "n_frame_s": t_n - t_fmax,
@@ -269,20 +284,35 @@ class SegmentPlanner:
                 needed_n_frame(before.n_frame, before.n_frame_steps, before.capped, self.config.segments.d_thr))
 
     # --- Step 2 ------------------------------------------------------------------------------
-    def _p_me(self, index: int, place: Placement, targets: dict[int, int]) -> tuple[float, float]:
+    def _windows(self, place: Placement, targets: dict[int, int], frames: list[int]) -> tuple:
+        """Condition (1)'s windows (back, fwd: (len(frames), E)) at ``frames`` over the photons of
+        ``targets``, and the elements a photon of the segment hits (those that tell about the
+        lighting, decisions.p_me)."""
         use = batches_in_use(self.store, targets)
         counts = window_counts(self.store, batches=use)
         emitted = np.array([self.store.photons_in(f, int(use[f])) for f in range(self.store.n_frames)], np.float64)
-        # p_me counts how far Condition (1)'s walks reach each way; a regional step stops a walk as
-        # it stops the collection (pipeline/collection/regional_steps.py)
-        back, fwd = collection_windows(counts, emitted, [place.k - 1], WindowSpec("adaptive", place.fmax),
+        # a regional step stops a walk as it stops the collection (pipeline/collection/regional_steps.py)
+        back, fwd = collection_windows(counts, emitted, [f - 1 for f in frames], WindowSpec("adaptive", place.fmax),
                                        self.config.collection,
                                        regions=step_regions(self.elements, self.config.collection))
-        hit = counts[place.start - 1:place.end].sum(axis=0) > 0
+        return back, fwd, counts[place.start - 1:place.end].sum(axis=0) > 0
+
+    def _p_me(self, index: int, place: Placement, targets: dict[int, int]) -> tuple[float, float]:
+        back, fwd, hit = self._windows(place, targets, [place.k])
         pb, pf = p_me(back[0], fwd[0], place.fmax, hit)
         self.executor.progress(f"segment {index}: F_max {place.fmax}, K {place.k}: p_me {pb:.2f} back, "
                                f"{pf:.2f} forward")
         return pb, pf
+
+    def _lighting_steps(self, index: int, place: Placement, targets: dict[int, int]) -> list[int]:
+        """Frames of the segment that begin after an abrupt lighting change (decisions.lighting_steps),
+        from the frame before it, which an earlier segment traced: a step at its first frame counts."""
+        frames = list(range(max(place.start - 1, self.job.first), place.end + 1))
+        back, _, hit = self._windows(place, targets, frames)
+        steps = lighting_steps(back, hit, frames, self.config.segments.p_thr)
+        if steps:
+            self.executor.progress(f"segment {index}: lighting steps before frame(s) {', '.join(map(str, steps))}")
+        return steps
 
     # --- Step 3 ------------------------------------------------------------------------------
     def _d_aqm(self, index: int, place: Placement, targets: dict[int, int], temporal: str) -> tuple[float, dict]:
@@ -305,5 +335,4 @@ class SegmentPlanner:
         picture.parent.mkdir(parents=True, exist_ok=True)
         write_png(picture, judged.picture)
         self._add_time("aqm_s", t0)
-        self.executor.progress(f"segment {index}: N_frame {targets[k]:,} at K {k}: d_AQM {judged.d_aqm:.2f} %")
         return judged.d_aqm, at_k

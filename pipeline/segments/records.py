@@ -43,7 +43,8 @@ class SegmentRecord:
     guided: bool  # decided by the loops (True) or given with --photons N --fmax F (False)
     decision_hash: str
     status: str = "decided"
-    end_frames: list = field(default_factory=list)  # frames within F_max/2 of an animation end
+    end_frames: list = field(default_factory=list)  # frames within F_max/2 of an animation end or a step
+    steps: list = field(default_factory=list)  # frames beginning after a lighting step (decisions.lighting_steps)
     end_factor: float = 1.0
     pilot: dict = field(default_factory=dict)  # frame, n_probe, e_probe, e_target, n_pilot (§5.2.1)
     fmax_steps: list = field(default_factory=list)  # [{fmax, k, p_me_back, p_me_fwd}] (§5.2.2)

@@ -1,6 +1,6 @@
 """The segments' pure decisions (pipeline/segments/decisions.py) on synthetic inputs with known answers:
 Eq. (2), p_me with a lighting step at a known frame, the doubling loop, segment placement and the
-photons of the frames next to an animation end."""
+photons of the frames next to an animation end or a lighting step."""
 from __future__ import annotations
 
 import math
@@ -12,6 +12,7 @@ from pipeline.collection.maps import WindowSpec, collection_windows
 from pipeline.config import CollectionConfig, PhotonConfig, SegmentConfig
 from pipeline.scene import read_scene
 from pipeline.segments.decisions import (
+    Placement,
     calibrated_start,
     doubling_loop,
     doublings_ahead,
@@ -19,7 +20,9 @@ from pipeline.segments.decisions import (
     energy_error,
     fmax_loop,
     grow_fmax,
+    keyframe_off_steps,
     ladder_n_frame,
+    lighting_steps,
     needed_n_frame,
     next_n_frame,
     p_me,
@@ -277,3 +280,48 @@ def test_a_record_with_a_retired_field_loads_and_an_unknown_field_is_refused(tmp
     path.write_text(json.dumps({**old, "no_such_field": 1}))
     with pytest.raises(LoomError, match="not a segment record"):
         read_record(tmp_path, 0)
+
+
+# --- lighting steps inside a segment --------------------------------------------------------------
+def test_a_switched_light_is_found_at_its_frame_and_nowhere_else(rng):
+    # 45 frames (a segment 46-90), F_max 44; 90 % of the elements' lighting drops to a third from
+    # frame 68 on (a switched light), the rest stay. The regional step test over cells of 100
+    # elements stops the switched elements' windows there; Condition (1)'s windows keep at least
+    # min_extent frames, so at every other frame every element collects its previous frame.
+    frames, elements = list(range(46, 91)), 3000
+    counts = rng.poisson(np.full((len(frames), elements), 900.0)).astype(np.uint32)
+    switched = np.arange(elements) < int(0.9 * elements)
+    counts[68 - 46:, switched] = rng.poisson(300.0, (91 - 68, int(switched.sum())))
+    cfg, cells, spec = CollectionConfig(), [np.arange(elements) // 100], WindowSpec("adaptive", 44)
+    back, _ = collection_windows(counts, np.full(len(frames), 40_000.0), np.arange(len(frames)), spec, cfg,
+                                 regions=cells)
+    hit = np.ones(elements, bool)
+    assert lighting_steps(back, hit, frames, p_thr=0.4) == [68]
+    assert lighting_steps(back, hit, frames, p_thr=0.05) == []  # the tenth that stays collects across
+    steady = rng.poisson(np.full((len(frames), elements), 900.0)).astype(np.uint32)
+    back, _ = collection_windows(steady, np.full(len(frames), 40_000.0), np.arange(len(frames)), spec, cfg,
+                                 regions=cells)
+    assert lighting_steps(back, hit, frames, p_thr=0.4) == []
+    assert lighting_steps(back, np.zeros(elements, bool), frames, p_thr=0.4) == []  # nothing lit: no step
+
+
+def test_k_moves_to_the_middle_of_the_longest_steady_run():
+    place = place_segment(46, 44, 135)
+    assert place.k == 68
+    assert keyframe_off_steps(place, []) == place
+    assert keyframe_off_steps(place, [68]) == Placement(46, 79, 90, 44)  # 68-90 (23) beats 46-67 (22)
+    assert keyframe_off_steps(place, [69]).k == 57  # 46-68 (23) beats 69-90 (22)
+    assert keyframe_off_steps(place, [56, 80]).k == 67  # 56-79 is the longest: K in its middle
+    assert keyframe_off_steps(place, [46, 91, 200]) == place  # its first frame and frames outside divide nothing
+    # equal runs: the one whose middle is nearest the paper's K, then the earlier
+    assert keyframe_off_steps(Placement(1, 5, 10, 10), [6]).k == 3
+
+
+def test_frames_beside_a_lighting_step_get_the_end_photons():
+    assert end_frames(1, 100, 10, steps=[50]) == {1, 2, 3, 4, 5, 45, 46, 47, 48, 49, 50, 51, 52, 53, 54,
+                                                  96, 97, 98, 99, 100}
+    middle = place_segment(40, 20, 100)  # frames 40-60
+    targets = photon_targets(middle, 40_000, first=1, last=100, end_factor=2.0, steps=[50])
+    assert [f for f in middle.frames if targets[f] == 80_000] == list(range(40, 60))
+    assert targets[60] == 40_000
+    assert set(photon_targets(middle, 40_000, first=1, last=100, end_factor=1.0, steps=[50]).values()) == {40_000}
