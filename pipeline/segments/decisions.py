@@ -187,7 +187,7 @@ def doubling_loop(n_frame: int, measure: Callable[[int], float], *, d_thr: float
 
 
 def fmax_loop(start: int, fmax: int, last: int, measure: Callable[[Placement], tuple[float, float]], *,
-              p_thr: float, step: int, cap: int, grow: bool = True) -> tuple[Placement, list[dict]]:
+              p_thr: float, step: int, cap: int) -> tuple[Placement, list[dict]]:
     """Step 2's loop: ``measure(placement)`` gives (p_me back, p_me fwd) at its K (the caller
     traces the placement's frames); F_max grows by :func:`grow_fmax` until it stops, the cap, or
     the segment reaches the animation's end. Returns the placement and the steps."""
@@ -196,7 +196,7 @@ def fmax_loop(start: int, fmax: int, last: int, measure: Callable[[Placement], t
     while True:
         pb, pf = measure(place)
         steps.append({"fmax": place.fmax, "k": place.k, "p_me_back": float(pb), "p_me_fwd": float(pf)})
-        grown = grow_fmax(place.fmax, pb, pf, p_thr=p_thr, step=step, cap=cap) if grow and place.end < last else None
+        grown = grow_fmax(place.fmax, pb, pf, p_thr=p_thr, step=step, cap=cap) if place.end < last else None
         if grown is None:
             return place, steps
         place = place_segment(start, grown, last)
