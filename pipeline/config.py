@@ -24,6 +24,9 @@ from typing import Any, Self
 
 from .errors import ConfigError
 
+# The AQM works on images scaled down to 256 pixels (§6); the metric and the segments read it here
+AQM_SIZE = 256
+
 
 def _param(default, symbol: str, lo=None, hi=None, *, odd: bool = False, optional: bool = False,
            closed: bool = False):
@@ -131,7 +134,7 @@ class SegmentConfig(_Stage):
     n_frame_max: int = _param(1_280_000, "largest N_frame of the doubling loop, reported when hit, §5.2.3",
                               1, 1 << 30)
     d_thr: float = _param(0.03, "d_thr, share of AQM pixels above 1 JND, §5.2.3", 0.0, 1.0)
-    aqm_size: int = _param(256, "AQM input size in pixels, §6", 16, 4096)
+    aqm_size: int = _param(AQM_SIZE, "AQM input size in pixels, §6", 16, 4096)
     # An end frame's windows reach one way only, so it collects about half the photons of a frame
     # inside the animation (docs/07-segments.md §2)
     end_photons: float = _param(2.0, "N_frame factor for frames within F_max/2 of an animation end, which "

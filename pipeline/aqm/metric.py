@@ -15,6 +15,7 @@ from dataclasses import dataclass
 import numpy as np
 import numpy.typing as npt
 
+from ..config import AQM_SIZE
 from ..errors import LoomError
 from .bands import decompose, decompose_channels
 from .csf import (
@@ -39,7 +40,6 @@ from .masking import mutual_masking
 from .nonlinearity import local_adaptation, nonlinear_contrast
 from .psychometric import P_THRESHOLD, d_aqm, detection_probability
 
-AQM_SIZE = 256  # §6; SegmentConfig.aqm_size
 # Every filter works by FFT, which treats the image as periodic: the left border would meet the right one
 # and the (usually large) luminance step there would mask errors along the borders. Mirroring a margin
 # of a quarter of the longer side around the image makes the borders continuous [decision]; at 256 px

@@ -14,7 +14,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from pipeline.aqm import AQMResult, Motion, ViewingConditions, aqm, image_velocity
+from pipeline.aqm import AQM_SIZE, AQMResult, Motion, ViewingConditions, aqm, image_velocity
 from pipeline.aqm.display import DISPLAYS, aqm_geometry
 from pipeline.photons.raycast import caster_for
 
@@ -49,7 +49,7 @@ def viewing_line(params: ToneMapping, width: int, height: int, aqm_size: int) ->
 
 
 def displayed_difference(rgb_a: np.ndarray, rgb_b: np.ndarray, adaptation: float, *,
-                         params: ToneMapping = ToneMapping(), aqm_size: int = 256,
+                         params: ToneMapping = ToneMapping(), aqm_size: int = AQM_SIZE,
                          flow: np.ndarray | None = None) -> AQMResult:
     """d_AQM and M_AQM of two linear renderings of one frame as the viewer sees them; ``flow`` the
     image velocity of camera motion in deg/s (:func:`camera_flow`), None for a still camera."""
