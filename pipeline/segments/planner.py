@@ -18,7 +18,7 @@ import math
 import time
 from dataclasses import dataclass
 from functools import cached_property
-from typing import TYPE_CHECKING, Protocol
+from typing import TYPE_CHECKING, NamedTuple, Protocol
 
 import numpy as np
 
@@ -78,6 +78,15 @@ class NextBatch:
     batch: int
     n_photons: int
     photon_start: int
+
+
+class Judged(NamedTuple):
+    """One doubling of Step 3: where K was, the lighting steps found, every frame's photons, Fig. 5 at K."""
+
+    place: Placement
+    steps: list[int]
+    targets: dict[int, int]
+    windows_at_k: dict
 
 
 def next_batches(store: PhotonStore, targets: dict[int, int]) -> list[NextBatch]:
@@ -200,40 +209,37 @@ class SegmentPlanner:
                                           step=cfg.fmax_step, cap=cfg.fmax_cap)
         t_fmax = time.perf_counter()
 
-        # A lighting step inside the segment: K moves off it, and the frames beside it are
-        # compensated as an animation's end frames are (docs/07-segments.md §8)
-        at_n = {**prior, **{f: n for f in place.frames}}
-        steps = [] if job.single_state else self._lighting_steps(index, place, at_n)
-        place = keyframe_off_steps(place, steps)
-
-        def targets_of(n_frame: int) -> dict[int, int]:
-            return photon_targets(place, n_frame, first=job.first, last=job.last, end_factor=cfg.end_photons,
-                                  steps=steps)
-
-        # Step 3: N_frame doubled while d_AQM > d_thr, K judged with the photons its frames will have
-        # (the end and step frames' included); the record keeps Fig. 5 of the last step
-        windows: list[dict] = []
+        # Step 3: N_frame doubled while d_AQM > d_thr. Each doubling first looks for lighting steps in
+        # the photons it has (a step the noise hides at one N stands out at the next): K moves off
+        # them, and the frames beside them are compensated as an animation's end frames are
+        # (docs/07-segments.md §8); K is judged with the photons its frames will have, the end and
+        # step frames' included. The record keeps the last doubling's steps, K and Fig. 5.
+        segment = place
+        judged: list[Judged] = []
 
         def d_aqm_of(n_frame: int) -> float:
-            targets = targets_of(n_frame)
+            steps = [] if job.single_state else self._lighting_steps(index, segment, prior, n_frame)
+            if steps and (not judged or judged[-1].steps != steps):
+                self.executor.progress(f"segment {index}: lighting steps before frame(s) {', '.join(map(str, steps))}")
+            at = keyframe_off_steps(segment, steps)
+            targets = photon_targets(at, n_frame, first=job.first, last=job.last, end_factor=cfg.end_photons,
+                                     steps=steps)
             self.executor.shoot(targets)
-            d, at_k = self._d_aqm(index, place, {**prior, **targets}, temporal)
-            windows.append(at_k)
-            beside = f" ({targets[place.k]:,} at K, beside an end or a step)" if targets[place.k] != n_frame else ""
-            self.executor.progress(f"segment {index}: N_frame {n_frame:,}{beside} at K {place.k}: d_AQM {d:.2f} %")
+            d, at_k = self._d_aqm(index, at, {**prior, **targets}, temporal)
+            judged.append(Judged(at, steps, targets, at_k))
+            beside = f" ({targets[at.k]:,} at K, beside an end or a step)" if targets[at.k] != n_frame else ""
+            self.executor.progress(f"segment {index}: N_frame {n_frame:,}{beside} at K {at.k}: d_AQM {d:.2f} %")
             return d
 
         n, n_steps, capped = doubling_loop(n, d_aqm_of, d_thr=cfg.d_thr, n_max=cfg.n_frame_max)
         t_n = time.perf_counter()
-
-        final = targets_of(n)
-        self.executor.shoot(final)  # a doubling loop that ended lower than it measured
+        place, steps, final, windows_at_k = judged[-1]  # the loop ends at the N_frame it measured last
         ends = sorted(f for f, v in final.items() if v != n)
         rec = SegmentRecord(
             index=index, start=place.start, end=place.end, k=place.k, fmax=place.fmax, n_frame=n,
             temporal=temporal, guided=True, decision_hash=job.decision_hash, end_frames=ends, steps=steps,
             end_factor=cfg.end_photons, pilot=pilot, fmax_steps=fmax_steps, n_frame_steps=n_steps, capped=capped,
-            windows_at_k=windows[-1],
+            windows_at_k=windows_at_k,
             times_s={"init_s": t_init - t_start, "fmax_s": t_fmax - t_init, "n_frame_s": t_n - t_fmax,
                      "decide_s": time.perf_counter() - t_start})
         write_record(job.out_dir, rec)
@@ -304,15 +310,17 @@ class SegmentPlanner:
                                f"{pf:.2f} forward")
         return pb, pf
 
-    def _lighting_steps(self, index: int, place: Placement, targets: dict[int, int]) -> list[int]:
-        """Frames of the segment that begin after an abrupt lighting change (decisions.lighting_steps),
-        from the frame before it, which an earlier segment traced: a step at its first frame counts."""
-        frames = list(range(max(place.start - 1, self.job.first), place.end + 1))
-        back, _, hit = self._windows(place, targets, frames)
-        steps = lighting_steps(back, hit, frames, self.config.segments.p_thr)
-        if steps:
-            self.executor.progress(f"segment {index}: lighting steps before frame(s) {', '.join(map(str, steps))}")
-        return steps
+    def _lighting_steps(self, index: int, place: Placement, prior: dict[int, int], n_frame: int) -> list[int]:
+        """Frames of the segment that begin after an abrupt lighting change (decisions.lighting_steps)
+        in its photons at ``n_frame`` (the end frames' included), from the frame before it, which an
+        earlier segment traced: a step at its first frame counts."""
+        job = self.job
+        targets = photon_targets(place, n_frame, first=job.first, last=job.last,
+                                 end_factor=self.config.segments.end_photons)
+        self.executor.shoot(targets)
+        frames = list(range(max(place.start - 1, job.first), place.end + 1))
+        back, _, hit = self._windows(place, {**prior, **targets}, frames)
+        return lighting_steps(back, hit, frames, self.config.segments.p_thr)
 
     # --- Step 3 ------------------------------------------------------------------------------
     def _d_aqm(self, index: int, place: Placement, targets: dict[int, int], temporal: str) -> tuple[float, dict]:
