@@ -225,12 +225,28 @@ def render(request: RenderRequest, *, scheduler: str = "local", workers: int | N
             else:
                 records = coordinate(job, client, on_segment=on_segment,
                                      on_progress=None if echo is None else (lambda line: echo(f"  {line}")))
+            _import_for_finish()
             finishing = pool.submit(finish, job, records, tally, t_start)
         report = finishing.result()
     if echo is not None:
         for line in summary_lines(report["skipped_work"]):
             echo(f"skipped: {line}")
     return report
+
+
+def _import_for_finish() -> None:
+    """Import, in this thread, the heavy modules :func:`finish` imports when it first draws.
+
+    finish runs in a thread while the cluster closes, and a closing Dask server removes its work
+    directory from ``sys.path``: an import walking ``sys.path`` in another thread at that moment can
+    skip the entry after it, site-packages, and fail with ModuleNotFoundError (seen as "No module
+    named 'matplotlib'" or 'PIL' at the end of a cluster render). Imported first, they are found in
+    ``sys.modules``, and their submodules are looked up in the packages' own paths."""
+    import imageio_ffmpeg  # noqa: F401  the preview video (pipeline/frames/images.py)
+    import matplotlib.backends.backend_agg  # noqa: F401  the report's figures (pipeline/report/figures.py)
+    import matplotlib.figure  # noqa: F401
+    import matplotlib.ticker  # noqa: F401
+    import PIL.Image  # noqa: F401  the report's filmstrip (pipeline/report/page.py)
 
 
 def _timed(func: Callable, *args) -> float:
