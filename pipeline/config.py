@@ -136,9 +136,10 @@ class SegmentConfig(_Stage):
     d_thr: float = _param(0.03, "d_thr, share of AQM pixels above 1 JND, §5.2.3", 0.0, 1.0)
     aqm_size: int = _param(AQM_SIZE, "AQM input size in pixels, §6", 16, 4096)
     # An end frame's windows reach one way only, so it collects about half the photons of a frame
-    # inside the animation (docs/07-segments.md §2)
+    # inside the animation; so do the frames beside a lighting step (docs/07-segments.md §2, §8)
     end_photons: float = _param(2.0, "N_frame factor for frames within F_max/2 of an animation end, which "
-                                "lack one neighbour segment, §5.2 (1: none)", 1.0, 64.0, closed=True)
+                                "lack one neighbour segment, §5.2, or of a lighting step (1: none)", 1.0, 64.0,
+                                closed=True)
 
     def __post_init__(self) -> None:
         super().__post_init__()
