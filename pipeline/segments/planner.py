@@ -1,13 +1,14 @@
-"""The planner of the animation segments: Steps 1-3 of §5.2 and the end frames' photons for one
-segment at a time, on the pure decisions of pipeline/segments/decisions.py (docs/07-segments.md §2).
+"""The planner of the animation segments: Steps 1-3 of §5.2 for one segment at a time, on the pure
+decisions of pipeline/segments/decisions.py (docs/07-segments.md §2).
 
 For a segment it places the frames, runs the pilot at K (Step 1), grows F_max while p_me >= p_thr
 (Step 2), doubles N_frame while d_AQM of the halves at K exceeds d_thr (Step 3, pipeline/segments/
-halves.py), asks for the end frames' photons (§5.2) and writes the record (pipeline/segments/
-records.py). The pilot, the windows, the maps and the halves are computed in the planner's own
-process; photon batches are what it asks of its :class:`Executor`, which traces them into the
-store. It never touches Dask: pipeline/run/coordinator.py is its Dask executor, which the make
-farm's decide step (pipeline/run/farm.py) runs too.
+halves.py), each doubling with the end frames' photons (§5.2) and off any lighting step it finds
+(docs/07-segments.md §8), and writes the record (pipeline/segments/records.py). The pilot, the
+windows, the maps and the halves are computed in the planner's own process; photon batches are
+what it asks of its :class:`Executor`, which traces them into the store. It never touches Dask:
+pipeline/run/coordinator.py is its Dask executor, which the make farm's decide step
+(pipeline/run/farm.py) runs too.
 
 Which photons a frame uses is fixed by the records: the fewest leading batches holding its
 target (:func:`batches_in_use`, docs/07-segments.md §4), never what else the store holds.
