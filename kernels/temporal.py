@@ -7,6 +7,7 @@ table the photon store keeps (§4), never the records.
 Condition (1), as implemented (paper symbols; ``s`` = ``smoothing_frames``, default 3)::
 
     R(g)  = mean over j in S(g) of c_j / N_j        S(g): s frames centred on g, clipped at the ends
+                                                     and at the element's lighting steps
     mu    = N_f R(f)                                 mean count at f ("three subsequent frames")
     x(g)  = N_f R(g)                                 same-width mean at the candidate frame g
     sigma = sqrt(mu N_f Q(g)),  Q(g) = mean over j in S(g) of 1 / N_j;  sigma = 1 where mu = 0
@@ -19,6 +20,11 @@ say where the extra frames lie; they are centred: at least ``(min_extent-1)//2``
 forward, each clipped to F_max/2 and the ends. Beside an abrupt change the regional step test
 (pipeline/collection/regional_steps.py) keeps a frame's window to its own side; placing the extra frames on
 the side least unlike the frame was tried and removed (docs/11-defaults.md, "min_extent_similar").
+
+Lighting steps (``cuts``, from the regional step test) also clip the means R and Q, as the ends do:
+a three-frame mean taken across a step is one third of the other side's lighting, so at the frames
+on either side of a step mu stood apart from every frame of the frame's own side and Condition (1)
+stopped both walks at once (docs/06-temporal.md §3).
 
 The two walks end apart, as in the paper: an asymmetric window's drift bias is taken out by the
 linear windows of the gather (docs/05-estimators.md §1.6), not by cutting the longer walk.
@@ -50,11 +56,18 @@ MODES = ("adaptive", "fixed", "off")
 MAX_HALF_FMAX = 255  # back and fwd are stored as uint8
 
 
-def _check(counts, n_emitted, fmax, mode, smoothing_frames, min_extent, frames):
+def _check(counts, n_emitted, fmax, mode, smoothing_frames, min_extent, frames, cuts):
     counts = np.ascontiguousarray(counts, dtype=np.uint32)
     if counts.ndim != 2:
         raise ValueError(f"counts must be (frames, elements), got shape {counts.shape}")
     n_frames = counts.shape[0]
+    padded = np.zeros(counts.shape, np.uint8)  # row t: a step between frames t and t + 1; the last row none
+    if cuts is not None:
+        cuts = np.asarray(cuts)
+        if cuts.shape != (max(n_frames - 1, 0), counts.shape[1]):
+            raise ValueError(f"cuts must be (frames - 1, elements) = {(max(n_frames - 1, 0), counts.shape[1])}, "
+                             f"got {cuts.shape}")
+        padded[:n_frames - 1] = cuts != 0
     n_emitted = np.ascontiguousarray(n_emitted, dtype=np.float64).reshape(-1)
     if n_emitted.shape[0] != n_frames:
         raise ValueError(f"n_emitted has {n_emitted.shape[0]} frames, counts {n_frames}")
@@ -69,21 +82,7 @@ def _check(counts, n_emitted, fmax, mode, smoothing_frames, min_extent, frames):
     f0, f1 = (0, n_frames) if frames is None else (int(frames[0]), int(frames[1]))
     if not 0 <= f0 <= f1 <= n_frames:
         raise ValueError(f"frames [{f0}, {f1}) outside the table's {n_frames} frames")
-    return counts, n_emitted, f0, f1
-
-
-def inverse_budget(n_emitted: np.ndarray, smoothing_frames: int) -> np.ndarray:
-    """Q(g): mean of 1/N_j over the smoothing frames of g (float64, j ascending)."""
-    n_emitted = np.asarray(n_emitted, dtype=np.float64)
-    n_frames, half = n_emitted.shape[0], smoothing_frames // 2
-    q = np.empty(n_frames)
-    for g in range(n_frames):
-        lo, hi = max(0, g - half), min(n_frames - 1, g + half)
-        total = 0.0
-        for j in range(lo, hi + 1):
-            total += 1.0 / n_emitted[j]
-        q[g] = total / (hi - lo + 1)
-    return q
+    return counts, n_emitted, f0, f1, padded
 
 
 def _extents(fmax: int, mode: str, min_extent: int) -> tuple[int, int, int, bool]:
@@ -94,7 +93,8 @@ def _extents(fmax: int, mode: str, min_extent: int) -> tuple[int, int, int, bool
 
 def windows_cl(counts: npt.ArrayLike, n_emitted: npt.ArrayLike, *, fmax: int, mode: str = "adaptive",
                k_sigma: float = 2.0, smoothing_frames: int = 3, min_extent: int = 3,
-               frames: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+               frames: tuple[int, int] | None = None,
+               cuts: npt.ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray]:
     """Windows of frames ``[f0, f1)`` (default all) on PoCL.
 
     Parameters
@@ -103,12 +103,15 @@ def windows_cl(counts: npt.ArrayLike, n_emitted: npt.ArrayLike, *, fmax: int, mo
     n_emitted : (F,) photons emitted per frame, N_frame.
     fmax : F_max, the segment length; each direction is limited to F_max // 2 frames.
     frames : optional (f0, f1) range of output frames (indices into the table).
+    cuts : optional (F - 1, E) bool, the element's lighting steps between frames t and t + 1: the
+        smoothed means do not cross them (the walks are cut there by the caller).
 
     Returns
     -------
     back, fwd : (f1 - f0, E) uint8, the window of frame f is [f - back, f + fwd].
     """
-    counts, n_emitted, f0, f1 = _check(counts, n_emitted, fmax, mode, smoothing_frames, min_extent, frames)
+    counts, n_emitted, f0, f1, cuts = _check(counts, n_emitted, fmax, mode, smoothing_frames, min_extent, frames,
+                                             cuts)
     n_frames, n_elements = counts.shape
     n_out = f1 - f0
     back = np.zeros((n_out, n_elements), np.uint8)
@@ -119,13 +122,14 @@ def windows_cl(counts: npt.ArrayLike, n_emitted: npt.ArrayLike, *, fmax: int, mo
     ctx, queue = device_context()
     mf = cl.mem_flags
     d_n = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=n_emitted)
-    d_q = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=inverse_budget(n_emitted, smoothing_frames))
     d_rate = cl.Buffer(ctx, mf.READ_WRITE, size=8 * counts.size)
+    d_q = cl.Buffer(ctx, mf.READ_WRITE, size=8 * counts.size)
     if adaptive:
         d_counts = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=counts)
+        d_cuts = cl.Buffer(ctx, mf.READ_ONLY | mf.COPY_HOST_PTR, hostbuf=cuts)
         kernel("temporal", "smooth_rates")(
-            queue, (counts.size,), None, d_counts, d_n, np.int32(n_frames), np.int32(n_elements),
-            np.int32(smoothing_frames // 2), d_rate)
+            queue, (counts.size,), None, d_counts, d_n, d_cuts, np.int32(n_frames), np.int32(n_elements),
+            np.int32(smoothing_frames // 2), d_rate, d_q)
     d_back = cl.Buffer(ctx, mf.WRITE_ONLY, size=back.nbytes)
     d_fwd = cl.Buffer(ctx, mf.WRITE_ONLY, size=fwd.nbytes)
     kernel("temporal", "windows")(
@@ -137,32 +141,53 @@ def windows_cl(counts: npt.ArrayLike, n_emitted: npt.ArrayLike, *, fmax: int, mo
     return back, fwd
 
 
-def smoothed_rates_reference(counts: np.ndarray, n_emitted: np.ndarray, smoothing_frames: int) -> np.ndarray:
-    """R(g, e): mean of c_j / N_j over the smoothing frames of g (float64, j ascending)."""
-    n_frames = counts.shape[0]
+def smoothed_rates_reference(counts: np.ndarray, n_emitted: np.ndarray, smoothing_frames: int,
+                             cuts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """R(g, e), the mean of c_j / N_j, and Q(g, e), the mean of 1/N_j, over the smoothing frames of g
+    clipped at the ends and at the element's steps (``cuts`` (F, E), row t: between t and t + 1);
+    float64, j ascending."""
+    n_frames, n_elements = counts.shape
     half = smoothing_frames // 2
     rate = np.empty(counts.shape)
+    q = np.empty(counts.shape)
+    cut = np.asarray(cuts, bool)
     for g in range(n_frames):
-        lo, hi = max(0, g - half), min(n_frames - 1, g + half)
-        total = np.zeros(counts.shape[1])
-        for j in range(lo, hi + 1):
-            total = total + counts[j].astype(np.float64) / n_emitted[j]
-        rate[g] = total / float(hi - lo + 1)
-    return rate
+        lo = np.full(n_elements, g, np.int64)
+        hi = np.full(n_elements, g, np.int64)
+        open_lo = np.ones(n_elements, bool)
+        open_hi = np.ones(n_elements, bool)
+        for d in range(1, half + 1):
+            if g - d >= 0:
+                open_lo &= ~cut[g - d]
+                lo = np.where(open_lo, g - d, lo)
+            if g + d < n_frames:
+                open_hi &= ~cut[g + d - 1]
+                hi = np.where(open_hi, g + d, hi)
+        total = np.zeros(n_elements)
+        inv = np.zeros(n_elements)
+        for j in range(max(0, g - half), min(n_frames - 1, g + half) + 1):
+            inside = (lo <= j) & (j <= hi)
+            total = np.where(inside, total + counts[j].astype(np.float64) / n_emitted[j], total)
+            inv = np.where(inside, inv + 1.0 / n_emitted[j], inv)
+        width = (hi - lo + 1).astype(np.float64)
+        rate[g] = total / width
+        q[g] = inv / width
+    return rate, q
 
 
 def windows_reference(counts: npt.ArrayLike, n_emitted: npt.ArrayLike, *, fmax: int, mode: str = "adaptive",
                       k_sigma: float = 2.0, smoothing_frames: int = 3, min_extent: int = 3,
-                      frames: tuple[int, int] | None = None) -> tuple[np.ndarray, np.ndarray]:
+                      frames: tuple[int, int] | None = None,
+                      cuts: npt.ArrayLike | None = None) -> tuple[np.ndarray, np.ndarray]:
     """NumPy twin of :func:`windows_cl` (same arguments and results)."""
-    counts, n_emitted, f0, f1 = _check(counts, n_emitted, fmax, mode, smoothing_frames, min_extent, frames)
+    counts, n_emitted, f0, f1, cuts = _check(counts, n_emitted, fmax, mode, smoothing_frames, min_extent, frames,
+                                             cuts)
     n_frames, n_elements = counts.shape
     half_fmax, half_lo, half_hi, adaptive = _extents(fmax, mode, min_extent)
     back = np.zeros((f1 - f0, n_elements), np.uint8)
     fwd = np.zeros((f1 - f0, n_elements), np.uint8)
     if adaptive:
-        rate = smoothed_rates_reference(counts, n_emitted, smoothing_frames)
-        q = inverse_budget(n_emitted, smoothing_frames)
+        rate, q = smoothed_rates_reference(counts, n_emitted, smoothing_frames, cuts)
     k2 = float(k_sigma) * float(k_sigma)
     for i, f in enumerate(range(f0, f1)):
         max_back, max_fwd = min(half_fmax, f), min(half_fmax, n_frames - 1 - f)

@@ -41,7 +41,7 @@ from pipeline.errors import LoomError
 from pipeline.stage_clock import StageClock
 
 from .batch_sums import FRAME_SUMS
-from .regional_steps import clamp_at_steps, region_levels
+from .regional_steps import clamp_windows, element_cuts, region_levels
 
 if TYPE_CHECKING:
     from pipeline.scene import ElementMesh, Scene
@@ -164,12 +164,13 @@ def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames: npt.Ar
         if a < counts_from or z > counts_from + counts.shape[0]:
             raise LoomError(f"count rows [{a}, {z}) needed, [{counts_from}, "
                             f"{counts_from + counts.shape[0]}) given")
-        b, w = windows_cl(counts[a - counts_from:z - counts_from], n_emitted[a:z], fmax=windows.fmax,
-                          mode=windows.mode, k_sigma=config.k_sigma, smoothing_frames=config.smoothing_frames,
-                          min_extent=config.min_extent, frames=(lo - a, hi - a))
+        table = counts[a - counts_from:z - counts_from]
+        cuts = element_cuts(table, n_emitted[a:z], regions, config) if steps else None
+        b, w = windows_cl(table, n_emitted[a:z], fmax=windows.fmax, mode=windows.mode, k_sigma=config.k_sigma,
+                          smoothing_frames=config.smoothing_frames, min_extent=config.min_extent,
+                          frames=(lo - a, hi - a), cuts=cuts)
         if steps:
-            b, w = clamp_at_steps(b, w, np.arange(lo - a, hi - a), counts[a - counts_from:z - counts_from],
-                                  n_emitted[a:z], regions, config)
+            b, w = clamp_windows(b, w, np.arange(lo - a, hi - a), cuts)
         back[inside] = b[frames[inside] - lo]
         fwd[inside] = w[frames[inside] - lo]
     return back, fwd

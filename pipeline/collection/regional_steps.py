@@ -13,7 +13,7 @@ deviations (Poisson counts):
     z = (R_{t+1}/N_{t+1} - R_t/N_t) / sqrt(R_{t+1}/N_{t+1}^2 + R_t/N_t^2)
 
 and by more than ``step_relative`` of the larger rate, and no window of an element of that cell
-crosses the boundary. A slow drift (a few per cent over the segment) never reaches ``step_k``
+crosses the boundary, nor do Condition (1)'s three-frame means (kernels/temporal.py). A slow drift (a few per cent over the segment) never reaches ``step_k``
 between neighbouring frames; a jumping light, a door, a switched lamp does. The relative bound
 keeps the test's power from growing with N_frame: without it, ROOM's guided loop at 640,000
 photons cut the windows at the aircraft's moving light and stalled (docs/06-temporal.md §3).
@@ -65,35 +65,33 @@ def step_boundaries(counts: np.ndarray, n_emitted: np.ndarray, regions: np.ndarr
     return (diff * diff > k * k * both) & large  # zero counts on both sides: 0 > 0, no step
 
 
-def clamp_windows(back: np.ndarray, fwd: np.ndarray, rows: np.ndarray, cut: np.ndarray,
-                  regions: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Back and fwd windows (F, E) of the count rows ``rows`` (F,), cut so that none crosses a
-    step of its element's region (``cut`` (T - 1, R) from :func:`step_boundaries`)."""
-    n_rows = cut.shape[0] + 1
-    # starts[t, r]: first row of region r's step-free run holding row t; ends[t, r]: its last row
-    starts = np.zeros((n_rows, cut.shape[1]), np.int64)
-    ends = np.full((n_rows, cut.shape[1]), n_rows - 1, np.int64)
-    for t in range(1, n_rows):
-        starts[t] = np.where(cut[t - 1], t, starts[t - 1])
-    for t in range(n_rows - 2, -1, -1):
-        ends[t] = np.where(cut[t], t, ends[t + 1])
-    rows = np.asarray(rows, np.int64)
-    lo = starts[rows][:, regions]
-    hi = ends[rows][:, regions]
-    b = np.minimum(back.astype(np.int64), rows[:, None] - lo)
-    w = np.minimum(fwd.astype(np.int64), hi - rows[:, None])
-    return b.astype(back.dtype), w.astype(fwd.dtype)
-
-
-def clamp_at_steps(back: np.ndarray, fwd: np.ndarray, rows: np.ndarray, counts: np.ndarray,
-                   n_emitted: np.ndarray, regions: list[np.ndarray],
-                   config: CollectionConfig) -> tuple[np.ndarray, np.ndarray]:
-    """:func:`clamp_windows` at the steps (``config.step_k``, ``config.step_relative``) of every
-    region level in ``regions``."""
+def element_cuts(counts: np.ndarray, n_emitted: np.ndarray, regions: list[np.ndarray],
+                 config: CollectionConfig) -> np.ndarray:
+    """(T - 1, E) bool: a step (``config.step_k``, ``config.step_relative``) of any of the element's
+    regions, one per level of ``regions``, between rows t and t + 1 of ``counts`` (T, E). No
+    window crosses it and Condition (1)'s means do not mix its sides (kernels/temporal.py)."""
+    cuts = np.zeros((max(counts.shape[0] - 1, 0), counts.shape[1]), bool)
     for level in regions:
-        cut = step_boundaries(counts, n_emitted, level, config.step_k, config.step_relative)
-        back, fwd = clamp_windows(back, fwd, rows, cut, level)
-    return back, fwd
+        cuts |= step_boundaries(counts, n_emitted, level, config.step_k, config.step_relative)[:, level]
+    return cuts
+
+
+def clamp_windows(back: np.ndarray, fwd: np.ndarray, rows: np.ndarray,
+                  cuts: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Back and fwd windows (F, E) of the count rows ``rows`` (F,), cut so that none crosses a
+    step of its element (``cuts`` (T - 1, E) from :func:`element_cuts`)."""
+    n_rows = cuts.shape[0] + 1
+    # starts[t, e]: first row of element e's step-free run holding row t; ends[t, e]: its last row
+    starts = np.zeros((n_rows, cuts.shape[1]), np.int64)
+    ends = np.full((n_rows, cuts.shape[1]), n_rows - 1, np.int64)
+    for t in range(1, n_rows):
+        starts[t] = np.where(cuts[t - 1], t, starts[t - 1])
+    for t in range(n_rows - 2, -1, -1):
+        ends[t] = np.where(cuts[t], t, ends[t + 1])
+    rows = np.asarray(rows, np.int64)
+    b = np.minimum(back.astype(np.int64), rows[:, None] - starts[rows])
+    w = np.minimum(fwd.astype(np.int64), ends[rows] - rows[:, None])
+    return b.astype(back.dtype), w.astype(fwd.dtype)
 
 
 def region_levels(elements: ElementMesh, levels: int) -> list[np.ndarray]:

@@ -59,7 +59,7 @@ def test_no_window_crosses_a_step_and_others_are_untouched():
     cut = step_boundaries(counts, np.full(len(counts), 1e4), regions, 6.0)
     rows = np.arange(len(counts))
     back = np.full((len(rows), len(regions)), 7, np.uint8)
-    b, w = clamp_windows(back, back.copy(), rows, cut, regions)
+    b, w = clamp_windows(back, back.copy(), rows, cut[:, regions])
     first = rows[:, None] - b.astype(int)
     last = rows[:, None] + w.astype(int)
     in_step = regions == 0

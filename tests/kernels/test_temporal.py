@@ -60,12 +60,21 @@ class TestWindowsTwin(KernelTwinTests):
              **{f"{name}-{mode}-fmax{fmax}": (name, dict(mode=mode, fmax=fmax))
                 for name in ADVERSARIAL for mode in MODES for fmax in (0, 30, 500)},
              "random-adaptive-extent7-k3": ("random", dict(fmax=30, min_extent=7, k_sigma=3.0, frames=(0, 50))),
-             "flicker-extent5": ("flicker", dict(fmax=12, smoothing_frames=1, min_extent=5))}
+             "flicker-extent5": ("flicker", dict(fmax=12, smoothing_frames=1, min_extent=5)),
+             # lighting steps between frames, scattered over elements: the means stop at them
+             **{f"random-adaptive-cuts-s{s}": ("random-cuts", dict(fmax=30, smoothing_frames=s)) for s in (3, 5)},
+             "one-frame-cuts": ("one-frame-cuts", dict(fmax=30))}
 
     def make_inputs(self, rng, case):
         name, kw = case
         if name == "random":
             counts, n = _random_table(rng)
+        elif name == "random-cuts":
+            counts, n = _random_table(rng)
+            kw = {**kw, "cuts": rng.random((counts.shape[0] - 1, counts.shape[1])) < 0.1}
+        elif name == "one-frame-cuts":
+            counts, n = poisson_table(rng, 1, 50), np.full(1, 1000.0)
+            kw = {**kw, "cuts": np.zeros((0, 50), bool)}
         elif name == "flicker":  # every neighbour fails Condition (1): the minimal extent everywhere
             counts = poisson_table(rng, 30, 200, scale=50.0)
             counts[::2] *= 5
@@ -111,6 +120,28 @@ def test04_a_step_stops_the_walk_in_one_direction_only():
     # Fixed mode collects the invalid photons anyway (Fig. 3b)
     back_f, fwd_f = both(counts, np.full(41, 1e4), fmax=30, mode="fixed")
     assert fwd_f[20, 0] == 15
+
+
+def test04b_a_step_given_as_a_cut_keeps_the_means_to_its_sides():
+    counts = np.full((41, 1), 100, np.uint32)
+    counts[26:] = 300  # lighting triples at frame 26
+    cuts = np.zeros((40, 1), bool)
+    cuts[25] = True  # the step, as the regional step test reports it: between frames 25 and 26
+    back, fwd = both(counts, np.full(41, 1e4), fmax=30)
+    # Without the cut, mu at 25 and 26 mixes one frame of the other side: (100+100+300)/3 = 167 and
+    # (100+300+300)/3 = 233, outside 2 sigma of every frame of its own side, so both walks stop at once
+    assert (back[25, 0], fwd[25, 0]) == (1, 1) and (back[26, 0], fwd[26, 0]) == (1, 1)
+    back_c, fwd_c = both(counts, np.full(41, 1e4), fmax=30, cuts=cuts)
+    # With it, frame 25's mean is that of 24-25 and 26's of 26-27: each walks its own side to F_max/2
+    # (the walk across the step is the caller's to cut: pipeline/collection/regional_steps.py)
+    assert back_c[25, 0] == 15 and fwd_c[26, 0] == 14
+    # Away from the step the windows do not change
+    assert (back_c[:24] == back[:24]).all() and (fwd_c[28:] == fwd[28:]).all()
+
+
+def test04c_cuts_must_match_the_table():
+    with pytest.raises(ValueError, match="cuts"):
+        windows_cl(np.ones((5, 2), np.uint32), np.ones(5), fmax=4, cuts=np.zeros((5, 2), bool))
 
 
 def test05_min_extent_is_always_taken():
