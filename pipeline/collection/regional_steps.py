@@ -13,12 +13,12 @@ deviations (Poisson counts):
     z = (R_{t+1}/N_{t+1} - R_t/N_t) / sqrt(R_{t+1}/N_{t+1}^2 + R_t/N_t^2)
 
 and by more than ``step_relative`` of the larger rate, and no window of an element of that cell
-crosses the boundary, nor do Condition (1)'s three-frame means (kernels/temporal.py). A slow drift (a few per cent over the segment) never reaches ``step_k``
-between neighbouring frames; a jumping light, a door, a switched lamp does. The relative bound
-keeps the test's power from growing with N_frame: without it, ROOM's guided loop at 640,000
-photons cut the windows at the aircraft's moving light and stalled (docs/06-temporal.md §3).
-Only the two rows of a boundary are read, so a window's bits do not depend on the chunk of frames
-around it (pipeline/collection/maps.py).
+crosses the boundary, nor do Condition (1)'s three-frame means (kernels/temporal.py). A slow drift
+(a few per cent over the segment) never reaches ``step_k`` between neighbouring frames; a jumping
+light, a door, a switched lamp does. The relative bound keeps the test's power from growing with
+N_frame: without it, ROOM's guided loop at 640,000 photons cut the windows at the aircraft's moving
+light and stalled (docs/06-temporal.md §3). Only the two rows of a boundary are read, so a window's
+bits do not depend on the chunk of frames around it (pipeline/collection/maps.py).
 """
 from __future__ import annotations
 
