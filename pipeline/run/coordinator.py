@@ -158,7 +158,7 @@ class DaskExecutor:
         """One reconstruction task per chunk of :func:`frame_chunks` of the segment's frames."""
         job = self.job
         use = tuple(batches_in_use(self.store, targets).tolist())
-        windows = WindowSpec(rec.temporal, rec.fmax)
+        windows = WindowSpec(rec.temporal, rec.windows_fmax)
         return [(task_key(f"reconstruct-{job.decision_hash[:8]}-f{chunk[0]:05d}", job.store_url),
                  ReconstructRequest(job.scene_ref, job.store_url, tuple(chunk), windows, use, job.config, job.settings))
                 for chunk in frame_chunks(self.frames_of(rec))]

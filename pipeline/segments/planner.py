@@ -50,6 +50,7 @@ from .decisions import (
     photon_targets,
     pilot_n_frame,
     place_segment,
+    window_fmax_loop,
 )
 from .halves import halves_difference
 from .job import Job
@@ -226,7 +227,7 @@ class SegmentPlanner:
             targets = photon_targets(at, n_frame, first=job.first, last=job.last, end_factor=cfg.end_photons,
                                      steps=steps)
             self.executor.shoot(targets)
-            d, at_k = self._d_aqm(index, at, {**prior, **targets}, temporal)
+            d, at_k, _ = self._d_aqm(index, at, {**prior, **targets}, temporal)
             judged.append(Judged(at, steps, targets, at_k))
             beside = f" ({targets[at.k]:,} at K, beside an end or a step)" if targets[at.k] != n_frame else ""
             self.executor.progress(f"segment {index}: N_frame {n_frame:,}{beside} at K {at.k}: d_AQM {d:.2f} %")
@@ -235,12 +236,28 @@ class SegmentPlanner:
         n, n_steps, capped = doubling_loop(n, d_aqm_of, d_thr=cfg.d_thr, n_max=cfg.n_frame_max)
         t_n = time.perf_counter()
         place, steps, final, windows_at_k = judged[-1]  # the loop ends at the N_frame it measured last
+
+        # The windows' F_max: the shortest rung below F_max whose halves pass at this N_frame
+        # (decisions.window_fmax_loop); a capped segment's halves pass at none.
+        window_fmax, window_tries, tried = None, [], {}
+        if temporal == "adaptive" and not capped and not job.single_state:
+            def halves_at(fmax: int) -> float:
+                tried[fmax] = self._d_aqm(index, place, {**prior, **final}, temporal, fmax=fmax)
+                return tried[fmax][0]
+
+            chosen, window_tries = window_fmax_loop(place.fmax, halves_at, d_thr=cfg.d_thr, first=cfg.fmax_initial,
+                                                    step=cfg.fmax_step)
+            if chosen != place.fmax:
+                window_fmax, windows_at_k = chosen, tried[chosen][1]
+                self._write_picture(index, tried[chosen][2])
+                self.executor.progress(f"segment {index}: windows F_max {chosen} at K {place.k}: d_AQM "
+                                       f"{tried[chosen][0]:.2f} %")
         ends = sorted(f for f, v in final.items() if v != n)
         rec = SegmentRecord(
             index=index, start=place.start, end=place.end, k=place.k, fmax=place.fmax, n_frame=n,
             temporal=temporal, guided=True, decision_hash=job.decision_hash, end_frames=ends, steps=steps,
             end_factor=cfg.end_photons, pilot=pilot, fmax_steps=fmax_steps, n_frame_steps=n_steps, capped=capped,
-            windows_at_k=windows_at_k,
+            windows_at_k=windows_at_k, window_fmax=window_fmax, window_fmax_steps=window_tries,
             times_s={"init_s": t_init - t_start, "fmax_s": t_fmax - t_init, "n_frame_s": t_n - t_fmax,
                      "decide_s": time.perf_counter() - t_start})
         write_record(job.out_dir, rec)
@@ -324,24 +341,31 @@ class SegmentPlanner:
         return lighting_steps(back, hit, frames, self.config.segments.p_thr)
 
     # --- Step 3 ------------------------------------------------------------------------------
-    def _d_aqm(self, index: int, place: Placement, targets: dict[int, int], temporal: str) -> tuple[float, dict]:
-        """d_AQM (percent) of I1(K) against I2(K) as the viewer sees them, and Fig. 5's windows at
-        K; the M_AQM picture is written beside the segment record."""
+    def _d_aqm(self, index: int, place: Placement, targets: dict[int, int], temporal: str,
+               fmax: int | None = None) -> tuple[float, dict, np.ndarray]:
+        """d_AQM (percent) of I1(K) against I2(K) as the viewer sees them with windows of F_max
+        ``fmax`` (None: the placement's), Fig. 5's windows at K and the M_AQM picture; the picture
+        is written beside the segment record unless ``fmax`` is given (a try of the windows' F_max)."""
         t0 = time.perf_counter()
         use = batches_in_use(self.store, targets)
         k = place.k
+        windows_fmax = place.fmax if fmax is None else fmax
         # Each half is reconstructed as the final frame will be, spatial filter included (Step 5):
         # on ATRIUM's 43,000 small elements the filter, not N_frame, removes most of what the
         # unfiltered halves differ by; judged unfiltered, the loop would trace for noise no frame shows.
         (lit,) = illumination_maps(self.store, self.elements, self.scene,
-                                   MapRequest(WindowSpec(temporal, place.fmax), [k - 1], batches=use, halves=True),
+                                   MapRequest(WindowSpec(temporal, windows_fmax), [k - 1], batches=use, halves=True),
                                    self.config.collection, self.config.filter)
         judged = halves_difference(self.scene, self.elements, lit.irradiance, k, settings=self.job.settings,
                                    config=self.config)
         counts = window_counts(self.store, batches=use)[place.start - 1:place.end]
-        at_k = window_histogram(lit.back, lit.fwd, place.fmax, counts)
-        picture = record_path(self.job.out_dir, index).with_suffix(".aqm.png")
-        picture.parent.mkdir(parents=True, exist_ok=True)
-        write_png(picture, judged.picture)
+        at_k = window_histogram(lit.back, lit.fwd, windows_fmax, counts)
+        if fmax is None:
+            self._write_picture(index, judged.picture)
         self._add_time("aqm_s", t0)
-        return judged.d_aqm, at_k
+        return judged.d_aqm, at_k, judged.picture
+
+    def _write_picture(self, index: int, picture: np.ndarray) -> None:
+        path = record_path(self.job.out_dir, index).with_suffix(".aqm.png")
+        path.parent.mkdir(parents=True, exist_ok=True)
+        write_png(path, picture)

@@ -51,6 +51,9 @@ class SegmentRecord:
     n_frame_steps: list = field(default_factory=list)  # [{n_frame, d_aqm}] (§5.2.3), d_aqm in %
     capped: bool = False  # the doubling loop stopped at n_frame_max with d_AQM > d_thr
     windows_at_k: dict = field(default_factory=dict)  # Fig. 5 at K's last d_AQM (planner.window_histogram)
+    # F_max of the windows that reconstruct the frames (decisions.window_fmax_loop); None: fmax
+    window_fmax: int | None = None
+    window_fmax_steps: list = field(default_factory=list)  # [{fmax, d_aqm}], d_aqm in %
     frames: dict = field(default_factory=dict)  # str(frame) -> {adaptation, digest, filtered, window}
     times_s: dict = field(default_factory=dict)
     # bytes its tasks read and wrote through the store, by task kind (pipeline/store counting_io):
@@ -62,6 +65,11 @@ class SegmentRecord:
         ends = set(self.end_frames)
         return {f: frame_photons(self.n_frame, self.end_factor if f in ends else 1.0)
                 for f in range(self.start, self.end + 1)}
+
+    @property
+    def windows_fmax(self) -> int:
+        """F_max of the windows the segment's frames are collected with."""
+        return self.fmax if self.window_fmax is None else self.window_fmax
 
     @property
     def d_aqm(self) -> float | None:
