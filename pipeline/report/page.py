@@ -176,7 +176,8 @@ def _segments(out: Path, records: list[SegmentRecord], config: dict) -> str:
         last = used_fmax_step(r)
         p = f"{last['p_me_back']:.2f} / {last['p_me_fwd']:.2f}" if last else "-"
         t = r.times_s
-        rows.append([r.index, f"{r.start}-{r.end}", r.k, f"{r.n_frame:,}", r.fmax,
+        fmax = r.fmax if r.windows_fmax == r.fmax else f"{r.fmax} (windows {r.windows_fmax})"
+        rows.append([r.index, f"{r.start}-{r.end}", r.k, f"{r.n_frame:,}", fmax,
                      "-" if r.d_aqm is None else f"{r.d_aqm:.2f}" + (" (cap)" if r.capped else ""), p,
                      f"{r.pilot['e_probe']:.3f}" if r.pilot else "-", r.temporal,
                      "guided" if r.guided else "fixed", r.status,
@@ -188,6 +189,9 @@ def _segments(out: Path, records: list[SegmentRecord], config: dict) -> str:
         if r.n_frame_steps:
             steps.append(f"<li>segment {r.index}, N_frame steps (d_AQM at K {r.k}): "
                          + _e(", ".join(f"{s['n_frame']:,}: {s['d_aqm']:.2f} %" for s in r.n_frame_steps)) + "</li>")
+        if r.window_fmax_steps:
+            steps.append(f"<li>segment {r.index}, windows' F_max tried at N_frame {r.n_frame:,} (d_AQM at K): "
+                         + _e(", ".join(f"{s['fmax']}: {s['d_aqm']:.2f} %" for s in r.window_fmax_steps)) + "</li>")
         if len(r.fmax_steps) > 1:
             steps.append(f"<li>segment {r.index}, F_max steps (p_me back/fwd): "
                          + _e(", ".join(f"{s['fmax']} ({s['p_me_back']:.2f}/{s['p_me_fwd']:.2f})"

@@ -272,7 +272,8 @@ def finish(job: Job, records: list[SegmentRecord], tally: RenderTally | None, t_
         "resolution": [job.settings.width, job.settings.height], "spp": job.settings.spp,
         "photons": "auto" if job.n_photons is None else job.n_photons,
         "segments": [{"index": r.index, "frames": [r.start, r.end], "k": r.k, "fmax": r.fmax,
-                      "n_frame": r.n_frame, "d_aqm": r.d_aqm, "capped": r.capped} for r in records],
+                      "windows_fmax": r.windows_fmax, "n_frame": r.n_frame, "d_aqm": r.d_aqm, "capped": r.capped}
+                     for r in records],
         "viewing": _viewing(job),
         "store": job.store_url, "store_size": store_size(job.store_url), "video": str(video),
         "render_hash": job.render_hash,

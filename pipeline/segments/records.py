@@ -158,6 +158,9 @@ def table(records: list[SegmentRecord]) -> list[str]:
         if r.n_frame_steps:
             steps = ", ".join(f"{s['n_frame']:,}: {s['d_aqm']:.2f} %" for s in r.n_frame_steps)
             lines.append(f"{'':>4}N_frame steps (d_AQM at K): {steps}")
+        if r.window_fmax_steps:
+            tries = ", ".join(f"{s['fmax']}: {s['d_aqm']:.2f} %" for s in r.window_fmax_steps)
+            lines.append(f"{'':>4}windows' F_max {r.windows_fmax} (tried, d_AQM at K): {tries}")
         if len(r.fmax_steps) > 1:
             steps = ", ".join(f"{s['fmax']} ({s['p_me_back']:.2f}/{s['p_me_fwd']:.2f})" for s in r.fmax_steps)
             lines.append(f"{'':>4}F_max steps (p_me back/fwd): {steps}")

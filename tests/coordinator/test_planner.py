@@ -122,8 +122,17 @@ def test_the_loops_follow_the_decisions(decided):
     assert n[0] == ladder_n_frame(rec.pilot["n_start"], cfg.n_frame_min, cfg.n_frame_max)
     assert n[1:] == [next_n_frame(n[i], d[i] / 100, cfg.d_thr, cfg.n_frame_max) for i in range(len(n) - 1)]
     assert n == [2000, 4000, 8000] and rec.n_frame == 8000 and not rec.capped
-    # one progress line a decision: the pilot, each p_me, each d_AQM
-    assert len(executor.lines) == 1 + len(rec.fmax_steps) + len(rec.n_frame_steps)
+    # the windows' F_max: the shortest rung below F_max whose halves pass at the final N_frame
+    tries = rec.window_fmax_steps
+    assert [t["fmax"] for t in tries] == list(range(cfg.fmax_initial, rec.fmax, cfg.fmax_step))[:len(tries)]
+    assert all(t["d_aqm"] / 100 > cfg.d_thr for t in tries[:-1])
+    if rec.window_fmax is not None:
+        assert rec.window_fmax == tries[-1]["fmax"] < rec.fmax and tries[-1]["d_aqm"] / 100 <= cfg.d_thr
+    else:
+        assert rec.windows_fmax == rec.fmax and all(t["d_aqm"] / 100 > cfg.d_thr for t in tries)
+    # one progress line a decision: the pilot, each p_me, each d_AQM, shorter windows when chosen
+    assert len(executor.lines) == (1 + len(rec.fmax_steps) + len(rec.n_frame_steps)
+                                   + (rec.window_fmax is not None))
     assert executor.lines[0].startswith(f"segment 0: pilot at K {rec.fmax_steps[0]['k']}")
 
 

@@ -29,6 +29,7 @@ from pipeline.segments.decisions import (
     photon_targets,
     pilot_n_frame,
     place_segment,
+    window_fmax_loop,
 )
 
 
@@ -123,6 +124,25 @@ def test_fmax_loop_grows_until_p_me_falls_below_p_thr():
     # A segment that already reaches the animation's end does not grow
     place, steps = fmax_loop(280, 15, 300, lambda p: (1.0, 1.0), p_thr=0.4, step=15, cap=44)
     assert len(steps) == 1 and place.end == 300
+
+
+def test_window_fmax_is_the_shortest_rung_whose_halves_pass():
+    seen = []
+
+    def measure(fmax):
+        seen.append(fmax)
+        return {15: 4.4, 30: 2.3}[fmax]  # percent; d_thr 3 %
+
+    assert window_fmax_loop(44, measure, d_thr=0.03, first=15, step=15) == (
+        30, [{"fmax": 15, "d_aqm": 4.4}, {"fmax": 30, "d_aqm": 2.3}])
+    assert seen == [15, 30]  # shortest first, and no rung tried once one passes
+    # the first rung passing: no other tried
+    assert window_fmax_loop(44, lambda f: 1.0, d_thr=0.03, first=15, step=15) == (15, [{"fmax": 15, "d_aqm": 1.0}])
+    # none passing below F_max: F_max itself, not measured again (Step 3 judged it)
+    fmax, tries = window_fmax_loop(44, lambda f: 9.0, d_thr=0.03, first=15, step=15)
+    assert fmax == 44 and [t["fmax"] for t in tries] == [15, 30]
+    # F_max at the ladder's first rung: nothing shorter to try
+    assert window_fmax_loop(15, lambda f: 0.0, d_thr=0.03, first=15, step=15) == (15, [])
 
 
 # --- Step 3: the doubling loop ----------------------------------------------------------------
