@@ -90,7 +90,7 @@ def test_room_guided_frames_match_the_converged_reference(tmp_path):
         # The reference's own noise is below what the AQM sees, so it is the truth here
         assert got[r.k]["floor_halves"] < 0.5
         # The paper's claim (§6): d_AQM < 1 % against the reference for d_thr = 3 %; on the
-        # defaults 0.37, 0.94 and 0.18 % at K = 23, 68 and 113 (docs/07-segments.md §7)
+        # defaults 0.03, 0.11 and 0.19 % at K = 23, 68 and 113 (docs/07-segments.md §7)
         assert got[r.k]["d_aqm"] <= 1.0
 
 
