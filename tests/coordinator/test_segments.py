@@ -302,6 +302,26 @@ def test_a_record_with_a_retired_field_loads_and_an_unknown_field_is_refused(tmp
         read_record(tmp_path, 0)
 
 
+def test_a_record_without_the_windows_fmax_collects_over_its_fmax(tmp_path):
+    # A record decided before the windows' F_max existed has no window_fmax: resumed, its frames
+    # are collected over the segment's F_max, as they were rendered; a record with one uses it.
+    import json
+
+    from pipeline.segments.records import SegmentRecord, read_record, record_path, table, write_record
+
+    rec = SegmentRecord(index=0, start=1, end=45, k=23, fmax=44, n_frame=80_000, temporal="adaptive", guided=True,
+                        decision_hash="0" * 16, window_fmax=30,
+                        window_fmax_steps=[{"fmax": 15, "d_aqm": 4.4}, {"fmax": 30, "d_aqm": 2.3}])
+    write_record(tmp_path, rec)
+    assert read_record(tmp_path, 0).windows_fmax == 30
+    assert "windows' F_max 30 (tried, d_AQM at K): 15: 4.40 %, 30: 2.30 %" in "\n".join(table([rec]))
+    path = record_path(tmp_path, 0)
+    old = {k: v for k, v in json.loads(path.read_text()).items() if not k.startswith("window_fmax")}
+    path.write_text(json.dumps(old))
+    loaded = read_record(tmp_path, 0)
+    assert loaded.window_fmax is None and loaded.windows_fmax == 44 and loaded.window_fmax_steps == []
+
+
 # --- lighting steps inside a segment --------------------------------------------------------------
 def test_a_switched_light_is_found_at_its_frame_and_nowhere_else(rng):
     # 45 frames (a segment 46-90), F_max 44; 90 % of the elements' lighting drops to a third from
