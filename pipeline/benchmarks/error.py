@@ -560,7 +560,7 @@ def _label(r: dict) -> str:
     if r["method"] == "guided":
         n = ", ".join(f"{s['n_frame']:,}" for s in r["segments"])
         f = ", ".join(str(s["fmax"]) for s in r["segments"])
-        w = ", ".join(str(s.get("windows_fmax", s["fmax"])) for s in r["segments"])
+        w = ", ".join(str(s["windows_fmax"]) for s in r["segments"])
         return f"guided d_thr {r['d_thr']:g} (N_frame {n}; F_max {f}; windows {w})"
     if r["method"] == "per-frame":
         return f"per-frame {r['n_photons']:,}"

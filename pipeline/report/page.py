@@ -176,8 +176,7 @@ def _segments(out: Path, records: list[SegmentRecord], config: dict) -> str:
         last = used_fmax_step(r)
         p = f"{last['p_me_back']:.2f} / {last['p_me_fwd']:.2f}" if last else "-"
         t = r.times_s
-        fmax = r.fmax if r.windows_fmax == r.fmax else f"{r.fmax} (windows {r.windows_fmax})"
-        rows.append([r.index, f"{r.start}-{r.end}", r.k, f"{r.n_frame:,}", fmax,
+        rows.append([r.index, f"{r.start}-{r.end}", r.k, f"{r.n_frame:,}", r.fmax_text,
                      "-" if r.d_aqm is None else f"{r.d_aqm:.2f}" + (" (cap)" if r.capped else ""), p,
                      f"{r.pilot['e_probe']:.3f}" if r.pilot else "-", r.temporal,
                      "guided" if r.guided else "fixed", r.status,

@@ -185,8 +185,7 @@ def segment_line(rec: SegmentRecord, result: dict) -> str:
     """The progress line of a finished segment."""
     d = f", d_AQM {rec.d_aqm:.2f} %" if rec.d_aqm is not None else ""
     cap = " (n_frame_max reached)" if rec.capped else ""
-    windows = f" (windows {rec.windows_fmax})" if rec.windows_fmax != rec.fmax else ""
-    return (f"segment {rec.index}: frames {rec.start}-{rec.end}, K {rec.k}, F_max {rec.fmax}{windows}, "
+    return (f"segment {rec.index}: frames {rec.start}-{rec.end}, K {rec.k}, F_max {rec.fmax_text}, "
             f"N_frame {rec.n_frame:,}{d}{cap}; {len(result['rays'])} frames written")
 
 

@@ -189,7 +189,7 @@ def doubling_loop(n_frame: int, measure: Callable[[int], float], *, d_thr: float
 def window_fmax_loop(fmax: int, measure: Callable[[int], float], *, d_thr: float, first: int,
                      step: int) -> tuple[int, list[dict]]:
     """The F_max of the windows that reconstruct a segment's frames: the shortest rung of Step 2's
-    ladder (``first``, ``first + step``, ... below ``fmax``) at which ``measure(f)``, the halves'
+    ladder (§5.2.2; ``first``, ``first + step``, ... below ``fmax``) at which ``measure(f)``, the halves'
     d_AQM (percent) at K with windows of F_max ``f`` at the final N_frame, is within ``d_thr`` (a
     fraction); ``fmax`` itself when none is. Returns it and the tries [{fmax, d_aqm}].
 

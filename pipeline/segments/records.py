@@ -72,6 +72,11 @@ class SegmentRecord:
         return self.fmax if self.window_fmax is None else self.window_fmax
 
     @property
+    def fmax_text(self) -> str:
+        """"44", or "44 (windows 30)" where the windows are shorter than the segment's F_max."""
+        return f"{self.fmax}" if self.windows_fmax == self.fmax else f"{self.fmax} (windows {self.windows_fmax})"
+
+    @property
     def d_aqm(self) -> float | None:
         return self.n_frame_steps[-1]["d_aqm"] if self.n_frame_steps else None
 
