@@ -27,6 +27,7 @@ from pipeline.scene import ElementMesh, FrameState
 
 from .area_lights import area_light, sky_light
 from .camera_hits import CameraHits
+from .map_hits import MapHitRecorder, MapHits
 from .punctual_lights import punctual_light
 from .random_numbers import DIMS_PER_DEPTH, frame_key, uniform
 from .settings import RenderSettings
@@ -47,6 +48,7 @@ class FrameImage:
     alpha: np.ndarray
     rays: dict = field(default_factory=dict)
     also_indirect: list = field(default_factory=list)  # indirect layers of ``also_maps``, same paths
+    map_hits: MapHits | None = None  # where the paths read the map (``render_frame(record_hits=True)``)
 
     def also_beauty(self, i: int) -> np.ndarray:
         """The beauty layer ``also_maps[i]`` gives: the bits of a render with that map alone."""
@@ -81,16 +83,18 @@ class CameraPaths:
 
 def render_frame(state: FrameState, elements: ElementMesh | None, irradiance: np.ndarray | None,
                  paths: CameraPaths, *, caster: RayCaster | None = None, chunk_rays: int = CHUNK_RAYS,
-                 also_maps: Sequence[np.ndarray] = ()) -> FrameImage:
+                 also_maps: Sequence[np.ndarray] = (), record_hits: bool = False) -> FrameImage:
     """Render one frame along ``paths``; ``irradiance`` (V, 3) is the indirect map (None: no indirect light).
 
     ``also_maps``: more (V, 3) maps whose indirect layers come from the same camera paths
     (``FrameImage.also_indirect``): the paths never depend on the map, so each layer has the bits
     of its own render at the cost of one more map lookup a hit (the AQM's I1, I2 of §5.2.3).
-    ``chunk_rays`` camera samples are traced together (memory bound); pixels do not depend on it."""
+    ``chunk_rays`` camera samples are traced together (memory bound); pixels do not depend on it.
+    ``record_hits``: keep where the paths read the map (``FrameImage.map_hits``), so that any other
+    map can light them later (pipeline/frames/map_hits.py)."""
     also_maps = list(also_maps)  # a list of maps or the rows of a (M, V, 3) stack
-    if also_maps and irradiance is None:
-        raise ValueError("also_maps needs a first map")
+    if (also_maps or record_hits) and irradiance is None:
+        raise ValueError("also_maps and record_hits need a first map")
     caster = caster or caster_for(state)
     sh = ShadingTables(state, elements, irradiance, caster, paths.area_samples, also_maps)
     spp = paths.spp
@@ -100,22 +104,24 @@ def render_frame(state: FrameState, elements: ElementMesh | None, irradiance: np
     layers = np.zeros((n_layers, n_pixels, 3), np.float32)
     alpha = np.zeros(n_pixels, np.float32)
     rays = dict.fromkeys(RAY_KINDS, 0)
+    record = MapHitRecorder() if record_hits else None
     chunk_pixels = max(1, chunk_rays // spp)
     samples = None if spp == 1 else np.empty((n_layers, chunk_pixels * spp, 3), np.float32)
     for lo in range(0, n_pixels, chunk_pixels):
         hi = min(n_pixels, lo + chunk_pixels)
         counter = np.arange(lo * spp, hi * spp, dtype=np.int64)
         if spp == 1:  # samples are pixels: trace straight into the layers
-            alpha[lo:hi] = trace_samples(state, sh, paths, counter, rays, layers[:, lo:hi])
+            alpha[lo:hi] = trace_samples(state, sh, paths, counter, rays, layers[:, lo:hi], record)
         else:  # mean over each pixel's samples (consecutive counters), in a fixed order
             out = samples[:, :len(counter)]
             out.fill(0)
-            cover = trace_samples(state, sh, paths, counter, rays, out)
+            cover = trace_samples(state, sh, paths, counter, rays, out, record)
             sample_means(out.reshape(n_layers, hi - lo, spp, 3), layers[:, lo:hi])
             alpha[lo:hi] = cover.reshape(hi - lo, spp).mean(axis=1)
     shape = (paths.height, paths.width, 3)
     direct, indirect, albedo, *also = (layers[i].reshape(shape) for i in range(n_layers))
-    return FrameImage(direct + indirect, direct, indirect, albedo, alpha.reshape(shape[:2]), rays, also)
+    return FrameImage(direct + indirect, direct, indirect, albedo, alpha.reshape(shape[:2]), rays, also,
+                      None if record is None else record.finish(paths))
 
 
 def sample_means(samples: np.ndarray, out: np.ndarray) -> None:
@@ -129,9 +135,10 @@ def sample_means(samples: np.ndarray, out: np.ndarray) -> None:
 
 
 def trace_samples(state: FrameState, sh: ShadingTables, paths: CameraPaths, counter: np.ndarray,
-                  rays: dict[str, int], out: np.ndarray) -> np.ndarray:
+                  rays: dict[str, int], out: np.ndarray, record: MapHitRecorder | None = None) -> np.ndarray:
     """Add direct, indirect and albedo (and the indirect layers of ``sh.also``) of the camera
-    samples ``counter`` of ``paths`` into ``out`` (L, n, 3), zero on entry; returns their coverage (n,)."""
+    samples ``counter`` of ``paths`` into ``out`` (L, n, 3), zero on entry; returns their coverage (n,).
+    ``record`` collects the hits that read the map."""
     n = len(counter)
     cover = np.zeros(n, np.float32)
     key, max_depth = paths.key, paths.max_depth
@@ -197,6 +204,9 @@ def trace_samples(state: FrameState, sh: ShadingTables, paths: CameraPaths, coun
                 acc[1] += scale * hits.indirect
                 for j, also in enumerate(hits.also_indirect):
                     acc[3 + j] += scale * also
+                if record is not None:
+                    record.add(counter if path is None else counter[path], tri, u, v, scale, throughput,
+                               np.flatnonzero(diffuse))
             if active is None:
                 if not direct_out:
                     _put_layers(out, path, acc if throughput is None else acc * throughput[None])

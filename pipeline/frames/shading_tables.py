@@ -47,12 +47,12 @@ class ShadingTables:
         self.elements = elements
         self.element_irradiance = None  # (E, 3, 3) float32 [E0, E1 - E0, E2 - E0]: one gather a hit
         if irradiance is not None:
-            self.element_irradiance = _element_table(elements, irradiance)
+            self.element_irradiance = element_table(elements, irradiance)
         # Element and map irradiance of every hit, on PoCL (kernels/surface.cl)
         self.lookup = (LookupCL(elements.triangle_n, elements.triangle_offset[:-1], self.element_irradiance)
                        if elements is not None else None)
         # more maps seen along the same paths (pipeline/frames/camera_paths.py render_frame's also_maps)
-        self.also = [LookupCL(elements.triangle_n, elements.triangle_offset[:-1], _element_table(elements, m))
+        self.also = [LookupCL(elements.triangle_n, elements.triangle_offset[:-1], element_table(elements, m))
                      for m in also_maps]
         self.area_samples = area_samples if len(state.emissive_triangles) else 0
         if self.area_samples:
@@ -69,7 +69,7 @@ class ShadingTables:
             self.area_corners = state.vertices.astype(np.float32)[state.faces[self.area_tris]]
 
 
-def _element_table(elements: ElementMesh, irradiance) -> np.ndarray:
+def element_table(elements: ElementMesh, irradiance) -> np.ndarray:
     """(E, 3, 3) float32 [E0, E1 - E0, E2 - E0] of a (V, 3) vertex map: one gather a hit."""
     e = np.asarray(irradiance, np.float64)[elements.element_vertices]
     return np.stack([e[:, 0], e[:, 1] - e[:, 0], e[:, 2] - e[:, 0]], axis=1).astype(np.float32)

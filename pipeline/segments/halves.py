@@ -1,10 +1,12 @@
 """Step 3's measurement (§5.2.3): I1(K) and I2(K), the frame K of the even and of the odd photons
 as the viewer sees it, and d_AQM between them (docs/07-segments.md §2).
 
-Both halves are rendered along one set of camera paths with the final frame's direct light
-(``render_frame(..., also_maps=...)``: the bits of two renders at the cost of one), at the
-adaptation the final frame gets from the map it shows, and tone mapped as it will be
-(pipeline/frames/perceived.py)."""
+Both halves light one set of camera paths with the final frame's direct light, at the adaptation
+the final frame gets from the map it shows, and are tone mapped as it will be
+(pipeline/frames/perceived.py). The paths never depend on the map, so :class:`HalvesJudge` traces a
+frame's paths once, keeping where they read the map (pipeline/frames/map_hits.py), and lights them
+with every later pair of halves at that frame: Step 3's doublings and the windows' F_max tries
+judge one K again and again, and each judgement gets the bits of rendering both halves anew."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -19,6 +21,7 @@ from pipeline.frames.perceived import camera_flow, displayed_difference
 from pipeline.frames.settings import RenderSettings
 
 if TYPE_CHECKING:
+    from pipeline.frames.map_hits import MapHits
     from pipeline.scene import ElementMesh, Scene
 
 
@@ -28,17 +31,41 @@ class HalvesDifference:
     picture: np.ndarray  # M_AQM over I1(K) (pipeline/aqm/visualize.py), the record's .aqm.png
 
 
-def halves_difference(scene: Scene, elements: ElementMesh, halves: np.ndarray, k: int, *,
-                      settings: RenderSettings, config: RenderConfig) -> HalvesDifference:
-    """d_AQM of frame ``k`` lit by ``halves[0]`` against ``halves[1]`` ((2, V, 3) irradiance, the
-    even and odd photons' maps of pipeline/collection/maps.py, ``MapRequest.halves``)."""
-    state = scene.pose_frame(k)
-    px = settings
-    img = render_frame(state, elements, halves[0], CameraPaths.of(px, config.photons.seed, k), also_maps=halves[1:])
-    images = [img.beauty, img.also_beauty(0)]
-    # L_wa as the frame's own (workers/reconstruct.py): what the camera sees of the halves' mean map
-    adaptation = visible_adaptation(state, elements, 0.5 * (halves[0] + halves[1]), px, config.photons.seed)
-    flow = camera_flow(scene, k, px.width, px.height, px.tonemap)
-    result = displayed_difference(images[0], images[1], adaptation, params=px.tonemap,
-                                  aqm_size=config.segments.aqm_size, flow=flow)
-    return HalvesDifference(float(result.d_aqm), difference_picture(images[0], result.visible))
+@dataclass(frozen=True)
+class _TracedFrame:
+    """What a frame's judgements share: its direct light, where its paths read the map, its flow."""
+
+    frame: int
+    direct: np.ndarray
+    hits: MapHits
+    flow: np.ndarray | None
+
+
+class HalvesJudge:
+    """d_AQM of the halves at a frame, the last frame's camera paths kept for the next judgement."""
+
+    def __init__(self, scene: Scene, elements: ElementMesh, *, settings: RenderSettings, config: RenderConfig):
+        self.scene, self.elements, self.settings, self.config = scene, elements, settings, config
+        self._traced: _TracedFrame | None = None
+        self.traced_frames = 0  # how many times paths were traced (the rest were relit)
+
+    def difference(self, halves: np.ndarray, k: int) -> HalvesDifference:
+        """d_AQM of frame ``k`` lit by ``halves[0]`` against ``halves[1]`` ((2, V, 3) irradiance, the
+        even and odd photons' maps of pipeline/collection/maps.py, ``MapRequest.halves``)."""
+        px, el = self.settings, self.elements
+        state = self.scene.pose_frame(k)
+        if self._traced is not None and self._traced.frame == k:
+            t = self._traced
+            images = [t.direct + t.hits.indirect(el, h) for h in halves[:2]]
+        else:
+            img = render_frame(state, el, halves[0], CameraPaths.of(px, self.config.photons.seed, k),
+                               also_maps=halves[1:2], record_hits=True)
+            images = [img.beauty, img.also_beauty(0)]
+            self._traced = _TracedFrame(k, img.direct, img.map_hits, camera_flow(self.scene, k, px.width, px.height,
+                                                                                 px.tonemap))
+            self.traced_frames += 1
+        # L_wa as the frame's own (workers/reconstruct.py): what the camera sees of the halves' mean map
+        adaptation = visible_adaptation(state, el, 0.5 * (halves[0] + halves[1]), px, self.config.photons.seed)
+        result = displayed_difference(images[0], images[1], adaptation, params=px.tonemap,
+                                      aqm_size=self.config.segments.aqm_size, flow=self._traced.flow)
+        return HalvesDifference(float(result.d_aqm), difference_picture(images[0], result.visible))

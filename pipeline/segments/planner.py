@@ -52,7 +52,7 @@ from .decisions import (
     place_segment,
     window_fmax_loop,
 )
-from .halves import halves_difference
+from .halves import HalvesJudge
 from .job import Job
 from .records import SegmentRecord, read_record, record_path, write_record
 
@@ -169,6 +169,11 @@ class SegmentPlanner:
     @cached_property
     def elements(self) -> ElementMesh:
         return load_elements(self.job.scene_path, self.job.scene_hash, self.job.element_size)
+
+    @cached_property
+    def judge(self) -> HalvesJudge:
+        """Step 3's d_AQM of the halves, K's camera paths traced once for all its judgements."""
+        return HalvesJudge(self.scene, self.elements, settings=self.job.settings, config=self.config)
 
     def record(self, index: int, start: int, fmax: int) -> SegmentRecord:
         """Segment ``index`` decided for this run: its record if current, else decided now."""
@@ -356,8 +361,7 @@ class SegmentPlanner:
         (lit,) = illumination_maps(self.store, self.elements, self.scene,
                                    MapRequest(WindowSpec(temporal, windows_fmax), [k - 1], batches=use, halves=True),
                                    self.config.collection, self.config.filter)
-        judged = halves_difference(self.scene, self.elements, lit.irradiance, k, settings=self.job.settings,
-                                   config=self.config)
+        judged = self.judge.difference(lit.irradiance, k)
         counts = window_counts(self.store, batches=use)[place.start - 1:place.end]
         at_k = window_histogram(lit.back, lit.fwd, windows_fmax, counts)
         if fmax is None:

@@ -10,6 +10,7 @@ import pytest
 
 from pipeline.benchmarks.error import write_scene
 from pipeline.collection.estimators import vertex_moments
+from pipeline.collection.maps import MapRequest, WindowSpec, illumination_maps
 from pipeline.config import RenderConfig
 from pipeline.frames.settings import RenderSettings
 from pipeline.photons.tracing import PhotonRange, trace_batch
@@ -30,9 +31,11 @@ from pipeline.segments.decisions import (
     place_segment,
 )
 from pipeline.segments.job import Job
+from pipeline.segments.halves import HalvesJudge
 from pipeline.segments.planner import (
     NextBatch,
     SegmentPlanner,
+    batches_in_use,
     known_targets,
     next_batches,
     reach_targets,
@@ -150,6 +153,26 @@ def test_the_store_holds_exactly_the_records_targets(decided):
     windows = rec.windows_at_k
     assert sum(windows["back"]) == sum(windows["fwd"]) == windows["elements"] > 0
     assert read_record(job.out_dir, 0) == rec
+
+
+def test_judgements_relighting_ks_paths_have_the_bits_of_fresh_renders(decided):
+    # The planner traced K's camera paths at its first judgement and relit them for the rest
+    # (pipeline/segments/halves.py); a judge that traces them anew for each gives the recorded d_AQM
+    job, store, _, _, rec = decided
+    scene = read_scene(job.scene_path)
+    elements = load_elements(job.scene_path, job.scene_hash, job.element_size)
+    use = batches_in_use(store, rec.targets())
+    judged = [(rec.fmax, rec.n_frame_steps[-1]["d_aqm"])] + [(t["fmax"], t["d_aqm"]) for t in rec.window_fmax_steps]
+    assert len(judged) >= 2
+    relit = HalvesJudge(scene, elements, settings=job.settings, config=job.config)
+    for fmax, recorded in judged:
+        (lit,) = illumination_maps(store, elements, scene, MapRequest(WindowSpec("adaptive", fmax), [rec.k - 1],
+                                                                      batches=use, halves=True),
+                                   job.config.collection, job.config.filter)
+        fresh = HalvesJudge(scene, elements, settings=job.settings, config=job.config).difference(lit.irradiance, rec.k)
+        again = relit.difference(lit.irradiance, rec.k)
+        assert fresh.d_aqm == again.d_aqm == recorded and np.array_equal(fresh.picture, again.picture)
+    assert relit.traced_frames == 1
 
 
 def test_a_current_record_is_kept_and_a_stale_one_decided_again(decided):
