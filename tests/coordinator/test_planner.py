@@ -30,8 +30,8 @@ from pipeline.segments.decisions import (
     pilot_n_frame,
     place_segment,
 )
-from pipeline.segments.job import Job
 from pipeline.segments.halves import HalvesJudge
+from pipeline.segments.job import Job
 from pipeline.segments.planner import (
     NextBatch,
     SegmentPlanner,
