@@ -72,6 +72,7 @@ from pipeline.collection.estimators import vertex_irradiance
 from pipeline.config import PhotonConfig, RenderConfig, SegmentConfig
 from pipeline.errors import LoomError
 from pipeline.frames.camera_paths import CameraPaths, render_frame
+from pipeline.frames.map_hits import MapHits
 from pipeline.frames.perceived import display_values, displayed_difference
 from pipeline.frames.settings import RenderSettings
 from pipeline.frames.tonemap import log_average, luminance
@@ -236,6 +237,9 @@ def run_method(client: Client, scene_path: Path, out: Path, plan: Plan, *, metho
             "indirect": indirect}
 
 
+TRACED_BYTES = 4 << 30  # camera paths kept for relighting (about 25 MB a 320x240 frame at 8 spp)
+
+
 class Evaluation:
     """The reference's frames, and every measure of a run's maps against them."""
 
@@ -247,9 +251,9 @@ class Evaluation:
         self.casters = [caster_for(s) for s in self.states]
         self.areas = np.stack([elements.vertex_areas(s) for s in self.states])
         self.highlight = highlight
-        self._render = lambda i, m: render_frame(self.states[i], elements, m,
-                                                 CameraPaths(plan.width, plan.height, plan.spp, 0, self.frames[i]),
-                                                 caster=self.casters[i]).beauty
+        self.elements = elements
+        self._traced: dict[int, tuple[np.ndarray, MapHits]] = {}  # frame index -> direct light, map hits
+        self._traced_bytes = 0
         self.ref_images = self.images(refs[0])
         self.adaptation = log_average(luminance(self.ref_images))  # the frozen tone mapping's L_wa
         self.ref_displayed = self.displayed(self.ref_images)
@@ -263,6 +267,23 @@ class Evaluation:
 
     def images(self, maps: np.ndarray) -> np.ndarray:
         return np.stack([self._render(i, m) for i, m in enumerate(maps)])
+
+    def _render(self, i: int, irradiance: np.ndarray) -> np.ndarray:
+        """Frame ``i`` lit by ``irradiance``: every method's frame is seen along the same camera
+        paths, so the first render of a frame keeps where they read the map and later ones relight
+        them (pipeline/frames/map_hits.py, the same bits), while :data:`TRACED_BYTES` allows."""
+        kept = self._traced.get(i)
+        if kept is not None:
+            direct, hits = kept
+            return direct + hits.indirect(self.elements, irradiance)
+        plan = self.plan
+        img = render_frame(self.states[i], self.elements, irradiance,
+                           CameraPaths(plan.width, plan.height, plan.spp, 0, self.frames[i]), caster=self.casters[i],
+                           record_hits=self._traced_bytes < TRACED_BYTES)
+        if img.map_hits is not None:
+            self._traced[i] = (img.direct, img.map_hits)
+            self._traced_bytes += img.map_hits.nbytes + img.direct.nbytes
+        return img.beauty
 
     def displayed(self, images: np.ndarray) -> np.ndarray:
         return display_values(images, self.adaptation)
