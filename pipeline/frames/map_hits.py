@@ -27,6 +27,14 @@ if TYPE_CHECKING:
     from .camera_paths import CameraPaths
 
 
+HIT_BYTES = 44  # bytes a kept hit takes: sample, tri, u, v, scale and throughput
+
+
+def hits_bytes(paths: CameraPaths) -> int:
+    """The most a frame's :class:`MapHits` can take: one hit a camera sample."""
+    return HIT_BYTES * paths.width * paths.height * paths.spp
+
+
 class MapHitRecorder:
     """Collects the map-reading hits of the path loop, chunk by chunk (``trace_samples(record=...)``)."""
 

@@ -17,6 +17,7 @@ import numpy as np
 from pipeline.aqm.visualize import difference_picture
 from pipeline.config import RenderConfig
 from pipeline.frames.camera_paths import CameraPaths, render_frame, visible_adaptation
+from pipeline.frames.map_hits import hits_bytes
 from pipeline.frames.perceived import camera_flow, displayed_difference
 from pipeline.frames.settings import RenderSettings
 
@@ -41,11 +42,17 @@ class _TracedFrame:
     flow: np.ndarray | None
 
 
-class HalvesJudge:
-    """d_AQM of the halves at a frame, the last frame's camera paths kept for the next judgement."""
+KEPT_BYTES = 1 << 30  # the most the judge keeps of a frame's paths (a 1920x1080 frame at 8 spp takes 730 MB)
 
-    def __init__(self, scene: Scene, elements: ElementMesh, *, settings: RenderSettings, config: RenderConfig):
+
+class HalvesJudge:
+    """d_AQM of the halves at a frame, the last frame's camera paths kept for the next judgement
+    while they take at most ``kept_bytes`` (larger frames are traced for every judgement)."""
+
+    def __init__(self, scene: Scene, elements: ElementMesh, *, settings: RenderSettings, config: RenderConfig,
+                 kept_bytes: int = KEPT_BYTES):
         self.scene, self.elements, self.settings, self.config = scene, elements, settings, config
+        self.kept_bytes = kept_bytes
         self._traced: _TracedFrame | None = None
         self.traced_frames = 0  # how many times paths were traced (the rest were relit)
 
@@ -56,16 +63,17 @@ class HalvesJudge:
         state = self.scene.pose_frame(k)
         if self._traced is not None and self._traced.frame == k:
             t = self._traced
-            images = [t.direct + t.hits.indirect(el, h) for h in halves[:2]]
+            images, flow = [t.direct + t.hits.indirect(el, h) for h in halves[:2]], t.flow
         else:
-            img = render_frame(state, el, halves[0], CameraPaths.of(px, self.config.photons.seed, k),
-                               also_maps=halves[1:2], record_hits=True)
+            paths = CameraPaths.of(px, self.config.photons.seed, k)
+            img = render_frame(state, el, halves[0], paths, also_maps=halves[1:2],
+                               record_hits=hits_bytes(paths) <= self.kept_bytes)
             images = [img.beauty, img.also_beauty(0)]
-            self._traced = _TracedFrame(k, img.direct, img.map_hits, camera_flow(self.scene, k, px.width, px.height,
-                                                                                 px.tonemap))
+            flow = camera_flow(self.scene, k, px.width, px.height, px.tonemap)
+            self._traced = None if img.map_hits is None else _TracedFrame(k, img.direct, img.map_hits, flow)
             self.traced_frames += 1
         # L_wa as the frame's own (workers/reconstruct.py): what the camera sees of the halves' mean map
         adaptation = visible_adaptation(state, el, 0.5 * (halves[0] + halves[1]), px, self.config.photons.seed)
         result = displayed_difference(images[0], images[1], adaptation, params=px.tonemap,
-                                      aqm_size=self.config.segments.aqm_size, flow=self._traced.flow)
+                                      aqm_size=self.config.segments.aqm_size, flow=flow)
         return HalvesDifference(float(result.d_aqm), difference_picture(images[0], result.visible))

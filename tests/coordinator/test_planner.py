@@ -173,6 +173,10 @@ def test_judgements_relighting_ks_paths_have_the_bits_of_fresh_renders(decided):
         again = relit.difference(lit.irradiance, rec.k)
         assert fresh.d_aqm == again.d_aqm == recorded and np.array_equal(fresh.picture, again.picture)
     assert relit.traced_frames == 1
+    # paths larger than the judge may keep are traced for every judgement, to the same d_AQM
+    small = HalvesJudge(scene, elements, settings=job.settings, config=job.config, kept_bytes=1000)
+    assert [small.difference(lit.irradiance, rec.k).d_aqm for _ in range(2)] == [recorded] * 2
+    assert small.traced_frames == 2
 
 
 def test_a_current_record_is_kept_and_a_stale_one_decided_again(decided):
