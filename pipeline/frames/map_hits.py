@@ -19,20 +19,19 @@ import numpy as np
 
 from kernels.surface import LookupCL
 
+from .pixel_samples import sample_means
 from .shading_tables import element_table
 
 if TYPE_CHECKING:
     from pipeline.scene import ElementMesh
 
-    from .camera_paths import CameraPaths
-
 
 HIT_BYTES = 44  # bytes a kept hit takes: sample, tri, u, v, scale and throughput
 
 
-def hits_bytes(paths: CameraPaths) -> int:
+def hits_bytes(n_samples: int) -> int:
     """The most a frame's :class:`MapHits` can take: one hit a camera sample."""
-    return HIT_BYTES * paths.width * paths.height * paths.spp
+    return HIT_BYTES * n_samples
 
 
 class MapHitRecorder:
@@ -49,24 +48,28 @@ class MapHitRecorder:
         self._parts.append((np.take(samples, rows), np.take(tri, rows), np.take(u, rows), np.take(v, rows),
                             np.take(scale, rows, axis=0), t))
 
-    def finish(self, paths: CameraPaths) -> MapHits:
+    def finish(self, width: int, height: int, spp: int) -> MapHits:
+        """The hits of a ``width`` x ``height`` frame of ``spp`` samples a pixel."""
         if not self._parts:
             empty = np.empty((0, 3), np.float32)
-            return MapHits(paths, np.empty(0, np.int64), np.empty(0, np.int32), np.empty(0, np.float32),
+            return MapHits(width, height, spp, np.empty(0, np.int64), np.empty(0, np.int32), np.empty(0, np.float32),
                            np.empty(0, np.float32), empty, empty)
         sample, tri, u, v, scale, thr = (np.concatenate(c) for c in zip(*self._parts))
-        return MapHits(paths, sample.astype(np.int64), tri.astype(np.int32), u.astype(np.float32),
+        return MapHits(width, height, spp, sample.astype(np.int64), tri.astype(np.int32), u.astype(np.float32),
                        v.astype(np.float32), scale.astype(np.float32), thr.astype(np.float32))
 
 
 @dataclass(frozen=True)
 class MapHits:
-    """The map-reading hit of every camera sample of ``paths`` that has one (n hits): ``sample``
+    """The map-reading hit of every camera sample of a ``width`` x ``height`` frame of ``spp``
+    samples a pixel that has one (n hits): ``sample``
     (n,) the sample's counter (pixel * spp + sample), ``tri``, ``u``, ``v`` Embree's hit, ``scale``
     (n, 3) rho / pi there, ``throughput`` (n, 3) the reflections' weight before it (ones for a
     camera ray's own hit)."""
 
-    paths: CameraPaths
+    width: int
+    height: int
+    spp: int
     sample: np.ndarray
     tri: np.ndarray
     u: np.ndarray
@@ -81,15 +84,13 @@ class MapHits:
     def indirect(self, elements: ElementMesh, irradiance: np.ndarray) -> np.ndarray:
         """The indirect layer (H, W, 3) float32 that ``irradiance`` (V, 3) gives along these paths:
         the bits of ``render_frame(..., irradiance, paths).indirect``."""
-        from .camera_paths import sample_means
-
-        p = self.paths
         lookup = LookupCL(elements.triangle_n, elements.triangle_offset[:-1], element_table(elements, irradiance))
         _, e = lookup(self.tri, self.u, self.v)
-        per_sample = np.zeros((p.width * p.height * p.spp, 3), np.float32)
+        n_pixels = self.width * self.height
+        per_sample = np.zeros((n_pixels * self.spp, 3), np.float32)
         per_sample[self.sample] += (self.scale * e) * self.throughput  # one hit a sample at most
-        if p.spp == 1:
-            return per_sample.reshape(p.height, p.width, 3)
-        out = np.empty((1, p.width * p.height, 3), np.float32)
-        sample_means(per_sample.reshape(1, p.width * p.height, p.spp, 3), out)
-        return out[0].reshape(p.height, p.width, 3)
+        if self.spp == 1:
+            return per_sample.reshape(self.height, self.width, 3)
+        out = np.empty((1, n_pixels, 3), np.float32)
+        sample_means(per_sample.reshape(1, n_pixels, self.spp, 3), out)
+        return out[0].reshape(self.height, self.width, 3)

@@ -69,7 +69,7 @@ class ShadingTables:
             self.area_corners = state.vertices.astype(np.float32)[state.faces[self.area_tris]]
 
 
-def element_table(elements: ElementMesh, irradiance) -> np.ndarray:
+def element_table(elements: ElementMesh, irradiance: np.ndarray) -> np.ndarray:
     """(E, 3, 3) float32 [E0, E1 - E0, E2 - E0] of a (V, 3) vertex map: one gather a hit."""
     e = np.asarray(irradiance, np.float64)[elements.element_vertices]
     return np.stack([e[:, 0], e[:, 1] - e[:, 0], e[:, 2] - e[:, 0]], axis=1).astype(np.float32)

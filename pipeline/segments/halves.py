@@ -67,7 +67,7 @@ class HalvesJudge:
         else:
             paths = CameraPaths.of(px, self.config.photons.seed, k)
             img = render_frame(state, el, halves[0], paths, also_maps=halves[1:2],
-                               record_hits=hits_bytes(paths) <= self.kept_bytes)
+                               record_hits=hits_bytes(paths.width * paths.height * paths.spp) <= self.kept_bytes)
             images = [img.beauty, img.also_beauty(0)]
             flow = camera_flow(self.scene, k, px.width, px.height, px.tonemap)
             self._traced = None if img.map_hits is None else _TracedFrame(k, img.direct, img.map_hits, flow)

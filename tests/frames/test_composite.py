@@ -11,7 +11,8 @@ import numpy as np
 import pytest
 
 from kernels.camera import camera_rays_reference
-from pipeline.frames.camera_paths import CHUNK_RAYS, CameraPaths, render_frame, sample_means
+from pipeline.frames.camera_paths import CHUNK_RAYS, CameraPaths, render_frame
+from pipeline.frames.pixel_samples import sample_means
 from pipeline.scene import ElementMesh, read_scene
 from tests.frames.scenes import EYE, LAMP, area_scene, mirror_scene, plane_scene
 
