@@ -55,17 +55,17 @@ class MapHitRecorder:
             return MapHits(width, height, spp, np.empty(0, np.int64), np.empty(0, np.int32), np.empty(0, np.float32),
                            np.empty(0, np.float32), empty, empty)
         sample, tri, u, v, scale, thr = (np.concatenate(c) for c in zip(*self._parts))
-        return MapHits(width, height, spp, sample.astype(np.int64), tri.astype(np.int32), u.astype(np.float32),
-                       v.astype(np.float32), scale.astype(np.float32), thr.astype(np.float32))
+        return MapHits(width, height, spp, sample.astype(np.int64, copy=False), tri.astype(np.int32, copy=False),
+                       u.astype(np.float32, copy=False), v.astype(np.float32, copy=False),
+                       scale.astype(np.float32, copy=False), thr.astype(np.float32, copy=False))
 
 
 @dataclass(frozen=True)
 class MapHits:
-    """The map-reading hit of every camera sample of a ``width`` x ``height`` frame of ``spp``
-    samples a pixel that has one (n hits): ``sample``
-    (n,) the sample's counter (pixel * spp + sample), ``tri``, ``u``, ``v`` Embree's hit, ``scale``
-    (n, 3) rho / pi there, ``throughput`` (n, 3) the reflections' weight before it (ones for a
-    camera ray's own hit)."""
+    """The map-reading hit of every camera sample that has one (n hits) in a ``width`` x ``height``
+    frame of ``spp`` samples a pixel: ``sample`` (n,) the sample's counter (pixel * spp + sample),
+    ``tri``, ``u``, ``v`` Embree's hit, ``scale`` (n, 3) rho / pi there, ``throughput`` (n, 3) the
+    reflections' weight before it (ones for a camera ray's own hit)."""
 
     width: int
     height: int
