@@ -220,3 +220,37 @@ def bench_spp(frames, spps, reference_spp, photons, fmax, resolution, seed_check
         raise LoomError("adaptive budgets start at 3 samples a pixel (2 in the first pass)", field="--adaptive")
     run(frame_list, spps=spp_list, reference_spp=reference_spp, photons=photons, fmax=fmax, width=width,
         height=height, seed_check=seed_check, adaptive=budgets, store=store, json_path=json_path, echo=click.echo)
+
+
+@bench.command("elements")
+@click.argument("scene", default="room")
+@click.option("--frames", default="23,68,113", show_default=True, help="Frames compared, comma-separated.")
+@click.option("--scales", default="0.5,0.75,1,1.5", show_default=True,
+              help="Element sizes as multiples of the scene's, comma-separated; the smallest is the comparison.")
+@click.option("--photons", type=click.IntRange(1), default=16_000_000, show_default=True,
+              help="Photons a frame of every converged map.")
+@click.option("--resolution", default="320x240", show_default=True)
+@click.option("--spp", type=int, default=RENDER_SPP, show_default=True, help=_RENDER_SPP_HELP)
+@click.option("--scheduler", default="local", show_default=True, help="synchronous, local or an address.")
+@click.option("--workers", type=int, default=2, show_default=True)
+@click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
+              help="Folder of elements.json and elements.png (default: bench-elements-SCENE).")
+def bench_elements(scene, frames, scales, photons, resolution, spp, scheduler, workers, out_dir):
+    """The element mesh's bias in the frames: converged maps on coarser and finer elements, each composited
+    with the same camera paths and compared with the finest as the viewer sees it (docs/04-photons.md §8)."""
+    from pathlib import Path
+
+    from pipeline.benchmarks.elements import run
+    from pipeline.errors import LoomError
+    from pipeline.run.render import parse_resolution
+
+    width, height = parse_resolution(resolution)
+    try:
+        frame_list = tuple(int(f) for f in frames.split(",") if f.strip())
+        scale_list = tuple(float(s) for s in scales.split(",") if s.strip())
+    except ValueError as err:
+        raise LoomError(f"cannot read the list: {err}", field="--frames/--scales") from None
+    if not frame_list:
+        raise LoomError("give at least one frame", field="--frames")
+    run(scene, frames=frame_list, scales=scale_list, photons=photons, width=width, height=height, spp=spp,
+        scheduler=scheduler, workers=workers, out_dir=Path(out_dir) if out_dir else None, echo=click.echo)

@@ -48,7 +48,7 @@ LOCAL_IMPORTS = (
     ("*", "OpenImageIO", "heavy; only where textures or images are read or written"),
     ("pipeline.benchmarks.*", "torch", "bench-only environment (ColorVideoVDP)"),
     ("pipeline.benchmarks.*", "pycvvdp", "bench-only environment (ColorVideoVDP)"),
-    ("pipeline.benchmarks.*", "flip_evaluator", "test extra: NVIDIA FLIP, only for `loom bench spp|error`"),
+    ("pipeline.benchmarks.*", "flip_evaluator", "test extra: NVIDIA FLIP, only for `loom bench spp|error|elements`"),
 )
 
 
