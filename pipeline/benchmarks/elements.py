@@ -15,7 +15,8 @@ Fewer, larger elements each collect more photons: at a given N_frame the photon 
 falls as the elements' count (photons an element ~ 1 / elements), which is the lever of coarser
 elements; the table prints the count beside the bias it costs. Decision
 (:func:`coarsest_invisible_scale`): the coarsest scale whose frames are within d_thr of the finest
-on every frame, i.e. whose bias is no more visible than the photon noise the guided default accepts.
+on every frame, i.e. whose bias is no more visible than the photon noise the guided default accepts;
+none when the floor itself is over d_thr (the maps are not converged: more photons are needed).
 Writes ``OUT/elements.json`` and ``OUT/elements.png`` (per frame: the finest mesh's frame, then each
 scale's luminance difference from it, red brighter, blue darker, full scale +-10 % of the mean).
 """
@@ -149,16 +150,21 @@ def run(scene_name: str = "room", *, frames: Sequence[int] = FRAMES, scales: Seq
                     echo(f"  element size {size:g} (x{scale:g}, {mesh.n_elements:,} elements): d_AQM "
                          f"{rows[-1]['d_aqm']:.2f} %, FLIP {rows[-1]['flip']:.4f}, rel RMS {rows[-1]['rel_rms']:.4f}")
                 pictures.append(np.concatenate(strip, axis=1))
-    chosen = coarsest_invisible_scale(rows, thr)
+    converged = all(f["d_aqm"] <= thr for f in floors)  # else the rows measure the photons' noise, not the mesh
+    chosen = coarsest_invisible_scale(rows, thr) if converged else None
     result = dict(scene=Path(path).stem, frames=list(frames), photons=photons, width=width, height=height,
                   spp=settings.spp, d_thr_percent=thr, finest=dict(scale=scales[0], element_size=sizes[0],
                                                                    elements=meshes[0].n_elements),
-                  floor=floors, rows=rows, coarsest_invisible_scale=chosen,
+                  floor=floors, rows=rows, converged=converged, coarsest_invisible_scale=chosen,
                   wall_s=time.perf_counter() - t_start)
     out_dir.mkdir(parents=True, exist_ok=True)  # only now: a refused or killed run leaves nothing
     (out_dir / "elements.json").write_text(json.dumps(result, indent=1))
     write_png(out_dir / "elements.png", np.concatenate(pictures, axis=0))
-    echo("coarsest element size whose frames are within d_thr of the finest on every frame: "
-         + (f"x{chosen:g} of the scene's" if chosen is not None else f"none coarser than x{scales[0]:g}")
-         + f"; {out_dir / 'elements.json'}, {out_dir / 'elements.png'}")
+    if not converged:
+        echo(f"the floor is over d_thr on some frame: the finest maps are not converged, so the rows show their "
+             f"noise as much as the mesh; give more --photons (now {photons:,})")
+    else:
+        echo("coarsest element size whose frames are within d_thr of the finest on every frame: "
+             + (f"x{chosen:g} of the scene's" if chosen is not None else f"none coarser than x{scales[0]:g}"))
+    echo(f"wrote {out_dir / 'elements.json'}, {out_dir / 'elements.png'}")
     return result
