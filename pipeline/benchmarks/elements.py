@@ -92,9 +92,10 @@ def _maps(client, scene, path: Path, sizes: Sequence[float], frame: int, photons
 
 def run(scene_name: str = "room", *, frames: Sequence[int] = FRAMES, scales: Sequence[float] = SCALES,
         photons: int = 16_000_000, width: int = 320, height: int = 240, spp: int | None = None,
-        scheduler: str = "local", workers: int = 2, out_dir: Path | None = None,
+        element_size: float | None = None, scheduler: str = "local", workers: int = 2, out_dir: Path | None = None,
         echo: Callable[[str], None] = click.echo) -> dict:
-    """Measure, print the table, write ``elements.json`` and ``elements.png`` in ``out_dir``."""
+    """Measure, print the table, write ``elements.json`` and ``elements.png`` in ``out_dir``; the scales
+    multiply ``element_size`` (default the scene's own)."""
     config = RenderConfig()
     settings = RenderSettings(width=width, height=height, **({} if spp is None else {"spp": spp}))
     thr = 100.0 * config.segments.d_thr
@@ -112,7 +113,9 @@ def run(scene_name: str = "room", *, frames: Sequence[int] = FRAMES, scales: Seq
         if bad:
             raise LoomError(f"frame(s) {bad} are not inside the scene's {scene.timeline.first}-"
                             f"{scene.timeline.last}", path=str(path), field="--frames")
-        base = ElementMesh.build(scene).element_size
+        if element_size is not None and not element_size > 0:
+            raise LoomError(f"must be positive, got {element_size}", field="--element-size")
+        base = ElementMesh.build(scene, element_size).element_size
         sizes = [base * s for s in scales]
         meshes = [ElementMesh.build(scene, size) for size in sizes]
         echo(f"loom bench elements {Path(path).stem}: frames {', '.join(map(str, frames))}, {width}x{height}, "

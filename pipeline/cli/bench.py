@@ -229,13 +229,15 @@ def bench_spp(frames, spps, reference_spp, photons, fmax, resolution, seed_check
               help="Element sizes as multiples of the scene's, comma-separated; the smallest is the comparison.")
 @click.option("--photons", type=click.IntRange(1), default=16_000_000, show_default=True,
               help="Photons a frame of every converged map.")
+@click.option("--element-size", type=float, default=None,
+              help="The element size the scales multiply (default: the scene's own).")
 @click.option("--resolution", default="320x240", show_default=True)
 @click.option("--spp", type=int, default=RENDER_SPP, show_default=True, help=_RENDER_SPP_HELP)
 @click.option("--scheduler", default="local", show_default=True, help="synchronous, local or an address.")
 @click.option("--workers", type=int, default=2, show_default=True)
 @click.option("--out", "out_dir", type=click.Path(file_okay=False), default=None,
               help="Folder of elements.json and elements.png (default: bench-elements-SCENE).")
-def bench_elements(scene, frames, scales, photons, resolution, spp, scheduler, workers, out_dir):
+def bench_elements(scene, frames, scales, photons, element_size, resolution, spp, scheduler, workers, out_dir):
     """The element mesh's bias in the frames: converged maps on coarser and finer elements, each composited
     with the same camera paths and compared with the finest as the viewer sees it (docs/04-photons.md §8)."""
     from pathlib import Path
@@ -253,4 +255,5 @@ def bench_elements(scene, frames, scales, photons, resolution, spp, scheduler, w
     if not frame_list:
         raise LoomError("give at least one frame", field="--frames")
     run(scene, frames=frame_list, scales=scale_list, photons=photons, width=width, height=height, spp=spp,
-        scheduler=scheduler, workers=workers, out_dir=Path(out_dir) if out_dir else None, echo=click.echo)
+        element_size=element_size, scheduler=scheduler, workers=workers, out_dir=Path(out_dir) if out_dir else None,
+        echo=click.echo)

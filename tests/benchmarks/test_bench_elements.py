@@ -51,11 +51,18 @@ def test_tiny_run_is_repeatable_and_writes_its_table_and_picture(tmp_path):
     assert not written["converged"] and written["coarsest_invisible_scale"] is None
     assert max(f["d_aqm"] for f in written["floor"]) > written["d_thr_percent"]
     assert read_png(tmp_path / "a" / "elements.png").shape[:2] == (24, 64)  # the frame, then the one difference
+    # the scales multiply a given element size instead of the scene's
+    other = run("cornell", out_dir=tmp_path / "c", element_size=0.5 * first["finest"]["element_size"], **kw)
+    assert other["finest"]["element_size"] == 0.5 * first["finest"]["element_size"]
+    assert other["rows"][0]["elements"] > row["elements"]
 
 
 def test_a_single_scale_or_a_frame_outside_the_scene_is_refused_and_writes_nothing(tmp_path):
     with pytest.raises(LoomError, match="--scales"):
         run("cornell", frames=(1,), scales=(1.0,), out_dir=tmp_path, echo=lambda s: None)
+    with pytest.raises(LoomError, match="--element-size"):
+        run("cornell", frames=(1,), scales=(1.0, 2.0), element_size=0.0, scheduler="synchronous",
+            out_dir=tmp_path / "out", echo=lambda s: None)
     with pytest.raises(LoomError, match="--frames"):
         run("cornell", frames=(9999,), scales=(1.0, 2.0), scheduler="synchronous", out_dir=tmp_path / "out",
             echo=lambda s: None)

@@ -1,7 +1,7 @@
 """The photon store keeps what a render reads: per-batch counts and sums by default, hit records
 only with ``--keep-records`` (pipeline/store, pipeline/collection/batch_sums.py).
 
-On ATRIUM's element mesh (about 45,000 elements, where a batch of 6,000 photons hits a fraction of
+On ATRIUM's element mesh (about 23,600 elements, where a batch of 6,000 photons hits a fraction of
 them and the sums are stored sparse) a render without records writes none and gives frames and
 segment records bit-identical to one with them; its last lines say the store's size and bytes a
 photon; a store of the previous format is refused in one line that says what to do, with nothing

@@ -6,9 +6,10 @@ from click.testing import CliRunner
 
 from pipeline.cli import main
 from pipeline.scene import ElementMesh, Scene, read_scene
-from pipeline.scene.builtin import write_builtin
+from pipeline.scene.builtin import atrium, write_builtin
 
 TARGET_ELEMENTS = {"room": 5_300, "atrium": 45_000}
+PAPER_SIZE = {"room": None, "atrium": atrium.PAPER_ELEMENT_SIZE}  # None: the scene's own element size
 
 
 @pytest.fixture(scope="module")
@@ -26,8 +27,15 @@ def builtin(tmp_path_factory):
 
 @pytest.mark.parametrize("name", sorted(TARGET_ELEMENTS))
 def test_element_counts_match_the_paper(builtin, name):
-    mesh = ElementMesh.build(builtin(name))
+    mesh = ElementMesh.build(builtin(name), PAPER_SIZE[name])
     assert abs(mesh.n_elements / TARGET_ELEMENTS[name] - 1) <= 0.15
+
+
+def test_atrium_own_elements_are_one_and_a_half_times_the_papers(builtin):
+    """The coarsest size `loom bench elements` finds within d_thr of the paper's mesh (docs/04-photons.md §8)."""
+    own = ElementMesh.build(builtin("atrium"))
+    assert own.element_size == 1.5 * atrium.PAPER_ELEMENT_SIZE
+    assert own.n_elements < 0.6 * ElementMesh.build(builtin("atrium"), atrium.PAPER_ELEMENT_SIZE).n_elements
 
 
 def test_room_is_three_segments_with_moving_lit_objects(builtin):
