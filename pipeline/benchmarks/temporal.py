@@ -1,6 +1,6 @@
 """``loom bench temporal``: temporal windows, gather and filter on PoCL for an ATRIUM-size case.
 
-The case of §6 for ATRIUM: the real ATRIUM element mesh (about 43,000 elements), 300 frames,
+The case of §6 for ATRIUM: the real ATRIUM element mesh at the paper's size (about 43,000 elements), 300 frames,
 20,000 photons per frame, F_max = 44. Photon tracing time per frame is measured by shooting a few
 real ATRIUM frames at 20,000 photons (synchronous, one process); their per-element counts give the
 hit rates of a synthetic 300-frame photon set (Poisson counts per element and frame, a moving

@@ -19,7 +19,7 @@ Sparse: only the elements and vertices a batch hit are stored, each with its ind
     E, V, n_e, n_v | element ids (n_e) | their 24 sums (n_e x 2 x 3 x 4 float32 bits)
                    | vertex ids (n_v)  | their direct flux (n_v x 3 float32 bits)
 
-A small batch on a fine mesh (ATRIUM's 43,000 elements) stores the elements it hit, not 4.2 MB of
+A small batch on a fine mesh (ATRIUM's at the paper's size, 43,000 elements) stores the elements it hit, not 4.2 MB of
 mostly zero sums; a large batch pays 4 bytes an element over the dense form. The reader scatters
 them into zeros (:func:`decode`): the same bits as the dense sums.
 
@@ -224,4 +224,4 @@ class FrameSums:
             self.bytes -= gone.nbytes
 
 
-FRAME_SUMS = FrameSums(1 << 30)  # ATRIUM (43,000 elements): ~120 batches of split sums
+FRAME_SUMS = FrameSums(1 << 30)  # ATRIUM on the paper's mesh (43,000 elements): ~120 batches of split sums

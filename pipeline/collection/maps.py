@@ -19,7 +19,7 @@ photons is its own animation, with its own ends. Frames sharing another frame's 
 
 Memory: output frames are processed in chunks of consecutive frames; a chunk holds the element
 sums of its frames and their windows' reach (F_max/2 each side): (chunk + F_max) x E x 12 doubles
-per photon parity, about 590 MB for ATRIUM (43,000 elements, F_max = 44, chunk 96). The per-batch
+per photon parity, about 590 MB for ATRIUM on the paper's mesh (43,000 elements, F_max = 44, chunk 96). The per-batch
 sums are kept (pipeline/collection/batch_sums.FrameSums, bounded by bytes), so frames in the overlap of two
 chunks that run on one worker are read once.
 """

@@ -356,7 +356,7 @@ class SegmentPlanner:
         k = place.k
         windows_fmax = place.fmax if fmax is None else fmax
         # Each half is reconstructed as the final frame will be, spatial filter included (Step 5):
-        # on ATRIUM's 43,000 small elements the filter, not N_frame, removes most of what the
+        # on ATRIUM's 43,000 small elements (the paper's mesh) the filter, not N_frame, removes most of what the
         # unfiltered halves differ by; judged unfiltered, the loop would trace for noise no frame shows.
         (lit,) = illumination_maps(self.store, self.elements, self.scene,
                                    MapRequest(WindowSpec(temporal, windows_fmax), [k - 1], batches=use, halves=True),
