@@ -126,6 +126,7 @@ def run(scene_name: str = "room", *, frames: Sequence[int] = FRAMES, scales: Seq
         with connect(scheduler, workers) as client:
             for frame in frames:
                 t0 = time.perf_counter()
+                echo(f"frame {frame}: tracing {len(sizes) + 1} maps of {photons:,} photons ...")
                 maps = _maps(client, scene, path, sizes, frame, photons, config.photons.photon_depth)
                 state = scene.pose_frame(frame)
                 paths = CameraPaths.of(settings, config.photons.seed, frame)
