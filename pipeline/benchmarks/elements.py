@@ -11,9 +11,9 @@ finest mesh's frame as the viewer sees it (d_AQM, FLIP, relative RMS of luminanc
 the finest mesh is the floor, the photons' own noise. The finest mesh has a bias of its own, which
 no row shows: the figures are what a coarser mesh adds.
 
-Fewer, larger elements each collect more photons: at a given N_frame the photon noise of a vertex
-falls as the elements' count (photons an element ~ 1 / elements), which is the lever of coarser
-elements; the table prints the count beside the bias it costs. Decision
+Fewer, larger elements each collect more photons: at a given N_frame a vertex's photon-noise
+variance is proportional to the elements' count (photons an element ~ 1 / elements), which is the
+lever of coarser elements; the table prints the count beside the bias it costs. Decision
 (:func:`coarsest_invisible_scale`): the coarsest scale whose frames are within d_thr of the finest
 on every frame, i.e. whose bias is no more visible than the photon noise the guided default accepts;
 none when the floor itself is over d_thr (the maps are not converged: more photons are needed).
