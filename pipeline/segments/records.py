@@ -170,5 +170,6 @@ def table(records: list[SegmentRecord]) -> list[str]:
             steps = ", ".join(f"{s['fmax']} ({s['p_me_back']:.2f}/{s['p_me_fwd']:.2f})" for s in r.fmax_steps)
             lines.append(f"{'':>4}F_max steps (p_me back/fwd): {steps}")
     if any(r.capped for r in records):
-        lines.append("* N_frame reached n_frame_max with d_AQM still above d_thr")
+        lines.append("* N_frame reached n_frame_max with d_AQM still above d_thr: raise n_frame_max (--config), "
+                     "or see whether coarser elements hide the noise at a bias under d_thr (`loom bench elements`)")
     return lines

@@ -365,3 +365,16 @@ def test_frames_beside_a_lighting_step_get_the_end_photons():
     assert [f for f in middle.frames if targets[f] == 80_000] == list(range(40, 60))
     assert targets[60] == 40_000
     assert set(photon_targets(middle, 40_000, first=1, last=100, end_factor=1.0, steps=[50]).values()) == {40_000}
+
+
+def test_a_capped_segment_is_starred_and_the_table_says_what_to_try():
+    from pipeline.segments.records import SegmentRecord, table
+
+    done = SegmentRecord(index=0, start=1, end=45, k=23, fmax=44, n_frame=80_000, temporal="adaptive", guided=True,
+                         decision_hash="0" * 16)
+    capped = SegmentRecord(index=1, start=46, end=90, k=68, fmax=44, n_frame=1_280_000, temporal="adaptive",
+                           guided=True, decision_hash="0" * 16, capped=True)
+    assert not any(line.startswith("*") for line in table([done]))
+    *rows, note = table([done, capped])
+    assert "*" in rows[-1] and "*" not in rows[-2]
+    assert note.startswith("* N_frame reached n_frame_max") and "loom bench elements" in note
