@@ -29,7 +29,7 @@ from string import Template
 
 from pipeline.errors import LoomError
 from pipeline.frames.images import frame_paths
-from pipeline.segments.records import SegmentRecord, read_records, record_path, used_fmax_step
+from pipeline.segments.records import CAPPED_NOTE, SegmentRecord, read_records, record_path, used_fmax_step
 
 from .figures import figure, png_bytes
 from .segment_plot import plot_segments
@@ -195,7 +195,8 @@ def _segments(out: Path, records: list[SegmentRecord], config: dict) -> str:
             steps.append(f"<li>segment {r.index}, F_max steps (p_me back/fwd): "
                          + _e(", ".join(f"{s['fmax']} ({s['p_me_back']:.2f}/{s['p_me_fwd']:.2f})"
                                         for s in r.fmax_steps)) + "</li>")
-    return (table + (f"<ul>{''.join(steps)}</ul>" if steps else "")
+    capped = f"<p id=\"capped\">(cap): {_e(CAPPED_NOTE)}</p>" if any(r.capped for r in records) else ""
+    return (table + capped + (f"<ul>{''.join(steps)}</ul>" if steps else "")
             + _segment_picture(records, config)
             + (_img(_fig6_plot(out, records, config), "fig6-plot", "Fig. 6: d_AQM against N_frame at each K; "
                     "p_me against F_max (§5.2.2-3)") if any(r.guided for r in records) else ""))

@@ -144,6 +144,11 @@ def read_records(out_dir: str | Path) -> list[SegmentRecord]:
     return out
 
 
+# What `loom segments` and the report say under a segment the doubling loop stopped at its cap
+CAPPED_NOTE = ("N_frame reached n_frame_max with d_AQM still above d_thr: raise n_frame_max (--config), or see "
+               "whether coarser elements hide the noise at a bias under d_thr (`loom bench elements`)")
+
+
 def table(records: list[SegmentRecord]) -> list[str]:
     """The paper's Table 1 with the evidence: K_i, N_frame, F_max, d_AQM, p_me, pilot E, times."""
     head = (f"{'seg':>3} {'frames':>9} {'K':>4} {'N_frame':>9} {'F_max':>5} {'d_AQM %':>8} "
@@ -170,6 +175,5 @@ def table(records: list[SegmentRecord]) -> list[str]:
             steps = ", ".join(f"{s['fmax']} ({s['p_me_back']:.2f}/{s['p_me_fwd']:.2f})" for s in r.fmax_steps)
             lines.append(f"{'':>4}F_max steps (p_me back/fwd): {steps}")
     if any(r.capped for r in records):
-        lines.append("* N_frame reached n_frame_max with d_AQM still above d_thr: raise n_frame_max (--config), "
-                     "or see whether coarser elements hide the noise at a bias under d_thr (`loom bench elements`)")
+        lines.append(f"* {CAPPED_NOTE}")
     return lines

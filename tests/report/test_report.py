@@ -153,3 +153,17 @@ def test_segment_plot_only_where_segments_differ_or_were_decided():
     guided = _segment_picture([_record(0, 1, 40, guided=True, d_aqm=2.5)], {"d_thr": 0.03})
     for html in (mixed, guided):
         assert 'id="segment-plot"' in html and "data:image/png;base64," in html
+
+
+def test_a_capped_segment_gets_the_note_of_what_to_try(tmp_path):
+    from dataclasses import replace
+
+    from pipeline.report.page import _segments
+    from pipeline.segments.records import CAPPED_NOTE
+
+    config = {"d_thr": 0.03}
+    done = _record(0, 1, 40, guided=True, d_aqm=2.5)
+    capped = replace(_record(1, 41, 80, guided=True, d_aqm=4.0, n_frame=1_280_000), capped=True)
+    assert 'id="capped"' not in _segments(tmp_path, [done], config)
+    html = _segments(tmp_path, [done, capped], config)
+    assert "4.00 (cap)" in html and 'id="capped"' in html and "loom bench elements" in CAPPED_NOTE
