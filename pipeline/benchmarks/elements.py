@@ -31,7 +31,6 @@ from typing import TYPE_CHECKING
 import click
 import numpy as np
 
-from kernels import colour
 from pipeline.config import RenderConfig
 from pipeline.errors import LoomError
 from pipeline.frames.camera_paths import CameraPaths, render_frame, visible_adaptation
@@ -42,16 +41,14 @@ from pipeline.run.cluster import connect
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin import BUILTIN_SCENES, write_builtin
 
-from .error import reference_map
-from .error_measures import flip_mean, frame_ppd, shown
+from .error import REFERENCE_SEEDS, reference_map
+from .error_measures import LUMA, flip_mean, frame_ppd, relative_rms, shown
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Sequence
 
-LUMA = np.asarray(colour.LUMA)  # Rec. 709 (kernels/colour.py)
 FRAMES = (23, 68, 113)  # ROOM's segment centres K (§6, Table 1)
 SCALES = (0.5, 0.75, 1.0, 1.5)  # element sizes as multiples of the scene's; the smallest is the comparison
-SEEDS = (101, 202)  # the maps' Philox seeds; the second, on the finest mesh, is the floor
 DIFFERENCE_SCALE = 0.1  # elements.png: a luminance difference of 10 % of the frame's mean is full colour
 
 
@@ -82,7 +79,7 @@ def difference_picture(test: np.ndarray, ref: np.ndarray, full_scale: float = DI
 def _maps(client, scene, path: Path, sizes: Sequence[float], frame: int, photons: int, depth: int) -> list:
     """Converged maps of ``frame``: one per element size with the first seed, then the finest with
     the second; traced on the cluster's workers, or here without one."""
-    jobs = [(size, SEEDS[0]) for size in sizes] + [(sizes[0], SEEDS[1])]
+    jobs = [(size, REFERENCE_SEEDS[0]) for size in sizes] + [(sizes[0], REFERENCE_SEEDS[1])]
     kwargs = [dict(scene_path=str(path.resolve()), scene_hash=scene.scene_hash, element_size=size, frame=frame,
                    n_photons=photons, seed=seed, stream=frame, max_depth=depth) for size, seed in jobs]
     if client is None:
@@ -135,12 +132,11 @@ def run(scene_name: str = "room", *, frames: Sequence[int] = FRAMES, scales: Seq
                 ref, alt = images[0], images[-1]
                 adaptation = visible_adaptation(state, meshes[0], maps[0].astype(np.float32), settings,
                                                 config.photons.seed)
-                y_ref = ref @ LUMA
 
-                def measure(img, ref=ref, y_ref=y_ref, adaptation=adaptation) -> dict:
+                def measure(img, ref=ref, adaptation=adaptation) -> dict:
                     return dict(d_aqm=float(displayed_difference(img, ref, adaptation).d_aqm),
                                 flip=flip_mean(shown(img, adaptation), shown(ref, adaptation), ppd),
-                                rel_rms=float(np.sqrt(np.mean((img @ LUMA - y_ref) ** 2)) / np.mean(y_ref)))
+                                rel_rms=relative_rms(img, ref))
 
                 floors.append(dict(frame=frame, **measure(alt)))
                 echo(f"frame {frame} ({time.perf_counter() - t0:.0f} s): floor (element size {sizes[0]:g}, another "

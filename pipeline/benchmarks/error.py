@@ -106,6 +106,7 @@ RECONSTRUCTION_KERNELS = ("temporal", "gather", "filter")
 # kernels (but those that run on stored photons only); the compositor (pipeline/frames/) is not in it
 REFERENCE_SOURCES = ("pipeline/photons", "pipeline/collection/estimators.py", "kernels", "pipeline/scene")
 REFERENCE_BATCH = 250_000  # photons traced per call into a reference map (bounded worker memory)
+REFERENCE_SEEDS = (101, 202)  # a reference's two Philox seeds: errors against the first, the second its noise floor
 # The methods compared; per-frame rendering is the baseline every ratio is taken against
 METHODS = ("per-frame", "fixed", "adaptive", "guided")
 
@@ -477,7 +478,7 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, config:
              f"{', '.join(f'{d:g}' for d in plan.d_thr)}; reference {plan.reference_photons:,} photons a frame "
              f"x 2 seeds; {elements.n_elements:,} elements; {workers} workers")
         machine = {"before": announce(tmp, "before", echo)}  # equal-time ratios move with it
-        seeds = (101, 202)
+        seeds = REFERENCE_SEEDS
         cache = out_dir / "references" / (reference_key(
             scene_hash=scene.scene_hash, element_size=elements.element_size, frames=plan.frames,
             n_photons=plan.reference_photons, seeds=seeds, max_depth=config.photons.photon_depth) + ".npz")

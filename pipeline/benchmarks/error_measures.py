@@ -64,6 +64,12 @@ def image_errors(test: np.ndarray, ref: np.ndarray) -> tuple[float, float]:
     return float(np.sqrt(np.mean(d * d))), float(np.mean(np.abs(d)) / np.mean(ref))
 
 
+def relative_rms(test: np.ndarray, ref: np.ndarray) -> float:
+    """RMS of the Rec. 709 luminance difference of two linear frames (H, W, 3) over ``ref``'s mean luminance."""
+    y_ref = ref @ LUMA
+    return float(np.sqrt(np.mean((test @ LUMA - y_ref) ** 2)) / np.mean(y_ref))
+
+
 def region_energy(irradiance: np.ndarray, areas: np.ndarray, region: np.ndarray) -> float:
     """Luminous flux sum_v A_v Y(E_v) over a set of vertices (the Fig. 3 highlight)."""
     return float(np.sum(areas[region] * (irradiance[region] @ LUMA)))

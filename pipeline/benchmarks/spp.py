@@ -41,7 +41,6 @@ from typing import TYPE_CHECKING
 import click
 import numpy as np
 
-from kernels import colour
 from pipeline.collection.maps import MapRequest, WindowSpec, illumination_maps
 from pipeline.config import RenderConfig
 from pipeline.frames.camera_paths import CameraPaths, render_frame, visible_adaptation
@@ -53,12 +52,11 @@ from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin import write_builtin
 from pipeline.store import PhotonStore
 
-from .error_measures import flip_mean, frame_ppd, shown
+from .error_measures import LUMA, flip_mean, frame_ppd, relative_rms, shown
 
 if TYPE_CHECKING:
     from collections.abc import Callable, Iterable, Sequence
 
-LUMA = np.asarray(colour.LUMA)  # Rec. 709 (kernels/colour.py)
 FRAMES = (68, 23)  # ROOM's segment centre K2 (§6, Table 1), and a frame of the first segment
 SPPS = (1, 2, 4, 8, 16)
 REFERENCE_SPP = 256
@@ -153,12 +151,11 @@ def run(frames: Iterable[int] = FRAMES, *, spps: Sequence[int] = SPPS, reference
 
             ref, ref_cpu, ref_wall = composite(reference_spp)
             ref_shown = shown(ref, adaptation)
-            y_ref = ref @ LUMA
 
-            def measure(img, cpu, wall, spp, k=k, ref=ref, ref_shown=ref_shown, y_ref=y_ref, adaptation=adaptation):
+            def measure(img, cpu, wall, spp, k=k, ref=ref, ref_shown=ref_shown, adaptation=adaptation):
                 return dict(frame=k, spp=spp, flip=flip_mean(shown(img, adaptation), ref_shown, ppd),
                             d_aqm=displayed_difference(img, ref, adaptation, aqm_size=config.segments.aqm_size).d_aqm,
-                            rel_rms=float(np.sqrt(np.mean((img @ LUMA - y_ref) ** 2)) / np.mean(y_ref)),
+                            rel_rms=relative_rms(img, ref),
                             cpu_s=cpu, wall_s=wall)
 
             for spp in spps:
