@@ -43,9 +43,10 @@ reference's frames, pipeline/frames/perceived.py) RMSE and mean relative error o
 and d_AQM (every ``--aqm-every``-th frame, on the workers); on the same frames the FLIP mean of the
 frames as their PNGs show them at that adaptation (error_measures.displayed_flip, as ``loom bench
 spp`` computes it, at the AQM's pixels per degree); the flicker of the error field
-(vertex maps and displayed frames); the Fig. 3 highlight's energy (ROOM: floor vertices within
-0.5 m under the aircraft, tests/collection/test_room.py; elsewhere the brightest 2 % of the
-reference's indirect light) against the reference's; the lag after an abrupt lighting change.
+(vertex maps and displayed frames) and of the run's photon noise alone (:func:`photon_noise`); the
+Fig. 3 highlight's energy (ROOM: floor vertices within 0.5 m under the aircraft,
+tests/collection/test_room.py; elsewhere the brightest 2 % of the reference's indirect light)
+against the reference's; the lag after an abrupt lighting change.
 Frames are composited here from each run's indirect maps with the same camera samples and direct
 light (workers/composite.py), so image differences are in the indirect light only.
 
@@ -69,6 +70,7 @@ import click
 import numpy as np
 
 from pipeline.collection.estimators import vertex_irradiance
+from pipeline.collection.maps import MapRequest, WindowSpec, illumination_maps
 from pipeline.config import PhotonConfig, RenderConfig, SegmentConfig
 from pipeline.errors import LoomError
 from pipeline.frames.camera_paths import CameraPaths, render_frame
@@ -84,6 +86,8 @@ from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin import BUILTIN_SCENES
 from pipeline.scene.scene_cache import load_elements, load_scene
 from pipeline.scene.timeline import Timeline
+from pipeline.segments.planner import batches_in_use
+from pipeline.segments.records import read_records
 from pipeline.store import PhotonStore
 from pipeline.store.illumination import IlluminationMaps
 
@@ -218,8 +222,9 @@ def _cpu_seconds(client: Client) -> float:
 
 
 def run_method(client: Client, scene_path: Path, out: Path, plan: Plan, *, method: str, n_photons: int | None,
-               config: RenderConfig, fmax: int | None, temporal: str) -> dict:
-    """One timed ``loom render`` of the plan's frames; its indirect maps and what it cost."""
+               config: RenderConfig, fmax: int | None, temporal: str, scene: Scene, elements: ElementMesh) -> dict:
+    """One timed ``loom render`` of the plan's frames (``scene`` and ``elements`` read from ``scene_path``);
+    its indirect maps, their photon noise (:func:`photon_noise`) and what it cost."""
     settings = RenderSettings(width=plan.width, height=plan.height, spp=plan.spp)
     cpu0, t0 = _cpu_seconds(client), time.perf_counter()
     report = render(RenderRequest(scene_path=scene_path, frames=f"{plan.frames[0]}-{plan.frames[1]}", out_dir=out,
@@ -232,10 +237,32 @@ def run_method(client: Client, scene_path: Path, out: Path, plan: Plan, *, metho
     photons = sum(store.photons_emitted(i) for i in sources)
     maps = IlluminationMaps.open(str(out / "photons.zarr"))
     indirect = np.stack([np.asarray(maps.read(f - 1), np.float64) for f in range(plan.frames[0], plan.frames[1] + 1)])
+    noise = photon_noise(out, store, scene, elements, plan, config)
     shutil.rmtree(out)
     return {"method": method, "n_photons": n_photons, "fmax": fmax, "d_thr": config.segments.d_thr if n_photons is None
             else None, "wall_s": wall, "cpu_s": cpu, "photons": photons, "segments": report["segments"],
-            "indirect": indirect}
+            "indirect": indirect, "noise": noise}
+
+
+def photon_noise(out: Path, store: PhotonStore, scene: Scene, elements: ElementMesh, plan: Plan,
+                 config: RenderConfig) -> np.ndarray:
+    """(T, V, 3) half the difference of each frame's even and odd half maps (§5.2.3), collected as the
+    render's segments collected its maps (their windows, photons and filter, from their records): the
+    photon noise in the windows the run chose. What it leaves of the run's flicker is bias, the
+    windows' own noise and the reference's (docs/12-error-benchmark.md §3)."""
+    records = read_records(out)
+    targets: dict[int, int] = {}
+    for rec in records:
+        targets.update(rec.targets())
+    use = batches_in_use(store, targets)
+    first, last = plan.frames
+    noise = {}
+    for rec in records:
+        frames = [f - 1 for f in range(max(rec.start, first), min(rec.end, last) + 1)]
+        request = MapRequest(WindowSpec(rec.temporal, rec.windows_fmax), frames, batches=use, halves=True)
+        for lit in illumination_maps(store, elements, scene, request, config.collection, config.filter):
+            noise[lit.frame_index + 1] = (lit.irradiance[0] - lit.irradiance[1]) / 2.0
+    return np.stack([noise[f] for f in range(first, last + 1)])
 
 
 TRACED_BYTES = 4 << 30  # camera paths kept for relighting (about 25 MB a 320x240 frame at 8 spp)
@@ -289,7 +316,9 @@ class Evaluation:
     def displayed(self, images: np.ndarray) -> np.ndarray:
         return display_values(images, self.adaptation)
 
-    def measure(self, maps: np.ndarray) -> dict:
+    def measure(self, maps: np.ndarray, noise: np.ndarray | None = None) -> dict:
+        """Every measure of ``maps`` (T, V, 3) against the reference; with ``noise`` (their photon
+        noise, :func:`photon_noise`) also the flicker that noise alone has."""
         refs, areas = self.refs[0], self.areas
         images = self.images(maps)
         shown = self.displayed(images)
@@ -314,6 +343,7 @@ class Evaluation:
         return {"rel_l2": float(np.mean(rel)), "rmse": float(img[:, 0].mean()), "mean_rel": float(img[:, 1].mean()),
                 "d_aqm": float(np.mean(d_aqm)), "flip": float(np.mean(flip)), "flicker": float(np.mean(fl)),
                 "flicker_net": float(np.mean(net)),
+                "flicker_noise": None if noise is None else float(np.mean(em.flicker(refs + noise, refs, areas)[keep])),
                 "change": float(np.mean(own)),
                 "image_flicker": float(np.mean(em.image_flicker(shown, self.ref_displayed)[keep])),
                 "highlight": float(np.mean(hl)), "lag": lag, "lag_reached": reached,
@@ -419,22 +449,27 @@ def _against(d: dict, digits: int) -> str:
     return f"{d['run']:.{digits}f} vs {'n/a' if at_t is None else f'{at_t:.{digits}f}'}: {_ratio(d)}"
 
 
+def _optional(x: float | None) -> str:
+    return "" if x is None else f"{x:.4f}"
+
+
 def _table(echo: Callable[[str], None], result: dict) -> None:
     floor = result["reference"]["floor"]
     echo("")
-    echo("| run | wall s | CPU s | photons | rel L2 | RMSE | mean rel | d_AQM % | FLIP | flicker | image flicker "
-         "| highlight | lag (frames) |")
-    echo("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+    echo("| run | wall s | CPU s | photons | rel L2 | RMSE | mean rel | d_AQM % | FLIP | flicker | of it photon noise "
+         "| image flicker | highlight | lag (frames) |")
+    echo("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     echo(f"| reference noise floor (2nd seed) | {result['reference']['wall_s']:.1f} | | "
          f"{result['reference']['photons']:,} x 2 | {floor['rel_l2']:.4f} | {floor['rmse']:.4f} "
-         f"| {floor['mean_rel']:.4f} | {floor['d_aqm']:.2f} | {floor['flip']:.4f} | {floor['flicker']:.4f} "
+         f"| {floor['mean_rel']:.4f} | {floor['d_aqm']:.2f} | {floor['flip']:.4f} | {floor['flicker']:.4f} | "
          f"| {floor['image_flicker']:.4f} | {100 * floor['highlight']:+.1f} % | {floor['lag']} |")
     for r in result["runs"]:
         m = r["measures"]
         lag = f"{m['lag']}" if m["lag_reached"] else f">= {m['lag']}"
         echo(f"| {r['label']} | {r['wall_s']:.1f} | {r['cpu_s']:.1f} | {r['photons']:,} | {m['rel_l2']:.4f} "
              f"| {m['rmse']:.4f} | {m['mean_rel']:.4f} | {m['d_aqm']:.2f} | {m['flip']:.4f} | {m['flicker']:.4f} "
-             f"| {m['image_flicker']:.4f} | {100 * m['highlight']:+.1f} % | {lag} |")
+             f"| {_optional(m.get('flicker_noise'))} | {m['image_flicker']:.4f} | {100 * m['highlight']:+.1f} % "
+             f"| {lag} |")
     echo("")
     for clock, name in (("cpu_s", "CPU"), ("wall_s", "wall")):
         comparison = result["comparison"][clock]
@@ -523,16 +558,18 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, config:
                                       config=config.replace(segments=config.segments.replace(d_thr=d))))
                       for d in plan.d_thr if "guided" in plan.methods]
             # Warm-up, not timed: the workers' first render builds kernels and caches the first run would pay
-            run_method(client, path, tmp / "warm-up", plan, **{**specs[0][1], "method": "warm-up"})
+            run_method(client, path, tmp / "warm-up", plan, **{**specs[0][1], "method": "warm-up"}, scene=scene,
+                       elements=elements)
             runs = []
             for i, (method, kw) in enumerate(specs):
-                r = run_method(client, path, tmp / f"run-{i}", plan, method=method, **kw)
-                r["measures"] = ev.measure(r.pop("indirect"))
+                r = run_method(client, path, tmp / f"run-{i}", plan, method=method, **kw, scene=scene,
+                               elements=elements)
+                r["measures"] = ev.measure(r.pop("indirect"), r.pop("noise"))
                 r["label"] = _label(r)
                 echo(f"  {r['label']}: {r['wall_s']:.1f} s wall, {r['cpu_s']:.1f} s CPU, {r['photons']:,} photons; "
                      f"rel L2 {r['measures']['rel_l2']:.4f}, d_AQM {r['measures']['d_aqm']:.2f} %, "
-                     f"FLIP {r['measures']['flip']:.4f}, flicker "
-                     f"{r['measures']['flicker']:.4f}, lag {r['measures']['lag']}")
+                     f"FLIP {r['measures']['flip']:.4f}, flicker {r['measures']['flicker']:.4f} (photon noise "
+                     f"{r['measures']['flicker_noise']:.4f}), lag {r['measures']['lag']}")
                 runs.append(r)
         machine["after"] = announce(tmp, "after", echo)
     ref_photons = 2 * plan.reference_photons * (last - first + 1)

@@ -129,6 +129,13 @@ def test_bench_error_runs_end_to_end_on_a_tiny_cornell(tmp_path):
         assert flip["ratio"] is None or flip["ratio"] == pytest.approx(flip["run"] / flip["per_frame_at_equal_time"])
     assert any("| FLIP |" in line for line in lines)
     assert any("FLIP, per-frame's at equal time" in line for line in lines)
+    # The flicker of each run's photon noise alone (its even/odd halves in its own windows): less with
+    # more photons, and less in windows that slide over frames than in a frame's own photons
+    noise = {(r["method"], r["n_photons"]): r["measures"]["flicker_noise"] for r in saved["runs"]}
+    assert all(math.isfinite(v) and v > 0 for v in noise.values())
+    assert noise[("per-frame", 1_000)] > noise[("per-frame", 2_000)]
+    assert noise[("fixed", 1_000)] < noise[("per-frame", 1_000)]
+    assert floor["flicker_noise"] is None and any("| of it photon noise |" in line for line in lines)
     assert saved["event"]["frame"] == plan.event == 3
     assert any(line.startswith("| per-frame 1,000 |") for line in lines)
     # What the machine charged before and after the runs is printed and kept beside the figures
