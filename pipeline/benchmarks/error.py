@@ -238,18 +238,22 @@ def run_method(client: Client, scene_path: Path, out: Path, plan: Plan, *, metho
     maps = IlluminationMaps.open(str(out / "photons.zarr"))
     indirect = np.stack([np.asarray(maps.read(f - 1), np.float64) for f in range(plan.frames[0], plan.frames[1] + 1)])
     noise = photon_noise(out, store, scene, elements, plan, config)
+    # a frame's own photon noise at the run's photons, unfiltered: what hindsight windows would pool
+    own = None if n_photons is not None else np.mean(np.sum(np.square(photon_noise(
+        out, store, scene, elements, plan, config, windows=WindowSpec("off", 0), filtered=False)), axis=-1), axis=0)
     shutil.rmtree(out)
     return {"method": method, "n_photons": n_photons, "fmax": fmax, "d_thr": config.segments.d_thr if n_photons is None
             else None, "wall_s": wall, "cpu_s": cpu, "photons": photons, "segments": report["segments"],
-            "indirect": indirect, "noise": noise}
+            "indirect": indirect, "noise": noise, "noise_var": own}
 
 
 def photon_noise(out: Path, store: PhotonStore, scene: Scene, elements: ElementMesh, plan: Plan,
-                 config: RenderConfig) -> np.ndarray:
+                 config: RenderConfig, *, windows: WindowSpec | None = None, filtered: bool = True) -> np.ndarray:
     """(T, V, 3) half the difference of each frame's even and odd half maps (§5.2.3), collected as the
     render's segments collected its maps (their windows, photons and filter, from their records): the
     photon noise in the windows the run chose. What it leaves of the run's flicker is bias, the
-    windows' own noise and the reference's (docs/12-error-benchmark.md §3)."""
+    windows' own noise and the reference's (docs/12-error-benchmark.md §3). ``windows``: these
+    instead of the segments'; ``filtered``: False leaves out the spatial filter."""
     records = read_records(out)
     targets: dict[int, int] = {}
     for rec in records:
@@ -259,8 +263,9 @@ def photon_noise(out: Path, store: PhotonStore, scene: Scene, elements: ElementM
     noise = {}
     for rec in records:
         frames = [f - 1 for f in range(max(rec.start, first), min(rec.end, last) + 1)]
-        request = MapRequest(WindowSpec(rec.temporal, rec.windows_fmax), frames, batches=use, halves=True)
-        for lit in illumination_maps(store, elements, scene, request, config.collection, config.filter):
+        request = MapRequest(windows or WindowSpec(rec.temporal, rec.windows_fmax), frames, batches=use, halves=True)
+        for lit in illumination_maps(store, elements, scene, request, config.collection,
+                                     config.filter if filtered else None):
             noise[lit.frame_index + 1] = (lit.irradiance[0] - lit.irradiance[1]) / 2.0
     return np.stack([noise[f] for f in range(first, last + 1)])
 
@@ -316,9 +321,12 @@ class Evaluation:
     def displayed(self, images: np.ndarray) -> np.ndarray:
         return display_values(images, self.adaptation)
 
-    def measure(self, maps: np.ndarray, noise: np.ndarray | None = None) -> dict:
+    def measure(self, maps: np.ndarray, noise: np.ndarray | None = None, noise_var: np.ndarray | None = None) -> dict:
         """Every measure of ``maps`` (T, V, 3) against the reference; with ``noise`` (their photon
-        noise, :func:`photon_noise`) also the flicker that noise alone has."""
+        noise, :func:`photon_noise`) also the flicker that noise alone has; with ``noise_var`` (V,), a
+        frame's own photon-noise variance at the run's photons, the RMS of the run's flicker over the
+        frame pairs and the bound any windows could reach there with hindsight of the light (the mean
+        of the two references; error_measures.hindsight_flicker)."""
         refs, areas = self.refs[0], self.areas
         images = self.images(maps)
         shown = self.displayed(images)
@@ -344,6 +352,9 @@ class Evaluation:
                 "d_aqm": float(np.mean(d_aqm)), "flip": float(np.mean(flip)), "flicker": float(np.mean(fl)),
                 "flicker_net": float(np.mean(net)),
                 "flicker_noise": None if noise is None else float(np.mean(em.flicker(refs + noise, refs, areas)[keep])),
+                "flicker_rms": float(np.sqrt(np.mean(fl ** 2))),
+                "flicker_hindsight": None if noise_var is None else em.hindsight_flicker(
+                    self.refs.mean(axis=0), noise_var, areas, self.event_index),
                 "change": float(np.mean(own)),
                 "image_flicker": float(np.mean(em.image_flicker(shown, self.ref_displayed)[keep])),
                 "highlight": float(np.mean(hl)), "lag": lag, "lag_reached": reached,
@@ -485,6 +496,14 @@ def _table(echo: Callable[[str], None], result: dict) -> None:
             echo(f"| {s['run']} | {_against(s['d_aqm'], 2)} | {_against(s['flip'], 4)} | {_ratio(s['flicker'])} "
                  f"| {_ratio(s['flicker_net'])} | {_ratio(s['image_flicker'])} | {up[0]} | {up[1]} |")
     echo("(* per-frame figure extrapolated beyond its runs along the power law of the two nearest)")
+    for r in result["runs"]:
+        bound, rms = r["measures"].get("flicker_hindsight"), r["measures"]["flicker_rms"]
+        if bound is None:
+            continue
+        ratio = next(x["flicker"]["ratio"] for x in result["comparison"]["cpu_s"]["rows"] if x["run"] == r["label"])
+        at_cpu = "" if not ratio else f", a flicker ratio of about {ratio * bound / rms:.2f} at its CPU time"
+        echo(f"{r['label']}: windows chosen with hindsight of the light would flicker {bound:.4f} at its photons "
+             f"(RMS over the frame pairs; the run {rms:.4f}){at_cpu} (docs/12-error-benchmark.md §7)")
 
 
 def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, config: RenderConfig | None = None,
@@ -564,7 +583,7 @@ def run(scene_name: str, plan: Plan, out_dir: Path, *, workers: int = 2, config:
             for i, (method, kw) in enumerate(specs):
                 r = run_method(client, path, tmp / f"run-{i}", plan, method=method, **kw, scene=scene,
                                elements=elements)
-                r["measures"] = ev.measure(r.pop("indirect"), r.pop("noise"))
+                r["measures"] = ev.measure(r.pop("indirect"), r.pop("noise"), r.pop("noise_var"))
                 r["label"] = _label(r)
                 echo(f"  {r['label']}: {r['wall_s']:.1f} s wall, {r['cpu_s']:.1f} s CPU, {r['photons']:,} photons; "
                      f"rel L2 {r['measures']['rel_l2']:.4f}, d_AQM {r['measures']['d_aqm']:.2f} %, "

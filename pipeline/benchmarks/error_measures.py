@@ -26,6 +26,7 @@ from pipeline.frames.perceived import viewing_for
 from pipeline.frames.tonemap import ToneMapping, display_linear, srgb_encode
 
 if TYPE_CHECKING:
+    from collections.abc import Sequence
     from types import ModuleType
 
     import numpy.typing as npt
@@ -50,6 +51,66 @@ def flicker(tests: np.ndarray, refs: np.ndarray, areas: np.ndarray) -> np.ndarra
     areas = np.broadcast_to(areas, tests.shape[:2])
     e = tests - refs
     return np.array([_norm(e[t] - e[t - 1], areas[t]) / _norm(refs[t], areas[t]) for t in range(1, len(e))])
+
+
+def centre_weights(half_width: int, degree: int) -> np.ndarray:
+    """(2h + 1,) weights of frames -h..h that give the value at frame 0 of their least-squares
+    polynomial of ``degree`` (a mean for degrees 0 and 1; Savitzky and Golay, Anal. Chem. 36, 1964);
+    a degree the frames cannot hold is lowered to what they can."""
+    if half_width == 0:
+        return np.ones(1)
+    x = np.arange(-half_width, half_width + 1, dtype=np.float64)
+    return np.linalg.pinv(np.vander(x, min(degree, 2 * half_width) + 1, increasing=True))[0]
+
+
+def symmetric_windows(refs: np.ndarray, half_width: int, degree: int, cut: int | None = None) -> np.ndarray:
+    """(T, V, 3) each frame of ``refs`` (T, V, 3) through its symmetric window (:func:`centre_weights`)
+    of ``half_width`` frames each side, shortened at the ends and so as never to cross the boundary
+    between frames ``cut - 1`` and ``cut``."""
+    n = len(refs)
+    out = np.empty_like(refs)
+    for t in range(n):
+        h = min(half_width, t, n - 1 - t)
+        if cut is not None:
+            h = min(h, cut - 1 - t if t < cut else t - cut)
+        out[t] = np.tensordot(centre_weights(h, degree), refs[t - h:t + h + 1], axes=1)
+    return out
+
+
+HINDSIGHT_HALF_WIDTHS = tuple(range(16))  # the windows the bound chooses from: 0-15 frames each side,
+HINDSIGHT_DEGREES = (0, 2)  # a mean or a parabola,
+HINDSIGHT_BLOCK = 15  # one choice per vertex and this many frame pairs
+
+
+def hindsight_flicker(refs: np.ndarray, noise_var: np.ndarray, areas: np.ndarray, cut: int | None = None, *,
+                      half_widths: Sequence[int] = HINDSIGHT_HALF_WIDTHS,
+                      degrees: Sequence[int] = HINDSIGHT_DEGREES, block: int = HINDSIGHT_BLOCK) -> float:
+    """A bound on the flicker any choice of windows could have at given photons: RMS over frame pairs
+    of ||e(t) - e(t-1)|| / ||R(t)|| when every vertex, in every ``block`` of frame pairs, takes the
+    symmetric window (:func:`symmetric_windows` of the lighting ``refs`` (T, V, 3)) whose bias flicker
+    plus photon-noise flicker is least there, chosen knowing the lighting. ``noise_var`` (V,) is a
+    frame's own photon-noise variance at a vertex (RGB summed); a window's noise flicker is that times
+    the sum of squares of its weights' change from one frame to the next. The pair ``cut - 1 | cut``
+    (an abrupt change) is left out, and no window crosses it. docs/12-error-benchmark.md §7."""
+    n = len(refs)
+    areas = np.broadcast_to(areas, refs.shape[:2])
+    keep = np.ones(n - 1, bool)
+    if cut is not None:
+        keep[cut - 1] = False
+    weight = areas[1:] / np.array([_norm(refs[t], areas[t]) ** 2 for t in range(1, n)])[:, None]
+    blocks = np.arange(n - 1) // block
+    best = None
+    for degree in degrees:
+        for h in half_widths:
+            if degree > 1 and 2 * h < degree + 1:  # a polynomial through its own frames: another degree's window
+                continue
+            bias = symmetric_windows(refs, h, degree, cut) - refs
+            w = centre_weights(h, degree)
+            step = float(np.sum((np.append(w, 0.0) - np.append(0.0, w)) ** 2))
+            cost = (np.sum(np.square(bias[1:] - bias[:-1]), axis=-1) + step * noise_var[None]) * weight
+            cost = np.stack([cost[keep & (blocks == k)].sum(axis=0) for k in range(int(blocks.max()) + 1)])
+            best = cost if best is None else np.minimum(best, cost)
+    return float(np.sqrt(best.sum() / keep.sum()))
 
 
 def image_flicker(tests: np.ndarray, refs: np.ndarray) -> np.ndarray:

@@ -136,6 +136,12 @@ def test_bench_error_runs_end_to_end_on_a_tiny_cornell(tmp_path):
     assert noise[("per-frame", 1_000)] > noise[("per-frame", 2_000)]
     assert noise[("fixed", 1_000)] < noise[("per-frame", 1_000)]
     assert floor["flicker_noise"] is None and any("| of it photon noise |" in line for line in lines)
+    # The guided run's bound with hindsight of the light, at its photons; the fixed-budget runs have none
+    for r in saved["runs"]:
+        bound = r["measures"]["flicker_hindsight"]
+        assert (bound is None) == (r["method"] != "guided")
+        assert bound is None or (math.isfinite(bound) and bound > 0)
+    assert any("windows chosen with hindsight of the light would flicker" in line for line in lines)
     assert saved["event"]["frame"] == plan.event == 3
     assert any(line.startswith("| per-frame 1,000 |") for line in lines)
     # What the machine charged before and after the runs is printed and kept beside the figures
@@ -222,3 +228,51 @@ def test_the_reference_basis_says_what_the_uncapped_guided_run_reached():
     assert basis["cap_reference_photons"] == 50 * 1_280_000 and basis["cap_reference_s"] == 8.0 * 640
     assert "reached N_frame 16,000" in basis["statement"] and "under 50x" in basis["statement"]
     assert reference_basis(plan, runs[:1], SegmentConfig(), 800_000, 8.0)["statement"] == ""
+
+
+def test_centre_weights_are_a_mean_and_a_parabola_through_the_frames():
+    np.testing.assert_allclose(em.centre_weights(3, 0), np.full(7, 1 / 7))
+    np.testing.assert_allclose(em.centre_weights(3, 1), np.full(7, 1 / 7))  # a line's centre is the mean
+    x = np.arange(-4, 5.0)
+    w = em.centre_weights(4, 2)
+    assert w.sum() == pytest.approx(1.0) and w @ x == pytest.approx(0.0, abs=1e-12)
+    assert w @ (3.0 + 2.0 * x - 0.5 * x * x) == pytest.approx(3.0)  # a parabola's value at the frame, exactly
+    np.testing.assert_allclose(em.centre_weights(1, 2), [0, 1, 0], atol=1e-12)  # three frames hold it exactly
+    assert np.array_equal(em.centre_weights(0, 2), [1.0])
+
+
+def test_symmetric_windows_stop_at_the_ends_and_at_a_cut():
+    refs = np.zeros((9, 1, 3))
+    refs[5:] = 1.0  # a step between frames 4 and 5
+    across = em.symmetric_windows(refs, 2, 0)
+    assert across[4, 0, 0] == pytest.approx(2 / 5)  # frames 2-6 mix both sides
+    kept = em.symmetric_windows(refs, 2, 0, cut=5)
+    np.testing.assert_array_equal(kept, refs)  # every window stays on its own side: the step is kept whole
+    assert em.symmetric_windows(refs, 8, 0)[0, 0, 0] == 0.0  # frame 0 has no frames before it: itself
+
+
+def test_hindsight_flicker_of_steady_light_is_the_longest_mean_s_noise(rng):
+    """Steady light with photon noise of variance s2 a frame: no window has bias, the longest mean
+    (2h + 1 = 31 frames) the least noise flicker, 2 s2 / 31^2 relative to ||R||^2 = 3 V."""
+    n, v, s2 = 40, 50, 0.04
+    refs = np.ones((n, v, 3))
+    bound = em.hindsight_flicker(refs, np.full(v, s2), np.ones(v))
+    assert bound == pytest.approx(np.sqrt(2 * s2 / 31 ** 2 / 3))
+
+
+def test_hindsight_flicker_of_noise_free_light_is_nil_and_a_cut_keeps_a_step(rng):
+    """Without photon noise each frame alone is exact, whatever the light does; steady light that
+    steps once flickers at the steady bound where no window crosses the step, and more where they may."""
+    n, v = 40, 30
+    moving = rng.uniform(0.5, 2.0, (n, v, 3))
+    assert em.hindsight_flicker(moving, np.zeros(v), np.ones(v)) == 0.0
+    step = np.ones((n, v, 3))
+    step[20:] = 3.0
+    noise = np.full(v, 0.04)
+    steady = em.hindsight_flicker(np.ones((n, v, 3)), noise, np.ones(v), 20)
+    kept = em.hindsight_flicker(step, noise, np.ones(v), 20)
+    crossed = em.hindsight_flicker(step, noise, np.ones(v))
+    assert kept < crossed
+    # the same windows as steady light, each pair's flicker relative to its own frame's light
+    assert kept == pytest.approx(steady * np.sqrt(np.mean(np.where(np.arange(1, n) < 20, 1.0, 1 / 9)[
+        np.arange(n - 1) != 19]) / 1.0), rel=1e-9)
