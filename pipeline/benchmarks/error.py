@@ -406,14 +406,16 @@ def summarise(runs: list[dict], clock: str = "wall_s", slope: float | None = Non
 def plot(result: dict, path: Path) -> list[Path]:
     """Error against time: (a) d_AQM and (b) relative L2 against wall seconds per method, the
     reference's noise floor dashed; (c) relative L2 per frame of each method's largest run, the
-    abrupt change marked. PNG and SVG."""
+    abrupt change marked; (d) error flicker against CPU seconds, each run's photon noise alone
+    dotted, and a fifth of per-frame rendering's, the target a run must be under at its CPU time.
+    PNG and SVG."""
     import matplotlib  # heavy: only when drawing
 
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt  # heavy: only when drawing
 
     runs, floor = result["runs"], result["reference"]["floor"]
-    fig, axes = plt.subplots(1, 3, figsize=(16, 4.8))
+    fig, axes = plt.subplots(1, 4, figsize=(21, 4.8))
     colours = {"per-frame": "tab:red", "fixed": "tab:orange", "adaptive": "tab:blue", "guided": "tab:green"}
     for ax, key, label in ((axes[0], "d_aqm", "d_AQM vs reference (%)"), (axes[1], "rel_l2", "relative L2, indirect")):
         for method, colour in colours.items():
@@ -435,6 +437,28 @@ def plot(result: dict, path: Path) -> list[Path]:
     ax.plot(frames, result["reference"]["floor_per_frame"], color="grey", ls="--", label="reference noise floor")
     ax.axvline(result["event"]["frame"], color="k", lw=0.8, ls=":", label="abrupt lighting change")
     ax.set(yscale="log", xlabel="frame", ylabel="relative L2, indirect")
+    ax.grid(True, which="both", alpha=0.3)
+    ax.legend(fontsize=7)
+    ax = axes[3]
+    for method, colour in colours.items():
+        mine = sorted((r for r in runs if r["method"] == method), key=lambda r: r["photons"])
+        if not mine:
+            continue
+        ax.plot([r["cpu_s"] for r in mine], [r["measures"]["flicker"] for r in mine], "o-", color=colour, label=method)
+        noise = [(r["cpu_s"], r["measures"].get("flicker_noise")) for r in mine]
+        if all(n is not None for _, n in noise):
+            ax.plot(*zip(*noise), "x:", color=colour)
+        if method == "per-frame":  # a fifth of its flicker at equal CPU time, over every run's time
+            slope = result["comparison"]["cpu_s"]["per_frame_cost"]["s_per_million_photons"] / 1e6
+            base = [[r[k] for r in mine] for k in ("photons", "cpu_s")] + [[r["measures"]["flicker"] for r in mine]]
+            ts = np.geomspace(min(r["cpu_s"] for r in runs), max(r["cpu_s"] for r in runs), 32)
+            fifth = [(t, e / 5) for t in ts for e in [em.equal_time(*base, t, slope)[0]] if e is not None]
+            if fifth:
+                ax.plot(*zip(*fifth), "--", color=colour, lw=0.8, label="1/5 of per-frame's at equal CPU (target)")
+    ax.plot([], [], "x:", color="k", label="photon noise alone")
+    ax.axhline(floor["flicker"], color="grey", ls="--", label="reference noise floor")
+    ax.set(xscale="log", yscale="log", xlabel="CPU seconds (this process and the workers)",
+           ylabel="error flicker, indirect")
     ax.grid(True, which="both", alpha=0.3)
     ax.legend(fontsize=7)
     fig.suptitle(f"loom bench error {result['scene']}: error against time")
