@@ -238,9 +238,10 @@ def run_method(client: Client, scene_path: Path, out: Path, plan: Plan, *, metho
     maps = IlluminationMaps.open(str(out / "photons.zarr"))
     indirect = np.stack([np.asarray(maps.read(f - 1), np.float64) for f in range(plan.frames[0], plan.frames[1] + 1)])
     noise = photon_noise(out, store, scene, elements, plan, config)
-    # a frame's own photon noise at the run's photons, unfiltered: what hindsight windows would pool
-    own = None if n_photons is not None else np.mean(np.sum(np.square(photon_noise(
-        out, store, scene, elements, plan, config, windows=WindowSpec("off", 0), filtered=False)), axis=-1), axis=0)
+    own = None
+    if n_photons is None:  # the guided run: a frame's own photon noise, unfiltered, for the hindsight bound
+        alone = photon_noise(out, store, scene, elements, plan, config, windows=WindowSpec("off", 0), filtered=False)
+        own = np.mean(np.sum(np.square(alone), axis=-1), axis=0)
     shutil.rmtree(out)
     return {"method": method, "n_photons": n_photons, "fmax": fmax, "d_thr": config.segments.d_thr if n_photons is None
             else None, "wall_s": wall, "cpu_s": cpu, "photons": photons, "segments": report["segments"],
