@@ -326,8 +326,8 @@ class Evaluation:
         """Every measure of ``maps`` (T, V, 3) against the reference; with ``noise`` (their photon
         noise, :func:`photon_noise`) also the flicker that noise alone has; with ``noise_var`` (V,), a
         frame's own photon-noise variance at the run's photons, the RMS of the run's flicker over the
-        frame pairs and the bound any windows could reach there with hindsight of the light (the mean
-        of the two references; error_measures.hindsight_flicker)."""
+        frame pairs and the bound any windows could reach there with hindsight of the light, measured
+        like the run's against the first reference (error_measures.hindsight_flicker)."""
         refs, areas = self.refs[0], self.areas
         images = self.images(maps)
         shown = self.displayed(images)
@@ -355,7 +355,7 @@ class Evaluation:
                 "flicker_noise": None if noise is None else float(np.mean(em.flicker(refs + noise, refs, areas)[keep])),
                 "flicker_rms": float(np.sqrt(np.mean(fl ** 2))),
                 "flicker_hindsight": None if noise_var is None else em.hindsight_flicker(
-                    self.refs.mean(axis=0), noise_var, areas, self.event_index),
+                    refs, noise_var, areas, self.event_index),
                 "change": float(np.mean(own)),
                 "image_flicker": float(np.mean(em.image_flicker(shown, self.ref_displayed)[keep])),
                 "highlight": float(np.mean(hl)), "lag": lag, "lag_reached": reached,
