@@ -55,7 +55,7 @@ def _timed(fn, *args, **kw):
 
 
 def _trace_frames(root: Path, frames: str):
-    """Shoot real ATRIUM frames on the paper's mesh (about 45,000 elements, Table 2's workload, not
+    """Shoot real ATRIUM frames on the paper's mesh (about 43,000 elements, Table 2's workload, not
     the scene's own coarser one); (scene, mesh, store, seconds per traced frame)."""
     scene = read_scene(write_builtin("atrium", root / "atrium.glb"))
     config = PhotonConfig(element_size=atrium.PAPER_ELEMENT_SIZE)

@@ -61,7 +61,7 @@ def bench_frame(scenes, resolution, spp, repeat):
 @click.option("--frames", "n_frames", type=click.IntRange(1), default=None,
               help="Synthetic frames gathered (default: the benchmark's 300; a few for a quick check).")
 def bench_temporal(trace_frames: int, numpy_frames: int, n_frames: int) -> None:
-    """Temporal windows, gather and filter on PoCL, ATRIUM-size (about 45,000 elements, 300 frames,
+    """Temporal windows, gather and filter on PoCL, ATRIUM-size (about 43,000 elements, 300 frames,
     20,000 photons per frame, F_max = 44), against the photon tracing time per frame."""
     from pipeline.benchmarks.temporal import run
 

@@ -1,9 +1,9 @@
 """ATRIUM: the paper's larger scene (§6, Fig. 8), 300 frames; about 23,600 elements.
 
-The paper's mesh has about 45,000 elements (``PAPER_ELEMENT_SIZE``); the scene's own element size is
-1.5 times that, the coarsest `loom bench elements` finds within d_thr of the paper's mesh on every
-frame it measured (2x is not), so each element collects 1.84 times the photons and no segment of
-the default render stops at the N_frame cap (docs/04-photons.md §8).
+The paper's element size (``PAPER_ELEMENT_SIZE``) gives 43,348 elements here (the paper: about
+45,000); the scene's own is 1.5 times that, the coarsest `loom bench elements` finds within d_thr
+of the paper's mesh on every frame it measured (2x is not), so each element collects 1.84 times
+the photons and no segment of the default render stops at the N_frame cap (docs/04-photons.md §8).
 
 Layout (metres, y up): a closed hall 16 x 8 x 12 (x in [0, 16], z in [0, 12]). A gallery slab at
 4 m covers the back (z < 4) on columns, with a parapet along its edge; a straight flight of 20
@@ -32,7 +32,7 @@ from pipeline.scene.builtin import shapes
 from pipeline.scene.builtin.gltf_builder import GltfBuilder
 from pipeline.scene.timeline import Timeline
 
-PAPER_ELEMENT_SIZE = 0.36  # about 45,000 elements, the paper's ATRIUM (§6)
+PAPER_ELEMENT_SIZE = 0.36  # 43,348 elements, the paper's ATRIUM mesh (§6: about 45,000)
 ELEMENT_SIZE = 1.5 * PAPER_ELEMENT_SIZE  # the scene's element size (see above)
 TIMELINE = Timeline(fps=30, frames=300)
 WIDTH, HEIGHT, DEPTH = 16.0, 8.0, 12.0
