@@ -178,7 +178,7 @@ def _segments(out: Path, records: list[SegmentRecord], config: dict) -> str:
         t = r.times_s
         rows.append([r.index, f"{r.start}-{r.end}", r.k, f"{r.n_frame:,}", r.fmax_text,
                      "-" if r.d_aqm is None else f"{r.d_aqm:.2f}" + (" (cap)" if r.capped else ""), p,
-                     f"{r.pilot['e_probe']:.3f}" if r.pilot else "-", r.temporal,
+                     r.e_pilot_text, r.temporal,
                      "guided" if r.guided else "fixed", r.status,
                      ", ".join(f"{t.get(k, 0.0):.1f}" for k in ("init_s", "fmax_s", "n_frame_s", "frames_s"))])
     table = _table(["seg", "frames", "K", "N_frame", "F_max", "d_AQM %", "p_me back / fwd", "E pilot",

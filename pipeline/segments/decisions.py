@@ -7,6 +7,7 @@ answers (tests/coordinator/test_segments.py); the planner (pipeline/segments/pla
 * :func:`p_me`, :func:`grow_fmax` — Step 2 (§5.2.2);
 * :func:`ladder_n_frame`, :func:`next_n_frame` — Step 3 (§5.2.3; the ladder is ours), one doubling a
   step as the paper's; :func:`doublings_ahead` extrapolates what a capped segment still lacked;
+  :func:`unlit_n_frame` starts a segment whose pilot saw no indirect light;
 * :func:`place_segment`, :func:`photon_targets` — where segments lie and how many photons each
   frame gets (the first and last segments compensate their missing neighbour, §5.2);
 * :func:`lighting_steps`, :func:`keyframe_off_steps` — a segment an abrupt lighting change divides
@@ -72,6 +73,20 @@ def calibrated_start(n_pilot: float, previous: tuple[float, float] | None) -> fl
     return n_pilot * max(1.0, previous[1] / previous[0] / 2.0)
 
 
+def unlit_n_frame(n_frame: int, lit_elements: int, n_max: int) -> int:
+    """Step 3's first N_frame for a segment whose pilot at K recorded no indirect light, so Eq. (2)
+    has no E to go on (ours, not the paper's).
+
+    The planner starts such a segment on the smallest rung; Step 2 traces its frames there. If no
+    photon of them recorded indirect light either (``lit_elements`` 0), the segment has none to
+    speak of: it stays on ``n_frame`` and Step 3's AQM confirms it at the fewest photons (a flat
+    skinned strip under the sun: the cap, 1,280,000 photons a frame, for halves that were both
+    black). If some did, the light lies away from K, where the AQM at K cannot see it, so the
+    segment takes the cap ``n_max`` as it would without a pilot.
+    """
+    return int(n_frame) if lit_elements == 0 else int(n_max)
+
+
 def needed_n_frame(n_frame: int, steps: list[dict], capped: bool, d_thr: float) -> float:
     """The N_frame a decided segment needed, for :func:`calibrated_start`: its final N_frame, or,
     when the cap (n_frame_max, §5.2.3) stopped its loop above d_thr, the cap times the doublings it
@@ -115,14 +130,18 @@ def p_me(back: np.ndarray, fwd: np.ndarray, fmax: int, considered: np.ndarray | 
     ``back``/``fwd`` (E,) window extents at K (kernels/temporal.py); ``considered`` (E,) bool, the
     elements that count (default all; the coordinator takes those hit by any photon in the
     segment, since an element no photon reaches keeps a full window by Condition (1)'s sigma = 1
-    and would pass without telling anything about the lighting).
+    and would pass without telling anything about the lighting). A segment whose photons hit no
+    element has no indirect light to change: (1, 1), so F_max grows and a scene without
+    interreflection is judged in few, long segments.
     """
     half = fmax // 2
     back, fwd = np.asarray(back), np.asarray(fwd)
     mask = np.ones(back.shape, bool) if considered is None else np.asarray(considered, bool)
     n = int(mask.sum())
-    if n == 0 or half == 0:
+    if half == 0:
         return 0.0, 0.0
+    if n == 0:  # no indirect light in the segment: none changes, every window may be full
+        return 1.0, 1.0
     return float(np.count_nonzero((back >= half) & mask)) / n, float(np.count_nonzero((fwd >= half) & mask)) / n
 
 

@@ -50,6 +50,7 @@ from .decisions import (
     photon_targets,
     pilot_n_frame,
     place_segment,
+    unlit_n_frame,
     window_fmax_loop,
 )
 from .halves import HalvesJudge
@@ -197,16 +198,19 @@ class SegmentPlanner:
 
         # Step 1: pilot at K, N_frame from Eq. (2)
         pilot = self._pilot(index, place)
-        start_n = calibrated_start(pilot["n_pilot"] if pilot["n_pilot"] is not None else float("inf"),
-                                   self._carried(index))
-        pilot["n_start"] = start_n if math.isfinite(start_n) else None
+        unlit = pilot["n_pilot"] is None  # no indirect light in the pilot: Eq. (2) has no E
+        start_n = cfg.n_frame_min if unlit else calibrated_start(pilot["n_pilot"], self._carried(index))
+        pilot["n_start"] = None if unlit else start_n
         n = ladder_n_frame(start_n, cfg.n_frame_min, cfg.n_frame_max)
         t_init = time.perf_counter()
 
         # Step 2: F_max while p_me >= p_thr (never for camera-only motion: all frames share photons)
+        lit_elements = [0]  # elements the photons of the segment's frames light, at its last F_max
+
         def p_me_of(at: Placement) -> tuple[float, float]:
             self.executor.shoot({f: n for f in at.frames})
-            return self._p_me(index, at, {**prior, **{f: n for f in at.frames}})
+            pb, pf, lit_elements[0] = self._p_me(index, at, {**prior, **{f: n for f in at.frames}})
+            return pb, pf
 
         temporal = "off" if job.single_state else job.temporal
         if job.single_state:
@@ -214,6 +218,11 @@ class SegmentPlanner:
         else:
             place, fmax_steps = fmax_loop(place.start, place.fmax, job.last, p_me_of, p_thr=cfg.p_thr,
                                           step=cfg.fmax_step, cap=cfg.fmax_cap)
+        if unlit:
+            n = unlit_n_frame(n, lit_elements[0], cfg.n_frame_max)
+            self.executor.progress(f"segment {index}: no indirect light at K {place.k}" + (
+                f" nor in frames {place.start}-{place.end}: N_frame {n:,}, the AQM checks it" if n < cfg.n_frame_max
+                else f", some in frames {place.start}-{place.end}: N_frame {n:,}, the cap"))
         t_fmax = time.perf_counter()
 
         # Step 3: N_frame doubled while d_AQM > d_thr. Each doubling first looks for lighting steps in
@@ -298,9 +307,10 @@ class SegmentPlanner:
         self._add_time("shoot_s", t0)
         e0 = energy_error(s, q)
         n_pilot = pilot_n_frame(n_probe, e0, cfg.e_max, place.fmax)
-        self.executor.progress(f"segment {index}: pilot at K {place.k}: E {e0:.3f} with {n_probe:,} "
-                               f"photons -> N_frame {n_pilot:,.0f} (Eq. 2, F_max {place.fmax})")
-        return {"frame": place.k, "n_probe": int(n_probe), "e_probe": e0,
+        self.executor.progress(f"segment {index}: pilot at K {place.k}: " + (
+            f"E {e0:.3f} with {n_probe:,} photons -> N_frame {n_pilot:,.0f} (Eq. 2, F_max {place.fmax})"
+            if math.isfinite(e0) else f"no indirect light in {n_probe:,} photons (Eq. 2 has no E)"))
+        return {"frame": place.k, "n_probe": int(n_probe), "e_probe": e0 if math.isfinite(e0) else None,
                 "e_target": cfg.e_max * float(np.sqrt(place.fmax + 1)),
                 "n_pilot": n_pilot if np.isfinite(n_pilot) else None}
 
@@ -326,12 +336,13 @@ class SegmentPlanner:
                                        regions=step_regions(self.elements, self.config.collection))
         return back, fwd, counts[place.start - 1:place.end].sum(axis=0) > 0
 
-    def _p_me(self, index: int, place: Placement, targets: dict[int, int]) -> tuple[float, float]:
+    def _p_me(self, index: int, place: Placement, targets: dict[int, int]) -> tuple[float, float, int]:
+        """(p_me back, p_me forward, elements any photon of the segment lights) at K."""
         back, fwd, hit = self._windows(place, targets, [place.k])
         pb, pf = p_me(back[0], fwd[0], place.fmax, hit)
         self.executor.progress(f"segment {index}: F_max {place.fmax}, K {place.k}: p_me {pb:.2f} back, "
                                f"{pf:.2f} forward")
-        return pb, pf
+        return pb, pf, int(np.count_nonzero(hit))
 
     def _lighting_steps(self, index: int, place: Placement, prior: dict[int, int], n_frame: int) -> list[int]:
         """Frames of the segment that begin after an abrupt lighting change (decisions.lighting_steps)

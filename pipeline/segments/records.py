@@ -13,6 +13,7 @@ and the time of each step.
 from __future__ import annotations
 
 import json
+import math
 import os
 import re
 from dataclasses import asdict, dataclass, field
@@ -75,6 +76,15 @@ class SegmentRecord:
     def fmax_text(self) -> str:
         """"44", or "44 (windows 30)" where the windows are shorter than the segment's F_max."""
         return f"{self.fmax}" if self.windows_fmax == self.fmax else f"{self.fmax} (windows {self.windows_fmax})"
+
+    @property
+    def e_pilot_text(self) -> str:
+        """The pilot's E (§5.2.1): "0.412"; "none" where its photons recorded no indirect light
+        (stored as null: E would be infinite, and JSON has no infinity); "-" without a pilot."""
+        if not self.pilot:
+            return "-"
+        e = self.pilot.get("e_probe")
+        return "none" if e is None or not math.isfinite(e) else f"{e:.3f}"
 
     @property
     def d_aqm(self) -> float | None:
@@ -159,7 +169,7 @@ def table(records: list[SegmentRecord]) -> list[str]:
         p = f"{last.get('p_me_back', float('nan')):.2f}/{last.get('p_me_fwd', float('nan')):.2f}" \
             if last else "-"
         d = f"{r.d_aqm:.2f}" if r.d_aqm is not None else "-"
-        e = f"{r.pilot['e_probe']:.3f}" if r.pilot else "-"
+        e = r.e_pilot_text
         t = r.times_s
         times = ", ".join(f"{t.get(k, 0.0):.1f}" for k in ("init_s", "fmax_s", "n_frame_s", "frames_s"))
         status = r.status + ("*" if r.capped else "")

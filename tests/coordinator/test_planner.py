@@ -3,6 +3,7 @@ batches the planner asks for in this process (workers/shoot.py's task: real kern
 and what the planner decides and records is checked against the pure decisions and the store."""
 from __future__ import annotations
 
+import json
 from dataclasses import replace
 
 import numpy as np
@@ -17,6 +18,8 @@ from pipeline.photons.tracing import PhotonRange, trace_batch
 from pipeline.run.shoot import open_store, plan
 from pipeline.scene import read_scene
 from pipeline.scene.builtin import write_builtin
+from pipeline.scene.builtin.gltf_builder import GltfBuilder
+from pipeline.scene.builtin.shapes import quad
 from pipeline.scene.scene_cache import load_elements
 from pipeline.segments.decisions import (
     Placement,
@@ -274,3 +277,50 @@ def test_a_switched_light_moves_k_and_gives_the_frames_beside_it_the_end_photons
     assert judged[-1].startswith("segment 0: N_frame 16,000 (32,000 at K, beside an end or a step) at K 62")
     # the store holds what the record says: nothing traced beyond the targets
     assert store.emitted()[59:70].tolist() == [32_000] * 11
+
+
+def _sunlit_plane(path, wall_from: int | None = None):
+    """A 1 m grey plane sliding along x for 20 frames under a point light 1 m above it: a flat
+    surface alone has no indirect light. With ``wall_from``, a wall facing it at its +x edge, scaled
+    to nothing until that frame (a zero scale is never hit), then whole: the two interreflect."""
+    b = GltfBuilder()
+    grey = b.add_material("grey", (0.7, 0.7, 0.7))
+    plane = b.add_node("plane", b.add_mesh("plane", *quad((-0.5, 0, -0.5), (0, 0, 1), (1, 0, 0)), material=grey))
+    end = 19 / 30
+    b.add_animation("slide", plane, "translation", [0.0, end], [[0, 0, 0], [0.3, 0, 0]])
+    b.add_node("lamp", translation=(0.0, 1.0, 0.0), light=b.add_point_light("lamp", (1, 1, 1), 5.0))
+    if wall_from is not None:
+        wall = b.add_node("wall", b.add_mesh("wall", *quad((1.0, 0, -0.5), (0, 1, 0), (0, 0, 1)), material=grey),
+                          scale=(0.0, 0.0, 0.0))
+        b.add_animation("appear", wall, "scale", [0.0, (wall_from - 1.5) / 30], [[0, 0, 0], [1, 1, 1]],
+                        interpolation="STEP")
+    return b.write(path)
+
+
+def test_a_segment_without_indirect_light_stays_on_the_smallest_rung(tmp_path):
+    # The pilot at K records no indirect light (Eq. 2 has no E), nor do the segment's frames: p_me
+    # is (1, 1), F_max grows to the cap, and N_frame is the smallest rung, not the cap
+    job, store = _job(tmp_path, "plane", "1-20", path=_sunlit_plane(tmp_path / "plane.glb"))
+    executor = InProcess(job, store)
+    rec = SegmentPlanner(job, store, executor, {}).decide(0, job.first, job.fmax)
+    assert rec.pilot["n_pilot"] is None and rec.pilot["n_start"] is None and rec.pilot["e_probe"] is None
+    assert rec.e_pilot_text == "none"  # and the record is JSON a strict reader takes: no Infinity
+    json.loads(record_path(job.out_dir, 0).read_text(), parse_constant=lambda c: pytest.fail(f"{c} in the record"))
+    assert executor.lines[0] == "segment 0: pilot at K 4: no indirect light in 2,000 photons (Eq. 2 has no E)"
+    assert [s["fmax"] for s in rec.fmax_steps] == [6, 10] and rec.fmax_steps[0]["p_me_back"] == 1.0
+    assert rec.n_frame == 1_000 == ladder_n_frame(1_000, 1_000, 8_000) and not rec.capped
+    assert [s["n_frame"] for s in rec.n_frame_steps] == [1_000] and rec.n_frame_steps[0]["d_aqm"] == 0.0
+    assert "segment 0: no indirect light at K 6 nor in frames 1-11: N_frame 1,000, the AQM checks it" in executor.lines
+    assert store.emitted()[:11].max() <= 2_000  # the end frames' double at most
+
+
+def test_light_away_from_an_unlit_k_takes_the_cap(tmp_path):
+    # The wall appears at frame 9, after K 6 (F_max 10): the pilot sees no indirect light, the
+    # segment's frames do, and the AQM at K could not: N_frame is the cap, as without a pilot
+    path = _sunlit_plane(tmp_path / "wall.glb", wall_from=9)
+    job, store = _job(tmp_path, "wall", "1-20", path=path)
+    executor = InProcess(job, store)
+    rec = SegmentPlanner(job, store, executor, {}).decide(0, job.first, job.fmax)
+    assert rec.pilot["n_pilot"] is None and (rec.start, rec.k, rec.end) == (1, 6, 11)
+    assert rec.n_frame == 8_000
+    assert "segment 0: no indirect light at K 6, some in frames 1-11: N_frame 8,000, the cap" in executor.lines

@@ -29,6 +29,7 @@ from pipeline.segments.decisions import (
     photon_targets,
     pilot_n_frame,
     place_segment,
+    unlit_n_frame,
     window_fmax_loop,
 )
 
@@ -106,6 +107,19 @@ def test_p_me_sees_a_lighting_step_at_a_known_frame(rng):
     assert grow_fmax(20, 0.39, 0.2, p_thr=0.4, step=15, cap=44) is None
     assert grow_fmax(44, 0.9, 0.9, p_thr=0.4, step=15, cap=44) is None
     assert grow_fmax(30, 0.9, 0.9, p_thr=0.4, step=15, cap=44) == 44
+
+
+def test_a_segment_no_photon_lights_grows_and_keeps_its_rung():
+    # No element hit in the segment: no indirect light to change, so F_max may grow; with F_max/2 = 0
+    # no window reaches a neighbour
+    back = fwd = np.zeros(50, np.uint8)
+    assert p_me(back, fwd, 20, considered=np.zeros(50, bool)) == (1.0, 1.0)
+    assert p_me(back, fwd, 1, considered=np.zeros(50, bool)) == (0.0, 0.0)
+    assert p_me(back, fwd, 20, considered=np.arange(50) < 3) == (0.0, 0.0)
+    assert grow_fmax(15, *p_me(back, fwd, 15, considered=np.zeros(50, bool)), p_thr=0.4, step=15, cap=44) == 30
+    # a pilot that saw no indirect light: the segment keeps the smallest rung unless its frames are lit
+    assert unlit_n_frame(1_250, 0, 1_280_000) == 1_250
+    assert unlit_n_frame(1_250, 1, 1_280_000) == 1_280_000
 
 
 def test_fmax_loop_grows_until_p_me_falls_below_p_thr():
