@@ -7,6 +7,8 @@ from pipeline.scene import read_scene
 
 CAMERA_HELP = ("Camera or camera-node name, or auto: frame the whole animation (pipeline/scene/default_camera.py). "
                "Default: the first camera, auto when the file has none.")
+ANIMATION_HELP = ("The animation that plays (by name). Default: the file's first; every animation plays that "
+                  "animates no node an earlier one does, so clips of one character play one at a time.")
 LIGHT_HELP = ("auto: a file without any light is lit by a default sun and sky (pipeline/scene/default_lights.py); "
               "none: refuse it.")
 
@@ -27,10 +29,12 @@ def scene_command(name: str, output: str) -> None:
 @click.option("--camera", default=None, help=CAMERA_HELP)
 @click.option("--element-size", type=float, default=None, help="Element edge bound (default: the scene's).")
 @click.option("--light", type=click.Choice(["auto", "none"]), default="auto", show_default=True, help=LIGHT_HELP)
-def info_command(scene_file: str, camera: str | None, element_size: float | None, light: str) -> None:
+@click.option("--animation", default=None, help=ANIMATION_HELP)
+def info_command(scene_file: str, camera: str | None, element_size: float | None, light: str,
+                 animation: str | None) -> None:
     """Summarise SCENE_FILE: timeline, geometry, elements, lights, materials, cameras, needs."""
     from pipeline.scene.summary import describe
 
-    scene = read_scene(scene_file, camera=camera, light=light)
+    scene = read_scene(scene_file, camera=camera, light=light, animation=animation)
     for line in describe(scene, element_size):
         click.echo(line)

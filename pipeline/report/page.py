@@ -151,6 +151,11 @@ def _summary(report: dict, records: list[SegmentRecord]) -> str:
                            f"AQM {t.get('aqm_s', 0.0):.1f}, temporal {t.get('temporal_s', 0.0):.1f}, "
                            f"composite {t.get('composite_s', 0.0):.1f}, video {t.get('video_s', 0.0):.1f})")],
             ["rays", ", ".join(f"{k} {v:,}" for k, v in report.get("rays", {}).items())]]
+    animations = report.get("animations", {})
+    if animations.get("played") or animations.get("left_out"):
+        left_out = animations.get("left_out", [])
+        rows.insert(2, ["animations", (", ".join(animations.get("played", [])) or "none")
+                        + (f" (left out: {', '.join(left_out)}, alternative clips)" if left_out else "")])
     if report.get("viewing"):
         rows.append(["viewing (the AQM's, §6)", report["viewing"]])
     if report.get("store_size"):

@@ -36,7 +36,6 @@ from pipeline.errors import LoomError
 from pipeline.frames.images import frame_is_valid, frame_paths
 from pipeline.frames.tonemap import adapt_in_time
 from pipeline.photons.tracing import PhotonRange
-from pipeline.scene.scene_cache import load_scene
 from pipeline.segments.job import Job
 from pipeline.segments.planner import SegmentPlanner, batches_in_use, next_batches, reach_targets
 from pipeline.segments.records import DIRECTORY, SegmentRecord, read_record, record_index, write_record
@@ -252,7 +251,7 @@ def smoothed_adaptation(job: Job, frames_info: dict[int, dict], upto: int) -> di
     """The eye's adaptation L_a of each rendered frame up to ``upto``: the time course of
     pipeline/frames/tonemap.py (adapt_in_time) over the frames' own L_wa in the records, at the timeline's
     times. It is causal, so a segment's frames need only the L_wa of the frames before them."""
-    scene = load_scene(job.scene_path, job.scene_hash, job.camera)
+    scene = job.scene_ref.scene()
     frames = [f for f in job.selection if f <= upto]
     values = adapt_in_time([frames_info[f]["adaptation"] for f in frames],
                            [scene.timeline.time(f) for f in frames], job.settings.tonemap)

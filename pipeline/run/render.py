@@ -40,7 +40,7 @@ from pipeline.paths import check_writable_dir
 from pipeline.report.page import page_parts, write_report
 from pipeline.report.skipped import skipped_work, summary_lines
 from pipeline.scene import read_scene
-from pipeline.scene.scene_cache import keep_scene, load_scene
+from pipeline.scene.scene_cache import keep_scene
 from pipeline.segments.job import Job
 from pipeline.segments.records import read_records
 from pipeline.store import PhotonStore, disk_usage, remove_partials
@@ -89,6 +89,7 @@ class RenderRequest:
     store_url: str | None = None  # None: OUT/photons.zarr
     camera: str | None = None  # None: the file's first camera
     light: str = "auto"  # none: refuse a file without light instead of lighting it by default
+    animation: str | None = None  # the animation that plays first (None: the file's first, pipeline/scene/loader.py)
     keep_records: bool = False  # also store every photon hit (a render reads only the counts and sums)
 
 
@@ -101,7 +102,7 @@ def prepare_job(request: RenderRequest) -> Job:
     n_photons, temporal, frames = request.n_photons, request.temporal, request.frames
     out = Path(request.out_dir)
     check_out_dir(out)
-    scene = read_scene(request.scene_path, camera=request.camera, light=request.light)
+    scene = read_scene(request.scene_path, camera=request.camera, light=request.light, animation=request.animation)
     p = plan(scene, frames, n_photons if n_photons is not None else 1, config.photons)
     store_url = request.store_url or str(out / "photons.zarr")
     check_store_location(store_url)
@@ -143,7 +144,8 @@ def prepare_job(request: RenderRequest) -> Job:
                first=p.frames[0], last=p.frames[-1], selection=tuple(p.frames), settings=settings, config=config,
                render_hash=stable_digest(look), decision_hash=stable_digest(decision), fmax=fmax,
                n_photons=n_photons, temporal=temporal,
-               single_state=len(set(p.sources[f] for f in p.frames)) == 1 and guided)
+               single_state=len(set(p.sources[f] for f in p.frames)) == 1 and guided,
+               animation=scene.animation_option)
 
 
 def _create_outputs(out: Path, store_url: str, p, keep_records: bool) -> None:
@@ -264,9 +266,10 @@ def finish(job: Job, records: list[SegmentRecord], tally: RenderTally | None, t_
     rays = {} if tally is None else tally.rays
     frame_times = {} if tally is None else tally.frame_times
     video = out / "preview.mp4"
-    scene = load_scene(job.scene_path, job.scene_hash, job.camera)
+    scene = job.scene_ref.scene()
     report = {
         "scene": job.scene_path, "camera": job.camera_name, "frames": list(job.selection),
+        "animations": {"played": list(scene.animations_played), "left_out": list(scene.animations_left_out)},
         "rendered": sorted(rays), "skipped": sorted(set(job.selection) - set(rays)),
         "resolution": [job.settings.width, job.settings.height], "spp": job.settings.spp,
         "photons": "auto" if job.n_photons is None else job.n_photons,

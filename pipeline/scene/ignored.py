@@ -35,6 +35,10 @@ def ignored(scene: Scene) -> list[str]:
     ortho = sum(1 for c in g.cameras if c.type != "perspective")
     if ortho:
         lines.append(f"{ortho} orthographic camera(s): only perspective cameras can render")
+    if scene.animations_left_out:
+        lines.append(f"{len(scene.animations_left_out)} animation(s) {', '.join(scene.animations_left_out)}: "
+                     f"alternative clips of nodes {scene.animations_played[0]} animates; one clip plays at a time "
+                     "(--animation NAME)")
     if len(g.scenes) > 1:
         lines.append(f"{len(g.scenes) - 1} scene(s) besides the default: only the default scene is rendered")
     return lines

@@ -47,15 +47,16 @@ _WEIGHT_COMPONENTS = (5126, 5121, 5123)
 
 
 def read_scene(path: str | Path, *, camera: str | None = None, fps: float | None = None,
-              light: str = "auto") -> Scene:
+              light: str = "auto", animation: str | None = None) -> Scene:
     """Load a ``.glb``/``.gltf`` file. ``camera`` picks a camera by camera or node name, or
     ``auto`` (pipeline/scene/default_camera.py); ``light`` ``auto`` lights a file without light
-    with the default sun and sky (pipeline/scene/default_lights.py), ``none`` refuses it."""
-    return build_scene(read_gltf(path), camera=camera, fps=fps, light=light)
+    with the default sun and sky (pipeline/scene/default_lights.py), ``none`` refuses it;
+    ``animation`` names the animation that plays first (the file's first when None)."""
+    return build_scene(read_gltf(path), camera=camera, fps=fps, light=light, animation=animation)
 
 
 def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | None = None,
-                light: str = "auto") -> Scene:
+                light: str = "auto", animation: str | None = None) -> Scene:
     if light not in LIGHT_CHOICES:
         raise ValueError(f"light must be one of {LIGHT_CHOICES}, got {light!r}")
     g = doc.gltf
@@ -109,7 +110,11 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
         notices.append("the file has no light: lit by the default sun and sky of pipeline/scene/default_lights.py "
                        "(loom info describes them; --light none refuses such a file)")
 
-    channels = _read_channels(doc, nodes, warnings)
+    channels, played, left_out, default = _read_channels(doc, nodes, warnings, animation)
+    if left_out:
+        notices.append(f"{len(left_out)} animation(s) animate nodes that {played[0]!r} animates, alternative clips "
+                       f"played one at a time: playing {', '.join(map(repr, played))}, leaving out "
+                       f"{', '.join(map(repr, left_out))} (--animation NAME plays another first)")
     extras = _scene_extras(doc)
     fps, n_frames = _timeline_numbers(doc, extras, channels, fps)
 
@@ -130,6 +135,8 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
         materials=materials, light_defs=light_defs, cameras=cameras, channels=channels,
         timeline=Timeline(fps=fps, frames=int(n_frames)), camera_node=camera_node,
         element_size=float(element_size or 0.0), dropped_triangles=dropped, warnings=warnings, notices=notices,
+        animations_played=tuple(played), animations_left_out=tuple(left_out),
+        animation_option=None if played == default else played[0],
         default_lights=(default_sun(),) if unlit else (), sky=default_sky() if unlit else None,
     )
     if camera_node is None:  # --camera auto, or the file has no perspective camera
@@ -518,64 +525,107 @@ def _texcoord_warnings(materials, instances, warnings) -> None:
                 break
 
 
-def _read_channels(doc, nodes, warnings) -> dict[int, dict[str, Sampler]]:
-    g = doc.gltf
+def _read_channels(doc, nodes, warnings, first: str | None
+                   ) -> tuple[dict[int, dict[str, Sampler]], list[str], list[str], list[str]]:
+    """The channels that play (node -> path -> sampler); the names of the animations that play, of
+    those left out, and of those that would play by default.
+
+    glTF says nothing of how animations combine. Files put things that move together in one
+    animation or in several over different nodes (ROOM's flight and torus), which all play; a
+    character's clips (Fox's Survey, Walk and Run) animate the same nodes and are alternatives,
+    played one at a time, by default the first, as viewers such as <model-viewer> do. So the
+    animations play in file order, each unless it animates a node and path an earlier one that
+    plays already does; every animation is checked all the same. ``first`` (--animation) names
+    the animation that plays first, the others following in file order by the same rule."""
+    clips = [(_animation_name(anim, a), _read_animation(doc, nodes, warnings, a, anim))
+             for a, anim in enumerate(doc.gltf.animations)]
+    default = _play(clips)[1]
+    if first is not None:
+        names = [name for name, _ in clips]
+        if first not in names:
+            raise doc.error(f"no animation is named {first!r} (the file has "
+                            f"{', '.join(map(repr, names)) if names else 'none'})", "animations")
+        clips.sort(key=lambda clip: clip[0] != first)  # stable: the others keep the file's order
+    channels, played, left_out = _play(clips)
+    return channels, played, left_out, default
+
+
+def _play(clips: list) -> tuple[dict[int, dict[str, Sampler]], list[str], list[str]]:
+    """Channels, names played and names left out of (name, samplers) ``clips`` taken in order."""
     channels: dict[int, dict[str, Sampler]] = {}
-    for a, anim in enumerate(g.animations):
-        for c, ch in enumerate(anim.channels):
-            f = f"animations[{a}].channels[{c}]"
-            target = ch.target
-            if target is None or target.path not in PATHS + ("weights",):
-                raise doc.error(f"target path {getattr(target, 'path', None)!r} is not supported", f + ".target.path")
-            if target.node is None:  # allowed by the spec (extensions may target other things)
+    played, left_out = [], []
+    for name, samplers in clips:
+        if any(path in channels.get(node, {}) for node, path in samplers):
+            left_out.append(name)
+            continue
+        played.append(name)
+        for (node, path), sampler in samplers.items():
+            channels.setdefault(node, {})[path] = sampler
+    return channels, played, left_out
+
+
+def _animation_name(anim, index: int) -> str:
+    return anim.name if isinstance(anim.name, str) and anim.name else f"animation {index}"
+
+
+def _read_animation(doc, nodes, warnings, a: int, anim) -> dict[tuple[int, str], Sampler]:
+    """One animation's channels, checked: (node, path) -> sampler."""
+    g = doc.gltf
+    samplers: dict[tuple[int, str], Sampler] = {}
+    for c, ch in enumerate(anim.channels):
+        f = f"animations[{a}].channels[{c}]"
+        target = ch.target
+        if target is None or target.path not in PATHS + ("weights",):
+            raise doc.error(f"target path {getattr(target, 'path', None)!r} is not supported", f + ".target.path")
+        if target.node is None:  # allowed by the spec (extensions may target other things)
+            continue
+        if not 0 <= target.node < len(nodes):
+            raise doc.error(f"targets missing node {target.node}", f + ".target.node")
+        n_targets = None
+        if target.path == "weights":  # one value per morph target of the node's mesh (§3.11)
+            mesh = nodes[target.node].mesh
+            n_targets = len(g.meshes[mesh].primitives[0].targets or []) if mesh is not None else 0
+            if not n_targets:
+                warnings.append(f"{f}: animates the morph weights of node {target.node}, whose mesh has no "
+                                "morph targets: ignored")
                 continue
-            if not 0 <= target.node < len(nodes):
-                raise doc.error(f"targets missing node {target.node}", f + ".target.node")
-            n_targets = None
-            if target.path == "weights":  # one value per morph target of the node's mesh (§3.11)
-                mesh = nodes[target.node].mesh
-                n_targets = len(g.meshes[mesh].primitives[0].targets or []) if mesh is not None else 0
-                if not n_targets:
-                    warnings.append(f"{f}: animates the morph weights of node {target.node}, whose mesh has no "
-                                    "morph targets: ignored")
-                    continue
-            elif nodes[target.node].matrix is not None:
-                raise doc.error("targets a node defined by a matrix (glTF requires TRS)", f + ".target.node")
-            if ch.sampler is None or not 0 <= ch.sampler < len(anim.samplers):
-                raise doc.error(f"refers to missing sampler {ch.sampler}", f + ".sampler")
-            s = anim.samplers[ch.sampler]
-            sf = f"animations[{a}].samplers[{ch.sampler}]"
-            interp = s.interpolation or "LINEAR"
-            if interp not in INTERPOLATIONS:
-                raise doc.error(f"interpolation {interp!r} is not one of {', '.join(INTERPOLATIONS)}", sf)
-            times = np.asarray(doc.accessor(s.input, sf + ".input", types=("SCALAR",), components=(5126,)),
-                               dtype=np.float64).ravel()
-            values = np.asarray(doc.accessor(s.output, sf + ".output"), dtype=np.float64)
-            width = 4 if target.path == "rotation" else 3
-            if n_targets is not None:  # scalars, n_targets per key (x 3 for CUBICSPLINE)
-                width = n_targets
-                if values.ndim != 1 or len(values) % n_targets:
-                    raise doc.error(f"output must be scalars, {n_targets} per key (the node's morph targets), "
-                                    f"got {len(values)}", sf + ".output")
-                values = values.reshape(-1, n_targets)
-            if values.ndim != 2 or values.shape[1] != width:
-                raise doc.error(f"output must be {width}-vectors for {target.path}", sf + ".output")
-            if not (np.all(np.isfinite(times)) and np.all(np.isfinite(values))):
-                raise doc.error("keyframes contain NaN or Inf", sf)
-            if np.any(np.diff(times) <= 0):
-                raise doc.error("input times must increase strictly", sf + ".input")
-            per_key = 3 if interp == "CUBICSPLINE" else 1
-            if len(values) != per_key * len(times):
-                raise doc.error(f"has {len(values)} outputs for {len(times)} keys ({interp})", sf + ".output")
-            if interp == "CUBICSPLINE":
-                values = values.reshape(len(times), 3, width)
-            if target.path == "rotation":  # keys (not cubic tangents) must be rotations
-                keys = values[:, 1] if interp == "CUBICSPLINE" else values
-                bad = np.flatnonzero(np.linalg.norm(keys, axis=1) <= 1e-6)
-                if len(bad):
-                    raise doc.error(f"rotation key {int(bad[0])} is a zero quaternion", sf + ".output")
-            channels.setdefault(target.node, {})[target.path] = Sampler(times, values, interp, target.path)
-    return channels
+        elif nodes[target.node].matrix is not None:
+            raise doc.error("targets a node defined by a matrix (glTF requires TRS)", f + ".target.node")
+        if ch.sampler is None or not 0 <= ch.sampler < len(anim.samplers):
+            raise doc.error(f"refers to missing sampler {ch.sampler}", f + ".sampler")
+        s = anim.samplers[ch.sampler]
+        sf = f"animations[{a}].samplers[{ch.sampler}]"
+        interp = s.interpolation or "LINEAR"
+        if interp not in INTERPOLATIONS:
+            raise doc.error(f"interpolation {interp!r} is not one of {', '.join(INTERPOLATIONS)}", sf)
+        times = np.asarray(doc.accessor(s.input, sf + ".input", types=("SCALAR",), components=(5126,)),
+                           dtype=np.float64).ravel()
+        values = np.asarray(doc.accessor(s.output, sf + ".output"), dtype=np.float64)
+        width = 4 if target.path == "rotation" else 3
+        if n_targets is not None:  # scalars, n_targets per key (x 3 for CUBICSPLINE)
+            width = n_targets
+            if values.ndim != 1 or len(values) % n_targets:
+                raise doc.error(f"output must be scalars, {n_targets} per key (the node's morph targets), "
+                                f"got {len(values)}", sf + ".output")
+            values = values.reshape(-1, n_targets)
+        if values.ndim != 2 or values.shape[1] != width:
+            raise doc.error(f"output must be {width}-vectors for {target.path}", sf + ".output")
+        if not (np.all(np.isfinite(times)) and np.all(np.isfinite(values))):
+            raise doc.error("keyframes contain NaN or Inf", sf)
+        if np.any(np.diff(times) <= 0):
+            raise doc.error("input times must increase strictly", sf + ".input")
+        per_key = 3 if interp == "CUBICSPLINE" else 1
+        if len(values) != per_key * len(times):
+            raise doc.error(f"has {len(values)} outputs for {len(times)} keys ({interp})", sf + ".output")
+        if interp == "CUBICSPLINE":
+            values = values.reshape(len(times), 3, width)
+        if target.path == "rotation":  # keys (not cubic tangents) must be rotations
+            keys = values[:, 1] if interp == "CUBICSPLINE" else values
+            bad = np.flatnonzero(np.linalg.norm(keys, axis=1) <= 1e-6)
+            if len(bad):
+                raise doc.error(f"rotation key {int(bad[0])} is a zero quaternion", sf + ".output")
+        samplers[(target.node, target.path)] = Sampler(times, values, interp, target.path)
+    return samplers
 
 
 def _scene_extras(doc: GltfDocument) -> dict:

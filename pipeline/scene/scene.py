@@ -83,13 +83,22 @@ class Scene:
     default_lights: tuple[Light, ...] = ()  # pipeline/scene/default_lights.py: the file has no light
     sky: Sky | None = None
     framing: Framing | None = None  # the auto camera (pipeline/scene/default_camera.py), no camera_node
+    # The animations that play and those left out, alternative clips of nodes one that plays animates
+    # (pipeline/scene/loader.py); the --animation that chose them, None where they are the default
+    animations_played: tuple[str, ...] = ()
+    animations_left_out: tuple[str, ...] = ()
+    animation_option: str | None = None
 
     # --- identity ---------------------------------------------------------------------------------
 
     @property
     def scene_hash(self) -> str:
-        """Digest of the file's JSON and buffers: which scene a photon store was made from."""
-        return self.document.digest[:16]
+        """Digest of the file's JSON and buffers, and of the animations that play where they are
+        not the default ones: which scene a photon store was made from."""
+        if self.animation_option is None:
+            return self.document.digest[:16]
+        chosen = "\0".join((self.document.digest, *self.animations_played))
+        return hashlib.sha256(chosen.encode()).hexdigest()[:16]
 
     # --- animation --------------------------------------------------------------------------------
 

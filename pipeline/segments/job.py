@@ -32,11 +32,12 @@ class Job:
     n_photons: int | None  # None: guided (--photons auto); else fixed N_frame
     temporal: str  # adaptive | fixed | off
     single_state: bool  # camera-only motion: every frame shares one photon set
+    animation: str | None = None  # the --animation option (None: the file's first clip, pipeline/scene/loader.py)
 
     @property
     def scene_ref(self) -> SceneRef:
         """The scene as the job's tasks load it."""
-        return SceneRef(self.scene_path, self.scene_hash, self.camera, self.element_size)
+        return SceneRef(self.scene_path, self.scene_hash, self.camera, self.element_size, self.animation)
 
     def to_dict(self) -> dict:
         return {f.name: (getattr(self, f.name).to_dict() if f.name in ("settings", "config") else getattr(self, f.name))

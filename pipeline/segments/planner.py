@@ -34,7 +34,6 @@ from pipeline.collection.maps import (
 )
 from pipeline.frames.images import write_png
 from pipeline.photons.tracing import PhotonRange, trace_batch
-from pipeline.scene.scene_cache import load_elements, load_scene
 
 from .decisions import (
     Placement,
@@ -165,11 +164,11 @@ class SegmentPlanner:
     # Loaded when first used: a fixed render's planner never needs them
     @cached_property
     def scene(self) -> Scene:
-        return load_scene(self.job.scene_path, self.job.scene_hash, self.job.camera)
+        return self.job.scene_ref.scene()
 
     @cached_property
     def elements(self) -> ElementMesh:
-        return load_elements(self.job.scene_path, self.job.scene_hash, self.job.element_size)
+        return self.job.scene_ref.elements()
 
     @cached_property
     def judge(self) -> HalvesJudge:

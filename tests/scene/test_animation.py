@@ -4,8 +4,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from pipeline.scene import read_scene
+from pipeline.errors import SceneError
+from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.animation import Sampler, slerp
+from pipeline.scene.ignored import ignored
+from pipeline.scene.scene_cache import SceneRef
 from tests.conftest import basic_builder
 
 CUBE = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
@@ -155,3 +158,55 @@ def test_sampler_single_key_is_constant():
     s = Sampler(np.array([0.5]), np.array([[1.0, 2.0, 3.0]]), "LINEAR", "translation")
     for t in (-1, 0.5, 3):
         np.testing.assert_array_equal(s.evaluate(t), [1, 2, 3])
+
+
+def _clips(path):
+    """A character's two clips of one node, as exporters write them (separate animations, same
+    targets, different lengths), and a door's animation of another node, unnamed."""
+    b = basic_builder()
+    body = b.add_node("body", b.add_mesh("tet", CUBE, CUBE_FACES, material=0))
+    door = b.add_node("door", b.add_mesh("door", CUBE, CUBE_FACES, material=0), translation=(3, 0, 0))
+    b.add_node("cam", camera=b.add_camera("cam", 0.9, 0.1), translation=(1.5, 1.0, 8.0))  # looks down -z at both
+    b.add_animation("idle", body, "translation", [0, 1], [[0, 0, 0], [0, 0.1, 0]])
+    b.add_animation("jump", body, "translation", [0, 2], [[0, 0, 0], [0, 2, 0]])
+    b.add_animation("jump", body, "rotation", [0, 2], [[0, 0, 0, 1], [0, 1, 0, 0]])
+    b.add_animation("", door, "rotation", [0, 0.5], [[0, 0, 0, 1], [0, 0.7071, 0, 0.7071]])
+    b.gltf.animations[-1].name = None
+    return b.write(path), body
+
+
+def test_clips_of_one_node_play_one_at_a_time(tmp_path):
+    path, body = _clips(tmp_path / "clips.glb")
+    scene = read_scene(path)
+    assert scene.animations_played == ("idle", "animation 2") and scene.animations_left_out == ("jump",)
+    assert scene.animation_option is None and scene.scene_hash == scene.document.digest[:16]
+    assert scene.timeline.frames == 31  # idle's 1 s, not jump's 2 s
+    np.testing.assert_allclose(scene.world_matrices(1.0)[body][:3, 3], [0, 0.1, 0], atol=1e-6)
+    assert any("playing 'idle', 'animation 2', leaving out 'jump'" in n for n in scene.notices)
+    assert "1 animation(s) jump: alternative clips of nodes idle animates; one clip plays at a time " \
+           "(--animation NAME)" in ignored(scene)
+    jump = read_scene(path, animation="jump")
+    assert jump.animations_played == ("jump", "animation 2") and jump.animations_left_out == ("idle",)
+    assert jump.timeline.frames == 61 and jump.animation_option == "jump"
+    np.testing.assert_allclose(jump.world_matrices(1.0)[body][:3, 3], [0, 1, 0], atol=1e-6)
+    # another clip is another scene to a photon store; naming the default clip is the default scene
+    assert jump.scene_hash != scene.scene_hash
+    assert read_scene(path, animation="idle").scene_hash == scene.scene_hash
+    assert read_scene(path, animation="animation 2").animations_played == ("animation 2", "idle")
+
+
+def test_an_unknown_clip_is_a_one_line_error(tmp_path):
+    path, _ = _clips(tmp_path / "clips.glb")
+    with pytest.raises(SceneError, match=r"/clips.glb: animations: no animation is named 'run' "
+                                         r"\(the file has 'idle', 'jump', 'animation 2'\)$"):
+        read_scene(path, animation="run")
+
+
+def test_tasks_load_the_clip_the_run_chose(tmp_path):
+    path, body = _clips(tmp_path / "clips.glb")
+    jump = read_scene(path, animation="jump")
+    ref = SceneRef(str(path), jump.scene_hash, None, 0.5, "jump")
+    assert ref.scene().animations_played == jump.animations_played
+    assert ref.elements().n_elements == ElementMesh.build(jump, 0.5).n_elements
+    with pytest.raises(SceneError, match="changed during the run"):  # the default clip is not what was planned
+        SceneRef(str(path), jump.scene_hash, None, 0.5, None).scene()
