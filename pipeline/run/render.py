@@ -283,7 +283,7 @@ def finish(job: Job, records: list[SegmentRecord], tally: RenderTally | None, t_
         "rays": {k: sum(r[k] for r in rays.values()) for k in RAY_KINDS},
         "rays_per_frame": {str(f): rays[f] for f in sorted(rays)},
         "frame_times_s": {str(f): frame_times[f] for f in sorted(frame_times)},
-        "skipped_work": _skipped(job, scene, tally),
+        "skipped_work": _skipped(job, scene, tally, records),
         "settings": _settings(job),
     }
     # The video (an ffmpeg process) encodes while this process draws the report's figures: both
@@ -333,13 +333,16 @@ def store_size(store_url: str) -> dict:
             (parts["photons"] + parts["records"]) / photons}
 
 
-def _skipped(job: Job, scene: Scene, tally: RenderTally | None) -> dict:
-    """pipeline/report/skipped.py's account of the frames of ``job``, from the store's sharing table."""
+def _skipped(job: Job, scene: Scene, tally: RenderTally | None, records: list[SegmentRecord]) -> dict:
+    """pipeline/report/skipped.py's account of the frames of ``job``, from the store's sharing table
+    and the segment records."""
     store = PhotonStore.open(job.store_url)
     sources = {f: store.source_frame(f - 1) + 1 for f in job.selection}
     return skipped_work(job.selection, sources=sources, has_specular=scene.has_specular,
                         has_area_lights=scene.has_area_lights, rays=None if tally is None else tally.rays,
-                        segments_done=[] if tally is None else tally.segments_done, has_sky=scene.sky is not None)
+                        segments_done=[] if tally is None else tally.segments_done, has_sky=scene.sky is not None,
+                        segments_unlit=[{"index": r.index, "frames": [r.start, r.end], "n_frame": r.n_frame}
+                                        for r in records if r.without_indirect_light])
 
 
 def _remove_leftovers(out: Path, store_url: str) -> None:

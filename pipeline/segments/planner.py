@@ -219,6 +219,7 @@ class SegmentPlanner:
                                           step=cfg.fmax_step, cap=cfg.fmax_cap)
         if unlit:
             n = unlit_n_frame(n, lit_elements[0], cfg.n_frame_max)
+            pilot["no_indirect_light"] = lit_elements[0] == 0
             self.executor.progress(f"segment {index}: no indirect light at K {place.k}" + (
                 f" nor in frames {place.start}-{place.end}: N_frame {n:,}, the AQM checks it" if n < cfg.n_frame_max
                 else f", some in frames {place.start}-{place.end}: N_frame {n:,}, the cap"))

@@ -78,6 +78,12 @@ class SegmentRecord:
         return f"{self.fmax}" if self.windows_fmax == self.fmax else f"{self.fmax} (windows {self.windows_fmax})"
 
     @property
+    def without_indirect_light(self) -> bool:
+        """Neither the pilot nor the segment's frames recorded indirect light: the segment stayed on
+        the smallest rung (decisions.unlit_n_frame)."""
+        return bool(self.pilot.get("no_indirect_light"))
+
+    @property
     def e_pilot_text(self) -> str:
         """The pilot's E (§5.2.1): "0.412"; "none" where its photons recorded no indirect light
         (stored as null: E would be infinite, and JSON has no infinity); "-" without a pilot."""

@@ -304,7 +304,7 @@ def test_a_segment_without_indirect_light_stays_on_the_smallest_rung(tmp_path):
     executor = InProcess(job, store)
     rec = SegmentPlanner(job, store, executor, {}).decide(0, job.first, job.fmax)
     assert rec.pilot["n_pilot"] is None and rec.pilot["n_start"] is None and rec.pilot["e_probe"] is None
-    assert rec.e_pilot_text == "none"  # and the record is JSON a strict reader takes: no Infinity
+    assert rec.e_pilot_text == "none" and rec.without_indirect_light  # the record is strict JSON: no Infinity
     json.loads(record_path(job.out_dir, 0).read_text(), parse_constant=lambda c: pytest.fail(f"{c} in the record"))
     assert executor.lines[0] == "segment 0: pilot at K 4: no indirect light in 2,000 photons (Eq. 2 has no E)"
     assert [s["fmax"] for s in rec.fmax_steps] == [6, 10] and rec.fmax_steps[0]["p_me_back"] == 1.0
@@ -322,5 +322,5 @@ def test_light_away_from_an_unlit_k_takes_the_cap(tmp_path):
     executor = InProcess(job, store)
     rec = SegmentPlanner(job, store, executor, {}).decide(0, job.first, job.fmax)
     assert rec.pilot["n_pilot"] is None and (rec.start, rec.k, rec.end) == (1, 6, 11)
-    assert rec.n_frame == 8_000
+    assert rec.n_frame == 8_000 and not rec.without_indirect_light
     assert "segment 0: no indirect light at K 6, some in frames 1-11: N_frame 8,000, the cap" in executor.lines

@@ -17,7 +17,7 @@ def test_each_kind_of_skip_names_its_reason():
                      segments_done=[{"index": 0, "frames": [3, 3]}])
     why = {f: {i["what"]: i["why"] for i in items} for f, items in s["per_frame"].items()}
     assert why["1"] == {"reflection rays": "no specular surface in view"}
-    assert why["2"]["photons"].startswith("camera-only motion: shares frame 1")
+    assert why["2"]["photons"] == "nothing but the camera moves since frame 1: shares its photons"
     assert why["2"]["area-light sampling"] == "no diffuse surface in view takes area or sky light"
     assert why["3"] == {"frame": "already done: its files carry the current frame hash"}
     assert s["photon_sets"] == 2 and s["frames_skipping"] == {"reflection rays": 1, "photons": 1,
@@ -27,6 +27,11 @@ def test_each_kind_of_skip_names_its_reason():
     assert all({i["what"] for i in items} == {"reflection rays", "area-light sampling"}
                for items in plain["per_frame"].values())
     assert any("segments already done: 1 (0: frames 3-3)" == line for line in summary_lines(s))
+    assert "segments without indirect light (N_frame the smallest rung): 0" in summary_lines(s)
+    unlit = skipped_work([1, 2], sources={1: 1, 2: 2}, has_specular=False, has_area_lights=False, rays=None,
+                         segments_done=[], segments_unlit=[{"index": 0, "frames": [1, 2], "n_frame": 1250}])
+    assert "segments without indirect light (N_frame the smallest rung): 1 (0: frames 1-2 at 1,250)" \
+        in summary_lines(unlit)
 
 
 def test_camera_only_motion_traces_one_photon_set_at_fixed_settings(tmp_path):
