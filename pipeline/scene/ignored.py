@@ -11,6 +11,11 @@ from __future__ import annotations
 from .gltf import SUPPORTED_REQUIRED_EXTENSIONS
 from .scene import Scene
 
+# Extensions implemented in part, and what of them is left out
+_PARTLY = {
+    "KHR_animation_pointer": "pointers to node translation, rotation, scale and morph weights and to light colour "
+                             "and intensity are animated; the others keep the file's values",
+}
 # Why an extension that is only "used" (not required) is safe to ignore, by name prefix; the
 # file's core data is what gets rendered.
 _REASONS = (
@@ -20,7 +25,6 @@ _REASONS = (
     ("KHR_draco_", "the uncompressed fallback data is read"),
     ("EXT_meshopt_", "the uncompressed fallback data is read"),
     ("EXT_mesh_gpu_instancing", "only the node itself is drawn, not its instances"),
-    ("KHR_animation_pointer", "only node translation, rotation, scale and morph weights are animated"),
     ("KHR_xmp", "metadata does not change the picture"),
 )
 
@@ -30,6 +34,9 @@ def ignored(scene: Scene) -> list[str]:
     g = scene.document.gltf
     lines = []
     for name in sorted(_extensions(g) - SUPPORTED_REQUIRED_EXTENSIONS):
+        if name in _PARTLY:
+            lines.append(f"extension {name}: in part: {_PARTLY[name]}")
+            continue
         reason = next((why for prefix, why in _REASONS if name.startswith(prefix)), "the core glTF data is used")
         lines.append(f"extension {name}: not implemented, {reason}")
     ortho = sum(1 for c in g.cameras if c.type != "perspective")

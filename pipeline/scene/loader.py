@@ -8,6 +8,7 @@ displacements, default and animated weights) are read here into each instance's
 from __future__ import annotations
 
 import logging
+import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -116,7 +117,7 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
                        f"played one at a time: playing {', '.join(map(repr, played))}, leaving out "
                        f"{', '.join(map(repr, left_out))} (--animation NAME plays another first)")
     extras = _scene_extras(doc)
-    fps, n_frames = _timeline_numbers(doc, extras, channels, fps)
+    fps, n_frames = _timeline_numbers(doc, extras, channels.values(), fps)
 
     camera_node = _choose_camera(doc, nodes, order, cameras, camera)
 
@@ -132,7 +133,8 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
         log.warning("%s: %s", doc.path, w)
     scene = Scene(
         path=doc.path, document=doc, nodes=nodes, order=order, instances=instances,
-        materials=materials, light_defs=light_defs, cameras=cameras, channels=channels,
+        materials=materials, light_defs=light_defs, cameras=cameras, channels=_by_target(channels, "node"),
+        light_channels=_by_target(channels, "light"),
         timeline=Timeline(fps=fps, frames=int(n_frames)), camera_node=camera_node,
         element_size=float(element_size or 0.0), dropped_triangles=dropped, warnings=warnings, notices=notices,
         animations_played=tuple(played), animations_left_out=tuple(left_out),
@@ -175,7 +177,7 @@ def _is_number(value) -> bool:
     return isinstance(value, (int, float)) and not isinstance(value, bool) and bool(np.isfinite(value))
 
 
-def _timeline_numbers(doc, extras: dict, channels, fps: float | None) -> tuple[float, int]:
+def _timeline_numbers(doc, extras: dict, samplers, fps: float | None) -> tuple[float, int]:
     """fps and the number of frames: the caller's fps, else the scene's, else 30; the scene's
     frames, else one past the last key. Each is checked (a stated 0 fps is an error, not 30), and
     the frames are refused above MAX_FRAMES before anything is planned per frame."""
@@ -194,7 +196,7 @@ def _timeline_numbers(doc, extras: dict, channels, fps: float | None) -> tuple[f
         if not 1 <= n_frames <= MAX_FRAMES:
             raise doc.error(f"frames {n_frames} must be in [1, {MAX_FRAMES:,}]", where + ".frames")
         return fps, n_frames
-    end = max((s.end for ch in channels.values() for s in ch.values()), default=0.0)
+    end = max((s.end for s in samplers), default=0.0)
     n_frames = round(end * fps) + 1 if end * fps < MAX_FRAMES else MAX_FRAMES + 1
     if n_frames > MAX_FRAMES:
         raise doc.error(f"the last animation key at {end:g} s gives {end * fps + 1:,.0f} frames at {fps:g} fps, "
@@ -526,9 +528,9 @@ def _texcoord_warnings(materials, instances, warnings) -> None:
 
 
 def _read_channels(doc, nodes, warnings, first: str | None
-                   ) -> tuple[dict[int, dict[str, Sampler]], list[str], list[str], list[str]]:
-    """The channels that play (node -> path -> sampler); the names of the animations that play, of
-    those left out, and of those that would play by default.
+                   ) -> tuple[dict[tuple, Sampler], list[str], list[str], list[str]]:
+    """The channels that play (("node", node, path) or ("light", light, property) -> sampler); the
+    names of the animations that play, of those left out, and of those that would play by default.
 
     glTF says nothing of how animations combine. Files put things that move together in one
     animation or in several over different nodes (ROOM's flight and torus), which all play; a
@@ -537,8 +539,13 @@ def _read_channels(doc, nodes, warnings, first: str | None
     animations play in file order, each unless it animates a node and path an earlier one that
     plays already does; every animation is checked all the same. ``first`` (--animation) names
     the animation that plays first, the others following in file order by the same rule."""
-    clips = [(_animation_name(anim, a), _read_animation(doc, nodes, warnings, a, anim))
+    unsupported: set[str] = set()
+    clips = [(_animation_name(anim, a), _read_animation(doc, nodes, warnings, a, anim, unsupported))
              for a, anim in enumerate(doc.gltf.animations)]
+    if unsupported:
+        warnings.append(f"KHR_animation_pointer targets not animated, kept at the file's values: "
+                        f"{', '.join(sorted(unsupported))} (animated are node TRS, morph weights and light "
+                        "colour and intensity)")
     default = _play(clips)[1]
     if first is not None:
         names = [name for name, _ in clips]
@@ -550,46 +557,90 @@ def _read_channels(doc, nodes, warnings, first: str | None
     return channels, played, left_out, default
 
 
-def _play(clips: list) -> tuple[dict[int, dict[str, Sampler]], list[str], list[str]]:
-    """Channels, names played and names left out of (name, samplers) ``clips`` taken in order."""
-    channels: dict[int, dict[str, Sampler]] = {}
+def _play(clips: list) -> tuple[dict[tuple, Sampler], list[str], list[str]]:
+    """Channels (target -> sampler), names played and names left out of (name, samplers) ``clips``
+    taken in order."""
+    channels: dict[tuple, Sampler] = {}
     played, left_out = [], []
     for name, samplers in clips:
-        if any(path in channels.get(node, {}) for node, path in samplers):
+        if any(key in channels for key in samplers):
             left_out.append(name)
             continue
         played.append(name)
-        for (node, path), sampler in samplers.items():
-            channels.setdefault(node, {})[path] = sampler
+        channels.update(samplers)
     return channels, played, left_out
+
+
+def _by_target(channels: dict[tuple, Sampler], kind: str) -> dict[int, dict[str, Sampler]]:
+    """index -> property -> sampler of the channels whose target is a ``kind`` ("node" or "light")."""
+    out: dict[int, dict[str, Sampler]] = {}
+    for (what, index, prop), sampler in channels.items():
+        if what == kind:
+            out.setdefault(index, {})[prop] = sampler
+    return out
 
 
 def _animation_name(anim, index: int) -> str:
     return anim.name if isinstance(anim.name, str) and anim.name else f"animation {index}"
 
 
-def _read_animation(doc, nodes, warnings, a: int, anim) -> dict[tuple[int, str], Sampler]:
-    """One animation's channels, checked: (node, path) -> sampler."""
+_NODE_POINTER = re.compile(r"/nodes/(\d+)/(translation|rotation|scale|weights)")
+_LIGHT_POINTER = re.compile(r"/extensions/KHR_lights_punctual/lights/(\d+)/(intensity|color)")
+
+
+def _pointer_target(doc, target, f: str, lights: int, unsupported: set[str]) -> tuple | None:
+    """The target of a KHR_animation_pointer channel: ("node", node, path) for a node's TRS or
+    weights (the core targets written as pointers), ("light", light, "intensity" | "color") for a
+    punctual light; None for any other pointer, whose property keeps the file's value (its
+    pattern added to ``unsupported``)."""
+    pointer = ((target.extensions or {}).get("KHR_animation_pointer") or {}).get("pointer")
+    where = f + ".target.extensions.KHR_animation_pointer.pointer"
+    if not isinstance(pointer, str) or not pointer.startswith("/"):
+        raise doc.error(f"pointer {pointer!r} must be a JSON pointer string", where)
+    node = _NODE_POINTER.fullmatch(pointer)
+    if node:
+        return "node", int(node.group(1)), node.group(2)
+    light = _LIGHT_POINTER.fullmatch(pointer)
+    if light:
+        if not 0 <= int(light.group(1)) < lights:
+            raise doc.error(f"{pointer} points to missing light {light.group(1)}", where)
+        return "light", int(light.group(1)), light.group(2)
+    unsupported.add(re.sub(r"/\d+(?=/|$)", "/{i}", pointer))
+    return None
+
+
+def _read_animation(doc, nodes, warnings, a: int, anim, unsupported: set[str]) -> dict[tuple, Sampler]:
+    """One animation's channels, checked: ("node", node, path) or ("light", light, property) ->
+    sampler. Core targets and KHR_animation_pointer's node and light pointers are read; other
+    pointers are skipped and their patterns added to ``unsupported``."""
     g = doc.gltf
-    samplers: dict[tuple[int, str], Sampler] = {}
+    lights = len((g.extensions or {}).get("KHR_lights_punctual", {}).get("lights", []))
+    samplers: dict[tuple, Sampler] = {}
     for c, ch in enumerate(anim.channels):
         f = f"animations[{a}].channels[{c}]"
         target = ch.target
-        if target is None or target.path not in PATHS + ("weights",):
+        if target is not None and target.path == "pointer":
+            key = _pointer_target(doc, target, f, lights, unsupported)
+            if key is None:
+                continue
+        elif target is None or target.path not in PATHS + ("weights",):
             raise doc.error(f"target path {getattr(target, 'path', None)!r} is not supported", f + ".target.path")
-        if target.node is None:  # allowed by the spec (extensions may target other things)
+        elif target.node is None:  # allowed by the spec (extensions may target other things)
             continue
-        if not 0 <= target.node < len(nodes):
-            raise doc.error(f"targets missing node {target.node}", f + ".target.node")
+        else:
+            key = ("node", target.node, target.path)
+        kind, index, prop = key
+        if kind == "node" and not 0 <= index < len(nodes):
+            raise doc.error(f"targets missing node {index}", f + ".target.node")
         n_targets = None
-        if target.path == "weights":  # one value per morph target of the node's mesh (§3.11)
-            mesh = nodes[target.node].mesh
+        if kind == "node" and prop == "weights":  # one value per morph target of the node's mesh (§3.11)
+            mesh = nodes[index].mesh
             n_targets = len(g.meshes[mesh].primitives[0].targets or []) if mesh is not None else 0
             if not n_targets:
-                warnings.append(f"{f}: animates the morph weights of node {target.node}, whose mesh has no "
+                warnings.append(f"{f}: animates the morph weights of node {index}, whose mesh has no "
                                 "morph targets: ignored")
                 continue
-        elif nodes[target.node].matrix is not None:
+        elif kind == "node" and nodes[index].matrix is not None:
             raise doc.error("targets a node defined by a matrix (glTF requires TRS)", f + ".target.node")
         if ch.sampler is None or not 0 <= ch.sampler < len(anim.samplers):
             raise doc.error(f"refers to missing sampler {ch.sampler}", f + ".sampler")
@@ -601,7 +652,9 @@ def _read_animation(doc, nodes, warnings, a: int, anim) -> dict[tuple[int, str],
         times = np.asarray(doc.accessor(s.input, sf + ".input", types=("SCALAR",), components=(5126,)),
                            dtype=np.float64).ravel()
         values = np.asarray(doc.accessor(s.output, sf + ".output"), dtype=np.float64)
-        width = 4 if target.path == "rotation" else 3
+        width = 4 if prop == "rotation" else 1 if prop == "intensity" else 3
+        if width == 1 and values.ndim == 1:  # a scalar property: SCALAR keys
+            values = values.reshape(-1, 1)
         if n_targets is not None:  # scalars, n_targets per key (x 3 for CUBICSPLINE)
             width = n_targets
             if values.ndim != 1 or len(values) % n_targets:
@@ -609,9 +662,12 @@ def _read_animation(doc, nodes, warnings, a: int, anim) -> dict[tuple[int, str],
                                 f"got {len(values)}", sf + ".output")
             values = values.reshape(-1, n_targets)
         if values.ndim != 2 or values.shape[1] != width:
-            raise doc.error(f"output must be {width}-vectors for {target.path}", sf + ".output")
+            raise doc.error(f"output must be {'scalars' if width == 1 else f'{width}-vectors'} for {prop}",
+                            sf + ".output")
         if not (np.all(np.isfinite(times)) and np.all(np.isfinite(values))):
             raise doc.error("keyframes contain NaN or Inf", sf)
+        if kind == "light" and np.any(values < 0):
+            raise doc.error(f"light {prop} keys must not be negative", sf + ".output")
         if np.any(np.diff(times) <= 0):
             raise doc.error("input times must increase strictly", sf + ".input")
         per_key = 3 if interp == "CUBICSPLINE" else 1
@@ -619,12 +675,12 @@ def _read_animation(doc, nodes, warnings, a: int, anim) -> dict[tuple[int, str],
             raise doc.error(f"has {len(values)} outputs for {len(times)} keys ({interp})", sf + ".output")
         if interp == "CUBICSPLINE":
             values = values.reshape(len(times), 3, width)
-        if target.path == "rotation":  # keys (not cubic tangents) must be rotations
+        if prop == "rotation":  # keys (not cubic tangents) must be rotations
             keys = values[:, 1] if interp == "CUBICSPLINE" else values
             bad = np.flatnonzero(np.linalg.norm(keys, axis=1) <= 1e-6)
             if len(bad):
                 raise doc.error(f"rotation key {int(bad[0])} is a zero quaternion", sf + ".output")
-        samplers[(target.node, target.path)] = Sampler(times, values, interp, target.path)
+        samplers[key] = Sampler(times, values, interp, prop)
     return samplers
 
 

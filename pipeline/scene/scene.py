@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import hashlib
 import logging
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from functools import cached_property
 from pathlib import Path
 
@@ -72,7 +72,7 @@ class Scene:
     materials: list[Material]
     light_defs: list[LightDef]
     cameras: list[CameraDef]
-    channels: dict[int, dict[str, Sampler]]
+    channels: dict[int, dict[str, Sampler]]  # node -> translation | rotation | scale | weights -> sampler
     timeline: Timeline
     camera_node: int | None
     element_size: float
@@ -85,6 +85,7 @@ class Scene:
     framing: Framing | None = None  # the auto camera (pipeline/scene/default_camera.py), no camera_node
     # The animations that play and those left out, alternative clips of nodes one that plays animates
     # (pipeline/scene/loader.py); the --animation that chose them, None where they are the default
+    light_channels: dict[int, dict[str, Sampler]] = field(default_factory=dict)  # light -> intensity | color
     animations_played: tuple[str, ...] = ()
     animations_left_out: tuple[str, ...] = ()
     animation_option: str | None = None
@@ -118,7 +119,17 @@ class Scene:
             world[i] = local if node.parent is None else world[node.parent] @ local
         return world
 
-    def _lights_at(self, world: np.ndarray) -> list[Light]:
+    def light_def(self, light: int, t: float) -> LightDef:
+        """Light ``light`` of the file at ``t``: its colour and intensity as animated
+        (KHR_animation_pointer), clamped at 0 where a cubic spline overshoots."""
+        d, ch = self.light_defs[light], self.light_channels.get(light)
+        if not ch:
+            return d
+        color = tuple(float(c) for c in np.maximum(ch["color"].evaluate(t), 0.0)) if "color" in ch else d.color
+        intensity = max(float(ch["intensity"].evaluate(t)[0]), 0.0) if "intensity" in ch else d.intensity
+        return replace(d, color=color, intensity=intensity)
+
+    def _lights_at(self, world: np.ndarray, t: float) -> list[Light]:
         lights = []
         for i in self.order:
             node = self.nodes[i]
@@ -127,7 +138,7 @@ class Scene:
             m = world[i]
             d = -m[:3, 2]
             norm = np.linalg.norm(d)
-            lights.append(Light(self.light_defs[node.light], i, m[:3, 3].copy(),
+            lights.append(Light(self.light_def(node.light, t), i, m[:3, 3].copy(),
                                 d / norm if norm > 0 else np.array([0.0, 0.0, -1.0])))
         return lights + list(self.default_lights)
 
@@ -180,12 +191,12 @@ class Scene:
         """Key equal for frames whose geometry and lights are equal (camera-only motion)."""
         t = self.timeline.time(frame)
         world = self.world_matrices(t)
-        return self._state_key(world, self._lights_at(world), t)
+        return self._state_key(world, self._lights_at(world, t), t)
 
     def pose(self, t: float, *, frame: int | None = None) -> FrameState:
         """Evaluate the animation at ``t`` seconds: world-space triangles, lights and camera."""
         world = self.world_matrices(t)
-        lights = self._lights_at(world)
+        lights = self._lights_at(world, t)
         inst_mats = np.stack([world[inst.node] for inst in self.instances])
         verts = [(inst.vertices @ m[:3, :3].T + m[:3, 3]) for inst, m in zip(self.instances, inst_mats)]
         corner_normals = world_corner_normals(self.instances, inst_mats)

@@ -4,7 +4,9 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
+from pipeline.config import PhotonConfig
 from pipeline.errors import SceneError
+from pipeline.photons.tracing import PhotonRange, trace_batch
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.animation import Sampler, slerp
 from pipeline.scene.ignored import ignored
@@ -210,3 +212,68 @@ def test_tasks_load_the_clip_the_run_chose(tmp_path):
     assert ref.elements().n_elements == ElementMesh.build(jump, 0.5).n_elements
     with pytest.raises(SceneError, match="changed during the run"):  # the default clip is not what was planned
         SceneRef(str(path), jump.scene_hash, None, 0.5, None).scene()
+
+
+LAMP = "/extensions/KHR_lights_punctual/lights/0"
+
+
+def _pointer_lamp(path, extra=None):
+    """basic_builder's lamp (10 W/sr, white) animated through KHR_animation_pointer: its intensity
+    10 -> 40 over 1 s (LINEAR), its colour to (1, 0.5, 0.25) at 0.5 s (STEP), and a material's base
+    colour, which is not animated."""
+    b = basic_builder()
+    b.add_pointer_animation("lamp", LAMP + "/intensity", [0, 1], [10.0, 40.0])
+    b.add_pointer_animation("lamp", LAMP + "/color", [0, 0.5], [[1, 1, 1], [1, 0.5, 0.25]], "STEP")
+    b.add_pointer_animation("lamp", "/materials/0/pbrMetallicRoughness/baseColorFactor", [0, 1],
+                            [[1, 1, 1, 1], [1, 0, 0, 1]])
+    if extra:
+        extra(b)
+    return b.write(path)
+
+
+def test_a_light_animated_through_pointers(tmp_path):
+    scene = read_scene(_pointer_lamp(tmp_path / "lamp.glb"))
+    np.testing.assert_allclose(scene.pose(0.0).lights[0].radiant, [10, 10, 10])
+    np.testing.assert_allclose(scene.pose(0.25).lights[0].radiant, [17.5, 17.5, 17.5])
+    np.testing.assert_allclose(scene.pose(0.75).lights[0].radiant, [32.5, 16.25, 8.125])
+    np.testing.assert_allclose(scene.pose(1.0).lights[0].radiant, [40, 20, 10])
+    assert scene.timeline.frames == 31 and len(set(scene.frame_state_keys)) == 31
+    assert sorted(scene.light_channels[0]) == ["color", "intensity"] and not scene.channels
+    assert any("/materials/{i}/pbrMetallicRoughness/baseColorFactor" in w and "kept at the file's values" in w
+               for w in scene.warnings)
+    assert any(line.startswith("extension KHR_animation_pointer: in part:") for line in ignored(scene))
+    np.testing.assert_allclose(scene.materials[0].albedo, (0.7, 0.7, 0.7))
+
+
+def test_a_node_pointer_is_the_core_channel(tmp_path):
+    b = basic_builder()
+    node = b.add_node("mover", b.add_mesh("tet", CUBE, CUBE_FACES, material=0))
+    b.add_pointer_animation("move", f"/nodes/{node}/translation", [0, 1], [[0, 0, 0], [2, 0, 0]])
+    scene = read_scene(b.write(tmp_path / "node.glb"))
+    np.testing.assert_allclose(scene.world_matrices(0.5)[node][:3, 3], [1, 0, 0], atol=1e-6)
+
+
+def test_the_photons_of_a_brighter_lamp_carry_its_power(tmp_path):
+    # Same geometry, same random numbers: every photon takes the same path and carries 4x the power
+    scene = read_scene(_pointer_lamp(tmp_path / "lamp.glb"))
+    elements = ElementMesh.build(scene)
+    dim, bright = (trace_batch(scene.pose(t), elements, PhotonRange(1, 0, 4000), PhotonConfig()) for t in (0.0, 0.25))
+    assert np.array_equal(dim.key, bright.key) and len(dim.key) > 200  # the floor catches about 7 %
+    np.testing.assert_allclose(bright.energy, dim.energy * 1.75, rtol=1e-6)
+
+
+@pytest.mark.parametrize("extra, match", [
+    (lambda b: b.add_pointer_animation("bad", LAMP + "/intensity", [0, 1], [1.0, -1.0]),
+     r"animations\[1\].samplers\[0\].output: light intensity keys must not be negative"),
+    (lambda b: b.add_pointer_animation("bad", "/extensions/KHR_lights_punctual/lights/3/color", [0, 1],
+                                       [[1, 1, 1], [0, 0, 0]]),
+     r"animations\[1\].channels\[0\].target.extensions.KHR_animation_pointer.pointer: "
+     r"/extensions/KHR_lights_punctual/lights/3/color points to missing light 3"),
+    (lambda b: b.add_pointer_animation("bad", LAMP + "/intensity", [0, 1], [[1, 1, 1], [2, 2, 2]]),
+     r"animations\[1\].samplers\[0\].output: output must be scalars for intensity"),
+    (lambda b: b.add_pointer_animation("bad", "nodes/0/translation", [0, 1], [[1, 1, 1], [2, 2, 2]]),
+     r"pointer 'nodes/0/translation' must be a JSON pointer string"),
+])
+def test_a_bad_pointer_channel_is_a_one_line_error(tmp_path, extra, match):
+    with pytest.raises(SceneError, match=match):
+        read_scene(_pointer_lamp(tmp_path / "bad.glb", extra))

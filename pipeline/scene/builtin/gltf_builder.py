@@ -48,6 +48,7 @@ from pipeline.scene.gltf import COMPONENT_DTYPES, TYPE_WIDTH
 
 LIGHTS_EXTENSION = "KHR_lights_punctual"
 EMISSIVE_STRENGTH_EXTENSION = "KHR_materials_emissive_strength"
+POINTER_EXTENSION = "KHR_animation_pointer"
 TEXTURE_TRANSFORM_EXTENSION = "KHR_texture_transform"
 
 TRIANGLES = 4
@@ -428,6 +429,32 @@ class GltfBuilder:
                                                    interpolation=interpolation))
         animation.channels.append(AnimationChannel(sampler=len(animation.samplers) - 1,
                                                    target=AnimationChannelTarget(node=int(node), path=path)))
+        return index
+
+    def add_pointer_animation(self, name: str, pointer: str, times: Sequence[float], values: np.ndarray | Sequence,
+                              interpolation: str = "LINEAR") -> int:
+        """Animate the property at JSON ``pointer`` (KHR_animation_pointer, e.g.
+        ``/extensions/KHR_lights_punctual/lights/0/intensity``): one row of ``values`` per key
+        (one number for a scalar); returns the animation index."""
+        if interpolation not in _INTERPOLATIONS:
+            raise ValueError(f"animation {name!r}: interpolation must be one of {_INTERPOLATIONS}")
+        times = np.asarray(times, dtype=np.float32).reshape(-1)
+        if times.size == 0 or not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
+            raise ValueError(f"animation {name!r}: key times must be finite and strictly increasing")
+        values = np.asarray(values, dtype=np.float32)
+        flat = values.reshape(-1) if values.ndim == 1 or values.shape[-1] == 1 else values.reshape(-1, values.shape[-1])
+        input_accessor = self.add_accessor(times, with_bounds=True)
+        output_accessor = self.add_accessor(flat)
+        index = self._animations_by_name.get(name)
+        if index is None:
+            self.gltf.animations.append(Animation(name=name))
+            index = self._animations_by_name[name] = len(self.gltf.animations) - 1
+        animation = self.gltf.animations[index]
+        animation.samplers.append(AnimationSampler(input=input_accessor, output=output_accessor,
+                                                   interpolation=interpolation))
+        target = AnimationChannelTarget(path="pointer", extensions={POINTER_EXTENSION: {"pointer": pointer}})
+        animation.channels.append(AnimationChannel(sampler=len(animation.samplers) - 1, target=target))
+        self._use_extension(POINTER_EXTENSION)
         return index
 
     # -- scene ----------------------------------------------------------------------------------
