@@ -91,8 +91,10 @@ def selection_probability(weight: np.ndarray, group: np.ndarray) -> np.ndarray:
     return (1.0 - LIGHT_FLOOR) * weight / total + share[light] * inside
 
 
-def emission_tables(state: FrameState, caster: RayCaster) -> EmissionTables:
-    """The emitter table (CDF of :func:`selection_probability`) and per-light parameters of a posed frame."""
+def emission_tables(state: FrameState, caster: RayCaster) -> EmissionTables | None:
+    """The emitter table (CDF of :func:`selection_probability`) and per-light parameters of a posed
+    frame; None when nothing in it emits (every light off at this instant: an animated intensity or
+    emission at 0), so that its photons carry nothing."""
     kinds, index, flux, group = [], [], [], []
     code = {"point": POINT, "spot": SPOT, "directional": DIRECTIONAL}
     radius = caster.radius * DISK_MARGIN
@@ -131,7 +133,7 @@ def emission_tables(state: FrameState, caster: RayCaster) -> EmissionTables:
     flux = np.asarray(flux, dtype=np.float64).reshape(-1, 3)
     weight = flux.mean(axis=1)
     if not len(weight) or weight.sum() <= 0:
-        raise ValueError("the scene's lights emit no power")
+        return None
     cdf = np.cumsum(selection_probability(weight, np.asarray(group, np.int64)))
     cdf /= cdf[-1]
     cdf[-1] = 1.0

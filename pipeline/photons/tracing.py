@@ -89,7 +89,9 @@ def _kernels(state: FrameState, elements: ElementMesh, caster: RayCaster, backen
     if found is None:
         tables = scene_tables(state, elements, caster)
         emission = emission_tables(state, caster)
-        if backend == "opencl":
+        if emission is None:
+            found = (None, None, None)
+        elif backend == "opencl":
             found = (EmitCL(emission), ScatterCL(tables), emission)
         else:
             found = (lambda photon, key: emit_reference(emission, photon, key),
@@ -118,6 +120,9 @@ def trace_batch(state: FrameState, elements: ElementMesh, photons: PhotonRange, 
         raise ValueError(f"n_photons must be positive, got {photons.count}")
     caster = caster or caster_for(state)
     emit, scatter, table = _kernels(state, elements, caster, backend)
+    if table is None:  # nothing emits at this instant: the photons are emitted and carry nothing
+        return PhotonBatch(np.empty(0, np.uint32), np.empty((0, 2), np.uint16), np.empty((0, 3), np.float32),
+                           photons.count, photons.start, 0, {"records": 0, "direct": 0, "capped": 0})
     tracer = _Tracer(state, caster, table, emit, scatter, SurfaceShading(state, caster.normals),
                      one_sided_triangles(state), (int(config.seed) & 0xFFFFFFFF, int(photons.frame) & 0xFFFFFFFF),
                      config.photon_depth)

@@ -54,7 +54,7 @@ def plan(scene: Scene, frames_spec: str | None, n_photons: int, config: PhotonCo
     except LoomError as err:  # name the file and where its timeline comes from
         tl = scene.timeline
         span = f"{tl.frames} frame(s) at {tl.fps:g} fps, {tl.duration:g} s"
-        if not scene.channels and not scene.light_channels:
+        if not scene.has_animation:
             span += "; the file has no animation"
         raise LoomError(f"{err.reason} ({span})", path=str(scene.path), field=err.field) from None
     elements = ElementMesh.build(scene, config.element_size)

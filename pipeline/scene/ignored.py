@@ -9,12 +9,12 @@ perspective cameras can be chosen.
 from __future__ import annotations
 
 from .gltf import SUPPORTED_REQUIRED_EXTENSIONS
+from .loader import ANIMATED_POINTERS
 from .scene import Scene
 
 # Extensions implemented in part, and what of them is left out
 _PARTLY = {
-    "KHR_animation_pointer": "pointers to node translation, rotation, scale and morph weights and to light colour "
-                             "and intensity are animated; the others keep the file's values",
+    "KHR_animation_pointer": f"pointers to {ANIMATED_POINTERS} are animated; the others keep the file's values",
 }
 # Why an extension that is only "used" (not required) is safe to ignore, by name prefix; the
 # file's core data is what gets rendered.

@@ -20,7 +20,7 @@ from .default_camera import AZIMUTH, ELEVATION, YFOV_DEG, animation_bounds, fram
 from .default_lights import default_sky, default_sun
 from .gltf import GltfDocument, read_gltf
 from .lights import light_def_from_gltf
-from .materials import DEFAULT_MATERIAL, material_from_gltf
+from .materials import ANIMATED_PROPERTIES, DEFAULT_MATERIAL, MATERIAL_WIDTHS, any_emits, material_from_gltf
 from .nodes import MeshInstance, Node
 from .scene import DEFAULT_ELEMENT_FRACTION, Scene
 from .textures import base_color_texture, emissive_texture
@@ -102,7 +102,9 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
     _texcoord_warnings(materials, instances, warnings)
     if not instances:
         raise doc.error("the scene has no triangle meshes", "meshes")
-    emissive = any(materials[inst.material].is_emissive for inst in instances)
+    channels, played, left_out, default = _read_channels(doc, nodes, warnings, animation)
+    animated_materials = _by_target(channels, "material")
+    emissive = any_emits(materials, g.materials, animated_materials, {inst.material for inst in instances})
     unlit = not any(nodes[i].light is not None for i in order) and not emissive
     if unlit and light == "none":
         raise doc.error("the scene has no light: no KHR_lights_punctual light on a node and no emissive material "
@@ -111,7 +113,6 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
         notices.append("the file has no light: lit by the default sun and sky of pipeline/scene/default_lights.py "
                        "(loom info describes them; --light none refuses such a file)")
 
-    channels, played, left_out, default = _read_channels(doc, nodes, warnings, animation)
     if left_out:
         notices.append(f"{len(left_out)} animation(s) animate nodes that {played[0]!r} animates, alternative clips "
                        f"played one at a time: playing {', '.join(map(repr, played))}, leaving out "
@@ -134,7 +135,7 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
     scene = Scene(
         path=doc.path, document=doc, nodes=nodes, order=order, instances=instances,
         materials=materials, light_defs=light_defs, cameras=cameras, channels=_by_target(channels, "node"),
-        light_channels=_by_target(channels, "light"),
+        light_channels=_by_target(channels, "light"), material_channels=animated_materials,
         timeline=Timeline(fps=fps, frames=int(n_frames)), camera_node=camera_node,
         element_size=float(element_size or 0.0), dropped_triangles=dropped, warnings=warnings, notices=notices,
         animations_played=tuple(played), animations_left_out=tuple(left_out),
@@ -544,8 +545,7 @@ def _read_channels(doc, nodes, warnings, first: str | None
              for a, anim in enumerate(doc.gltf.animations)]
     if unsupported:
         warnings.append(f"KHR_animation_pointer targets not animated, kept at the file's values: "
-                        f"{', '.join(sorted(unsupported))} (animated are node TRS, morph weights and light "
-                        "colour and intensity)")
+                        f"{', '.join(sorted(unsupported))} (animated are {ANIMATED_POINTERS})")
     default = _play(clips)[1]
     if first is not None:
         names = [name for name, _ in clips]
@@ -584,15 +584,20 @@ def _animation_name(anim, index: int) -> str:
     return anim.name if isinstance(anim.name, str) and anim.name else f"animation {index}"
 
 
+# What KHR_animation_pointer channels animate here (the others keep the file's values)
+ANIMATED_POINTERS = ("node translation, rotation, scale and morph weights, light colour and intensity, and "
+                     "material base colour and emission")
 _NODE_POINTER = re.compile(r"/nodes/(\d+)/(translation|rotation|scale|weights)")
 _LIGHT_POINTER = re.compile(r"/extensions/KHR_lights_punctual/lights/(\d+)/(intensity|color)")
+_MATERIAL_POINTER = re.compile(r"/materials/(\d+)/(" + "|".join(map(re.escape, ANIMATED_PROPERTIES)) + ")")
 
 
 def _pointer_target(doc, target, f: str, lights: int, unsupported: set[str]) -> tuple | None:
     """The target of a KHR_animation_pointer channel: ("node", node, path) for a node's TRS or
     weights (the core targets written as pointers), ("light", light, "intensity" | "color") for a
-    punctual light; None for any other pointer, whose property keeps the file's value (its
-    pattern added to ``unsupported``)."""
+    punctual light, ("material", material, name) for a material's base colour, emissive factor or
+    strength (materials.ANIMATED_PROPERTIES); None for any other pointer, whose property keeps
+    the file's value (its pattern added to ``unsupported``)."""
     pointer = ((target.extensions or {}).get("KHR_animation_pointer") or {}).get("pointer")
     where = f + ".target.extensions.KHR_animation_pointer.pointer"
     if not isinstance(pointer, str) or not pointer.startswith("/"):
@@ -605,6 +610,11 @@ def _pointer_target(doc, target, f: str, lights: int, unsupported: set[str]) -> 
         if not 0 <= int(light.group(1)) < lights:
             raise doc.error(f"{pointer} points to missing light {light.group(1)}", where)
         return "light", int(light.group(1)), light.group(2)
+    material = _MATERIAL_POINTER.fullmatch(pointer)
+    if material:
+        if not 0 <= int(material.group(1)) < len(doc.gltf.materials):
+            raise doc.error(f"{pointer} points to missing material {material.group(1)}", where)
+        return "material", int(material.group(1)), ANIMATED_PROPERTIES[material.group(2)][0]
     unsupported.add(re.sub(r"/\d+(?=/|$)", "/{i}", pointer))
     return None
 
@@ -652,7 +662,8 @@ def _read_animation(doc, nodes, warnings, a: int, anim, unsupported: set[str]) -
         times = np.asarray(doc.accessor(s.input, sf + ".input", types=("SCALAR",), components=(5126,)),
                            dtype=np.float64).ravel()
         values = np.asarray(doc.accessor(s.output, sf + ".output"), dtype=np.float64)
-        width = 4 if prop == "rotation" else 1 if prop == "intensity" else 3
+        width = (MATERIAL_WIDTHS[prop] if kind == "material" else 4 if prop == "rotation"
+                 else 1 if prop == "intensity" else 3)
         if width == 1 and values.ndim == 1:  # a scalar property: SCALAR keys
             values = values.reshape(-1, 1)
         if n_targets is not None:  # scalars, n_targets per key (x 3 for CUBICSPLINE)
@@ -666,8 +677,6 @@ def _read_animation(doc, nodes, warnings, a: int, anim, unsupported: set[str]) -
                             sf + ".output")
         if not (np.all(np.isfinite(times)) and np.all(np.isfinite(values))):
             raise doc.error("keyframes contain NaN or Inf", sf)
-        if kind == "light" and np.any(values < 0):
-            raise doc.error(f"light {prop} keys must not be negative", sf + ".output")
         if np.any(np.diff(times) <= 0):
             raise doc.error("input times must increase strictly", sf + ".input")
         per_key = 3 if interp == "CUBICSPLINE" else 1
@@ -675,6 +684,8 @@ def _read_animation(doc, nodes, warnings, a: int, anim, unsupported: set[str]) -
             raise doc.error(f"has {len(values)} outputs for {len(times)} keys ({interp})", sf + ".output")
         if interp == "CUBICSPLINE":
             values = values.reshape(len(times), 3, width)
+        if kind in ("light", "material") and np.any((values[:, 1] if interp == "CUBICSPLINE" else values) < 0):
+            raise doc.error(f"{kind} {prop} keys must not be negative", sf + ".output")
         if prop == "rotation":  # keys (not cubic tangents) must be rotations
             keys = values[:, 1] if interp == "CUBICSPLINE" else values
             bad = np.flatnonzero(np.linalg.norm(keys, axis=1) <= 1e-6)

@@ -20,7 +20,7 @@ Mapping (docs/03-conventions.md §2; written in the README too):
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -67,15 +67,58 @@ def classify(metallic: float, roughness: float) -> str:
     return "diffuse"
 
 
+# The material properties KHR_animation_pointer may animate here, by their names under /materials/i/
+ANIMATED_PROPERTIES = {"pbrMetallicRoughness/baseColorFactor": ("baseColorFactor", 4),
+                       "emissiveFactor": ("emissiveFactor", 3),
+                       "extensions/KHR_materials_emissive_strength/emissiveStrength": ("emissiveStrength", 1)}
+
+
+MATERIAL_WIDTHS = {name: width for name, width in ANIMATED_PROPERTIES.values()}
+
+
+def may_emit(material: Material, mat: pygltflib.Material, channels: dict | None) -> bool:
+    """Whether ``material`` emits at some instant: at rest, or at any key of its animated
+    ``channels`` (property name -> animation Sampler), where LINEAR and STEP values peak."""
+    if material.is_emissive or not channels:
+        return material.is_emissive
+    times = sorted({float(t) for s in channels.values() for t in s.times})
+    return any(animated_material(material, mat, {k: s.evaluate(t) for k, s in channels.items()}).is_emissive
+               for t in times)
+
+
+def any_emits(materials: list[Material], gltf_materials: list, channels: dict[int, dict], used: set[int]) -> bool:
+    """Whether any of the ``used`` materials emits at some instant (:func:`may_emit`); the default
+    material (past the file's) never does."""
+    return any(may_emit(materials[m], gltf_materials[m], channels.get(m)) if m < len(gltf_materials)
+               else materials[m].is_emissive for m in used)
+
+
+def _factors(mat: pygltflib.Material) -> dict[str, np.ndarray]:
+    """The file's values of the animatable properties (ANIMATED_PROPERTIES' short names)."""
+    pbr = mat.pbrMetallicRoughness
+    base = list(pbr.baseColorFactor) if pbr and pbr.baseColorFactor is not None else [1.0, 1.0, 1.0, 1.0]
+    emissive = mat.emissiveFactor if mat.emissiveFactor is not None else [0.0, 0.0, 0.0]
+    strength = (mat.extensions or {}).get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)
+    return {"baseColorFactor": np.asarray(base, float), "emissiveFactor": np.asarray(emissive, float),
+            "emissiveStrength": np.asarray([strength], float)}
+
+
+def animated_material(material: Material, mat: pygltflib.Material, values: dict[str, np.ndarray]) -> Material:
+    """``material`` (built from the file's ``mat``) with the animated ``values`` of some of its
+    ANIMATED_PROPERTIES at one instant; the others keep the file's values."""
+    f = {**_factors(mat), **values}
+    return replace(material, albedo=tuple(float(c) for c in np.clip(f["baseColorFactor"][:3], 0.0, 1.0)),
+                   emission=tuple(float(c) for c in np.maximum(f["emissiveFactor"] * f["emissiveStrength"][0], 0.0)))
+
+
 def material_from_gltf(mat: pygltflib.Material, index: int) -> Material:
     """Build a :class:`Material` from a pygltflib material."""
     pbr = mat.pbrMetallicRoughness
-    base = list(pbr.baseColorFactor) if pbr and pbr.baseColorFactor is not None else [1.0, 1.0, 1.0, 1.0]
+    f = _factors(mat)
+    base = f["baseColorFactor"]
     metallic = float(pbr.metallicFactor) if pbr and pbr.metallicFactor is not None else 1.0
     roughness = float(pbr.roughnessFactor) if pbr and pbr.roughnessFactor is not None else 1.0
-    emissive = np.array(mat.emissiveFactor if mat.emissiveFactor is not None else [0.0, 0.0, 0.0], float)
-    strength = (mat.extensions or {}).get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)
-    emission = emissive * float(strength)
+    emission = f["emissiveFactor"] * float(f["emissiveStrength"][0])
     return Material(
         name=mat.name or f"material{index}",
         albedo=tuple(float(c) for c in np.clip(base[:3], 0.0, 1.0)),

@@ -23,7 +23,7 @@ from .animation import Sampler, joint_matrices, pose_vertices, trs_matrix
 from .camera import AUTO, Camera, CameraDef, Framing
 from .gltf import GltfDocument
 from .lights import Light, LightDef
-from .materials import Material
+from .materials import Material, animated_material, any_emits
 from .nodes import MeshInstance, Node
 from .shading import CornerAttributes, corner_attributes, world_corner_normals
 from .sky import Sky
@@ -86,6 +86,8 @@ class Scene:
     # The animations that play and those left out, alternative clips of nodes one that plays animates
     # (pipeline/scene/loader.py); the --animation that chose them, None where they are the default
     light_channels: dict[int, dict[str, Sampler]] = field(default_factory=dict)  # light -> intensity | color
+    # material -> baseColorFactor | emissiveFactor | emissiveStrength (materials.ANIMATED_PROPERTIES)
+    material_channels: dict[int, dict[str, Sampler]] = field(default_factory=dict)
     animations_played: tuple[str, ...] = ()
     animations_left_out: tuple[str, ...] = ()
     animation_option: str | None = None
@@ -128,6 +130,21 @@ class Scene:
         color = tuple(float(c) for c in np.maximum(ch["color"].evaluate(t), 0.0)) if "color" in ch else d.color
         intensity = max(float(ch["intensity"].evaluate(t)[0]), 0.0) if "intensity" in ch else d.intensity
         return replace(d, color=color, intensity=intensity)
+
+    @property
+    def has_animation(self) -> bool:
+        """Something in the file is animated: a node, a light or a material."""
+        return bool(self.channels or self.light_channels or self.material_channels)
+
+    def materials_at(self, t: float) -> list[Material]:
+        """The materials at ``t``: base colour and emission as animated (KHR_animation_pointer)."""
+        if not self.material_channels:
+            return self.materials
+        mats = list(self.materials)
+        for m, ch in self.material_channels.items():
+            mats[m] = animated_material(mats[m], self.document.gltf.materials[m],
+                                        {k: s.evaluate(t) for k, s in ch.items()})
+        return mats
 
     def _lights_at(self, world: np.ndarray, t: float) -> list[Light]:
         lights = []
@@ -183,6 +200,10 @@ class Scene:
                                       _STATE_DECIMALS).tobytes())
         for light in lights:
             h.update(np.round(light.state(), _STATE_DECIMALS).tobytes())
+        if self.material_channels:  # animated materials change what photons carry and what emits
+            mats = self.materials_at(t)
+            for m in sorted(self.material_channels):
+                h.update(np.round(np.r_[mats[m].albedo, mats[m].emission], _STATE_DECIMALS).tobytes())
         if self.sky is not None:
             h.update(np.round(self.sky.state(), _STATE_DECIMALS).tobytes())
         return h.hexdigest()[:16]
@@ -211,7 +232,8 @@ class Scene:
             [np.full(len(inst.faces), inst.index, np.int32) for inst in self.instances]
         )
         tri_mat = np.asarray([inst.material for inst in self.instances], np.int32)[tri_inst]
-        emissive_mats = np.array([m.is_emissive for m in self.materials])
+        materials = self.materials_at(t)
+        emissive_mats = np.array([m.is_emissive for m in materials])
         cam = None
         if self.camera_node is not None:
             node = self.nodes[self.camera_node]
@@ -227,7 +249,7 @@ class Scene:
             faces=faces.astype(np.int32),
             triangle_instance=tri_inst,
             triangle_material=tri_mat,
-            materials=self.materials,
+            materials=materials,
             lights=lights,
             emissive_triangles=np.flatnonzero(emissive_mats[tri_mat]).astype(np.int32),
             camera=cam,
@@ -293,4 +315,5 @@ class Scene:
 
     @property
     def has_area_lights(self) -> bool:
-        return any(self.materials[inst.material].is_emissive for inst in self.instances)
+        return any_emits(self.materials, self.document.gltf.materials, self.material_channels,
+                         {inst.material for inst in self.instances})

@@ -2,7 +2,8 @@
 10 W/sr white at t = 0, 40 W/sr of colour (1, 0.5, 0.25) at t = 1 s) rendered by ``loom render``
 (synchronous scheduler, real store and files): the direct light of frame 31 is the lamp's radiant
 intensity times that of frame 1, channel by channel, (4, 2, 1), as a point light's irradiance
-I cos / r^2 is linear in I; and loom info names the animated light."""
+I cos / r^2 is linear in I; and loom info names the animated light. An area light switched on by
+its material's emission strength."""
 from __future__ import annotations
 
 import numpy as np
@@ -10,7 +11,8 @@ from click.testing import CliRunner
 
 from pipeline.cli import main
 from pipeline.frames.images import frame_paths, read_exr
-from tests.scene.test_animation import _pointer_lamp
+from tests.conftest import basic_builder
+from tests.scene.test_animation import CUBE, CUBE_FACES, _pointer_lamp
 
 
 def test_the_direct_light_follows_the_lamp(tmp_path):
@@ -30,3 +32,20 @@ def test_the_direct_light_follows_the_lamp(tmp_path):
     for channel, ratio in zip("RGB", (4.0, 2.0, 1.0)):
         change = last[f"direct.{channel}"][lit] / first[f"direct.{channel}"][lit]
         assert abs(np.median(change) / ratio - 1) < 0.01, channel
+
+
+def test_a_panel_that_switches_on_renders_dark_frames_then_light(tmp_path):
+    # The only light is a panel whose emission strength steps 0 -> 3 at 0.5 s (frame 16): the frames
+    # before trace photons that carry nothing and are black, with the guided defaults
+    b = basic_builder(light=False)
+    panel = b.add_material("panel", (0.5, 0.5, 0.5), emissive=(1.0, 0.5, 0.5), emissive_strength=0.0)
+    b.add_node("panel", b.add_mesh("panel", CUBE, CUBE_FACES, material=panel), translation=(0, 1, 0))
+    b.add_pointer_animation("switch", f"/materials/{panel}/extensions/KHR_materials_emissive_strength/"
+                            "emissiveStrength", [0, 0.5], [0.0, 3.0], "STEP")
+    path = b.write(tmp_path / "switch.glb")
+    out = tmp_path / "out"
+    result = CliRunner().invoke(main, ["render", str(path), "--out", str(out), "--resolution", "32x24", "--spp", "1",
+                                       "--scheduler", "synchronous", "--quiet"])
+    assert result.exit_code == 0, result.output
+    beauty = [read_exr(frame_paths(out, f)[0])[0]["R"] for f in range(1, 17)]
+    assert all(not b.any() for b in beauty[:15]) and beauty[15].mean() > 0.01

@@ -219,13 +219,12 @@ LAMP = "/extensions/KHR_lights_punctual/lights/0"
 
 def _pointer_lamp(path, extra=None):
     """basic_builder's lamp (10 W/sr, white) animated through KHR_animation_pointer: its intensity
-    10 -> 40 over 1 s (LINEAR), its colour to (1, 0.5, 0.25) at 0.5 s (STEP), and a material's base
-    colour, which is not animated."""
+    10 -> 40 over 1 s (LINEAR), its colour to (1, 0.5, 0.25) at 0.5 s (STEP), and a material's
+    roughness, which is not animated."""
     b = basic_builder()
     b.add_pointer_animation("lamp", LAMP + "/intensity", [0, 1], [10.0, 40.0])
     b.add_pointer_animation("lamp", LAMP + "/color", [0, 0.5], [[1, 1, 1], [1, 0.5, 0.25]], "STEP")
-    b.add_pointer_animation("lamp", "/materials/0/pbrMetallicRoughness/baseColorFactor", [0, 1],
-                            [[1, 1, 1, 1], [1, 0, 0, 1]])
+    b.add_pointer_animation("lamp", "/materials/0/pbrMetallicRoughness/roughnessFactor", [0, 1], [1.0, 0.1])
     if extra:
         extra(b)
     return b.write(path)
@@ -239,10 +238,30 @@ def test_a_light_animated_through_pointers(tmp_path):
     np.testing.assert_allclose(scene.pose(1.0).lights[0].radiant, [40, 20, 10])
     assert scene.timeline.frames == 31 and len(set(scene.frame_state_keys)) == 31
     assert sorted(scene.light_channels[0]) == ["color", "intensity"] and not scene.channels
-    assert any("/materials/{i}/pbrMetallicRoughness/baseColorFactor" in w and "kept at the file's values" in w
+    assert any("/materials/{i}/pbrMetallicRoughness/roughnessFactor" in w and "kept at the file's values" in w
                for w in scene.warnings)
     assert any(line.startswith("extension KHR_animation_pointer: in part:") for line in ignored(scene))
     np.testing.assert_allclose(scene.materials[0].albedo, (0.7, 0.7, 0.7))
+
+
+def test_a_material_animated_through_pointers(tmp_path):
+    # The floor's base colour turns red over 1 s; a panel's emission switches on at 0.5 s (factor
+    # fixed, strength 0 -> 3): the scene has an area light, though at rest it emits nothing
+    b = basic_builder(light=False)
+    panel = b.add_material("panel", (0.5, 0.5, 0.5), emissive=(1.0, 0.5, 0.5), emissive_strength=0.0)
+    b.add_node("panel", b.add_mesh("panel", CUBE, CUBE_FACES, material=panel), translation=(0, 2, 0))
+    b.add_pointer_animation("paint", "/materials/0/pbrMetallicRoughness/baseColorFactor", [0, 1],
+                            [[0.7, 0.7, 0.7, 1], [0.7, 0.0, 0.0, 1]])
+    b.add_pointer_animation("switch", f"/materials/{panel}/extensions/KHR_materials_emissive_strength/emissiveStrength",
+                            [0, 0.5], [0.0, 3.0], "STEP")
+    scene = read_scene(b.write(tmp_path / "paint.glb"))
+    assert not scene.materials[panel].is_emissive and scene.has_area_lights and not scene.default_lights
+    dark, lit = scene.pose(0.25), scene.pose(0.75)
+    np.testing.assert_allclose(dark.materials[0].albedo, (0.7, 0.525, 0.525))
+    np.testing.assert_allclose(lit.materials[0].albedo, (0.7, 0.175, 0.175))
+    assert len(dark.emissive_triangles) == 0 and len(lit.emissive_triangles) == len(CUBE_FACES) // 3
+    np.testing.assert_allclose(lit.materials[panel].emission, (3.0, 1.5, 1.5))
+    assert dark.state_key != lit.state_key and sorted(scene.material_channels) == [0, panel]
 
 
 def test_a_node_pointer_is_the_core_channel(tmp_path):
@@ -260,6 +279,26 @@ def test_the_photons_of_a_brighter_lamp_carry_its_power(tmp_path):
     dim, bright = (trace_batch(scene.pose(t), elements, PhotonRange(1, 0, 4000), PhotonConfig()) for t in (0.0, 0.25))
     assert np.array_equal(dim.key, bright.key) and len(dim.key) > 200  # the floor catches about 7 %
     np.testing.assert_allclose(bright.energy, dim.energy * 1.75, rtol=1e-6)
+
+
+def test_a_cubic_intensity_may_have_falling_tangents_and_is_clamped_at_zero(tmp_path):
+    # keys 10 and 0, tangents -40 (in, value, out per key): the curve dips below 0 before the end
+    b = basic_builder()
+    b.add_pointer_animation("fade", LAMP + "/intensity", [0, 1], [[0.0], [10.0], [-40.0], [-40.0], [0.0], [0.0]],
+                            "CUBICSPLINE")
+    scene = read_scene(b.write(tmp_path / "fade.glb"))
+    values = [scene.pose(t).lights[0].radiant[0] for t in np.linspace(0, 1, 21)]
+    assert values[0] == 10.0 and values[-1] == 0.0 and min(values) == 0.0 and 0 < values[2] < 10
+
+
+def test_a_lamp_switched_off_traces_photons_that_carry_nothing(tmp_path):
+    b = basic_builder()
+    b.add_pointer_animation("off", LAMP + "/intensity", [0, 1], [10.0, 0.0], "STEP")
+    scene = read_scene(b.write(tmp_path / "off.glb"))
+    elements = ElementMesh.build(scene)
+    on, off = (trace_batch(scene.pose(t), elements, PhotonRange(1, 0, 4000), PhotonConfig()) for t in (0.0, 1.0))
+    assert len(on.key) > 200 and on.photons_emitted == 4000
+    assert len(off.key) == 0 and off.photons_emitted == 4000 and off.stats["records"] == 0
 
 
 @pytest.mark.parametrize("extra, match", [
