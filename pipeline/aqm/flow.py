@@ -13,6 +13,8 @@ pixels that see nothing (sky), which are warped as directions.
 """
 from __future__ import annotations
 
+from typing import Union
+
 import numpy as np
 import numpy.typing as npt
 
@@ -70,23 +72,28 @@ def project(points: np.ndarray, shape: tuple[int, int], yfov: float) -> np.ndarr
 
 
 def warp_displacement(depth: npt.ArrayLike, world_to_camera: npt.ArrayLike, other_world_to_camera: npt.ArrayLike,
-                      yfov: float) -> np.ndarray:
-    """Displacement (H, W, 2) in pixels of each pixel when seen by the other camera; NaN if behind it."""
+                      yfov: float, other_yfov: float | None = None) -> np.ndarray:
+    """Displacement (H, W, 2) in pixels of each pixel when seen by the other camera (its field of
+    view ``other_yfov``, default ``yfov``: a zoom moves pixels too); NaN if behind it."""
     d = _check_depth(depth)
     cam = _check_camera(world_to_camera, "world_to_camera")
     other = _check_camera(other_world_to_camera, "other_world_to_camera")
     pts = unproject(d, yfov)
     warp = other @ np.linalg.inv(cam)  # camera f -> world -> camera g
     moved = pts @ warp.T
-    return project(moved, d.shape, yfov) - project(pts, d.shape, yfov)
+    return project(moved, d.shape, yfov if other_yfov is None else other_yfov) - project(pts, d.shape, yfov)
+
+
+Neighbour = Union[npt.ArrayLike, tuple[npt.ArrayLike, float]]
 
 
 def image_velocity(depth: npt.ArrayLike, world_to_camera: npt.ArrayLike, *, yfov: float, fps: float, ppd: float,
-                   previous: npt.ArrayLike | None = None, following: npt.ArrayLike | None = None) -> np.ndarray:
+                   previous: Neighbour | None = None, following: Neighbour | None = None) -> np.ndarray:
     """Image velocity (H, W, 2) in deg/s (x right, y down) of frame f from its neighbours' cameras.
 
-    ``previous``/``following`` are the world-to-camera matrices of frames f-1 and f+1; with both the
-    velocity is the central difference, with one a one-sided difference. ``ppd`` is pixels per degree
+    ``previous``/``following`` are the world-to-camera matrices of frames f-1 and f+1, or (matrix,
+    yfov) pairs where a neighbour's field of view differs (a zoom); with both the velocity is the
+    central difference, with one a one-sided difference. ``ppd`` is pixels per degree
     of the depth image as displayed (ViewingConditions.ppd). A pixel that falls behind a neighbour's
     camera uses the other neighbour; behind both, it gets 0 deg/s (fully visible: the conservative
     choice for a stopping criterion).
@@ -97,14 +104,21 @@ def image_velocity(depth: npt.ArrayLike, world_to_camera: npt.ArrayLike, *, yfov
         raise LoomError(f"fps and ppd must be positive, got {fps} and {ppd}", field="flow")
     steps = []
     if previous is not None:
-        steps.append(-warp_displacement(depth, world_to_camera, previous, yfov))
+        steps.append(-warp_displacement(depth, world_to_camera, *_view(previous, yfov)))
     if following is not None:
-        steps.append(warp_displacement(depth, world_to_camera, following, yfov))
+        steps.append(warp_displacement(depth, world_to_camera, *_view(following, yfov)))
     stack = np.stack(steps)
     valid = np.isfinite(stack).all(axis=-1, keepdims=True)
     count = valid.sum(axis=0)
     per_frame = np.where(valid, stack, 0.0).sum(axis=0) / np.maximum(count, 1)
     return pixels_per_frame_to_deg_per_s(per_frame, fps, ppd)
+
+
+def _view(neighbour: Neighbour, yfov: float) -> tuple[npt.ArrayLike, float, float]:
+    """(its world-to-camera matrix, this frame's yfov, its yfov) of a neighbour as image_velocity takes it."""
+    if isinstance(neighbour, tuple):
+        return neighbour[0], yfov, float(neighbour[1])
+    return neighbour, yfov, yfov
 
 
 def pixels_per_frame_to_deg_per_s(flow: np.ndarray, fps: float, ppd: float) -> np.ndarray:

@@ -69,11 +69,11 @@ def camera_flow(scene: Scene, frame: int, width: int, height: int,
     neighbours = {}
     for name, g in (("previous", frame - 1), ("following", frame + 1)):
         if 1 <= g <= scene.timeline.frames:
-            neighbours[name] = scene.pose_frame(g).camera.world_to_camera
-    here = cam.world_to_camera
-    if not neighbours or all(np.allclose(m, here, rtol=0, atol=1e-9) for m in neighbours.values()):
+            other = scene.pose_frame(g).camera
+            neighbours[name] = (other.world_to_camera, other.definition.yfov)
+    here, yfov = cam.world_to_camera, cam.definition.yfov
+    if not neighbours or all(np.allclose(m, here, rtol=0, atol=1e-9) and fov == yfov for m, fov in neighbours.values()):
         return None
-    yfov = cam.definition.yfov
     f = 0.5 * height / np.tan(0.5 * yfov)
     x = (np.arange(width) + 0.5 - 0.5 * width) / f
     y = -(np.arange(height) + 0.5 - 0.5 * height) / f

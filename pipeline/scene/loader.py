@@ -136,6 +136,7 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
         path=doc.path, document=doc, nodes=nodes, order=order, instances=instances,
         materials=materials, light_defs=light_defs, cameras=cameras, channels=_by_target(channels, "node"),
         light_channels=_by_target(channels, "light"), material_channels=animated_materials,
+        camera_channels=_by_target(channels, "camera"),
         timeline=Timeline(fps=fps, frames=int(n_frames)), camera_node=camera_node,
         element_size=float(element_size or 0.0), dropped_triangles=dropped, warnings=warnings, notices=notices,
         animations_played=tuple(played), animations_left_out=tuple(left_out),
@@ -585,10 +586,11 @@ def _animation_name(anim, index: int) -> str:
 
 
 # What KHR_animation_pointer channels animate here (the others keep the file's values)
-ANIMATED_POINTERS = ("node translation, rotation, scale and morph weights, light colour and intensity, and "
-                     "material base colour and emission")
+ANIMATED_POINTERS = ("node translation, rotation, scale and morph weights, light colour and intensity, "
+                     "material base colour and emission, and a perspective camera's field of view")
 _NODE_POINTER = re.compile(r"/nodes/(\d+)/(translation|rotation|scale|weights)")
 _LIGHT_POINTER = re.compile(r"/extensions/KHR_lights_punctual/lights/(\d+)/(intensity|color)")
+_CAMERA_POINTER = re.compile(r"/cameras/(\d+)/perspective/yfov")
 _MATERIAL_POINTER = re.compile(r"/materials/(\d+)/(" + "|".join(map(re.escape, ANIMATED_PROPERTIES)) + ")")
 
 
@@ -596,7 +598,8 @@ def _pointer_target(doc, target, f: str, lights: int, unsupported: set[str]) -> 
     """The target of a KHR_animation_pointer channel: ("node", node, path) for a node's TRS or
     weights (the core targets written as pointers), ("light", light, "intensity" | "color") for a
     punctual light, ("material", material, name) for a material's base colour, emissive factor or
-    strength (materials.ANIMATED_PROPERTIES); None for any other pointer, whose property keeps
+    strength (materials.ANIMATED_PROPERTIES), ("camera", camera, "yfov") for a perspective
+    camera's field of view; None for any other pointer, whose property keeps
     the file's value (its pattern added to ``unsupported``)."""
     pointer = ((target.extensions or {}).get("KHR_animation_pointer") or {}).get("pointer")
     where = f + ".target.extensions.KHR_animation_pointer.pointer"
@@ -610,6 +613,11 @@ def _pointer_target(doc, target, f: str, lights: int, unsupported: set[str]) -> 
         if not 0 <= int(light.group(1)) < lights:
             raise doc.error(f"{pointer} points to missing light {light.group(1)}", where)
         return "light", int(light.group(1)), light.group(2)
+    camera = _CAMERA_POINTER.fullmatch(pointer)
+    if camera:
+        if not 0 <= int(camera.group(1)) < len(doc.gltf.cameras):
+            raise doc.error(f"{pointer} points to missing camera {camera.group(1)}", where)
+        return "camera", int(camera.group(1)), "yfov"
     material = _MATERIAL_POINTER.fullmatch(pointer)
     if material:
         if not 0 <= int(material.group(1)) < len(doc.gltf.materials):
@@ -663,7 +671,7 @@ def _read_animation(doc, nodes, warnings, a: int, anim, unsupported: set[str]) -
                            dtype=np.float64).ravel()
         values = np.asarray(doc.accessor(s.output, sf + ".output"), dtype=np.float64)
         width = (MATERIAL_WIDTHS[prop] if kind == "material" else 4 if prop == "rotation"
-                 else 1 if prop == "intensity" else 3)
+                 else 1 if prop in ("intensity", "yfov") else 3)
         if width == 1 and values.ndim == 1:  # a scalar property: SCALAR keys
             values = values.reshape(-1, 1)
         if n_targets is not None:  # scalars, n_targets per key (x 3 for CUBICSPLINE)
@@ -684,10 +692,12 @@ def _read_animation(doc, nodes, warnings, a: int, anim, unsupported: set[str]) -
             raise doc.error(f"has {len(values)} outputs for {len(times)} keys ({interp})", sf + ".output")
         if interp == "CUBICSPLINE":
             values = values.reshape(len(times), 3, width)
-        if kind in ("light", "material") and np.any((values[:, 1] if interp == "CUBICSPLINE" else values) < 0):
+        keys = values[:, 1] if interp == "CUBICSPLINE" else values  # not the cubic tangents
+        if kind in ("light", "material") and np.any(keys < 0):
             raise doc.error(f"{kind} {prop} keys must not be negative", sf + ".output")
-        if prop == "rotation":  # keys (not cubic tangents) must be rotations
-            keys = values[:, 1] if interp == "CUBICSPLINE" else values
+        if kind == "camera" and not np.all((keys > 0) & (keys < np.pi)):
+            raise doc.error("camera yfov keys must lie in (0, pi)", sf + ".output")
+        if prop == "rotation":  # keys must be rotations
             bad = np.flatnonzero(np.linalg.norm(keys, axis=1) <= 1e-6)
             if len(bad):
                 raise doc.error(f"rotation key {int(bad[0])} is a zero quaternion", sf + ".output")

@@ -88,6 +88,7 @@ class Scene:
     light_channels: dict[int, dict[str, Sampler]] = field(default_factory=dict)  # light -> intensity | color
     # material -> baseColorFactor | emissiveFactor | emissiveStrength (materials.ANIMATED_PROPERTIES)
     material_channels: dict[int, dict[str, Sampler]] = field(default_factory=dict)
+    camera_channels: dict[int, dict[str, Sampler]] = field(default_factory=dict)  # camera -> yfov
     animations_played: tuple[str, ...] = ()
     animations_left_out: tuple[str, ...] = ()
     animation_option: str | None = None
@@ -134,7 +135,7 @@ class Scene:
     @property
     def has_animation(self) -> bool:
         """Something in the file is animated: a node, a light or a material."""
-        return bool(self.channels or self.light_channels or self.material_channels)
+        return bool(self.channels or self.light_channels or self.material_channels or self.camera_channels)
 
     def materials_at(self, t: float) -> list[Material]:
         """The materials at ``t``: base colour and emission as animated (KHR_animation_pointer)."""
@@ -237,7 +238,10 @@ class Scene:
         cam = None
         if self.camera_node is not None:
             node = self.nodes[self.camera_node]
-            cam = Camera(self.cameras[node.camera], self.camera_node, world[self.camera_node].copy())
+            defn, ch = self.cameras[node.camera], self.camera_channels.get(node.camera)
+            if ch:  # a zoom (KHR_animation_pointer): the field of view at t, kept inside (0, pi)
+                defn = replace(defn, yfov=float(np.clip(ch["yfov"].evaluate(t)[0], 1e-6, np.pi - 1e-6)))
+            cam = Camera(defn, self.camera_node, world[self.camera_node].copy())
         elif self.framing is not None:
             cam = self.framing.camera
         with np.errstate(over="ignore"):  # beyond float32 becomes Inf, which ElementMesh.build refuses
@@ -301,6 +305,8 @@ class Scene:
     def has_camera_motion(self) -> bool:
         if self.camera_node is None:
             return False
+        if self.nodes[self.camera_node].camera in self.camera_channels:  # a zoom
+            return True
         node = self.camera_node
         moving = {n for n, ch in self.channels.items() if set(ch) - {"weights"}}  # morph weights move no node
         while node is not None:

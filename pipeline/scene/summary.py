@@ -32,8 +32,13 @@ def describe(scene: Scene, element_size: float | None = None) -> list[str]:
     if scene.framing is not None:
         chosen = f"the {describe_framing(scene.framing)}"
     animated = [f"{scene.nodes[i].name} [{', '.join(sorted(scene.channels[i]))}]" for i in scene.animated_nodes]
-    animated_lights = [f"{scene.light_defs[i].name} [{', '.join(sorted(ch))}]"
-                       for i, ch in sorted(scene.light_channels.items())]
+    others = []  # KHR_animation_pointer: lights, materials, cameras
+    for label, names, channels in (("lights", [d.name for d in scene.light_defs], scene.light_channels),
+                                   ("materials", [m.name for m in scene.materials], scene.material_channels),
+                                   ("cameras", [c.name if c else "" for c in scene.cameras], scene.camera_channels)):
+        if channels:
+            others.append(f"; {len(channels)} {label}: " + ", ".join(
+                f"{names[i]} [{', '.join(sorted(ch))}]" for i, ch in sorted(channels.items())))
     meshes = {inst.mesh for inst in scene.instances}
     # Scene states of at most INFO_STATE_FRAMES evenly spread frames: `loom info` does not pose
     # every frame of a long timeline (a render does, in pipeline/run/shoot.py's plan)
@@ -60,7 +65,7 @@ def describe(scene: Scene, element_size: float | None = None) -> list[str]:
         "materials  " + ", ".join(f"{kinds[k]} {k}" for k in ("diffuse", "specular", "emissive")),
         f"cameras    {len(cams)}: " + (", ".join(cams) or "none") + f"; rendering with {chosen}",
         f"animated   {len(animated)} nodes" + (": " + ", ".join(animated) if animated else "")
-        + (f"; {len(animated_lights)} lights: " + ", ".join(animated_lights) if animated_lights else ""),
+        + "".join(others),
         "needs      " + "; ".join([
             motion,
             "specular surfaces (reflection rays)" if scene.has_specular else "no specular surfaces",

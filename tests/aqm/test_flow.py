@@ -54,6 +54,23 @@ def test_velocity_in_degrees_per_second(wall):
     np.testing.assert_allclose(v[..., 0], expected, rtol=1e-9)
 
 
+def test_a_zoom_moves_pixels_away_from_the_centre_by_the_focal_ratio(wall):
+    """A still camera zooming in: every point keeps its direction, so a pixel at (u, v) from the
+    image centre moves to (u, v) f1 / f0, at any depth."""
+    wider, narrower = YFOV, np.radians(40.0)
+    d = warp_displacement(wall, np.eye(4), np.eye(4), wider, narrower)
+    scale = focal_pixels(SHAPE[0], narrower) / focal_pixels(SHAPE[0], wider) - 1.0
+    u = np.arange(SHAPE[1]) + 0.5 - SHAPE[1] / 2
+    v = np.arange(SHAPE[0]) + 0.5 - SHAPE[0] / 2
+    np.testing.assert_allclose(d[..., 0], scale * u[None, :] * np.ones(SHAPE), rtol=1e-9, atol=1e-12)
+    np.testing.assert_allclose(d[..., 1], scale * v[:, None] * np.ones(SHAPE), rtol=1e-9, atol=1e-12)
+    fps, ppd = 30.0, 30.0  # the central difference of a steady zoom: the mean of both steps
+    vel = image_velocity(wall, np.eye(4), yfov=wider, fps=fps, ppd=ppd, previous=(np.eye(4), np.radians(50.0)),
+                         following=(np.eye(4), narrower))
+    back = warp_displacement(wall, np.eye(4), np.eye(4), wider, np.radians(50.0))
+    np.testing.assert_allclose(vel, (d - back) / 2 * fps / ppd, rtol=1e-9, atol=1e-12)
+
+
 def test_translation_leaves_points_at_infinity_still():
     sky = np.full(SHAPE, np.inf)
     d = warp_displacement(sky, np.eye(4), translation(x=-1.0, z=2.0), YFOV)

@@ -11,6 +11,7 @@ from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.animation import Sampler, slerp
 from pipeline.scene.ignored import ignored
 from pipeline.scene.scene_cache import SceneRef
+from pipeline.scene.summary import describe
 from tests.conftest import basic_builder
 
 CUBE = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], dtype=float)
@@ -262,6 +263,21 @@ def test_a_material_animated_through_pointers(tmp_path):
     assert len(dark.emissive_triangles) == 0 and len(lit.emissive_triangles) == len(CUBE_FACES) // 3
     np.testing.assert_allclose(lit.materials[panel].emission, (3.0, 1.5, 1.5))
     assert dark.state_key != lit.state_key and sorted(scene.material_channels) == [0, panel]
+
+
+def test_a_camera_zooms_through_a_pointer(tmp_path):
+    b = basic_builder()
+    cam = b.add_camera("A", 0.8, 0.1)
+    b.add_node("cam", camera=cam, translation=(0, 1, 5))
+    b.add_pointer_animation("zoom", f"/cameras/{cam}/perspective/yfov", [0, 1], [0.8, 0.4])
+    path = b.write(tmp_path / "zoom.glb")
+    scene = read_scene(path)
+    assert scene.pose(0.5).camera.definition.yfov == pytest.approx(0.6)
+    assert scene.has_camera_motion and len(set(scene.frame_state_keys)) == 1  # one photon set serves all
+    assert "animated   0 nodes; 1 cameras: A [yfov]" in describe(scene, None)
+    b.add_pointer_animation("bad", f"/cameras/{cam}/perspective/yfov", [0, 1], [0.8, 3.2])
+    with pytest.raises(SceneError, match=r"animations\[1\].samplers\[0\].output: camera yfov keys must lie in"):
+        read_scene(b.write(tmp_path / "bad.glb"))
 
 
 def test_a_node_pointer_is_the_core_channel(tmp_path):

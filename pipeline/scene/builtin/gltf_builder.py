@@ -67,6 +67,16 @@ def _floats(values: Iterable[float]) -> list[float]:
     return [float(v) for v in values]
 
 
+def _key_times(name: str, times: Sequence[float], interpolation: str) -> np.ndarray:
+    """An animation's key times as float32, checked with its interpolation."""
+    if interpolation not in _INTERPOLATIONS:
+        raise ValueError(f"animation {name!r}: interpolation must be one of {_INTERPOLATIONS}")
+    times = np.asarray(times, dtype=np.float32).reshape(-1)
+    if times.size == 0 or not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
+        raise ValueError(f"animation {name!r}: key times must be finite and strictly increasing")
+    return times
+
+
 def normalized_quaternion(q: Sequence[float]) -> list[float]:
     """An xyzw quaternion scaled to unit length, as glTF requires for rotations."""
     q = np.asarray(q, dtype=np.float64)
@@ -403,11 +413,7 @@ class GltfBuilder:
         """
         if path not in _PATH_WIDTH and path != "weights":
             raise ValueError(f"animation {name!r}: path must be one of {sorted(_PATH_WIDTH) + ['weights']}")
-        if interpolation not in _INTERPOLATIONS:
-            raise ValueError(f"animation {name!r}: interpolation must be one of {_INTERPOLATIONS}")
-        times = np.asarray(times, dtype=np.float32).reshape(-1)
-        if times.size == 0 or not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
-            raise ValueError(f"animation {name!r}: key times must be finite and strictly increasing")
+        times = _key_times(name, times, interpolation)
         rows_per_key = 3 if interpolation == "CUBICSPLINE" else 1
         width = _PATH_WIDTH[path] if path != "weights" else np.asarray(values).size // (times.size * rows_per_key)
         values = np.asarray(values, dtype=np.float64).reshape(times.size, rows_per_key, width)
@@ -417,34 +423,27 @@ class GltfBuilder:
             if np.any(norms == 0):
                 raise ValueError(f"animation {name!r}: zero rotation quaternion")
             values[:, rows_per_key // 2, :] = key_values / norms
-        input_accessor = self.add_accessor(times, with_bounds=True)
         flat = values.reshape(-1) if path == "weights" else values.reshape(-1, width)  # weights: SCALAR
-        output_accessor = self.add_accessor(flat.astype(np.float32))
-        index = self._animations_by_name.get(name)
-        if index is None:
-            self.gltf.animations.append(Animation(name=name))
-            index = self._animations_by_name[name] = len(self.gltf.animations) - 1
-        animation = self.gltf.animations[index]
-        animation.samplers.append(AnimationSampler(input=input_accessor, output=output_accessor,
-                                                   interpolation=interpolation))
-        animation.channels.append(AnimationChannel(sampler=len(animation.samplers) - 1,
-                                                   target=AnimationChannelTarget(node=int(node), path=path)))
-        return index
+        return self._add_channel(name, times, flat, interpolation, AnimationChannelTarget(node=int(node), path=path))
 
     def add_pointer_animation(self, name: str, pointer: str, times: Sequence[float], values: np.ndarray | Sequence,
                               interpolation: str = "LINEAR") -> int:
         """Animate the property at JSON ``pointer`` (KHR_animation_pointer, e.g.
         ``/extensions/KHR_lights_punctual/lights/0/intensity``): one row of ``values`` per key
         (one number for a scalar); returns the animation index."""
-        if interpolation not in _INTERPOLATIONS:
-            raise ValueError(f"animation {name!r}: interpolation must be one of {_INTERPOLATIONS}")
-        times = np.asarray(times, dtype=np.float32).reshape(-1)
-        if times.size == 0 or not np.all(np.isfinite(times)) or np.any(np.diff(times) <= 0):
-            raise ValueError(f"animation {name!r}: key times must be finite and strictly increasing")
-        values = np.asarray(values, dtype=np.float32)
+        times = _key_times(name, times, interpolation)
+        values = np.asarray(values, dtype=np.float64)
         flat = values.reshape(-1) if values.ndim == 1 or values.shape[-1] == 1 else values.reshape(-1, values.shape[-1])
+        self._use_extension(POINTER_EXTENSION)
+        target = AnimationChannelTarget(path="pointer", extensions={POINTER_EXTENSION: {"pointer": pointer}})
+        return self._add_channel(name, times, flat, interpolation, target)
+
+    def _add_channel(self, name: str, times: np.ndarray, values: np.ndarray, interpolation: str,
+                     target: AnimationChannelTarget) -> int:
+        """A sampler of ``times`` and ``values`` and its channel to ``target``, in the animation
+        ``name`` (made on first use); returns the animation index."""
         input_accessor = self.add_accessor(times, with_bounds=True)
-        output_accessor = self.add_accessor(flat)
+        output_accessor = self.add_accessor(values.astype(np.float32))
         index = self._animations_by_name.get(name)
         if index is None:
             self.gltf.animations.append(Animation(name=name))
@@ -452,9 +451,7 @@ class GltfBuilder:
         animation = self.gltf.animations[index]
         animation.samplers.append(AnimationSampler(input=input_accessor, output=output_accessor,
                                                    interpolation=interpolation))
-        target = AnimationChannelTarget(path="pointer", extensions={POINTER_EXTENSION: {"pointer": pointer}})
         animation.channels.append(AnimationChannel(sampler=len(animation.samplers) - 1, target=target))
-        self._use_extension(POINTER_EXTENSION)
         return index
 
     # -- scene ----------------------------------------------------------------------------------
