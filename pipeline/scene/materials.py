@@ -71,8 +71,6 @@ def classify(metallic: float, roughness: float) -> str:
 ANIMATED_PROPERTIES = {"pbrMetallicRoughness/baseColorFactor": ("baseColorFactor", 4),
                        "emissiveFactor": ("emissiveFactor", 3),
                        "extensions/KHR_materials_emissive_strength/emissiveStrength": ("emissiveStrength", 1)}
-
-
 MATERIAL_WIDTHS = {name: width for name, width in ANIMATED_PROPERTIES.values()}
 
 

@@ -83,12 +83,14 @@ class Scene:
     default_lights: tuple[Light, ...] = ()  # pipeline/scene/default_lights.py: the file has no light
     sky: Sky | None = None
     framing: Framing | None = None  # the auto camera (pipeline/scene/default_camera.py), no camera_node
+    # KHR_animation_pointer's channels (pipeline/scene/loader.py): light -> intensity | color;
+    # material -> baseColorFactor | emissiveFactor | emissiveStrength (materials.ANIMATED_PROPERTIES);
+    # camera -> yfov
+    light_channels: dict[int, dict[str, Sampler]] = field(default_factory=dict)
+    material_channels: dict[int, dict[str, Sampler]] = field(default_factory=dict)
+    camera_channels: dict[int, dict[str, Sampler]] = field(default_factory=dict)
     # The animations that play and those left out, alternative clips of nodes one that plays animates
     # (pipeline/scene/loader.py); the --animation that chose them, None where they are the default
-    light_channels: dict[int, dict[str, Sampler]] = field(default_factory=dict)  # light -> intensity | color
-    # material -> baseColorFactor | emissiveFactor | emissiveStrength (materials.ANIMATED_PROPERTIES)
-    material_channels: dict[int, dict[str, Sampler]] = field(default_factory=dict)
-    camera_channels: dict[int, dict[str, Sampler]] = field(default_factory=dict)  # camera -> yfov
     animations_played: tuple[str, ...] = ()
     animations_left_out: tuple[str, ...] = ()
     animation_option: str | None = None
@@ -134,7 +136,7 @@ class Scene:
 
     @property
     def has_animation(self) -> bool:
-        """Something in the file is animated: a node, a light or a material."""
+        """Something in the file is animated: a node, a light, a material or a camera's field of view."""
         return bool(self.channels or self.light_channels or self.material_channels or self.camera_channels)
 
     def materials_at(self, t: float) -> list[Material]:
