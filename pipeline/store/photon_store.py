@@ -387,7 +387,8 @@ def _check_identity(attrs: dict, expected: dict, where: str) -> None:
                         "another --out", path=where)
     for name, want in expected.items():
         if want is not None and attrs.get(name) != want and name != "keep_records":
-            raise LoomError(f"store was made with {name}={attrs.get(name)!r}, not {want!r}; "
+            what = " (another scene file, or another clip of it: --animation)" if name == "scene_hash" else ""
+            raise LoomError(f"store was made with {name}={attrs.get(name)!r}, not {want!r}{what}; "
                             "never mixed: use another store path", path=where, field=name)
     want = expected.get("keep_records")
     if want is not None and attrs.get("keep_records") != want:

@@ -51,5 +51,6 @@ def test_a_store_of_one_clip_is_not_reused_for_another(rendered, tmp_path):
     path, runs = rendered
     before = sorted(p.name for p in runs["jump"].iterdir())
     result = CliRunner().invoke(main, ["render", str(path), "--out", str(runs["jump"]), *ARGS])  # the default: idle
-    assert result.exit_code == 2 and "loom: error:" in result.output and "scene_hash" in result.output
+    assert result.exit_code == 2 and "loom: error:" in result.output
+    assert "(another scene file, or another clip of it: --animation); never mixed" in result.output
     assert sorted(p.name for p in runs["jump"].iterdir()) == before
