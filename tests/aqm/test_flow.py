@@ -8,6 +8,10 @@ from aqm_data import SIZE, monte_carlo
 from pipeline.aqm import Motion, ViewingConditions, aqm, image_velocity
 from pipeline.aqm.flow import focal_pixels, warp_displacement
 from pipeline.errors import LoomError
+from pipeline.frames.perceived import camera_flow, viewing_for
+from pipeline.frames.tonemap import ToneMapping
+from pipeline.scene import read_scene
+from tests.conftest import basic_builder
 
 YFOV = np.radians(45.0)
 SHAPE = (48, 64)
@@ -118,3 +122,25 @@ def test_camera_flow_lowers_d_aqm_of_untracked_noise(shaded_scene):
     still = aqm(a, b, viewing=viewing).d_aqm
     moving = aqm(a, b, motion=Motion(flow, pursuit_gain=0.0), viewing=viewing).d_aqm
     assert 0 < moving < still
+
+
+def test_a_rendered_zoom_flows_as_its_closed_form(tmp_path):
+    """A still camera 1.5 above the floor looking straight down, zooming 0.8 -> 0.4 rad over 1 s by a
+    KHR_animation_pointer channel: the AQM's flow of frame 16 (pipeline/frames/perceived.py, from a
+    depth image cast with Embree) is the central difference of the pure zoom's closed form, at every
+    pixel, whatever its depth."""
+    b = basic_builder()
+    cam = b.add_camera("down", 0.8, 0.1)
+    b.add_node("cam", camera=cam, translation=(1, 1.5, 1), rotation=(-np.sqrt(0.5), 0, 0, np.sqrt(0.5)))
+    b.add_pointer_animation("zoom", f"/cameras/{cam}/perspective/yfov", [0, 1], [0.8, 0.4])
+    scene = read_scene(b.write(tmp_path / "zoom.glb"))
+    h, w = 48, 64
+    flow = camera_flow(scene, 16, w, h)
+    fov = {f: scene.pose_frame(f).camera.definition.yfov for f in (15, 16, 17)}
+    ratio = {f: focal_pixels(h, fov[f]) / focal_pixels(h, fov[16]) - 1.0 for f in (15, 17)}
+    u = np.arange(w) + 0.5 - w / 2
+    v = np.arange(h) + 0.5 - h / 2
+    scale = (ratio[17] - ratio[15]) / 2 * scene.timeline.fps / viewing_for(ToneMapping()).frame_ppd((h, w))
+    np.testing.assert_allclose(flow[..., 0], scale * u[None, :] * np.ones((h, w)), rtol=1e-6, atol=1e-9)
+    np.testing.assert_allclose(flow[..., 1], scale * v[:, None] * np.ones((h, w)), rtol=1e-6, atol=1e-9)
+    assert scale > 0  # zooming in: pixels move away from the centre
