@@ -531,7 +531,7 @@ def _texcoord_warnings(materials, instances, warnings) -> None:
 
 def _read_channels(doc, nodes, warnings, first: str | None
                    ) -> tuple[dict[tuple, Sampler], list[str], list[str], list[str]]:
-    """The channels that play (("node", node, path) or ("light", light, property) -> sampler); the
+    """The channels that play ((kind, index, property) -> sampler, the kinds of _read_animation); the
     names of the animations that play, of those left out, and of those that would play by default.
 
     glTF says nothing of how animations combine. Files put things that move together in one
@@ -573,7 +573,8 @@ def _play(clips: list) -> tuple[dict[tuple, Sampler], list[str], list[str]]:
 
 
 def _by_target(channels: dict[tuple, Sampler], kind: str) -> dict[int, dict[str, Sampler]]:
-    """index -> property -> sampler of the channels whose target is a ``kind`` ("node" or "light")."""
+    """index -> property -> sampler of the channels whose target is a ``kind`` (node, light, material
+    or camera)."""
     out: dict[int, dict[str, Sampler]] = {}
     for (what, index, prop), sampler in channels.items():
         if what == kind:
@@ -588,6 +589,8 @@ def _animation_name(anim, index: int) -> str:
 # What KHR_animation_pointer channels animate here (the others keep the file's values)
 ANIMATED_POINTERS = ("node translation, rotation, scale and morph weights, light colour and intensity, "
                      "material base colour and emission, and a perspective camera's field of view")
+# Values a key of each animated property holds (a sampler's output width)
+_WIDTHS = {"translation": 3, "rotation": 4, "scale": 3, "intensity": 1, "color": 3, "yfov": 1, **MATERIAL_WIDTHS}
 _NODE_POINTER = re.compile(r"/nodes/(\d+)/(translation|rotation|scale|weights)")
 _LIGHT_POINTER = re.compile(r"/extensions/KHR_lights_punctual/lights/(\d+)/(intensity|color)")
 _CAMERA_POINTER = re.compile(r"/cameras/(\d+)/perspective/yfov")
@@ -628,8 +631,8 @@ def _pointer_target(doc, target, f: str, lights: int, unsupported: set[str]) -> 
 
 
 def _read_animation(doc, nodes, warnings, a: int, anim, unsupported: set[str]) -> dict[tuple, Sampler]:
-    """One animation's channels, checked: ("node", node, path) or ("light", light, property) ->
-    sampler. Core targets and KHR_animation_pointer's node and light pointers are read; other
+    """One animation's channels, checked: (kind, index, property) -> sampler, the kind "node" for
+    core targets and the kinds of :func:`_pointer_target` for KHR_animation_pointer's; other
     pointers are skipped and their patterns added to ``unsupported``."""
     g = doc.gltf
     lights = len((g.extensions or {}).get("KHR_lights_punctual", {}).get("lights", []))
@@ -670,8 +673,7 @@ def _read_animation(doc, nodes, warnings, a: int, anim, unsupported: set[str]) -
         times = np.asarray(doc.accessor(s.input, sf + ".input", types=("SCALAR",), components=(5126,)),
                            dtype=np.float64).ravel()
         values = np.asarray(doc.accessor(s.output, sf + ".output"), dtype=np.float64)
-        width = (MATERIAL_WIDTHS[prop] if kind == "material" else 4 if prop == "rotation"
-                 else 1 if prop in ("intensity", "yfov") else 3)
+        width = _WIDTHS.get(prop, 0)  # weights: n_targets, below
         if width == 1 and values.ndim == 1:  # a scalar property: SCALAR keys
             values = values.reshape(-1, 1)
         if n_targets is not None:  # scalars, n_targets per key (x 3 for CUBICSPLINE)

@@ -189,7 +189,7 @@ class Scene:
         """Instances with a skin or morph targets, posed per vertex."""
         return [inst for inst in self.instances if inst.deformation is not None]
 
-    def _state_key(self, world: np.ndarray, lights: list[Light], t: float) -> str:
+    def _state_key(self, world: np.ndarray, lights: list[Light], materials: list[Material], t: float) -> str:
         h = hashlib.sha256(self.document.digest.encode())  # keys of different scenes never collide
         for inst in self.instances:
             h.update(np.round(world[inst.node], _STATE_DECIMALS).tobytes())
@@ -203,10 +203,8 @@ class Scene:
                                       _STATE_DECIMALS).tobytes())
         for light in lights:
             h.update(np.round(light.state(), _STATE_DECIMALS).tobytes())
-        if self.material_channels:  # animated materials change what photons carry and what emits
-            mats = self.materials_at(t)
-            for m in sorted(self.material_channels):
-                h.update(np.round(np.r_[mats[m].albedo, mats[m].emission], _STATE_DECIMALS).tobytes())
+        for m in sorted(self.material_channels):  # animated materials change what photons carry and what emits
+            h.update(np.round(np.r_[materials[m].albedo, materials[m].emission], _STATE_DECIMALS).tobytes())
         if self.sky is not None:
             h.update(np.round(self.sky.state(), _STATE_DECIMALS).tobytes())
         return h.hexdigest()[:16]
@@ -215,7 +213,7 @@ class Scene:
         """Key equal for frames whose geometry and lights are equal (camera-only motion)."""
         t = self.timeline.time(frame)
         world = self.world_matrices(t)
-        return self._state_key(world, self._lights_at(world, t), t)
+        return self._state_key(world, self._lights_at(world, t), self.materials_at(t), t)
 
     def pose(self, t: float, *, frame: int | None = None) -> FrameState:
         """Evaluate the animation at ``t`` seconds: world-space triangles, lights and camera."""
@@ -260,7 +258,7 @@ class Scene:
             emissive_triangles=np.flatnonzero(emissive_mats[tri_mat]).astype(np.int32),
             camera=cam,
             instance_matrices=inst_mats,
-            state_key=self._state_key(world, lights, t),
+            state_key=self._state_key(world, lights, materials, t),
             corner_normals=corner_normals,
             corners=self.corner_attributes,
             sky=self.sky,
