@@ -6,14 +6,13 @@ from __future__ import annotations
 
 import numpy as np
 
+from kernels.scatter import KIND_CODE  # material kinds as the path loop codes them too
 from kernels.surface import LookupCL
 from pipeline.photons.raycast import RayCaster
 from pipeline.scene import ElementMesh, FrameState
 from pipeline.scene.shading import SurfaceShading
 
 from .light_culling import bounding_spheres, light_reach
-
-KIND = {"diffuse": 0, "mirror": 1, "glossy": 2}  # material kinds as the path loop codes them
 
 
 class ShadingTables:
@@ -24,7 +23,7 @@ class ShadingTables:
                  area_samples: int, also_maps=()):
         mats = state.materials
         tri_mat = state.triangle_material.astype(np.int64)
-        self.kind = np.array([KIND[m.kind] for m in mats], np.int8)[tri_mat]
+        self.kind = np.array([KIND_CODE[m.kind] for m in mats], np.int8)[tri_mat]
         self.albedo = np.array([m.albedo for m in mats], np.float32)[tri_mat]
         self.exponent = np.array([m.phong_exponent for m in mats], np.float32)[tri_mat]
         self.emission = np.array([m.emission for m in mats], np.float32)[tri_mat]

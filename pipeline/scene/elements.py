@@ -107,7 +107,7 @@ class ElementMesh:
         size = float(element_size if element_size is not None else scene.element_size)
         if not size > 0:
             raise SceneError(f"element_size {size} must be positive", path=str(scene.path), field="element_size")
-        state = scene.pose_frame(scene.timeline.first)
+        state = scene.pose_frame(scene.timeline.first, every_node=True)  # hidden meshes get elements too
         world = state.vertices.astype(np.float64)[state.faces]
         if not np.isfinite(world).all():  # node transforms that overflow float32 (or a NaN on the way)
             raise SceneError("the posed triangles of the first frame have NaN or Inf coordinates (a node's "

@@ -48,10 +48,11 @@ MAX_UNBACKED_ACCESSOR_BYTES = 1 << 28
 # opt-in: a scene file should not read /etc/passwd or /dev/zero because it says so).
 ALLOW_OUTSIDE_ENV = "PHOTONLOOM_ALLOW_OUTSIDE_FILES"
 
-# Extensions we implement; anything else in ``extensionsRequired`` is refused.
+# Extensions we implement; anything else in ``extensionsRequired`` is refused. A file that requires
+# KHR_animation_pointer is refused by the loader if it points at what is not animated (pointers.py).
 SUPPORTED_REQUIRED_EXTENSIONS = frozenset(
-    {"KHR_lights_punctual", "KHR_materials_emissive_strength", "KHR_mesh_quantization",
-     "KHR_texture_transform"}
+    {"KHR_animation_pointer", "KHR_lights_punctual", "KHR_materials_emissive_strength", "KHR_mesh_quantization",
+     "KHR_node_visibility", "KHR_texture_transform"}
 )
 
 

@@ -41,7 +41,7 @@ SCHEMA = {
     "scenes": _list({"nodes": _list(INDEX), "name": STR}),
     "nodes": _list({"name": STR, "children": _list(INDEX), "mesh": INDEX, "camera": INDEX, "skin": INDEX,
                     "matrix": _NUMS, "translation": _NUMS, "rotation": _NUMS, "scale": _NUMS, "weights": _NUMS,
-                    "extensions": {"KHR_lights_punctual": {"light": INDEX}}}),
+                    "extensions": {"KHR_lights_punctual": {"light": INDEX}, "KHR_node_visibility": {"visible": BOOL}}}),
     "meshes": _list({"name": STR, "weights": _NUMS,
                      "primitives": _list({"attributes": _map(INDEX), "indices": INDEX, "material": INDEX,
                                           "mode": INDEX, "targets": _list(_map(INDEX))})}),

@@ -3,19 +3,15 @@
 Skins and morph targets are rendered (pipeline/scene/animation.py; ``loom info`` lists what deforms
 on its ``deforms`` line). Extensions outside the ones
 implemented are ignored with the core glTF data they extend, or refused by the loader when the
-file lists them in ``extensionsRequired``. Only the default scene is rendered, and only
+file lists them in ``extensionsRequired``; ``KHR_animation_pointer`` pointers that are not animated
+are the loader's warnings (pipeline/scene/pointers.py). Only the default scene is rendered, and only
 perspective cameras can be chosen.
 """
 from __future__ import annotations
 
 from .gltf import SUPPORTED_REQUIRED_EXTENSIONS
-from .loader import ANIMATED_POINTERS
 from .scene import Scene
 
-# Extensions implemented in part, and what of them is left out
-_PARTLY = {
-    "KHR_animation_pointer": f"pointers to {ANIMATED_POINTERS} are animated; the others keep the file's values",
-}
 # Why an extension that is only "used" (not required) is safe to ignore, by name prefix; the
 # file's core data is what gets rendered.
 _REASONS = (
@@ -34,9 +30,6 @@ def ignored(scene: Scene) -> list[str]:
     g = scene.document.gltf
     lines = []
     for name in sorted(_extensions(g) - SUPPORTED_REQUIRED_EXTENSIONS):
-        if name in _PARTLY:
-            lines.append(f"extension {name}: in part: {_PARTLY[name]}")
-            continue
         reason = next((why for prefix, why in _REASONS if name.startswith(prefix)), "the core glTF data is used")
         lines.append(f"extension {name}: not implemented, {reason}")
     ortho = sum(1 for c in g.cameras if c.type != "perspective")

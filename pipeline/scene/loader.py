@@ -8,7 +8,6 @@ displacements, default and animated weights) are read here into each instance's
 from __future__ import annotations
 
 import logging
-import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -20,12 +19,16 @@ from .default_camera import AZIMUTH, ELEVATION, YFOV_DEG, animation_bounds, fram
 from .default_lights import default_sky, default_sun
 from .gltf import GltfDocument, read_gltf
 from .lights import light_def_from_gltf
-from .materials import ANIMATED_PROPERTIES, DEFAULT_MATERIAL, MATERIAL_WIDTHS, any_emits, material_from_gltf
+from .materials import DEFAULT_MATERIAL, any_emits, material_from_gltf
 from .nodes import MeshInstance, Node
+from .pointers import ANIMATED_POINTERS, BOOLEAN_ACCESSOR, NON_NEGATIVE_PROPERTIES, WIDTHS, pointer_target
+from .pointers import EXTENSION as POINTER
 from .scene import DEFAULT_ELEMENT_FRACTION, Scene
 from .textures import base_color_texture, emissive_texture
 from .timeline import DEFAULT_FPS, MAX_FRAMES, Timeline
 from .vertex_attributes import read_vertex_attributes
+from .visibility import EXTENSION as VISIBILITY
+from .visibility import always_hidden
 
 log = logging.getLogger(__name__)
 # What the loader chose for a file that lacks it (default camera, default lights): the CLI shows
@@ -97,15 +100,19 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
                                  float(p.zfar) if p.zfar else None,
                                  float(p.aspectRatio) if p.aspectRatio else None))
 
+    channels, played, left_out, default = _read_channels(doc, nodes, warnings, animation)
+    visibility = {i: ch["visible"] for i, ch in _by_target(channels, "visibility").items()}
+    hidden = always_hidden(nodes, order, visibility)
+    shown = [i for i in order if i not in hidden]
     skins = _read_skins(doc, order)
-    instances, dropped = _read_instances(doc, nodes, order, default_material, warnings, skins)
+    instances, dropped = _read_instances(doc, nodes, shown, default_material, warnings, skins)
     _texcoord_warnings(materials, instances, warnings)
     if not instances:
-        raise doc.error("the scene has no triangle meshes", "meshes")
-    channels, played, left_out, default = _read_channels(doc, nodes, warnings, animation)
+        raise doc.error("the scene has no triangle meshes" + (" that are ever visible (KHR_node_visibility)"
+                                                              if hidden else ""), "meshes")
     animated_materials = _by_target(channels, "material")
     emissive = any_emits(materials, g.materials, animated_materials, {inst.material for inst in instances})
-    unlit = not any(nodes[i].light is not None for i in order) and not emissive
+    unlit = not any(nodes[i].light is not None for i in shown) and not emissive
     if unlit and light == "none":
         raise doc.error("the scene has no light: no KHR_lights_punctual light on a node and no emissive material "
                         "(--light auto lights it with a default sun and sky)", "lights")
@@ -136,7 +143,8 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
         path=doc.path, document=doc, nodes=nodes, order=order, instances=instances,
         materials=materials, light_defs=light_defs, cameras=cameras, channels=_by_target(channels, "node"),
         light_channels=_by_target(channels, "light"), material_channels=animated_materials,
-        camera_channels=_by_target(channels, "camera"),
+        camera_channels=_by_target(channels, "camera"), visibility_channels=visibility,
+        hidden_nodes=frozenset(hidden),
         timeline=Timeline(fps=fps, frames=int(n_frames)), camera_node=camera_node,
         element_size=float(element_size or 0.0), dropped_triangles=dropped, warnings=warnings, notices=notices,
         animations_played=tuple(played), animations_left_out=tuple(left_out),
@@ -264,6 +272,9 @@ def _read_nodes(doc: GltfDocument) -> list[Node]:
         if n.matrix is not None and list(n.matrix) != [1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1, 0, 0, 0, 0, 1]:
             matrix = _vec(n.matrix, None, 16, doc, f + ".matrix").reshape(4, 4).T  # column-major
         light = (n.extensions or {}).get("KHR_lights_punctual", {}).get("light")
+        visible = (n.extensions or {}).get(VISIBILITY, {}).get("visible", True)
+        if not isinstance(visible, bool):
+            raise doc.error(f"visible {visible!r} must be true or false", f"{f}.extensions.{VISIBILITY}.visible")
         if n.mesh is not None and not 0 <= n.mesh < len(g.meshes):
             raise doc.error(f"refers to missing mesh {n.mesh}", f + ".mesh")
         if n.camera is not None and not 0 <= n.camera < len(g.cameras):
@@ -273,7 +284,7 @@ def _read_nodes(doc: GltfDocument) -> list[Node]:
             translation=_vec(n.translation, (0, 0, 0), 3, doc, f + ".translation"),
             rotation=_unit_quaternion(_vec(n.rotation, (0, 0, 0, 1), 4, doc, f + ".rotation"), doc, f + ".rotation"),
             scale=_vec(n.scale, (1, 1, 1), 3, doc, f + ".scale"),
-            matrix=matrix, mesh=n.mesh, camera=n.camera, light=light,
+            matrix=matrix, mesh=n.mesh, camera=n.camera, light=light, visible=visible,
         ))
     return nodes
 
@@ -544,8 +555,11 @@ def _read_channels(doc, nodes, warnings, first: str | None
     unsupported: set[str] = set()
     clips = [(_animation_name(anim, a), _read_animation(doc, nodes, warnings, a, anim, unsupported))
              for a, anim in enumerate(doc.gltf.animations)]
+    if unsupported and POINTER in (doc.gltf.extensionsRequired or ()):
+        raise doc.error(f"requires {POINTER} for {', '.join(sorted(unsupported))}, which photonloom does not "
+                        f"animate (it animates {ANIMATED_POINTERS})", "extensionsRequired")
     if unsupported:
-        warnings.append(f"KHR_animation_pointer targets not animated, kept at the file's values: "
+        warnings.append(f"{POINTER} targets not animated, kept at the file's values: "
                         f"{', '.join(sorted(unsupported))} (animated are {ANIMATED_POINTERS})")
     default = _play(clips)[1]
     if first is not None:
@@ -586,62 +600,17 @@ def _animation_name(anim, index: int) -> str:
     return anim.name if isinstance(anim.name, str) and anim.name else f"animation {index}"
 
 
-# What KHR_animation_pointer channels animate here (the others keep the file's values)
-ANIMATED_POINTERS = ("node translation, rotation, scale and morph weights, light colour and intensity, "
-                     "material base colour and emission, and a perspective camera's field of view")
-# Values a key of each animated property holds (a sampler's output width)
-_WIDTHS = {"translation": 3, "rotation": 4, "scale": 3, "intensity": 1, "color": 3, "yfov": 1, **MATERIAL_WIDTHS}
-_NODE_POINTER = re.compile(r"/nodes/(\d+)/(translation|rotation|scale|weights)")
-_LIGHT_POINTER = re.compile(r"/extensions/KHR_lights_punctual/lights/(\d+)/(intensity|color)")
-_CAMERA_POINTER = re.compile(r"/cameras/(\d+)/perspective/yfov")
-_MATERIAL_POINTER = re.compile(r"/materials/(\d+)/(" + "|".join(map(re.escape, ANIMATED_PROPERTIES)) + ")")
-
-
-def _pointer_target(doc, target, f: str, lights: int, unsupported: set[str]) -> tuple | None:
-    """The target of a KHR_animation_pointer channel: ("node", node, path) for a node's TRS or
-    weights (the core targets written as pointers), ("light", light, "intensity" | "color") for a
-    punctual light, ("material", material, name) for a material's base colour, emissive factor or
-    strength (materials.ANIMATED_PROPERTIES), ("camera", camera, "yfov") for a perspective
-    camera's field of view; None for any other pointer, whose property keeps
-    the file's value (its pattern added to ``unsupported``)."""
-    pointer = ((target.extensions or {}).get("KHR_animation_pointer") or {}).get("pointer")
-    where = f + ".target.extensions.KHR_animation_pointer.pointer"
-    if not isinstance(pointer, str) or not pointer.startswith("/"):
-        raise doc.error(f"pointer {pointer!r} must be a JSON pointer string", where)
-    node = _NODE_POINTER.fullmatch(pointer)
-    if node:
-        return "node", int(node.group(1)), node.group(2)
-    light = _LIGHT_POINTER.fullmatch(pointer)
-    if light:
-        if not 0 <= int(light.group(1)) < lights:
-            raise doc.error(f"{pointer} points to missing light {light.group(1)}", where)
-        return "light", int(light.group(1)), light.group(2)
-    camera = _CAMERA_POINTER.fullmatch(pointer)
-    if camera:
-        if not 0 <= int(camera.group(1)) < len(doc.gltf.cameras):
-            raise doc.error(f"{pointer} points to missing camera {camera.group(1)}", where)
-        return "camera", int(camera.group(1)), "yfov"
-    material = _MATERIAL_POINTER.fullmatch(pointer)
-    if material:
-        if not 0 <= int(material.group(1)) < len(doc.gltf.materials):
-            raise doc.error(f"{pointer} points to missing material {material.group(1)}", where)
-        return "material", int(material.group(1)), ANIMATED_PROPERTIES[material.group(2)][0]
-    unsupported.add(re.sub(r"/\d+(?=/|$)", "/{i}", pointer))
-    return None
-
-
 def _read_animation(doc, nodes, warnings, a: int, anim, unsupported: set[str]) -> dict[tuple, Sampler]:
     """One animation's channels, checked: (kind, index, property) -> sampler, the kind "node" for
     core targets and the kinds of :func:`_pointer_target` for KHR_animation_pointer's; other
     pointers are skipped and their patterns added to ``unsupported``."""
     g = doc.gltf
-    lights = len((g.extensions or {}).get("KHR_lights_punctual", {}).get("lights", []))
     samplers: dict[tuple, Sampler] = {}
     for c, ch in enumerate(anim.channels):
         f = f"animations[{a}].channels[{c}]"
         target = ch.target
         if target is not None and target.path == "pointer":
-            key = _pointer_target(doc, target, f, lights, unsupported)
+            key = pointer_target(doc, target, f, unsupported)
             if key is None:
                 continue
         elif target is None or target.path not in PATHS + ("weights",):
@@ -651,8 +620,9 @@ def _read_animation(doc, nodes, warnings, a: int, anim, unsupported: set[str]) -
         else:
             key = ("node", target.node, target.path)
         kind, index, prop = key
-        if kind == "node" and not 0 <= index < len(nodes):
-            raise doc.error(f"targets missing node {index}", f + ".target.node")
+        if kind in ("node", "visibility") and not 0 <= index < len(nodes):
+            raise doc.error(f"targets missing node {index}", f + ".target.node" if kind == "node" else
+                            f + ".target.extensions.KHR_animation_pointer.pointer")
         n_targets = None
         if kind == "node" and prop == "weights":  # one value per morph target of the node's mesh (§3.11)
             mesh = nodes[index].mesh
@@ -670,10 +640,13 @@ def _read_animation(doc, nodes, warnings, a: int, anim, unsupported: set[str]) -
         interp = s.interpolation or "LINEAR"
         if interp not in INTERPOLATIONS:
             raise doc.error(f"interpolation {interp!r} is not one of {', '.join(INTERPOLATIONS)}", sf)
+        if kind == "visibility" and interp != "STEP":  # a boolean (KHR_animation_pointer)
+            raise doc.error(f"interpolation {interp} cannot animate a boolean (visible): it must be STEP", sf)
         times = np.asarray(doc.accessor(s.input, sf + ".input", types=("SCALAR",), components=(5126,)),
                            dtype=np.float64).ravel()
-        values = np.asarray(doc.accessor(s.output, sf + ".output"), dtype=np.float64)
-        width = _WIDTHS.get(prop, 0)  # weights: n_targets, below
+        restrict = BOOLEAN_ACCESSOR if kind == "visibility" else {}
+        values = np.asarray(doc.accessor(s.output, sf + ".output", **restrict), dtype=np.float64)
+        width = WIDTHS.get(prop, 0)  # weights: n_targets, below
         if width == 1 and values.ndim == 1:  # a scalar property: SCALAR keys
             values = values.reshape(-1, 1)
         if n_targets is not None:  # scalars, n_targets per key (x 3 for CUBICSPLINE)
@@ -695,7 +668,7 @@ def _read_animation(doc, nodes, warnings, a: int, anim, unsupported: set[str]) -
         if interp == "CUBICSPLINE":
             values = values.reshape(len(times), 3, width)
         keys = values[:, 1] if interp == "CUBICSPLINE" else values  # not the cubic tangents
-        if kind in ("light", "material") and np.any(keys < 0):
+        if kind in ("light", "material") and prop in NON_NEGATIVE_PROPERTIES and np.any(keys < 0):
             raise doc.error(f"{kind} {prop} keys must not be negative", sf + ".output")
         if kind == "camera" and not np.all((keys > 0) & (keys < np.pi)):
             raise doc.error("camera yfov keys must lie in (0, pi)", sf + ".output")

@@ -25,9 +25,12 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .textures import transform_matrix
+
 if TYPE_CHECKING:
     import pygltflib
 
+KINDS = ("diffuse", "mirror", "glossy")
 MIRROR_ROUGHNESS = 0.2
 GLOSSY_ROUGHNESS = 0.6
 METALLIC_THRESHOLD = 0.5
@@ -52,6 +55,11 @@ class Material:
     def is_emissive(self) -> bool:
         return max(self.emission) > 0.0
 
+    def state(self) -> np.ndarray:
+        """Numbers that fully describe what the material does at one instant (for state keys)."""
+        transforms = [t.transform.ravel() for t in (self.base_color_texture, self.emissive_texture) if t is not None]
+        return np.concatenate([self.albedo, self.emission, [KINDS.index(self.kind), self.roughness], *transforms])
+
     @property
     def phong_exponent(self) -> float:
         alpha = max(self.roughness, 1e-3) ** 2
@@ -67,21 +75,43 @@ def classify(metallic: float, roughness: float) -> str:
     return "diffuse"
 
 
-# The material properties KHR_animation_pointer may animate here, by their names under /materials/i/
+# The material properties KHR_animation_pointer may animate here, by their pointers under
+# /materials/i/: (short name, values a key holds)
 ANIMATED_PROPERTIES = {"pbrMetallicRoughness/baseColorFactor": ("baseColorFactor", 4),
+                       "pbrMetallicRoughness/metallicFactor": ("metallicFactor", 1),
+                       "pbrMetallicRoughness/roughnessFactor": ("roughnessFactor", 1),
                        "emissiveFactor": ("emissiveFactor", 3),
                        "extensions/KHR_materials_emissive_strength/emissiveStrength": ("emissiveStrength", 1)}
+# A texture's KHR_texture_transform (a scrolling or turning texture), per texture slot
+TEXTURE_SLOTS = {"baseColorTexture": "pbrMetallicRoughness/baseColorTexture", "emissiveTexture": "emissiveTexture"}
+for _slot, _where in TEXTURE_SLOTS.items():
+    for _part, _width in (("offset", 2), ("rotation", 1), ("scale", 2)):
+        ANIMATED_PROPERTIES[f"{_where}/extensions/KHR_texture_transform/{_part}"] = (f"{_slot}.{_part}", _width)
 MATERIAL_WIDTHS = {name: width for name, width in ANIMATED_PROPERTIES.values()}
+# Properties whose keys must not be negative (texture offsets, rotations and scales may be)
+NON_NEGATIVE = frozenset({"baseColorFactor", "metallicFactor", "roughnessFactor", "emissiveFactor",
+                          "emissiveStrength"})
+
+
+def _at_keys(material: Material, mat: pygltflib.Material, channels: dict):
+    """``material`` at every key time of its animated ``channels``, where LINEAR and STEP values peak."""
+    times = sorted({float(t) for s in channels.values() for t in s.times})
+    return (animated_material(material, mat, {k: s.evaluate(t) for k, s in channels.items()}) for t in times)
 
 
 def may_emit(material: Material, mat: pygltflib.Material, channels: dict | None) -> bool:
     """Whether ``material`` emits at some instant: at rest, or at any key of its animated
-    ``channels`` (property name -> animation Sampler), where LINEAR and STEP values peak."""
+    ``channels`` (property name -> animation Sampler)."""
     if material.is_emissive or not channels:
         return material.is_emissive
-    times = sorted({float(t) for s in channels.values() for t in s.times})
-    return any(animated_material(material, mat, {k: s.evaluate(t) for k, s in channels.items()}).is_emissive
-               for t in times)
+    return any(m.is_emissive for m in _at_keys(material, mat, channels))
+
+
+def may_reflect(material: Material, mat: pygltflib.Material, channels: dict | None) -> bool:
+    """Whether ``material`` is a mirror or glossy at some instant (its metallic and roughness animated)."""
+    if material.is_specular or not channels:
+        return material.is_specular
+    return any(m.is_specular for m in _at_keys(material, mat, channels))
 
 
 def any_emits(materials: list[Material], gltf_materials: list, channels: dict[int, dict], used: set[int]) -> bool:
@@ -91,22 +121,56 @@ def any_emits(materials: list[Material], gltf_materials: list, channels: dict[in
                else materials[m].is_emissive for m in used)
 
 
+def texture_info(mat: pygltflib.Material, slot: str) -> pygltflib.TextureInfo | None:
+    """The file's textureInfo of a TEXTURE_SLOTS ``slot`` of ``mat``, or None."""
+    if slot == "baseColorTexture":
+        return mat.pbrMetallicRoughness.baseColorTexture if mat.pbrMetallicRoughness is not None else None
+    return mat.emissiveTexture
+
+
+def _texture_transforms(mat: pygltflib.Material) -> dict[str, np.ndarray]:
+    """The file's KHR_texture_transform offset, rotation and scale of each texture slot."""
+    out = {}
+    for slot in TEXTURE_SLOTS:
+        info = texture_info(mat, slot)
+        ext = ((getattr(info, "extensions", None) or {}).get("KHR_texture_transform") or {}) if info else {}
+        out[f"{slot}.offset"] = np.asarray(ext.get("offset", (0.0, 0.0)), float)
+        out[f"{slot}.rotation"] = np.asarray([ext.get("rotation", 0.0)], float)
+        out[f"{slot}.scale"] = np.asarray(ext.get("scale", (1.0, 1.0)), float)
+    return out
+
+
 def _factors(mat: pygltflib.Material) -> dict[str, np.ndarray]:
     """The file's values of the animatable properties (ANIMATED_PROPERTIES' short names)."""
     pbr = mat.pbrMetallicRoughness
     base = list(pbr.baseColorFactor) if pbr and pbr.baseColorFactor is not None else [1.0, 1.0, 1.0, 1.0]
+    metallic = pbr.metallicFactor if pbr and pbr.metallicFactor is not None else 1.0
+    roughness = pbr.roughnessFactor if pbr and pbr.roughnessFactor is not None else 1.0
     emissive = mat.emissiveFactor if mat.emissiveFactor is not None else [0.0, 0.0, 0.0]
     strength = (mat.extensions or {}).get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)
-    return {"baseColorFactor": np.asarray(base, float), "emissiveFactor": np.asarray(emissive, float),
-            "emissiveStrength": np.asarray([strength], float)}
+    return {"baseColorFactor": np.asarray(base, float), "metallicFactor": np.asarray([metallic], float),
+            "roughnessFactor": np.asarray([roughness], float), "emissiveFactor": np.asarray(emissive, float),
+            "emissiveStrength": np.asarray([strength], float), **_texture_transforms(mat)}
 
 
 def animated_material(material: Material, mat: pygltflib.Material, values: dict[str, np.ndarray]) -> Material:
     """``material`` (built from the file's ``mat``) with the animated ``values`` of some of its
     ANIMATED_PROPERTIES at one instant; the others keep the file's values."""
     f = {**_factors(mat), **values}
+    metallic, roughness = float(f["metallicFactor"][0]), float(np.clip(f["roughnessFactor"][0], 0.0, 1.0))
+    textures = {}
+    for slot in TEXTURE_SLOTS:
+        texture = getattr(material, _TEXTURE_FIELDS[slot])
+        if texture is not None and any(k.startswith(slot + ".") for k in values):
+            transform = transform_matrix(f[f"{slot}.offset"], float(f[f"{slot}.rotation"][0]), f[f"{slot}.scale"])
+            textures[_TEXTURE_FIELDS[slot]] = replace(texture, transform=transform)
     return replace(material, albedo=tuple(float(c) for c in np.clip(f["baseColorFactor"][:3], 0.0, 1.0)),
-                   emission=tuple(float(c) for c in np.maximum(f["emissiveFactor"] * f["emissiveStrength"][0], 0.0)))
+                   kind=classify(metallic, roughness), roughness=roughness,
+                   emission=tuple(float(c) for c in np.maximum(f["emissiveFactor"] * f["emissiveStrength"][0], 0.0)),
+                   **textures)
+
+
+_TEXTURE_FIELDS = {"baseColorTexture": "base_color_texture", "emissiveTexture": "emissive_texture"}
 
 
 def material_from_gltf(mat: pygltflib.Material, index: int) -> Material:

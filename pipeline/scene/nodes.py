@@ -23,6 +23,7 @@ class Node:
     mesh: int | None
     camera: int | None
     light: int | None
+    visible: bool = True  # KHR_node_visibility's ``visible`` as the file gives it (pipeline/scene/visibility.py)
 
 
 @dataclass(frozen=True)

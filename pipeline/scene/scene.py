@@ -23,11 +23,12 @@ from .animation import Sampler, joint_matrices, pose_vertices, trs_matrix
 from .camera import AUTO, Camera, CameraDef, Framing
 from .gltf import GltfDocument
 from .lights import Light, LightDef
-from .materials import Material, animated_material, any_emits
+from .materials import Material, animated_material, any_emits, may_reflect
 from .nodes import MeshInstance, Node
 from .shading import CornerAttributes, corner_attributes, world_corner_normals
 from .sky import Sky
 from .timeline import Timeline
+from .visibility import visible_nodes
 
 log = logging.getLogger(__name__)
 
@@ -83,12 +84,16 @@ class Scene:
     default_lights: tuple[Light, ...] = ()  # pipeline/scene/default_lights.py: the file has no light
     sky: Sky | None = None
     framing: Framing | None = None  # the auto camera (pipeline/scene/default_camera.py), no camera_node
-    # KHR_animation_pointer's channels (pipeline/scene/loader.py): light -> intensity | color;
-    # material -> baseColorFactor | emissiveFactor | emissiveStrength (materials.ANIMATED_PROPERTIES);
+    # KHR_animation_pointer's channels (pipeline/scene/pointers.py): light -> intensity | color | range |
+    # innerConeAngle | outerConeAngle; material -> the short names of materials.ANIMATED_PROPERTIES;
     # camera -> yfov
     light_channels: dict[int, dict[str, Sampler]] = field(default_factory=dict)
     material_channels: dict[int, dict[str, Sampler]] = field(default_factory=dict)
     camera_channels: dict[int, dict[str, Sampler]] = field(default_factory=dict)
+    # node -> its animated KHR_node_visibility ``visible`` (pipeline/scene/visibility.py)
+    visibility_channels: dict[int, Sampler] = field(default_factory=dict)
+    # Nodes hidden at every instant (KHR_node_visibility): their meshes are not loaded, their lights never shine
+    hidden_nodes: frozenset[int] = frozenset()
     # The animations that play and those left out, alternative clips of nodes one that plays animates
     # (pipeline/scene/loader.py); the --animation that chose them, None where they are the default
     animations_played: tuple[str, ...] = ()
@@ -125,19 +130,27 @@ class Scene:
         return world
 
     def light_def(self, light: int, t: float) -> LightDef:
-        """Light ``light`` of the file at ``t``: its colour and intensity as animated
-        (KHR_animation_pointer), clamped at 0 where a cubic spline overshoots."""
+        """Light ``light`` of the file at ``t``: its colour, intensity, range and spot cones as
+        animated (KHR_animation_pointer), clamped at 0 where a cubic spline overshoots, the outer
+        cone within (0, pi/2] and the inner one below it."""
         d, ch = self.light_defs[light], self.light_channels.get(light)
         if not ch:
             return d
-        color = tuple(float(c) for c in np.maximum(ch["color"].evaluate(t), 0.0)) if "color" in ch else d.color
-        intensity = max(float(ch["intensity"].evaluate(t)[0]), 0.0) if "intensity" in ch else d.intensity
-        return replace(d, color=color, intensity=intensity)
+        value = {name: s.evaluate(t) for name, s in ch.items()}
+        color = tuple(float(c) for c in np.maximum(value["color"], 0.0)) if "color" in ch else d.color
+        intensity = max(float(value["intensity"][0]), 0.0) if "intensity" in ch else d.intensity
+        rng = max(float(value["range"][0]), 1e-9) if "range" in ch else d.range
+        outer = float(np.clip(value["outerConeAngle"][0], 1e-6, np.pi / 2)) if "outerConeAngle" in ch else d.outer_cone
+        inner = float(value["innerConeAngle"][0]) if "innerConeAngle" in ch else d.inner_cone
+        return replace(d, color=color, intensity=intensity, range=rng, outer_cone=outer,
+                       inner_cone=float(np.clip(inner, 0.0, outer * (1 - 1e-6))))
 
     @property
     def has_animation(self) -> bool:
-        """Something in the file is animated: a node, a light, a material or a camera's field of view."""
-        return bool(self.channels or self.light_channels or self.material_channels or self.camera_channels)
+        """Something in the file is animated: a node, its visibility, a light, a material or a camera's
+        field of view."""
+        return bool(self.channels or self.light_channels or self.material_channels or self.camera_channels
+                    or self.visibility_channels)
 
     def materials_at(self, t: float) -> list[Material]:
         """The materials at ``t``: base colour and emission as animated (KHR_animation_pointer)."""
@@ -149,11 +162,15 @@ class Scene:
                                         {k: s.evaluate(t) for k, s in ch.items()})
         return mats
 
-    def _lights_at(self, world: np.ndarray, t: float) -> list[Light]:
+    def visible_nodes(self, t: float) -> np.ndarray:
+        """(n_nodes,) bool: the nodes shown at ``t`` (KHR_node_visibility, pipeline/scene/visibility.py)."""
+        return visible_nodes(self.nodes, self.order, self.visibility_channels, t)
+
+    def _lights_at(self, world: np.ndarray, t: float, shown: np.ndarray) -> list[Light]:
         lights = []
         for i in self.order:
             node = self.nodes[i]
-            if node.light is None:
+            if node.light is None or not shown[i]:
                 continue
             m = world[i]
             d = -m[:3, 2]
@@ -189,8 +206,11 @@ class Scene:
         """Instances with a skin or morph targets, posed per vertex."""
         return [inst for inst in self.instances if inst.deformation is not None]
 
-    def _state_key(self, world: np.ndarray, lights: list[Light], materials: list[Material], t: float) -> str:
+    def _state_key(self, world: np.ndarray, lights: list[Light], materials: list[Material], t: float,
+                   shown: np.ndarray) -> str:
         h = hashlib.sha256(self.document.digest.encode())  # keys of different scenes never collide
+        if self.visibility_channels:  # a mesh shown or hidden is geometry too
+            h.update(np.packbits(shown).tobytes())
         for inst in self.instances:
             h.update(np.round(world[inst.node], _STATE_DECIMALS).tobytes())
             if inst.deformation is not None:  # a skin's or a morph's pose is geometry too
@@ -203,8 +223,11 @@ class Scene:
                                       _STATE_DECIMALS).tobytes())
         for light in lights:
             h.update(np.round(light.state(), _STATE_DECIMALS).tobytes())
+            if light.node >= 0 and self.nodes[light.node].light in self.light_channels:  # animated cones, range
+                d = light.definition
+                h.update(np.round([d.inner_cone, d.outer_cone, d.range or 0.0], _STATE_DECIMALS).tobytes())
         for m in sorted(self.material_channels):  # animated materials change what photons carry and what emits
-            h.update(np.round(np.r_[materials[m].albedo, materials[m].emission], _STATE_DECIMALS).tobytes())
+            h.update(np.round(materials[m].state(), _STATE_DECIMALS).tobytes())
         if self.sky is not None:
             h.update(np.round(self.sky.state(), _STATE_DECIMALS).tobytes())
         return h.hexdigest()[:16]
@@ -213,12 +236,16 @@ class Scene:
         """Key equal for frames whose geometry and lights are equal (camera-only motion)."""
         t = self.timeline.time(frame)
         world = self.world_matrices(t)
-        return self._state_key(world, self._lights_at(world, t), self.materials_at(t), t)
+        shown = self.visible_nodes(t)
+        return self._state_key(world, self._lights_at(world, t, shown), self.materials_at(t), t, shown)
 
-    def pose(self, t: float, *, frame: int | None = None) -> FrameState:
-        """Evaluate the animation at ``t`` seconds: world-space triangles, lights and camera."""
+    def pose(self, t: float, *, frame: int | None = None, every_node: bool = False) -> FrameState:
+        """Evaluate the animation at ``t`` seconds: world-space triangles, lights and camera. A
+        hidden node's meshes collapse to its origin (zero area: no ray meets them) and its lights go
+        out, unless ``every_node`` (the element mesh splits every triangle as it stands)."""
         world = self.world_matrices(t)
-        lights = self._lights_at(world, t)
+        shown = np.ones(len(self.nodes), bool) if every_node else self.visible_nodes(t)
+        lights = self._lights_at(world, t, shown)
         inst_mats = np.stack([world[inst.node] for inst in self.instances])
         verts = [(inst.vertices @ m[:3, :3].T + m[:3, 3]) for inst, m in zip(self.instances, inst_mats)]
         corner_normals = world_corner_normals(self.instances, inst_mats)
@@ -227,6 +254,9 @@ class Scene:
             verts[inst.index], normals = self.deformed_vertices(inst, world, t)
             if normals is not None and corner_normals is not None:
                 corner_normals[first_face[inst.index]:first_face[inst.index + 1]] = normals[inst.faces]
+        for inst in self.instances:
+            if not shown[inst.node]:
+                verts[inst.index] = np.broadcast_to(world[inst.node][:3, 3], verts[inst.index].shape)
         offsets = np.cumsum([0] + [len(v) for v in verts])
         faces = np.concatenate([inst.faces + off for inst, off in zip(self.instances, offsets)])
         tri_inst = np.concatenate(
@@ -258,16 +288,16 @@ class Scene:
             emissive_triangles=np.flatnonzero(emissive_mats[tri_mat]).astype(np.int32),
             camera=cam,
             instance_matrices=inst_mats,
-            state_key=self._state_key(world, lights, materials, t),
+            state_key=self._state_key(world, lights, materials, t, shown),
             corner_normals=corner_normals,
             corners=self.corner_attributes,
             sky=self.sky,
             deformed_instances=tuple(inst.index for inst in self.deforming),
         )
 
-    def pose_frame(self, frame: int) -> FrameState:
+    def pose_frame(self, frame: int, *, every_node: bool = False) -> FrameState:
         """:meth:`pose` at a frame number of the timeline."""
-        return self.pose(self.timeline.time(frame), frame=frame)
+        return self.pose(self.timeline.time(frame), frame=frame, every_node=every_node)
 
     # --- summaries ------------------------------------------------------------------------------
 
@@ -289,7 +319,8 @@ class Scene:
 
     @property
     def animated_nodes(self) -> list[int]:
-        return sorted(self.channels)
+        """Nodes whose transform, morph weights or visibility is animated."""
+        return sorted(set(self.channels) | set(self.visibility_channels))
 
     @cached_property
     def frame_state_keys(self) -> list[str]:
@@ -317,7 +348,11 @@ class Scene:
 
     @property
     def has_specular(self) -> bool:
-        return any(self.materials[inst.material].is_specular for inst in self.instances)
+        """Some surface is a mirror or glossy at some instant (reflection rays are needed)."""
+        gltf_materials = self.document.gltf.materials
+        return any(may_reflect(self.materials[m], gltf_materials[m], self.material_channels.get(m))
+                   if m < len(gltf_materials) else self.materials[m].is_specular
+                   for m in {inst.material for inst in self.instances})
 
     @property
     def has_area_lights(self) -> bool:

@@ -24,14 +24,16 @@ def describe(scene: Scene, element_size: float | None = None) -> list[str]:
         mat = scene.materials[m]
         kinds["emissive" if mat.is_emissive else ("specular" if mat.is_specular else "diffuse")] += 1
     light_kinds = Counter(scene.light_defs[scene.nodes[i].light].kind
-                          for i in scene.order if scene.nodes[i].light is not None)
+                          for i in scene.order if scene.nodes[i].light is not None and i not in scene.hidden_nodes)
+    hidden = sum(1 for i in scene.hidden_nodes if scene.nodes[i].mesh is not None or scene.nodes[i].light is not None)
     n_area = sum(len(i.faces) for i in scene.instances if scene.materials[i.material].is_emissive)
     cams = [f"{scene.cameras[scene.nodes[i].camera].name} (node {scene.nodes[i].name})"
             for i in scene.order if scene.nodes[i].camera is not None and scene.cameras[scene.nodes[i].camera]]
     chosen = scene.camera_name or "none"
     if scene.framing is not None:
         chosen = f"the {describe_framing(scene.framing)}"
-    animated = [f"{scene.nodes[i].name} [{', '.join(sorted(scene.channels[i]))}]" for i in scene.animated_nodes]
+    animated = [f"{scene.nodes[i].name} [{', '.join(sorted(scene.channels.get(i, {})) + visible)}]"
+                for i in scene.animated_nodes for visible in [["visible"] if i in scene.visibility_channels else []]]
     others = []  # KHR_animation_pointer: lights, materials, cameras
     for label, names, channels in (("lights", [d.name for d in scene.light_defs], scene.light_channels),
                                    ("materials", [m.name for m in scene.materials], scene.material_channels),
@@ -56,7 +58,9 @@ def describe(scene: Scene, element_size: float | None = None) -> list[str]:
         f"scene      {scene.path}  (hash {scene.scene_hash})",
         f"frames     {tl.frames} at {tl.fps:g} fps, {tl.duration:.3f} s (frames {tl.first}-{tl.last})",
         f"meshes     {len(meshes)} meshes, {len(scene.instances)} instances, {scene.n_triangles} triangles"
-        + (f" ({scene.dropped_triangles} zero-area dropped)" if scene.dropped_triangles else ""),
+        + (f" ({scene.dropped_triangles} zero-area dropped)" if scene.dropped_triangles else "")
+        + (f"; {hidden} node(s) with meshes or lights hidden throughout (KHR_node_visibility), left out"
+           if hidden else ""),
         f"elements   {elements.n_elements} elements, {elements.n_vertices} vertices "
         f"at element size {elements.element_size:g}",
         "lights     " + (", ".join(f"{n} {k}" for k, n in sorted(light_kinds.items())) or "no punctual lights")

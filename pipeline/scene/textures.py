@@ -20,6 +20,7 @@ import base64
 import math
 import os
 import tempfile
+from collections.abc import Sequence
 from dataclasses import dataclass, field
 from urllib.parse import unquote
 
@@ -70,6 +71,13 @@ def texture_transform(ext: dict, where: str, doc: GltfDocument) -> np.ndarray:
         raise doc.error("offset and scale must be 2 numbers, rotation a number", where) from None
     if not all(math.isfinite(x) for x in (ox, oy, sx, sy, r)):
         raise doc.error("offset, rotation and scale must be finite", where)
+    return transform_matrix((ox, oy), r, (sx, sy))
+
+
+def transform_matrix(offset: Sequence[float], rotation: float, scale: Sequence[float]) -> np.ndarray:
+    """The (2, 3) matrix T R S of KHR_texture_transform from its ``offset``, ``rotation`` (radians)
+    and ``scale`` (KHR_texture_transform's specification, its matrix)."""
+    (ox, oy), r, (sx, sy) = (float(v) for v in offset), float(rotation), (float(v) for v in scale)
     c, s = math.cos(r), math.sin(r)
     translation = np.array([[1, 0, ox], [0, 1, oy], [0, 0, 1]], float)
     rotation = np.array([[c, s, 0], [-s, c, 0], [0, 0, 1]], float)

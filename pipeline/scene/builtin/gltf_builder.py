@@ -50,6 +50,7 @@ LIGHTS_EXTENSION = "KHR_lights_punctual"
 EMISSIVE_STRENGTH_EXTENSION = "KHR_materials_emissive_strength"
 POINTER_EXTENSION = "KHR_animation_pointer"
 TEXTURE_TRANSFORM_EXTENSION = "KHR_texture_transform"
+VISIBILITY_EXTENSION = "KHR_node_visibility"
 
 TRIANGLES = 4
 ARRAY_BUFFER = 34962
@@ -366,8 +367,9 @@ class GltfBuilder:
                  rotation: Sequence[float] | None = None, scale: Sequence[float] | None = None,
                  matrix: np.ndarray | Sequence[float] | None = None, children: Sequence[int] = (),
                  camera: int | None = None, light: int | None = None, skin: int | None = None,
-                 weights: Sequence[float] | None = None) -> int:
-        """A node with either TRS (rotation an xyzw quaternion, normalised here) or a 4x4 matrix.
+                 weights: Sequence[float] | None = None, visible: bool | None = None) -> int:
+        """A node with either TRS (rotation an xyzw quaternion, normalised here) or a 4x4 matrix;
+        ``visible`` writes KHR_node_visibility's property.
 
         ``matrix`` is given in the usual row-major mathematical layout (translation in the last
         column) and written column-major as glTF wants. ``children`` must already exist.
@@ -393,6 +395,9 @@ class GltfBuilder:
             if not 0 <= light < len(self._lights):
                 raise ValueError(f"node {name!r}: light {light} does not exist")
             node.extensions[LIGHTS_EXTENSION] = {"light": int(light)}
+        if visible is not None:
+            node.extensions[VISIBILITY_EXTENSION] = {"visible": bool(visible)}
+            self._use_extension(VISIBILITY_EXTENSION)
         self.gltf.nodes.append(node)
         return len(self.gltf.nodes) - 1
 
@@ -430,9 +435,11 @@ class GltfBuilder:
                               interpolation: str = "LINEAR") -> int:
         """Animate the property at JSON ``pointer`` (KHR_animation_pointer, e.g.
         ``/extensions/KHR_lights_punctual/lights/0/intensity``): one row of ``values`` per key
-        (one number for a scalar); returns the animation index."""
+        (one number for a scalar; booleans are written as unsigned bytes, as the extension has
+        them); returns the animation index."""
         times = _key_times(name, times, interpolation)
-        values = np.asarray(values, dtype=np.float64)
+        values = np.asarray(values)
+        values = values.astype(np.uint8) if values.dtype == bool else values.astype(np.float64)
         flat = values.reshape(-1) if values.ndim == 1 or values.shape[-1] == 1 else values.reshape(-1, values.shape[-1])
         self._use_extension(POINTER_EXTENSION)
         target = AnimationChannelTarget(path="pointer", extensions={POINTER_EXTENSION: {"pointer": pointer}})
@@ -443,7 +450,7 @@ class GltfBuilder:
         """A sampler of ``times`` and ``values`` and its channel to ``target``, in the animation
         ``name`` (made on first use); returns the animation index."""
         input_accessor = self.add_accessor(times, with_bounds=True)
-        output_accessor = self.add_accessor(values.astype(np.float32))
+        output_accessor = self.add_accessor(values if values.dtype == np.uint8 else values.astype(np.float32))
         index = self._animations_by_name.get(name)
         if index is None:
             self.gltf.animations.append(Animation(name=name))
