@@ -61,7 +61,7 @@ def scheduler_options(f: _F) -> _F:
 @click.option("--element-size", type=float, default=None, help="Element edge bound (default: the scene's).")
 @click.option("--photon-depth", type=int, default=_PHOTON_DEPTH, show_default=True, help=_PHOTON_DEPTH_HELP)
 @click.option("--keep-records", is_flag=True, help=_KEEP_HELP)
-@click.option("--quiet", is_flag=True, help="No progress bar.")
+@click.option("--quiet", is_flag=True, help="No progress bar, no notices of the defaults chosen.")
 @click.option("--light", type=click.Choice(["auto", "none"]), default="auto", show_default=True, help=LIGHT_HELP)
 @click.option("--animation", default=None, help=ANIMATION_HELP)
 @scheduler_options
@@ -72,6 +72,8 @@ def shoot_command(scene_file, frames, photons, store_url, seed, element_size, ph
     from pipeline.run.shoot import plan, shoot
     from pipeline.scene import read_scene
 
+    if quiet:
+        _hush_notices()
     config = PhotonConfig(seed=seed, element_size=element_size, photon_depth=photon_depth)
     p = plan(read_scene(scene_file, light=light, animation=animation), frames, photons, config)
     summary = shoot(p, store_url, keep_records=keep_records, scheduler=scheduler, workers=workers,
@@ -177,7 +179,7 @@ def render_request(scene_file: str, frames: str | None, out_dir: str, resolution
 @job_options
 @click.option("--segment", type=int, default=None,
               help="Redo one segment (index from `loom segments OUT`) and only the frames that depend on it.")
-@click.option("--quiet", is_flag=True, help="No progress lines.")
+@click.option("--quiet", is_flag=True, help="No progress lines, no notices of the defaults chosen.")
 @click.option("--verbose", is_flag=True, help="Log more of what the stages do.")
 @click.option("--performance-report", type=click.Path(dir_okay=False), default=None,
               help="Write Dask's performance report of the run to this HTML file.")
@@ -191,6 +193,8 @@ def render_command(segment, quiet, verbose, performance_report, scheduler, worke
 
     if verbose:
         logging.getLogger("pipeline").setLevel(logging.INFO)
+    if quiet:
+        _hush_notices()
     report = render(render_request(**job), scheduler=scheduler, workers=workers, segment=segment,
                     echo=None if quiet else click.echo, performance_report=performance_report)
     t, out_dir = report["times_s"], job["out_dir"]
@@ -205,6 +209,12 @@ def render_command(segment, quiet, verbose, performance_report, scheduler, worke
     click.echo(f"frames: {out_dir}/beauty.####.exr, .png  video: {report['video']}  "
                f"report: {out_dir}/report.json  segments: loom segments {out_dir}")
     click.echo(f"report: {out_dir}/report.html")
+
+
+def _hush_notices() -> None:
+    """--quiet: the loader's notices of the defaults it chose are announcements too, like the
+    progress lines; its warnings and errors still print."""
+    logging.getLogger("pipeline.scene.notices").setLevel(logging.WARNING)
 
 
 @click.command("segments")

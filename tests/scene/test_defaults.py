@@ -3,6 +3,8 @@
 from __future__ import annotations
 
 import logging
+import subprocess
+import sys
 
 import numpy as np
 import pytest
@@ -137,3 +139,17 @@ def test_light_none_refuses_before_writing_anything(tmp_path, command):
     result = CliRunner().invoke(main, [command, str(path), *args, "--light", "none", "--scheduler", "synchronous"])
     assert result.exit_code == 2 and "has no light" in result.output
     assert not target.exists()
+
+
+def test_quiet_renders_announce_no_defaults(tmp_path):
+    # The loader's notices print through logging to stderr: a real process shows what a user sees
+    path = box_in_box(tmp_path / "bib.glb")
+    loom = [sys.executable, "-m", "pipeline"]
+    common = ["--frames", "1", "--resolution", "16x12", "--spp", "1", "--scheduler", "synchronous"]
+    quiet = subprocess.run([*loom, "render", str(path), "--out", str(tmp_path / "q"), *common, "--quiet"],
+                           capture_output=True, text=True)
+    loud = subprocess.run([*loom, "render", str(path), "--out", str(tmp_path / "l"), *common],
+                          capture_output=True, text=True)
+    assert quiet.returncode == 0 and loud.returncode == 0, quiet.stderr + loud.stderr
+    assert "no perspective camera" in loud.stderr and "INFO" not in quiet.stderr
+    assert "rendered 1 frames" in quiet.stdout
