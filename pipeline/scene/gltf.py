@@ -51,8 +51,8 @@ ALLOW_OUTSIDE_ENV = "PHOTONLOOM_ALLOW_OUTSIDE_FILES"
 # Extensions we implement; anything else in ``extensionsRequired`` is refused. A file that requires
 # KHR_animation_pointer is refused by the loader if it points at what is not animated (pointers.py).
 SUPPORTED_REQUIRED_EXTENSIONS = frozenset(
-    {"KHR_animation_pointer", "KHR_lights_punctual", "KHR_materials_emissive_strength", "KHR_mesh_quantization",
-     "KHR_node_visibility", "KHR_texture_transform"}
+    {"KHR_animation_pointer", "KHR_draco_mesh_compression", "KHR_lights_punctual", "KHR_materials_emissive_strength",
+     "KHR_mesh_quantization", "KHR_node_visibility", "KHR_texture_transform"}
 )
 
 
@@ -65,6 +65,8 @@ class GltfDocument:
     buffers: list[bytes]
     digest: str  # sha256 of the JSON text and every buffer: identifies the scene content
     tree: dict = field(default_factory=dict, repr=False)  # the parsed JSON, for what pygltflib drops (node.weights)
+    # accessor -> its values decoded from compressed data (pipeline/scene/draco.py), read in place of its bytes
+    decoded: dict[int, np.ndarray] = field(default_factory=dict, repr=False)
 
     def error(self, message: str, field: str | None = None) -> SceneError:
         return SceneError(message, path=str(self.path), field=field)
@@ -98,7 +100,9 @@ class GltfDocument:
         itemsize = np.dtype(dtype).itemsize
         if offset % itemsize:
             raise self.error(f"byteOffset {offset} is not a multiple of the component size {itemsize}", where)
-        if acc.bufferView is None:  # all zeros, per spec: nothing backs them, so they are capped
+        if index in self.decoded:
+            out = self.decoded[index]
+        elif acc.bufferView is None:  # all zeros, per spec: nothing backs them, so they are capped
             if count * width * itemsize > MAX_UNBACKED_ACCESSOR_BYTES:
                 raise self.error(f"count {count} claims {count * width * itemsize:,} bytes of zeros without a "
                                  f"bufferView, more than {MAX_UNBACKED_ACCESSOR_BYTES:,}", where)
@@ -107,10 +111,16 @@ class GltfDocument:
             out = self._read_view(acc.bufferView, offset, dtype, width, count, where)
         if acc.sparse is not None:
             self._substitute_sparse(acc.sparse, out, dtype, width, where + ".sparse")
-        if acc.normalized and np.issubdtype(dtype, np.integer):
+        if acc.normalized and np.issubdtype(out.dtype, np.integer):
             info = np.iinfo(dtype)
             out = np.maximum(out.astype(np.float64) / info.max, -1.0)
         return out[:, 0] if width == 1 else out
+
+    def view_bytes(self, view_index: int, where: str) -> np.ndarray:
+        """The bytes of bufferView ``view_index`` (uint8), bounds-checked like an accessor's."""
+        length = _integer(self.gltf.bufferViews[view_index].byteLength, 1, self,
+                          f"bufferViews[{view_index}].byteLength")
+        return self._read_view(view_index, 0, np.uint8, 1, length, where)[:, 0]
 
     def _substitute_sparse(self, sparse, out: np.ndarray, dtype, width: int, where: str) -> None:
         """Write a sparse accessor's values over ``out`` (count, width) at its indices (glTF 2.0

@@ -17,6 +17,7 @@ from .animation import INTERPOLATIONS, PATHS, Deformation, Sampler, Skin, normal
 from .camera import AUTO, CameraDef
 from .default_camera import AZIMUTH, ELEVATION, YFOV_DEG, animation_bounds, frame_animation, sample_frames
 from .default_lights import default_sky, default_sun
+from .draco import decode_primitives
 from .gltf import GltfDocument, read_gltf
 from .lights import light_def_from_gltf
 from .materials import DEFAULT_MATERIAL, any_emits, material_from_gltf
@@ -66,6 +67,7 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
     g = doc.gltf
     warnings: list[str] = []
     notices: list[str] = []
+    doc.decoded.update(decode_primitives(doc))  # Draco-compressed primitives, read as their accessors
     nodes = _read_nodes(doc)
     order = _reachable(doc, nodes)
 
