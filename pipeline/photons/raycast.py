@@ -39,9 +39,10 @@ class RayCaster:
         mesh_construction.TriangleMesh(self._scene, np.ascontiguousarray(state.vertices, np.float32),
                                        np.ascontiguousarray(state.faces, np.int32))
         tri = state.vertices.astype(np.float64)[state.faces]
-        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0])
+        n = np.cross(tri[:, 1] - tri[:, 0], tri[:, 2] - tri[:, 0]) * state.front_sign()[:, None]
         self.triangle_area = 0.5 * np.linalg.norm(n, axis=1)
-        # unit, counter-clockwise front face; zero for a triangle a zero scale collapsed (never hit)
+        # unit, towards the front face (counter-clockwise, clockwise where mirrored); zero for a
+        # triangle a zero scale collapsed (never hit)
         self.normals = np.divide(n, 2.0 * self.triangle_area[:, None], out=np.zeros_like(n),
                                  where=self.triangle_area[:, None] > 0)
         lo, hi = state.vertices.min(0), state.vertices.max(0)

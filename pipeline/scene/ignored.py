@@ -19,7 +19,6 @@ _REASONS = (
     ("KHR_texture_", "the core texture reference is used"),
     ("EXT_texture_", "the core texture reference is used"),
     ("EXT_meshopt_", "the uncompressed fallback data is read"),
-    ("EXT_mesh_gpu_instancing", "only the node itself is drawn, not its instances"),
     ("KHR_xmp", "metadata does not change the picture"),
 )
 

@@ -19,6 +19,8 @@ from .default_camera import AZIMUTH, ELEVATION, YFOV_DEG, animation_bounds, fram
 from .default_lights import default_sky, default_sun
 from .draco import decode_primitives
 from .gltf import GltfDocument, read_gltf
+from .instancing import EXTENSION as INSTANCING
+from .instancing import instance_transforms, place_copy
 from .lights import light_def_from_gltf
 from .materials import DEFAULT_MATERIAL, any_emits, material_from_gltf
 from .nodes import MeshInstance, Node
@@ -356,6 +358,7 @@ def _read_instances(doc, nodes, order, default_material, warnings, skins):
         if skin is not None and not 0 <= skin < len(skins):
             raise doc.error(f"refers to missing skin {skin}", f"nodes[{i}].skin")
         mesh = g.meshes[node.mesh]
+        copies = instance_transforms(doc, i)  # EXT_mesh_gpu_instancing: the mesh drawn once per copy
         for p, prim in enumerate(mesh.primitives):
             f = f"meshes[{node.mesh}].primitives[{p}]"
             mode = 4 if prim.mode is None else prim.mode
@@ -393,12 +396,24 @@ def _read_instances(doc, nodes, order, default_material, warnings, skins):
             attributes = read_vertex_attributes(doc, prim.attributes, len(verts), f)
             deformation = _read_deformation(doc, i, node.mesh, prim, f, len(verts),
                                              None if skin is None else skins[skin], warnings)
-            instances.append(MeshInstance(
-                index=len(instances), node=i, mesh=node.mesh, primitive=p,
-                name=f"{node.name}/{mesh.name or f'mesh{node.mesh}'}[{p}]",
-                vertices=verts, faces=faces[keep], material=material, source_faces=source[keep],
-                attributes=None if attributes.empty else attributes, deformation=deformation,
-            ))
+            name = f"{node.name}/{mesh.name or f'mesh{node.mesh}'}[{p}]"
+            if copies is None:
+                instances.append(MeshInstance(
+                    index=len(instances), node=i, mesh=node.mesh, primitive=p, name=name,
+                    vertices=verts, faces=faces[keep], material=material, source_faces=source[keep],
+                    attributes=None if attributes.empty else attributes, deformation=deformation,
+                ))
+                continue
+            if deformation is not None:
+                raise doc.error("a skinned or morphed mesh cannot be instanced here (its pose is per vertex)",
+                                f"nodes[{i}].extensions.{INSTANCING}")
+            for k, transform in enumerate(copies):
+                placed, placed_faces, normals = place_copy(verts, faces[keep], attributes.normals, transform)
+                instances.append(MeshInstance(
+                    index=len(instances), node=i, mesh=node.mesh, primitive=p, name=f"{name}#{k}",
+                    vertices=placed, faces=placed_faces, material=material, source_faces=source[keep],
+                    attributes=None if attributes.empty else replace(attributes, normals=normals),
+                ))
     return instances, dropped
 
 

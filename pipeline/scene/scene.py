@@ -61,6 +61,15 @@ class FrameState:
     # Instances posed per vertex (skins, morph targets): their world vertices are in ``vertices``,
     # ``instance_matrices`` does not place them (ElementMesh.vertex_positions reads them from there)
     deformed_instances: tuple[int, ...] = ()
+    # Instances whose world transform mirrors them (negative determinant; a skin's joints excepted):
+    # glTF reverses their winding (§3.7.2.1), so their front faces are the other side of their corners' order
+    mirrored_instances: tuple[int, ...] = ()
+
+    def front_sign(self) -> np.ndarray:
+        """(F,) +1, or -1 where a triangle's corner order gives its back (a mirrored instance)."""
+        sign = np.ones(len(self.instance_matrices))
+        sign[list(self.mirrored_instances)] = -1.0
+        return sign[self.triangle_instance]
 
 
 @dataclass
@@ -293,6 +302,9 @@ class Scene:
             corners=self.corner_attributes,
             sky=self.sky,
             deformed_instances=tuple(inst.index for inst in self.deforming),
+            mirrored_instances=tuple(inst.index for inst, m in zip(self.instances, inst_mats)
+                                     if np.linalg.det(m[:3, :3]) < 0
+                                     and (inst.deformation is None or inst.deformation.skin is None)),
         )
 
     def pose_frame(self, frame: int, *, every_node: bool = False) -> FrameState:
