@@ -7,7 +7,8 @@ textures are sRGB-encoded), with the sampler's wrap modes and filter and the tex
 :func:`sample` is a pure function over arrays: the photon tracer and the compositor both call it
 (through pipeline/scene/shading.py), so texture colours are the same for photons and pixels.
 
-Decisions: images are PNG or JPEG (any format OpenImageIO reads is accepted); an image embedded in a
+Decisions: images are PNG, JPEG or WebP (``EXT_texture_webp``'s image is read in place of the
+fallback; any format OpenImageIO reads is accepted); an image embedded in a
 bufferView or a data URI is written to a temporary file for OpenImageIO, which reads files only from
 Python. There are no mipmaps: minification uses the magnification filter (NEAREST or LINEAR, LINEAR
 when unset), and the compositor's samples per pixel do the averaging. Alpha is ignored (opaque
@@ -36,7 +37,9 @@ CLAMP_TO_EDGE = 33071
 MIRRORED_REPEAT = 33648
 WRAP_NAMES = {REPEAT: "repeat", CLAMP_TO_EDGE: "clamp", MIRRORED_REPEAT: "mirror"}
 _MIN_FILTERS = {NEAREST, LINEAR, 9984, 9985, 9986, 9987}  # the four mipmap modes sample level 0
-_SUFFIX = {"image/png": ".png", "image/jpeg": ".jpg"}
+_SUFFIX = {"image/png": ".png", "image/jpeg": ".jpg", "image/webp": ".webp"}
+# A texture's WebP image, read in place of its PNG or JPEG fallback where it has one
+WEBP = "EXT_texture_webp"
 
 
 @dataclass(frozen=True, eq=False)
@@ -109,9 +112,12 @@ def _texture(doc: GltfDocument, info, where: str, images: dict[int, np.ndarray])
     if index is None or not 0 <= index < len(g.textures):
         raise doc.error(f"refers to a missing texture {index}", where + ".index")
     tex = g.textures[index]
-    source = tex.source
-    if source is None or not 0 <= source < len(g.images):
-        raise doc.error(f"refers to a missing image {source} (no supported image source)", f"textures[{index}].source")
+    source, source_field = tex.source, f"textures[{index}].source"
+    webp = (tex.extensions or {}).get(WEBP)
+    if isinstance(webp, dict) and webp.get("source") is not None:  # preferred to the fallback (EXT_texture_webp)
+        source, source_field = webp["source"], f"textures[{index}].extensions.{WEBP}.source"
+    if not isinstance(source, int) or isinstance(source, bool) or not 0 <= source < len(g.images):
+        raise doc.error(f"refers to a missing image {source} (no supported image source)", source_field)
     wrap_s = wrap_t = REPEAT
     nearest = False
     if tex.sampler is not None:
@@ -211,6 +217,8 @@ def _sniff_suffix(data: bytes) -> str:
         return ".png"
     if data[:3] == b"\xff\xd8\xff":
         return ".jpg"
+    if data[:4] == b"RIFF" and data[8:12] == b"WEBP":
+        return ".webp"
     return ".img"
 
 

@@ -175,3 +175,40 @@ def test_info_reports_textures_normals_and_colours(tmp_path):
     assert "normals    1 of 2 primitives carry NORMAL (smooth shading); the rest are flat shaded" in out
     assert "colours    1 of 2 primitives carry COLOR_0" in out
     assert "samples TEXCOORD_0, which the primitive lacks" in out  # the floor has no TEXCOORD_0
+
+
+def _webp(pixels: np.ndarray, path) -> bytes:
+    import OpenImageIO as oiio
+
+    out = oiio.ImageOutput.create(str(path))
+    spec = oiio.ImageSpec(pixels.shape[1], pixels.shape[0], 3, "uint8")
+    spec.attribute("compression", "lossless")
+    out.open(str(path), spec)
+    out.write_image(pixels)
+    out.close()
+    return path.read_bytes()
+
+
+@pytest.mark.parametrize("fallback", [True, False])
+def test_a_webp_image_is_read_in_place_of_its_fallback(tmp_path, fallback):
+    """EXT_texture_webp: the texture's WebP image (green) wins over its PNG fallback (red); a file
+    that requires the extension has no fallback at all."""
+    import base64
+
+    import pygltflib
+
+    green = np.tile(np.array([30, 180, 60], np.uint8), (8, 8, 1))
+    b = GltfBuilder()
+    tex = b.add_texture(np.tile(np.array([200, 20, 20], np.uint8), (8, 8, 1)))
+    data = base64.b64encode(_webp(green, tmp_path / "green.webp")).decode()
+    b.gltf.images.append(pygltflib.Image(uri="data:image/webp;base64," + data))
+    b.gltf.textures[tex].extensions["EXT_texture_webp"] = {"source": len(b.gltf.images) - 1}
+    b.gltf.extensionsUsed.append("EXT_texture_webp")
+    if not fallback:
+        b.gltf.textures[tex].source = None
+        b.gltf.extensionsRequired = ["EXT_texture_webp"]
+    mat = b.add_material("m", (1, 1, 1), base_color_texture=tex)
+    b.add_node("floor", b.add_mesh("floor", QUAD, FACES, material=mat, texcoords={0: UV}))
+    b.add_node("lamp", light=b.add_point_light("lamp", (1, 1, 1), 1.0), translation=(1, 2, 1))
+    texture = read_scene(b.write(tmp_path / "webp.glb")).materials[mat].base_color_texture
+    np.testing.assert_allclose(texture.mean, srgb_to_linear(np.array([30, 180, 60]) / 255), atol=1e-6)
