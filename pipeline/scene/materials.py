@@ -46,6 +46,8 @@ class Material:
     base_color_texture: object = None  # pipeline.scene.textures.Texture multiplying albedo, or None
     emissive_texture: object = None  # a Texture multiplying emission (area lights), or None
     double_sided: bool = True  # glTF doubleSided; False: photons reaching the back face are absorbed
+    normal_texture: object = None  # a Texture of tangent-space normals bending the shading normal, or None
+    normal_scale: float = 1.0  # normalTexture.scale: multiplies the map's x and y
 
     @property
     def is_specular(self) -> bool:
@@ -181,7 +183,10 @@ def material_from_gltf(mat: pygltflib.Material, index: int) -> Material:
     metallic = float(pbr.metallicFactor) if pbr and pbr.metallicFactor is not None else 1.0
     roughness = float(pbr.roughnessFactor) if pbr and pbr.roughnessFactor is not None else 1.0
     emission = f["emissiveFactor"] * float(f["emissiveStrength"][0])
+    normal_scale = mat.normalTexture.scale if mat.normalTexture is not None and mat.normalTexture.scale is not None \
+        else 1.0
     return Material(
+        normal_scale=float(normal_scale),
         name=mat.name or f"material{index}",
         albedo=tuple(float(c) for c in np.clip(base[:3], 0.0, 1.0)),
         kind=classify(metallic, roughness),

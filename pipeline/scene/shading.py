@@ -7,6 +7,9 @@
   start (offsets, pipeline/photons/raycast.py) still come from the geometric normal; primitives without
   ``NORMAL`` are flat shaded, as glTF 2.0 §3.7.2.1 asks. Lambert cosines, mirror and lobe directions
   use the shading normal (kernels/scatter.py, pipeline/frames/camera_paths.py).
+* **Normal maps**: a material's ``normalTexture`` bends that normal by the texel's tangent-space
+  normal (:meth:`SurfaceShading._bent`), in a frame built from the triangle's dp/du; the file's
+  ``TANGENT`` attribute is not read. Photons and pixels bounce and shade about the bent normal.
 * **Base colour**: ``baseColorFactor`` RGB x the ``baseColorTexture`` (pipeline/scene/textures.py) at
   the hit's interpolated ``TEXCOORD_n`` x the interpolated ``COLOR_0`` (glTF 2.0 §3.9.2). The photon
   tracer takes its Russian-roulette albedo from here, so colour bleeding follows the texture; the
@@ -116,11 +119,15 @@ class SurfaceShading:
         self.emission_factor = np.array([m.emission for m in mats], np.float64)
         self.emissive_textures = {j: m.emissive_texture for j, m in enumerate(mats)
                                   if j in used and m.is_emissive and getattr(m, "emissive_texture", None) is not None}
+        self.normal_maps = {j: (m.normal_texture, m.normal_scale) for j, m in enumerate(mats)
+                            if j in used and getattr(m, "normal_texture", None) is not None}
+        self.vertices, self.faces = getattr(state, "vertices", None), getattr(state, "faces", None)
 
     @property
     def smooth(self) -> bool:
-        """True when some triangle has vertex normals."""
-        return self.corner_normals is not None
+        """True when the shading normal differs from the geometric one somewhere: some triangle has
+        vertex normals or a normal map."""
+        return self.corner_normals is not None or bool(self.normal_maps)
 
     @property
     def varies(self) -> bool:
@@ -132,19 +139,52 @@ class SurfaceShading:
         ``tri`` may hold -1 (a miss): those rows get triangle 0's normal and mean nothing."""
         t = np.maximum(np.asarray(tri), 0)
         geo = np.take(self.geometric, t, axis=0)
-        if self.corner_normals is None:
+        if not self.smooth:
             return geo
-        rows = np.flatnonzero(self.smooth_triangle[t])
-        if not len(rows):
-            return geo
-        g = geo[rows]
-        c = np.take(self.corner_normals, t[rows], axis=0).astype(np.float64)
-        n = interpolate(c, np.take(u, rows), np.take(v, rows))
-        length = np.sqrt(np.einsum("ij,ij->i", n, n))
-        ok = length > 1e-6
-        n = np.where(ok[:, None], n / np.where(ok, length, 1.0)[:, None], g)
-        geo[rows] = n * np.where(np.einsum("ij,ij->i", n, g) < 0, -1.0, 1.0)[:, None]
-        return geo
+        n = geo.copy()
+        rows = np.flatnonzero(self.smooth_triangle[t]) if self.corner_normals is not None else ()
+        if len(rows):
+            c = np.take(self.corner_normals, t[rows], axis=0).astype(np.float64)
+            smooth = interpolate(c, np.take(u, rows), np.take(v, rows))
+            length = np.sqrt(np.einsum("ij,ij->i", smooth, smooth))
+            ok = length > 1e-6
+            n[rows] = np.where(ok[:, None], smooth / np.where(ok, length, 1.0)[:, None], geo[rows])
+        if self.normal_maps:
+            n = self._bent(n, t, np.asarray(u, np.float64), np.asarray(v, np.float64))
+        return n * np.where(np.einsum("ij,ij->i", n, geo) < 0, -1.0, 1.0)[:, None]
+
+    def _bent(self, n: np.ndarray, t: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """``n`` bent by each normal-mapped material's map: the texel's tangent-space normal
+        ``(2 c - 1) x (scale, scale, 1)`` in the frame of the triangle's dp/du (its texture
+        coordinates as the texture transform maps them), made orthogonal to ``n``, the bitangent
+        ``n x t`` towards decreasing v, as glTF's +Y-up maps want (pbrt-v4's NormalMap and the Khronos
+        sample viewer build the same frame where a file gives no TANGENT). Triangles whose texture
+        coordinates span no area keep ``n``."""
+        m = self.tri_mat[t]
+        for j, (tex, scale) in self.normal_maps.items():
+            rows = np.flatnonzero(m == j)
+            corners = self.texcoords.get(tex.texcoord)
+            if not len(rows) or corners is None or self.vertices is None:
+                continue
+            tri = t[rows]
+            raw = np.take(corners, tri, axis=0).astype(np.float64)
+            uv = raw @ tex.transform[:, :2].T + tex.transform[:, 2]
+            p = self.vertices[self.faces[tri]].astype(np.float64)
+            dpdu, dpdv, ok = uv_derivatives(p, uv)
+            nn = n[rows]
+            tangent = dpdu - nn * np.einsum("ij,ij->i", nn, dpdu)[:, None]
+            length = np.linalg.norm(tangent, axis=1)
+            ok &= length > 1e-12
+            tangent = tangent / np.where(ok, length, 1.0)[:, None]
+            side = np.sign(np.einsum("ij,ij->i", np.cross(nn, tangent), -dpdv))
+            bitangent = np.cross(nn, tangent) * np.where(side == 0, 1.0, side)[:, None]
+            texel = sample(tex, interpolate(raw, u[rows], v[rows]))
+            local = (2.0 * texel - 1.0) * np.array([scale, scale, 1.0])
+            bent = local[:, :1] * tangent + local[:, 1:2] * bitangent + local[:, 2:] * nn
+            length = np.linalg.norm(bent, axis=1)
+            ok &= length > 1e-12
+            n[rows] = np.where(ok[:, None], bent / np.where(ok, length, 1.0)[:, None], nn)
+        return n
 
     def base_color(self, tri: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """(n, 3) float64 base colour at the hits (factor x texture x COLOR_0); -1 rows: triangle 0."""
@@ -213,6 +253,20 @@ def mean_base_color(material: Material) -> np.ndarray:
     factor = np.asarray(material.albedo, np.float64)
     tex = getattr(material, "base_color_texture", None)
     return factor if tex is None else factor * tex.mean
+
+
+def uv_derivatives(p: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """dp/du, dp/dv (n, 3) of triangles with corners ``p`` (n, 3, 3) and texture coordinates ``uv``
+    (n, 3, 2), and where they exist (the coordinates span an area); pbrt-v4, Triangle::
+    InteractionFromIntersection."""
+    duv02, duv12 = uv[:, 0] - uv[:, 2], uv[:, 1] - uv[:, 2]
+    dp02, dp12 = p[:, 0] - p[:, 2], p[:, 1] - p[:, 2]
+    det = duv02[:, 0] * duv12[:, 1] - duv02[:, 1] * duv12[:, 0]
+    ok = np.abs(det) > 1e-12
+    inv = np.where(ok, 1.0 / np.where(ok, det, 1.0), 0.0)[:, None]
+    dpdu = (duv12[:, 1:2] * dp02 - duv02[:, 1:2] * dp12) * inv
+    dpdv = (duv02[:, 0:1] * dp12 - duv12[:, 0:1] * dp02) * inv
+    return dpdu, dpdv, ok
 
 
 def interpolate(corners: np.ndarray, u: npt.ArrayLike, v: npt.ArrayLike) -> np.ndarray:

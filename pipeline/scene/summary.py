@@ -104,7 +104,7 @@ def deforms_line(scene: Scene) -> str:
 
 
 # Texture slots of a glTF material that photonloom does not read yet (docs/09-frames.md §4)
-_UNREAD_TEXTURES = ("normalTexture", "occlusionTexture", "metallicRoughnessTexture")
+_UNREAD_TEXTURES = ("occlusionTexture", "metallicRoughnessTexture")
 
 
 def surface_lines(scene: Scene) -> list[str]:
@@ -134,6 +134,9 @@ def surface_lines(scene: Scene) -> list[str]:
     emissive = sum(1 for m in used if scene.materials[m].emissive_texture is not None)
     if emissive:
         tex += f"; emissive textures on {emissive} material(s)"
+    bent = sum(1 for m in used if scene.materials[m].normal_texture is not None)
+    if bent:
+        tex += f"; normal maps on {bent} material(s)"
     if unread:
         tex += "; ignored (not read yet, factors used): " + ", ".join(unread)
     n = len(scene.instances)

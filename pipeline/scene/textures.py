@@ -12,7 +12,8 @@ fallback; any format OpenImageIO reads is accepted); an image embedded in a
 bufferView or a data URI is written to a temporary file for OpenImageIO, which reads files only from
 Python. There are no mipmaps: minification uses the magnification filter (NEAREST or LINEAR, LINEAR
 when unset), and the compositor's samples per pixel do the averaging. Alpha is ignored (opaque
-surfaces only). Normal, occlusion and metallic-roughness textures are not read yet.
+surfaces only). Normal textures are read as linear data (pipeline/scene/shading.py bends the
+shading normal with them); occlusion and metallic-roughness textures are not read.
 Spec: glTF 2.0 §5.26-§5.29 (textures, images, samplers); KHR_texture_transform README.
 """
 from __future__ import annotations
@@ -88,8 +89,8 @@ def transform_matrix(offset: Sequence[float], rotation: float, scale: Sequence[f
     return (translation @ rotation @ scale)[:2]
 
 
-def base_color_texture(doc: GltfDocument, material_index: int, images: dict[int, np.ndarray]) -> Texture | None:
-    """The material's ``baseColorTexture`` or None; ``images`` caches decoded images by index."""
+def base_color_texture(doc: GltfDocument, material_index: int, images: dict) -> Texture | None:
+    """The material's ``baseColorTexture`` or None; ``images`` caches decoded images by (index, linear)."""
     pbr = doc.gltf.materials[material_index].pbrMetallicRoughness
     info = pbr.baseColorTexture if pbr is not None else None
     if info is None:
@@ -97,7 +98,7 @@ def base_color_texture(doc: GltfDocument, material_index: int, images: dict[int,
     return _texture(doc, info, f"materials[{material_index}].pbrMetallicRoughness.baseColorTexture", images)
 
 
-def emissive_texture(doc: GltfDocument, material_index: int, images: dict[int, np.ndarray]) -> Texture | None:
+def emissive_texture(doc: GltfDocument, material_index: int, images: dict) -> Texture | None:
     """The material's ``emissiveTexture`` (sRGB, multiplied by ``emissiveFactor``) or None."""
     info = doc.gltf.materials[material_index].emissiveTexture
     if info is None:
@@ -105,8 +106,17 @@ def emissive_texture(doc: GltfDocument, material_index: int, images: dict[int, n
     return _texture(doc, info, f"materials[{material_index}].emissiveTexture", images)
 
 
-def _texture(doc: GltfDocument, info, where: str, images: dict[int, np.ndarray]) -> Texture:
-    """A glTF textureInfo ``info`` (at ``where``) as a :class:`Texture`, checked."""
+def normal_texture(doc: GltfDocument, material_index: int, images: dict) -> Texture | None:
+    """The material's ``normalTexture`` (tangent-space normals, linear: not sRGB) or None."""
+    info = doc.gltf.materials[material_index].normalTexture
+    if info is None:
+        return None
+    return _texture(doc, info, f"materials[{material_index}].normalTexture", images, linear=True)
+
+
+def _texture(doc: GltfDocument, info, where: str, images: dict, *, linear: bool = False) -> Texture:
+    """A glTF textureInfo ``info`` (at ``where``) as a :class:`Texture`, checked; ``linear`` for
+    data that are not colours (normal maps), which skip the sRGB decoding."""
     g = doc.gltf
     index = info.index
     if index is None or not 0 <= index < len(g.textures):
@@ -146,9 +156,9 @@ def _texture(doc: GltfDocument, info, where: str, images: dict[int, np.ndarray])
             texcoord = int(ext["texCoord"])
     if texcoord not in (0, 1):
         raise doc.error(f"TEXCOORD_{texcoord} is not supported (TEXCOORD_0 and _1 are)", where + ".texCoord")
-    if source not in images:
-        images[source] = decode_image(doc, source)
-    return Texture(images[source], source, texcoord, wrap_s, wrap_t, nearest, transform)
+    if (source, linear) not in images:
+        images[source, linear] = decode_image(doc, source, linear=linear)
+    return Texture(images[source, linear], source, texcoord, wrap_s, wrap_t, nearest, transform)
 
 
 def _image_bytes(doc: GltfDocument, index: int) -> tuple[bytes, str | None]:
@@ -185,8 +195,9 @@ def _image_bytes(doc: GltfDocument, index: int) -> tuple[bytes, str | None]:
         raise doc.error(f"missing image file {uri!r}", where + ".uri") from None
 
 
-def decode_image(doc: GltfDocument, index: int) -> np.ndarray:
-    """``images[index]`` as linear RGB float32 (H, W, 3): decoded by OpenImageIO, sRGB to linear."""
+def decode_image(doc: GltfDocument, index: int, *, linear: bool = False) -> np.ndarray:
+    """``images[index]`` as linear RGB float32 (H, W, 3): decoded by OpenImageIO, sRGB to linear
+    unless ``linear`` (the values are data, as a normal map's are)."""
     import OpenImageIO as oiio  # heavy: only where images are read or written
 
     data, suffix = _image_bytes(doc, index)
@@ -209,7 +220,8 @@ def decode_image(doc: GltfDocument, index: int) -> np.ndarray:
         raise doc.error("the image holds no pixels", where)
     channels = pixels.shape[2]
     rgb = np.repeat(pixels[:, :, :1], 3, axis=2) if channels < 3 else pixels[:, :, :3]
-    return srgb_to_linear(np.clip(rgb, 0.0, 1.0)).astype(np.float32)
+    rgb = np.clip(rgb, 0.0, 1.0)
+    return (rgb if linear else srgb_to_linear(rgb)).astype(np.float32)
 
 
 def _sniff_suffix(data: bytes) -> str:

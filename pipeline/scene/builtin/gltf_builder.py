@@ -160,12 +160,14 @@ class GltfBuilder:
                      roughness: float = 1.0, emissive: Sequence[float] = (0.0, 0.0, 0.0),
                      emissive_strength: float = 1.0, double_sided: bool | None = None,
                      base_color_texture: int | None = None, texcoord: int = 0,
-                     texture_transform: dict | None = None, emissive_texture: int | None = None) -> int:
+                     texture_transform: dict | None = None, emissive_texture: int | None = None,
+                     normal_texture: int | None = None, normal_scale: float = 1.0) -> int:
         """A metallic-roughness material; ``base_color`` is RGB or RGBA (the Lambertian albedo).
 
         ``base_color_texture`` is a texture index from :meth:`add_texture`, looked up with
         ``TEXCOORD_<texcoord>`` and an optional ``KHR_texture_transform`` (offset, rotation, scale);
-        ``emissive_texture`` multiplies the emission, looked up with the same set.
+        ``emissive_texture`` multiplies the emission, ``normal_texture`` (scaled by ``normal_scale``)
+        bends the shading normal, both looked up with the same set.
 
         Emitted radiance is ``emissive * emissive_strength``; a strength other than 1 is written as
         ``KHR_materials_emissive_strength``. ``double_sided`` defaults to True for surfaces that do
@@ -197,6 +199,9 @@ class GltfBuilder:
             material.pbrMetallicRoughness.baseColorTexture = info
         if emissive_texture is not None:
             material.emissiveTexture = pygltflib.TextureInfo(index=int(emissive_texture), texCoord=int(texcoord))
+        if normal_texture is not None:
+            material.normalTexture = pygltflib.NormalMaterialTexture(index=int(normal_texture), texCoord=int(texcoord),
+                                                                     scale=float(normal_scale))
         if emissive_strength != 1.0:
             material.extensions[EMISSIVE_STRENGTH_EXTENSION] = {"emissiveStrength": float(emissive_strength)}
             self._use_extension(EMISSIVE_STRENGTH_EXTENSION)
