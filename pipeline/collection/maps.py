@@ -99,6 +99,23 @@ def _runs(has_photons: np.ndarray) -> list[tuple[int, int]]:
     return list(zip(edges[::2].tolist(), edges[1::2].tolist()))
 
 
+def _split_at_dark(start: int, stop: int, counts: np.ndarray, counts_from: int) -> list[tuple[int, int]]:
+    """[start, stop) cut at the frames whose photons recorded no indirect light at all (a lamp
+    not yet on, nothing yet to reflect it): each such frame is a run of its own, so no window
+    pools light into it or its darkness into a lit frame. Condition (1) cannot see that step at an
+    element a lit frame's photons reach once or twice, and an almost black frame's exposure
+    would show what leaked. Rows the table does not hold count as lit (beyond any window's reach)."""
+    lo, hi = max(start, counts_from), min(stop, counts_from + counts.shape[0])
+    dark = np.zeros(stop - start, bool)
+    if hi > lo:
+        dark[lo - start:hi - start] = ~counts[lo - counts_from:hi - counts_from].any(axis=1)
+    if not dark.any():
+        return [(start, stop)]
+    runs = [(start + a, start + b) for a, b in _runs(~dark)]
+    runs += [(start + int(f), start + int(f) + 1) for f in np.flatnonzero(dark)]
+    return sorted(runs)
+
+
 def window_counts(store: PhotonStore, frames: Iterable[int] | None = None,
                   batches: npt.ArrayLike | None = None) -> np.ndarray:
     """(frames, E) hits per element that Condition (1), the step test and p_me read: the indirect
@@ -135,7 +152,8 @@ def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames: npt.Ar
                        config: CollectionConfig, *, counts_from: int = 0,
                        regions: list[np.ndarray] | None = None) -> tuple[np.ndarray, np.ndarray]:
     """(len(frames), E) back and fwd windows of the requested frame indices, per run of frames
-    with photons (a requested frame without photons is an error).
+    with photons (a requested frame without photons is an error); adaptive windows make a frame
+    that records no indirect light a run of its own (:func:`_split_at_dark`).
 
     ``counts`` holds the count-table rows ``counts_from ..`` (default the whole table); only the
     rows within :func:`window_reach` of the requested frames are read, and the windows are the
@@ -155,7 +173,10 @@ def collection_windows(counts: np.ndarray, n_emitted: np.ndarray, frames: npt.Ar
     steps = windows.mode == "adaptive" and config.step_levels > 0
     if steps and regions is None:
         raise ValueError("config.step_levels > 0 needs the element regions")
-    for start, stop in _runs(n_emitted > 0):
+    runs = _runs(n_emitted > 0)
+    if windows.mode == "adaptive":  # fixed windows pool regardless, and read no counts
+        runs = [run for start, stop in runs for run in _split_at_dark(start, stop, counts, counts_from)]
+    for start, stop in runs:
         inside = np.flatnonzero((frames >= start) & (frames < stop))
         if not len(inside):
             continue

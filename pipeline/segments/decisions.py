@@ -12,7 +12,7 @@ answers (tests/coordinator/test_segments.py); the planner (pipeline/segments/pla
   frame gets (the first and last segments compensate their missing neighbour, §5.2);
 * :func:`lighting_steps`, :func:`keyframe_off_steps` — a segment an abrupt lighting change divides
   is judged away from it, and the frames beside it are compensated as the ends are (ours,
-  docs/07-segments.md §8).
+  docs/07-segments.md §8); :func:`lit_keyframe` — a segment is judged where its light is.
 """
 from __future__ import annotations
 
@@ -81,8 +81,9 @@ def unlit_n_frame(n_frame: int, lit_elements: int, n_max: int) -> int:
     photon of them recorded indirect light either (``lit_elements`` 0), the segment has none to
     speak of: it stays on ``n_frame`` and Step 3's AQM confirms it at the fewest photons (a flat
     skinned strip under the sun: the cap, 1,280,000 photons a frame, for halves that were both
-    black). If some did, the light lies away from K, where the AQM at K cannot see it, so the
-    segment takes the cap ``n_max`` as it would without a pilot.
+    black). If some did, the planner moves K to a lit frame (:func:`lit_keyframe`) and pilots
+    there; only where that pilot too sees nothing (its few photons miss what Step 2's found) does
+    the segment take the cap ``n_max``, as it would without a pilot.
     """
     return int(n_frame) if lit_elements == 0 else int(n_max)
 
@@ -325,8 +326,9 @@ def lighting_steps(back: np.ndarray, considered: np.ndarray, frames: list[int], 
     return [f for i, f in enumerate(frames) if i > 0 and np.count_nonzero((back[i] >= 1) & mask) / n < p_thr]
 
 
-def keyframe_off_steps(place: Placement, steps: Iterable[int]) -> Placement:
-    """``place`` with K in the middle of its longest run of frames no lighting step divides.
+def keyframe_off_steps(place: Placement, steps: Iterable[int], lit: Iterable[int] | None = None) -> Placement:
+    """``place`` with K in the middle of its longest run of frames no lighting step divides, among
+    the runs that hold a frame of ``lit`` (frames with indirect light) where any does.
 
     §5.2.3 judges N_frame at K and "assumes it valid for all frames in a given segment", which
     holds where the lighting changes little over the segment (§5.2.3). A K on a step is the
@@ -340,8 +342,31 @@ def keyframe_off_steps(place: Placement, steps: Iterable[int]) -> Placement:
         return place
     bounds = [place.start, *cuts, place.end + 1]
     runs = [(a, b - 1) for a, b in zip(bounds[:-1], bounds[1:])]
-    a, b = min(runs, key=lambda r: (-(r[1] - r[0]), abs((r[0] + r[1]) // 2 - place.k), r[0]))
-    return Placement(place.start, (a + b) // 2, place.end, place.fmax)
+    lit = sorted(set(lit or ()))
+    dark = {r: not any(r[0] <= f <= r[1] for f in lit) for r in runs} if lit else dict.fromkeys(runs, False)
+    a, b = min(runs, key=lambda r: (dark[r], -(r[1] - r[0]), abs((r[0] + r[1]) // 2 - place.k), r[0]))
+    k = (a + b) // 2
+    inside = [f for f in lit if a <= f <= b]
+    if inside and k not in inside:  # the run's lit frame nearest its middle: the AQM needs light to judge
+        k = min(inside, key=lambda f: (abs(f - k), f))
+    return Placement(place.start, k, place.end, place.fmax)
+
+
+def lit_keyframe(place: Placement, lit: Iterable[int]) -> Placement | None:
+    """``place`` with K on the frame of ``lit`` nearest its K (the earlier of two), or None when
+    none of its frames is lit (ours, not the paper's).
+
+    Why: a segment whose pilot at K saw no indirect light (a lamp switched on later in it, a wall
+    that appears) would be judged at a K the AQM sees nothing at, so any N_frame passes there; it
+    took the cap instead (1,280,000 photons a frame, for a segment a lamp lights for a few frames).
+    Judged at a frame its light reaches, the segment is decided as any other: Eq. (2) starts it
+    and the AQM doubles N_frame until the halves agree there.
+    """
+    frames = [f for f in sorted(set(lit)) if place.start <= f <= place.end]
+    if not frames:
+        return None
+    k = min(frames, key=lambda f: (abs(f - place.k), f))
+    return Placement(place.start, k, place.end, place.fmax)
 
 
 def frame_photons(n_frame: int, factor: float) -> int:

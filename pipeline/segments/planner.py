@@ -44,6 +44,7 @@ from .decisions import (
     keyframe_off_steps,
     ladder_n_frame,
     lighting_steps,
+    lit_keyframe,
     needed_n_frame,
     p_me,
     photon_targets,
@@ -217,6 +218,16 @@ class SegmentPlanner:
         else:
             place, fmax_steps = fmax_loop(place.start, place.fmax, job.last, p_me_of, p_thr=cfg.p_thr,
                                           step=cfg.fmax_step, cap=cfg.fmax_cap)
+        lit_frames = [] if job.single_state else self._lit_frames(place, {**prior, **{f: n for f in place.frames}})
+        if unlit and lit_frames:  # judged where the light is (decisions.lit_keyframe), piloted there
+            moved = lit_keyframe(place, lit_frames)
+            again = self._pilot(index, moved)
+            if again["n_pilot"] is not None:
+                self.executor.progress(f"segment {index}: no indirect light at K {place.k}: K moves to frame "
+                                       f"{moved.k}, the lit frame nearest it")
+                place, pilot, unlit = moved, again, False
+                pilot["n_start"] = calibrated_start(pilot["n_pilot"], self._carried(index))
+                n = ladder_n_frame(pilot["n_start"], cfg.n_frame_min, cfg.n_frame_max)
         if unlit:
             n = unlit_n_frame(n, lit_elements[0], cfg.n_frame_max)
             pilot["no_indirect_light"] = lit_elements[0] == 0
@@ -237,7 +248,7 @@ class SegmentPlanner:
             steps = [] if job.single_state else self._lighting_steps(index, segment, prior, n_frame)
             if steps and (not judged or judged[-1].steps != steps):
                 self.executor.progress(f"segment {index}: lighting steps before frame(s) {', '.join(map(str, steps))}")
-            at = keyframe_off_steps(segment, steps)
+            at = keyframe_off_steps(segment, steps, lit_frames)
             targets = photon_targets(at, n_frame, first=job.first, last=job.last, end_factor=cfg.end_photons,
                                      steps=steps)
             self.executor.shoot(targets)
@@ -335,6 +346,11 @@ class SegmentPlanner:
                                        self.config.collection,
                                        regions=step_regions(self.elements, self.config.collection))
         return back, fwd, counts[place.start - 1:place.end].sum(axis=0) > 0
+
+    def _lit_frames(self, place: Placement, targets: dict[int, int]) -> list[int]:
+        """Frames of ``place`` whose photons (those of ``targets``) record indirect light."""
+        counts = window_counts(self.store, batches=batches_in_use(self.store, targets))[place.start - 1:place.end]
+        return [place.start + i for i in np.flatnonzero(counts.sum(axis=1) > 0).tolist()]
 
     def _p_me(self, index: int, place: Placement, targets: dict[int, int]) -> tuple[float, float, int]:
         """(p_me back, p_me forward, elements any photon of the segment lights) at K."""

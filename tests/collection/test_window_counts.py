@@ -47,3 +47,17 @@ def test_windows_follow_the_indirect_hits(tmp_path):
     assert back == (config.min_extent - 1) // 2  # the centred minimal extent only
     # Both kinds of hit stay in the store: the choice is only what the windows read
     assert store.counts(kind="direct")[:, 0].tolist() == [DIRECT[f >= CHANGE] for f in range(FRAMES)]
+
+
+def test_no_adaptive_window_crosses_a_frame_without_indirect_light():
+    # Frames 0-4 record no indirect photon (a lamp not yet on), 5-9 do, evenly: every adaptive
+    # window stays on its side; a dark frame's is itself; fixed windows pool regardless
+    counts = np.zeros((10, 3), np.uint32)
+    counts[5:] = 400
+    emitted = np.full(10, 1000.0)
+    config = CollectionConfig(step_levels=0)
+    back, fwd = collection_windows(counts, emitted, range(10), WindowSpec("adaptive", 8), config)
+    assert not back[:5].any() and not fwd[:5].any()
+    assert back[5].max() == 0 and back[9].min() == 4 and fwd[5].min() == 4  # the lit frames pool among themselves
+    back, fwd = collection_windows(counts, emitted, range(10), WindowSpec("fixed", 8), config)
+    assert back[5].min() == 4 and fwd[4].min() == 4

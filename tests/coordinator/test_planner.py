@@ -314,13 +314,17 @@ def test_a_segment_without_indirect_light_stays_on_the_smallest_rung(tmp_path):
     assert store.emitted()[:11].max() <= 2_000  # the end frames' double at most
 
 
-def test_light_away_from_an_unlit_k_takes_the_cap(tmp_path):
-    # The wall appears at frame 9, after K 6 (F_max 10): the pilot sees no indirect light, the
-    # segment's frames do, and the AQM at K could not: N_frame is the cap, as without a pilot
+def test_light_away_from_an_unlit_k_moves_k_there(tmp_path):
+    # The wall appears at frame 9, after K 6 (F_max 10): the pilot at K sees no indirect light, the
+    # segment's frames do. K moves to frame 9, the lit frame nearest it, the pilot there gives Eq.
+    # (2)'s start and the AQM judges there: 2,000 photons a frame where the cap was 8,000
     path = _sunlit_plane(tmp_path / "wall.glb", wall_from=9)
     job, store = _job(tmp_path, "wall", "1-20", path=path)
     executor = InProcess(job, store)
     rec = SegmentPlanner(job, store, executor, {}).decide(0, job.first, job.fmax)
-    assert rec.pilot["n_pilot"] is None and (rec.start, rec.k, rec.end) == (1, 6, 11)
-    assert rec.n_frame == 8_000 and not rec.without_indirect_light
-    assert "segment 0: no indirect light at K 6, some in frames 1-11: N_frame 8,000, the cap" in executor.lines
+    assert executor.lines[0] == "segment 0: pilot at K 4: no indirect light in 2,000 photons (Eq. 2 has no E)"
+    assert "segment 0: no indirect light at K 6: K moves to frame 9, the lit frame nearest it" in executor.lines
+    assert rec.pilot["frame"] == 9 and rec.pilot["n_pilot"] > 0 and (rec.start, rec.end) == (1, 11)
+    assert rec.k >= 9  # judged where the wall is (off the lighting step at 9, on the lit side)
+    assert rec.n_frame == 2_000 < 8_000 and not rec.capped and not rec.without_indirect_light
+    assert rec.n_frame_steps[-1]["d_aqm"] > 0  # the halves differ where the light is: the AQM saw it

@@ -23,6 +23,7 @@ from pipeline.segments.decisions import (
     keyframe_off_steps,
     ladder_n_frame,
     lighting_steps,
+    lit_keyframe,
     needed_n_frame,
     next_n_frame,
     p_me,
@@ -392,3 +393,16 @@ def test_a_capped_segment_is_starred_and_the_table_says_what_to_try():
     *rows, note = table([done, capped])
     assert "*" in rows[-1] and "*" not in rows[-2]
     assert note.startswith("* N_frame reached n_frame_max") and "loom bench elements" in note
+
+
+def test_a_segment_is_judged_where_its_light_is():
+    place = Placement(1, 16, 31, 30)
+    assert lit_keyframe(place, []) is None and lit_keyframe(place, [40]) is None  # none of its frames lit
+    assert lit_keyframe(place, range(25, 32)).k == 25  # a lamp switched on at 25: its nearest lit frame
+    assert lit_keyframe(place, [10, 22]).k == 10  # equally near: the earlier
+    # among the runs a lighting step leaves, the lit one, K on its lit frame nearest the run's middle
+    assert keyframe_off_steps(place, [25], lit=range(25, 32)).k == 28
+    assert keyframe_off_steps(place, [25]).k == 12  # without light to go by: the longest run, 1-24
+    assert keyframe_off_steps(place, [25], lit=range(1, 32)).k == 12  # every frame lit: the longest run
+    assert keyframe_off_steps(place, [25], lit=[3, 30]).k == 3  # both runs lit: the longest, at its lit frame
+    assert keyframe_off_steps(place, [5, 25], lit=[20]).k == 20  # the lit frame of the chosen run
