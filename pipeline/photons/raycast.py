@@ -22,8 +22,11 @@ from embreex import mesh_construction, rtcore_scene
 
 from kernels.scatter import surface_offset
 from pipeline.scene import FrameState
+from pipeline.scene.cutouts import Cutouts
 
 MISS = -1
+# Holes of alpha-masked surfaces a ray passes before it counts as a miss (a forest seen edge-on)
+MAX_HOLES = 64
 _CACHE_SIZE = 4
 # Relative self-intersection offset: 2^-16 = 256 float32 ulps of the triangle's largest corner
 # magnitude, well above the ~10 roundings of Embree's test and the float32 origin (see above).
@@ -53,6 +56,7 @@ class RayCaster:
         self.epsilon = OFFSET_REL
         self.offsets = triangle_offsets(tri)
         self.rays_cast = 0
+        self.cutouts = Cutouts.of(state)  # alpha-masked surfaces: rays pass their holes
         # Commit the BVH now (embreex commits lazily on the first query).
         self._scene.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32))
 
@@ -60,15 +64,43 @@ class RayCaster:
                   directions: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Closest hits as embreex returns them: (int32 triangle or -1, float32 u, v, distance);
         Embree's u, v weight the triangle's corners 1 and 2."""
-        out = self._scene.run(np.ascontiguousarray(origins, np.float32),
-                              np.ascontiguousarray(directions, np.float32), output=1)
+        origins = np.ascontiguousarray(origins, np.float32)
+        directions = np.ascontiguousarray(directions, np.float32)
+        out = self._scene.run(origins, directions, output=1)
         self.rays_cast += len(origins)
-        return out["primID"], out["u"], out["v"], out["tfar"]
+        if self.cutouts is None:
+            return out["primID"], out["u"], out["v"], out["tfar"]
+        return self._through_holes(origins, directions, out["primID"], out["u"], out["v"], out["tfar"])
+
+    def _through_holes(self, origins: np.ndarray, directions: np.ndarray, tri, u, v, t):
+        """Hits with those in an alpha-masked surface's holes replaced by what lies beyond: each such
+        ray starts again just past the hole's plane (the triangle's offset over the cosine) along
+        its direction, at most MAX_HOLES times."""
+        tri, u, v, t = (np.array(a) for a in (tri, u, v, t))
+        rows = np.flatnonzero(self.cutouts.holes(tri, u, v))
+        for _ in range(MAX_HOLES):
+            if not len(rows):
+                break
+            d = directions[rows].astype(np.float64)
+            cosine = np.abs(np.einsum("ij,ij->i", self.normals[tri[rows]], d))
+            reach = t[rows].astype(np.float64) + self.offsets[tri[rows]] / np.maximum(cosine, 1e-3)
+            out = self._scene.run((origins[rows] + d * reach[:, None]).astype(np.float32), directions[rows], output=1)
+            self.rays_cast += len(rows)
+            tri[rows], u[rows], v[rows] = out["primID"], out["u"], out["v"]
+            t[rows] = np.where(out["primID"] >= 0, reach + out["tfar"], out["tfar"])
+            rows = rows[self.cutouts.holes(out["primID"], out["u"], out["v"])]
+        if len(rows):  # a ray past MAX_HOLES holes: a miss rather than a hit on a hole
+            tri[rows] = MISS
+            t[rows] = np.inf
+        return tri, u, v, t
 
     def occluded(self, origins: np.ndarray, directions: np.ndarray, distances: np.ndarray) -> np.ndarray:
         """True where something lies between ``origins`` and ``distances`` along ``directions``."""
         if len(origins) == 0:
             return np.empty(0, bool)
+        if self.cutouts is not None:  # only an opaque hit before the distance blocks
+            tri, _, _, t = self.intersect(origins, directions)
+            return (tri >= 0) & (t < np.asarray(distances, np.float32))
         d = np.ascontiguousarray(distances, np.float32).copy()  # embreex overwrites dists in place
         out = self._scene.run(np.ascontiguousarray(origins, np.float32),
                               np.ascontiguousarray(directions, np.float32), query="OCCLUDED", dists=d)

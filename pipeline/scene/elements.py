@@ -35,6 +35,7 @@ import numpy as np
 from kernels.cells import locate_in_triangles
 
 from ..errors import SceneError
+from .cutouts import Cutouts, element_coverage
 from .scene import FrameState, Scene
 
 log = logging.getLogger(__name__)
@@ -85,6 +86,8 @@ class ElementMesh:
     triangle_source_face: np.ndarray  # (F,) int64 index of each source triangle in its glTF primitive
     vertex_triangle: np.ndarray | None = None  # (V,) int64 a global source triangle holding the vertex
     vertex_lattice: np.ndarray | None = None  # (V, 2) float64 its weights of corners 1 and 2 there
+    # (E,) solid fraction of each element of an alpha-masked surface (pipeline/scene/cutouts.py), None without
+    coverage: np.ndarray | None = None
 
     @property
     def n_elements(self) -> int:
@@ -181,10 +184,13 @@ class ElementMesh:
         p = occ_pos[elem_occ]
         local_areas = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
         inst_elems = np.searchsorted(element_instance, np.arange(len(scene.instances) + 1))
+        coverage = element_coverage(Cutouts(scene.materials, state.triangle_material,
+                                            scene.corner_attributes.texcoords if scene.corner_attributes else {}),
+                                    tri_n, offsets, _cells)
         return cls(size, tri_n.astype(np.int32), offsets, element_vertices, element_instance,
                    element_triangle, vertex_local, vertex_instance, local_areas, inst_elems,
                    np.concatenate([inst.source_faces for inst in scene.instances]), vertex_triangle,
-                   vertex_lattice)
+                   vertex_lattice, coverage)
 
     # --- queries ----------------------------------------------------------------------------------
 
@@ -235,7 +241,7 @@ class ElementMesh:
             else:
                 p = (self.vertex_local[self.element_vertices[lo:hi]] @ lin.T)
                 out[lo:hi] = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
-        return out
+        return out if self.coverage is None else out * self.coverage  # a masked surface's holes gather nothing
 
     def vertex_areas(self, state: FrameState) -> np.ndarray:
         """(V,) area of each vertex's hat basis function, sum of a third of its elements' areas

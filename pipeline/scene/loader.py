@@ -39,6 +39,7 @@ log = logging.getLogger(__name__)
 notices_log = logging.getLogger("pipeline.scene.notices")
 _noticed: set[tuple[str, str]] = set()  # one notice per file and process
 LIGHT_CHOICES = ("auto", "none")  # --light: a default sun and sky for a file without light, or refuse it
+ALPHA_MODES = ("OPAQUE", "MASK", "BLEND")  # glTF 2.0 §5.19 material.alphaMode
 
 # Primitive modes (glTF §3.7.2.1): 4 TRIANGLES, 5 TRIANGLE_STRIP, 6 TRIANGLE_FAN.
 _TRIANGLE_MODES = {4, 5, 6}
@@ -230,6 +231,10 @@ def _check_material(doc, m, i: int) -> None:
     if strength < 0:
         raise doc.error(f"must be non-negative, got {strength}",
                         f + ".extensions.KHR_materials_emissive_strength.emissiveStrength")
+    if m.alphaMode is not None and m.alphaMode not in ALPHA_MODES:
+        raise doc.error(f"{m.alphaMode!r} is not one of {', '.join(ALPHA_MODES)}", f + ".alphaMode")
+    if m.alphaCutoff is not None and not m.alphaCutoff >= 0:
+        raise doc.error(f"must be non-negative, got {m.alphaCutoff}", f + ".alphaCutoff")
     pbr = m.pbrMetallicRoughness
     if pbr is not None:
         if pbr.baseColorFactor is not None and len(pbr.baseColorFactor) not in (3, 4):

@@ -48,6 +48,9 @@ class Material:
     double_sided: bool = True  # glTF doubleSided; False: photons reaching the back face are absorbed
     normal_texture: object = None  # a Texture of tangent-space normals bending the shading normal, or None
     normal_scale: float = 1.0  # normalTexture.scale: multiplies the map's x and y
+    alpha_mode: str = "OPAQUE"  # glTF alphaMode: MASK cuts holes where alpha < alpha_cutoff (pipeline/scene/cutouts.py)
+    alpha_cutoff: float = 0.5  # glTF alphaCutoff
+    base_alpha: float = 1.0  # baseColorFactor's alpha, times the base-colour texture's alpha at a hit
 
     @property
     def is_specular(self) -> bool:
@@ -60,7 +63,8 @@ class Material:
     def state(self) -> np.ndarray:
         """Numbers that fully describe what the material does at one instant (for state keys)."""
         transforms = [t.transform.ravel() for t in (self.base_color_texture, self.emissive_texture) if t is not None]
-        return np.concatenate([self.albedo, self.emission, [KINDS.index(self.kind), self.roughness], *transforms])
+        return np.concatenate([self.albedo, self.emission, [KINDS.index(self.kind), self.roughness, self.base_alpha],
+                               *transforms])
 
     @property
     def phong_exponent(self) -> float:
@@ -146,6 +150,7 @@ def _factors(mat: pygltflib.Material) -> dict[str, np.ndarray]:
     """The file's values of the animatable properties (ANIMATED_PROPERTIES' short names)."""
     pbr = mat.pbrMetallicRoughness
     base = list(pbr.baseColorFactor) if pbr and pbr.baseColorFactor is not None else [1.0, 1.0, 1.0, 1.0]
+    base += [1.0] * (4 - len(base))  # an RGB factor is opaque
     metallic = pbr.metallicFactor if pbr and pbr.metallicFactor is not None else 1.0
     roughness = pbr.roughnessFactor if pbr and pbr.roughnessFactor is not None else 1.0
     emissive = mat.emissiveFactor if mat.emissiveFactor is not None else [0.0, 0.0, 0.0]
@@ -167,6 +172,7 @@ def animated_material(material: Material, mat: pygltflib.Material, values: dict[
             transform = transform_matrix(f[f"{slot}.offset"], float(f[f"{slot}.rotation"][0]), f[f"{slot}.scale"])
             textures[_TEXTURE_FIELDS[slot]] = replace(texture, transform=transform)
     return replace(material, albedo=tuple(float(c) for c in np.clip(f["baseColorFactor"][:3], 0.0, 1.0)),
+                   base_alpha=float(np.clip(f["baseColorFactor"][3], 0.0, 1.0)),
                    kind=classify(metallic, roughness), roughness=roughness,
                    emission=tuple(float(c) for c in np.maximum(f["emissiveFactor"] * f["emissiveStrength"][0], 0.0)),
                    **textures)
@@ -187,6 +193,9 @@ def material_from_gltf(mat: pygltflib.Material, index: int) -> Material:
         else 1.0
     return Material(
         normal_scale=float(normal_scale),
+        alpha_mode=mat.alphaMode or "OPAQUE",
+        alpha_cutoff=float(mat.alphaCutoff) if mat.alphaCutoff is not None else 0.5,
+        base_alpha=float(np.clip(base[3], 0.0, 1.0)),
         name=mat.name or f"material{index}",
         albedo=tuple(float(c) for c in np.clip(base[:3], 0.0, 1.0)),
         kind=classify(metallic, roughness),

@@ -162,7 +162,7 @@ class Scene:
                     or self.visibility_channels)
 
     def materials_at(self, t: float) -> list[Material]:
-        """The materials at ``t``: base colour and emission as animated (KHR_animation_pointer)."""
+        """The materials at ``t``, their animated properties (KHR_animation_pointer, pointers.py) applied."""
         if not self.material_channels:
             return self.materials
         mats = list(self.materials)

@@ -137,6 +137,9 @@ def surface_lines(scene: Scene) -> list[str]:
     bent = sum(1 for m in used if scene.materials[m].normal_texture is not None)
     if bent:
         tex += f"; normal maps on {bent} material(s)"
+    masked = sum(1 for m in used if scene.materials[m].alpha_mode == "MASK")
+    if masked:
+        tex += f"; alpha masks (holes rays pass) on {masked} material(s)"
     if unread:
         tex += "; ignored (not read yet, factors used): " + ", ".join(unread)
     n = len(scene.instances)

@@ -54,6 +54,7 @@ class Texture:
     wrap_t: int
     nearest: bool  # NEAREST magnification filter, else bilinear
     transform: np.ndarray  # (2, 3) uv' = transform @ (u, v, 1) (KHR_texture_transform)
+    alpha: np.ndarray | None = field(default=None, repr=False)  # (H, W) float32 alpha channel, None without one
 
     @property
     def has_transform(self) -> bool:
@@ -158,7 +159,8 @@ def _texture(doc: GltfDocument, info, where: str, images: dict, *, linear: bool 
         raise doc.error(f"TEXCOORD_{texcoord} is not supported (TEXCOORD_0 and _1 are)", where + ".texCoord")
     if (source, linear) not in images:
         images[source, linear] = decode_image(doc, source, linear=linear)
-    return Texture(images[source, linear], source, texcoord, wrap_s, wrap_t, nearest, transform)
+    rgb, alpha = images[source, linear]
+    return Texture(rgb, source, texcoord, wrap_s, wrap_t, nearest, transform, alpha)
 
 
 def _image_bytes(doc: GltfDocument, index: int) -> tuple[bytes, str | None]:
@@ -195,9 +197,10 @@ def _image_bytes(doc: GltfDocument, index: int) -> tuple[bytes, str | None]:
         raise doc.error(f"missing image file {uri!r}", where + ".uri") from None
 
 
-def decode_image(doc: GltfDocument, index: int, *, linear: bool = False) -> np.ndarray:
-    """``images[index]`` as linear RGB float32 (H, W, 3): decoded by OpenImageIO, sRGB to linear
-    unless ``linear`` (the values are data, as a normal map's are)."""
+def decode_image(doc: GltfDocument, index: int, *, linear: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
+    """``images[index]`` as linear RGB float32 (H, W, 3), sRGB to linear unless ``linear`` (the
+    values are data, as a normal map's are), and its alpha channel (H, W) (never sRGB-encoded) or
+    None: decoded by OpenImageIO."""
     import OpenImageIO as oiio  # heavy: only where images are read or written
 
     data, suffix = _image_bytes(doc, index)
@@ -221,7 +224,8 @@ def decode_image(doc: GltfDocument, index: int, *, linear: bool = False) -> np.n
     channels = pixels.shape[2]
     rgb = np.repeat(pixels[:, :, :1], 3, axis=2) if channels < 3 else pixels[:, :, :3]
     rgb = np.clip(rgb, 0.0, 1.0)
-    return (rgb if linear else srgb_to_linear(rgb)).astype(np.float32)
+    alpha = np.clip(pixels[:, :, channels - 1], 0.0, 1.0).astype(np.float32) if channels in (2, 4) else None
+    return (rgb if linear else srgb_to_linear(rgb)).astype(np.float32), alpha
 
 
 def _sniff_suffix(data: bytes) -> str:

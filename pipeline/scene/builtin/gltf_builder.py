@@ -161,7 +161,8 @@ class GltfBuilder:
                      emissive_strength: float = 1.0, double_sided: bool | None = None,
                      base_color_texture: int | None = None, texcoord: int = 0,
                      texture_transform: dict | None = None, emissive_texture: int | None = None,
-                     normal_texture: int | None = None, normal_scale: float = 1.0) -> int:
+                     normal_texture: int | None = None, normal_scale: float = 1.0, alpha_mode: str | None = None,
+                     alpha_cutoff: float | None = None) -> int:
         """A metallic-roughness material; ``base_color`` is RGB or RGBA (the Lambertian albedo).
 
         ``base_color_texture`` is a texture index from :meth:`add_texture`, looked up with
@@ -199,6 +200,9 @@ class GltfBuilder:
             material.pbrMetallicRoughness.baseColorTexture = info
         if emissive_texture is not None:
             material.emissiveTexture = pygltflib.TextureInfo(index=int(emissive_texture), texCoord=int(texcoord))
+        if alpha_mode is not None:  # OPAQUE, MASK (holes where alpha < alpha_cutoff) or BLEND
+            material.alphaMode = alpha_mode
+            material.alphaCutoff = None if alpha_cutoff is None else float(alpha_cutoff)
         if normal_texture is not None:
             material.normalTexture = pygltflib.NormalMaterialTexture(index=int(normal_texture), texCoord=int(texcoord),
                                                                      scale=float(normal_scale))
