@@ -97,15 +97,16 @@ def slerp(q0: np.ndarray, q1: np.ndarray, s: float) -> np.ndarray:
 
 
 def quaternion_matrix(q: np.ndarray) -> np.ndarray:
-    """3x3 rotation matrix of a unit quaternion (x, y, z, w)."""
-    x, y, z, w = q / np.linalg.norm(q)
-    return np.array(
-        [
-            [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
-            [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
-            [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
-        ]
-    )
+    """3x3 rotation matrix of a unit quaternion (x, y, z, w); (..., 3, 3) of quaternions (..., 4)."""
+    q = np.asarray(q, dtype=np.float64)
+    unit = q / np.linalg.norm(q) if q.ndim == 1 else q / np.linalg.norm(q, axis=-1, keepdims=True)  # same bits as ever
+    x, y, z, w = np.moveaxis(unit, -1, 0)
+    rows = [
+        [1 - 2 * (y * y + z * z), 2 * (x * y - z * w), 2 * (x * z + y * w)],
+        [2 * (x * y + z * w), 1 - 2 * (x * x + z * z), 2 * (y * z - x * w)],
+        [2 * (x * z - y * w), 2 * (y * z + x * w), 1 - 2 * (x * x + y * y)],
+    ]
+    return np.stack([np.stack(row, axis=-1) for row in rows], axis=-2)
 
 
 def trs_matrix(t: np.ndarray, r: np.ndarray, s: np.ndarray) -> np.ndarray:

@@ -13,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from .animation import transform_normals, trs_matrix
+from .animation import quaternion_matrix, transform_normals
 from .gltf import GltfDocument
 
 EXTENSION = "EXT_mesh_gpu_instancing"
@@ -49,9 +49,11 @@ def instance_transforms(doc: GltfDocument, node: int) -> np.ndarray | None:
     norms = np.linalg.norm(rotation, axis=1)
     if np.any(norms < 1e-6):
         raise doc.error(f"ROTATION of copy {int(np.argmax(norms < 1e-6))} is a zero quaternion", where + ".ROTATION")
-    translation = values.get("TRANSLATION", np.zeros((n, 3)))
-    scale = values.get("SCALE", np.ones((n, 3)))
-    return np.stack([trs_matrix(t, q / np.linalg.norm(q), s) for t, q, s in zip(translation, rotation, scale)])
+    out = np.zeros((n, 4, 4))
+    out[:, :3, :3] = quaternion_matrix(rotation) * values.get("SCALE", np.ones((n, 3)))[:, None, :]  # T R S
+    out[:, :3, 3] = values.get("TRANSLATION", np.zeros((n, 3)))
+    out[:, 3, 3] = 1.0
+    return out
 
 
 def place_copy(vertices: np.ndarray, faces: np.ndarray, normals: np.ndarray | None, transform: np.ndarray

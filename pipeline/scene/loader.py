@@ -18,6 +18,7 @@ from .camera import AUTO, CameraDef
 from .default_camera import AZIMUTH, ELEVATION, YFOV_DEG, animation_bounds, frame_animation, sample_frames
 from .default_lights import default_sky, default_sun
 from .draco import decode_primitives
+from .elements import MAX_ELEMENTS
 from .gltf import GltfDocument, read_gltf
 from .instancing import EXTENSION as INSTANCING
 from .instancing import instance_transforms, place_copy
@@ -412,6 +413,9 @@ def _read_instances(doc, nodes, order, default_material, warnings, skins):
             if deformation is not None:
                 raise doc.error("a skinned or morphed mesh cannot be instanced here (its pose is per vertex)",
                                 f"nodes[{i}].extensions.{INSTANCING}")
+            if len(copies) * int(keep.sum()) > MAX_ELEMENTS:  # each triangle is an element at least
+                raise doc.error(f"{len(copies):,} copies of {int(keep.sum()):,} triangles exceed the "
+                                f"{MAX_ELEMENTS:,} elements a scene may have", f"nodes[{i}].extensions.{INSTANCING}")
             for k, transform in enumerate(copies):
                 placed, placed_faces, normals = place_copy(verts, faces[keep], attributes.normals, transform)
                 instances.append(MeshInstance(

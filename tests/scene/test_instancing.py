@@ -86,7 +86,16 @@ def _short_scale(b, node):
         np.ones((2, 3), np.float32))
 
 
+def _a_million_copies(b, node):
+    n = 1_000_000
+    b.gltf.nodes[node].extensions["EXT_mesh_gpu_instancing"]["attributes"] = {
+        "TRANSLATION": b.add_accessor(np.zeros((n, 3), np.float32))}
+    b.gltf.meshes[1].primitives[0].indices = b.add_accessor(np.tile(BOX_FACES.ravel(), 2).astype(np.uint32))
+
+
 @pytest.mark.parametrize("extra, match", [
+    (_a_million_copies, r"nodes\[2\].extensions.EXT_mesh_gpu_instancing: 1,000,000 copies of 24 triangles exceed "
+                        r"the 20,000,000 elements a scene may have"),
     (_skin, r"nodes\[2\].extensions.EXT_mesh_gpu_instancing: a skinned or morphed mesh cannot be instanced"),
     (_short_scale, r"nodes\[2\].extensions.EXT_mesh_gpu_instancing.attributes: TRANSLATION, ROTATION and SCALE "
                    r"must have one count, got \[2, 3\]"),
