@@ -123,8 +123,10 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
         raise doc.error("the scene has no light: no KHR_lights_punctual light on a node and no emissive material "
                         "(--light auto lights it with a default sun and sky)", "lights")
     if unlit:
-        notices.append("the file has no light: lit by the default sun and sky of pipeline/scene/default_lights.py "
-                       "(loom info describes them; --light none refuses such a file)")
+        hidden_lights = any(nodes[i].light is not None for i in hidden)
+        notices.append(("the file's lights are on nodes hidden throughout (KHR_node_visibility)" if hidden_lights
+                        else "the file has no light") + ": lit by the default sun and sky of "
+                       "pipeline/scene/default_lights.py (loom info describes them; --light none refuses such a file)")
 
     if left_out:
         notices.append(f"{len(left_out)} animation(s) animate nodes that {played[0]!r} animates, alternative clips "

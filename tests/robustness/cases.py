@@ -69,6 +69,13 @@ def pack_glb(doc: dict | str | bytes, binary: bytes) -> bytes:
     return struct.pack("<III", 0x46546C67, 2, 12 + len(body)) + body
 
 
+def _draco_garbage(doc, _binary) -> None:
+    """The floor's primitive said to be Draco-compressed, its bufferView the positions' own bytes."""
+    prim = doc["meshes"][0]["primitives"][0]
+    prim["extensions"] = {"KHR_draco_mesh_compression": {"bufferView": 0, "attributes": {"POSITION": 0}}}
+    doc["extensionsRequired"] = ["KHR_draco_mesh_compression"]
+
+
 def _base() -> tuple[dict, bytes]:
     return split_glb(base_builder().to_glb_bytes())
 
@@ -362,6 +369,16 @@ def scene_cases() -> list[Case]:
         Case("triangle strip", OK, "", glb(_strip)),
         Case("data URI buffer", OK, "", glb(_data_uri)),
         Case("points mode", E, "mode", glb(_set("meshes.0.primitives.0.mode", 0))),
+        # Extensions: compressed, instanced, hidden, masked, mirrored
+        Case("Draco data that are not Draco", E, "not Draco data", glb(_draco_garbage)),
+        Case("instancing attributes not an object", E, "EXT_mesh_gpu_instancing",
+             glb(_set("nodes.1.extensions", {"EXT_mesh_gpu_instancing": {"attributes": 5}}))),
+        Case("visible is a number", E, "visible",
+             glb(_set("nodes.1.extensions", {"KHR_node_visibility": {"visible": 1}}))),
+        Case("alphaMode CUTOUT", E, "alphaMode", glb(_set("materials.0.alphaMode", "CUTOUT"))),
+        Case("a box hidden throughout", OK, "",
+             glb(_set("nodes.1.extensions", {"KHR_node_visibility": {"visible": False}}))),
+        Case("a mirrored box", OK, "", glb(_set("nodes.1.scale", [-1.0, 1.0, 1.0]))),
     ]
 
 

@@ -132,3 +132,11 @@ def test_a_bad_visibility_is_a_one_line_error(tmp_path, extra, match):
     with pytest.raises(SceneError, match=match) as err:
         read_scene(cubes(tmp_path / "bad.glb", extra=extra))
     assert "\n" not in str(err.value)
+
+
+def test_a_file_whose_lamp_is_hidden_throughout_is_lit_by_the_defaults_and_says_why(tmp_path):
+    def hide_lamp(b):
+        b.gltf.nodes[LAMP_NODE].extensions["KHR_node_visibility"] = {"visible": False}
+    scene = read_scene(cubes(tmp_path / "dark.glb", blink=None, extra=hide_lamp))
+    assert scene.default_lights and scene.pose(0).lights[0].node == -1  # the default sun, not the lamp
+    assert any("lights are on nodes hidden throughout (KHR_node_visibility)" in n for n in scene.notices)
