@@ -23,9 +23,10 @@ def _axes(rot: np.ndarray) -> np.ndarray:
     return (rot / np.linalg.norm(rot, axis=0)).astype(np.float32)
 
 
-def camera_rays_reference(key: int, c0: int, count: int, spp: int, width: int, height: int,
-                          yfov: float, rot: np.ndarray) -> np.ndarray:
-    """(count, 3) float32 unit directions of samples c0 .. c0 + count - 1."""
+def image_plane(key: int, c0: int, count: int, spp: int, width: int, height: int) -> tuple[np.ndarray, np.ndarray]:
+    """(x, y) float64 of samples c0 .. c0 + count - 1 on the image, jittered as ``camera8`` jitters
+    them, each from -1 to 1 across the frame (x right, y up): the pinhole's directions scale them
+    by the tangents, an orthographic camera's origins by its half extents."""
     counter = np.arange(c0, c0 + count, dtype=np.int64)
     h = mix64(mix64(counter.astype(np.uint64) ^ np.uint64(key)))  # dimension 0 adds nothing
     scale = 1.0 / (1 << 32)
@@ -33,9 +34,16 @@ def camera_rays_reference(key: int, c0: int, count: int, spp: int, width: int, h
     jy = (h & np.uint64(0xFFFFFFFF)).astype(np.float64) * scale
     pixel = counter // spp
     px, py = pixel % width + jx, pixel // width + jy
+    return (2.0 / width) * px - 1.0, 1.0 - (2.0 / height) * py
+
+
+def camera_rays_reference(key: int, c0: int, count: int, spp: int, width: int, height: int,
+                          yfov: float, rot: np.ndarray) -> np.ndarray:
+    """(count, 3) float32 unit directions of samples c0 .. c0 + count - 1."""
+    a, b = image_plane(key, c0, count, spp, width, height)
     tan_y = np.tan(yfov / 2.0)
-    x = (((2.0 / width) * px - 1.0) * (tan_y * width / height)).astype(np.float32)
-    y = ((1.0 - (2.0 / height) * py) * tan_y).astype(np.float32)
+    x = (a * (tan_y * width / height)).astype(np.float32)
+    y = (b * tan_y).astype(np.float32)
     r = _axes(rot)
     d = np.empty((count, 3), np.float32)
     for k in range(3):

@@ -19,11 +19,12 @@ from typing import Sequence
 
 import numpy as np
 
-from kernels.camera import camera_rays_cl
+from kernels.camera import camera_rays_cl, image_plane
 from kernels.sampling import around
 from pipeline.frames.tonemap import image_adaptation
 from pipeline.photons.raycast import RayCaster, caster_for
 from pipeline.scene import ElementMesh, FrameState
+from pipeline.scene.camera import Camera
 
 from .area_lights import area_light, sky_light
 from .camera_hits import CameraHits
@@ -125,6 +126,23 @@ def render_frame(state: FrameState, elements: ElementMesh | None, irradiance: np
                       None if record is None else record.finish(paths.width, paths.height, spp))
 
 
+def camera_rays(cam: Camera, key: int, c0: int, n: int, paths: CameraPaths) -> tuple[np.ndarray, np.ndarray]:
+    """Origins and unit directions (n, 3) float32 of camera samples c0 .. c0 + n - 1, jittered by
+    random dimensions 0 and 1: from the pinhole through the image (kernels/camera.cl), or, for an
+    orthographic camera, parallel along its -Z from the image's points, ``ymag`` up and
+    ``ymag x width / height`` across either side of its axis."""
+    if not cam.definition.orthographic:
+        dirs = camera_rays_cl(key, c0, n, paths.spp, paths.width, paths.height, cam.definition.yfov,
+                              cam.to_world[:3, :3])
+        return np.broadcast_to(cam.position.astype(np.float32), dirs.shape), dirs
+    a, b = image_plane(key, c0, n, paths.spp, paths.width, paths.height)
+    axes = cam.to_world[:3, :3] / np.linalg.norm(cam.to_world[:3, :3], axis=0)
+    ymag = cam.definition.ymag
+    across = np.outer(a * ymag * paths.width / paths.height, axes[:, 0])
+    origins = cam.position + across + np.outer(b * ymag, axes[:, 1])
+    return origins.astype(np.float32), np.broadcast_to((-axes[:, 2]).astype(np.float32), (n, 3))
+
+
 def trace_samples(state: FrameState, sh: ShadingTables, paths: CameraPaths, counter: np.ndarray,
                   rays: dict[str, int], out: np.ndarray, record: MapHitRecorder | None = None) -> np.ndarray:
     """Add direct, indirect and albedo (and the indirect layers of ``sh.also``) of the camera
@@ -133,10 +151,7 @@ def trace_samples(state: FrameState, sh: ShadingTables, paths: CameraPaths, coun
     n = len(counter)
     cover = np.zeros(n, np.float32)
     key, max_depth = paths.key, paths.max_depth
-    cam = state.camera  # jittered camera rays (random dimensions 0 and 1), kernels/camera.cl
-    dirs = camera_rays_cl(key, int(counter[0]), n, paths.spp, paths.width, paths.height, cam.definition.yfov,
-                          cam.to_world[:3, :3])
-    origins = np.broadcast_to(cam.position.astype(np.float32), dirs.shape)
+    origins, dirs = camera_rays(state.camera, key, int(counter[0]), n, paths)
     path = None  # sample index of every live ray; None while it is 0..n-1
     throughput = None  # None while it is all ones (camera rays)
     for depth in range(max_depth + 1):

@@ -16,12 +16,14 @@ import numpy as np
 
 from pipeline.aqm import AQM_SIZE, AQMResult, Motion, ViewingConditions, aqm, image_velocity
 from pipeline.aqm.display import DISPLAYS, aqm_geometry
+from pipeline.aqm.flow import Lens, Ortho
 from pipeline.photons.raycast import caster_for
 
 from .tonemap import ToneMapping, ward_scale
 
 if TYPE_CHECKING:
     from pipeline.scene import Scene
+    from pipeline.scene.camera import Camera
 
 
 def display_values(rgb: np.ndarray, adaptation: float, params: ToneMapping = ToneMapping()) -> np.ndarray:
@@ -58,6 +60,11 @@ def displayed_difference(rgb_a: np.ndarray, rgb_b: np.ndarray, adaptation: float
                viewing=view, aqm_size=aqm_size, names=("I1", "I2"), motion=None if flow is None else Motion(flow))
 
 
+def lens(cam: Camera) -> Lens:
+    """The camera's lens as the AQM's warping takes it: its field of view, or its orthographic view."""
+    return Ortho(cam.definition.ymag) if cam.definition.orthographic else cam.definition.yfov
+
+
 def camera_flow(scene: Scene, frame: int, width: int, height: int,
                 params: ToneMapping = ToneMapping()) -> np.ndarray | None:
     """Image velocity (H, W, 2) in deg/s that the camera's own motion gives frame ``frame`` (§6: pixel
@@ -70,18 +77,23 @@ def camera_flow(scene: Scene, frame: int, width: int, height: int,
     for name, g in (("previous", frame - 1), ("following", frame + 1)):
         if 1 <= g <= scene.timeline.frames:
             other = scene.pose_frame(g).camera
-            neighbours[name] = (other.world_to_camera, other.definition.yfov)
-    here, yfov = cam.world_to_camera, cam.definition.yfov
+            neighbours[name] = (other.world_to_camera, lens(other))
+    here, yfov = cam.world_to_camera, lens(cam)
     if not neighbours or all(np.allclose(m, here, rtol=0, atol=1e-9) and fov == yfov for m, fov in neighbours.values()):
         return None
-    f = 0.5 * height / np.tan(0.5 * yfov)
+    ortho = isinstance(yfov, Ortho)
+    f = 0.5 * height / (yfov.ymag if ortho else np.tan(0.5 * yfov))
     x = (np.arange(width) + 0.5 - 0.5 * width) / f
     y = -(np.arange(height) + 0.5 - 0.5 * height) / f
     local = np.stack(np.broadcast_arrays(x[None, :], y[:, None], -np.ones((height, width))), axis=-1).reshape(-1, 3)
     rot = cam.to_world[:3, :3] / np.linalg.norm(cam.to_world[:3, :3], axis=0)
-    dirs = local @ rot.T
+    if ortho:  # parallel rays from the image's points, depth their length
+        origins = cam.position + (local * [1.0, 1.0, 0.0]) @ rot.T
+        dirs = np.broadcast_to(-rot[:, 2], origins.shape)
+    else:
+        dirs = local @ rot.T
+        origins = np.broadcast_to(cam.position, dirs.shape)
     lengths = np.linalg.norm(dirs, axis=1, keepdims=True)
-    origins = np.broadcast_to(cam.position, dirs.shape)
     tri, _, _, t = caster_for(state).intersect(np.ascontiguousarray(origins, np.float32),
                                                 np.ascontiguousarray(dirs / lengths, np.float32))
     depth = np.where(tri >= 0, t.astype(np.float64) / lengths[:, 0], np.inf).reshape(height, width)

@@ -1,4 +1,5 @@
-"""Perspective camera placed by a (possibly animated) node: looks down its -Z with +Y up (glTF)."""
+"""A camera placed by a (possibly animated) node: looks down its -Z with +Y up (glTF). A pinhole
+(perspective: ``yfov``) or orthographic (``ymag``: parallel rays through a view ``2 ymag`` high)."""
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -13,6 +14,11 @@ class CameraDef:
     znear: float
     zfar: float | None
     aspect: float | None  # the file's; the output resolution decides the rendered aspect
+    ymag: float | None = None  # orthographic: half the view's height in world units (glTF ymag); None: a pinhole
+
+    @property
+    def orthographic(self) -> bool:
+        return self.ymag is not None
 
 
 @dataclass(frozen=True)

@@ -5,7 +5,7 @@ on its ``deforms`` line). Extensions outside the ones
 implemented are ignored with the core glTF data they extend, or refused by the loader when the
 file lists them in ``extensionsRequired``; ``KHR_animation_pointer`` pointers that are not animated
 are the loader's warnings (pipeline/scene/pointers.py). Only the default scene is rendered, and only
-perspective cameras can be chosen.
+perspective and orthographic cameras can be chosen.
 """
 from __future__ import annotations
 
@@ -30,9 +30,9 @@ def ignored(scene: Scene) -> list[str]:
     for name in sorted(_extensions(g) - SUPPORTED_REQUIRED_EXTENSIONS):
         reason = next((why for prefix, why in _REASONS if name.startswith(prefix)), "the core glTF data is used")
         lines.append(f"extension {name}: not implemented, {reason}")
-    ortho = sum(1 for c in g.cameras if c.type != "perspective")
-    if ortho:
-        lines.append(f"{ortho} orthographic camera(s): only perspective cameras can render")
+    unknown = sum(1 for c in g.cameras if c.type not in ("perspective", "orthographic"))
+    if unknown:
+        lines.append(f"{unknown} camera(s) neither perspective nor orthographic: they cannot render")
     if scene.animations_left_out:
         lines.append(f"{len(scene.animations_left_out)} animation(s) {', '.join(scene.animations_left_out)}: "
                      f"alternative clips of nodes {scene.animations_played[0]} animates; one clip plays at a time "

@@ -95,8 +95,17 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
 
     cameras = []
     for i, cam in enumerate(g.cameras):
+        if cam.type == "orthographic" and cam.orthographic is not None:
+            o = cam.orthographic
+            if not (o.ymag and o.xmag and np.isfinite(o.ymag) and np.isfinite(o.xmag)):
+                raise doc.error(f"xmag {o.xmag} and ymag {o.ymag} must be finite and not zero",
+                                f"cameras[{i}].orthographic")
+            cameras.append(CameraDef(cam.name or f"camera{i}", 0.0, float(o.znear or 0.0),
+                                     float(o.zfar) if o.zfar else None, abs(float(o.xmag / o.ymag)),
+                                     ymag=abs(float(o.ymag))))
+            continue
         if cam.type != "perspective" or cam.perspective is None:
-            cameras.append(None)  # orthographic cameras are listed but cannot be chosen
+            cameras.append(None)  # neither a pinhole nor orthographic: listed, never chosen
             continue
         p = cam.perspective
         if not (p.yfov and 0 < p.yfov < np.pi and p.znear and p.znear > 0):
@@ -159,10 +168,10 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
         animation_option=None if played == default else played[0],
         default_lights=(default_sun(),) if unlit else (), sky=default_sky() if unlit else None,
     )
-    if camera_node is None:  # --camera auto, or the file has no perspective camera
+    if camera_node is None:  # --camera auto, or the file has no camera that renders
         scene.framing = frame_animation(scene)
         if camera != AUTO:
-            notices.insert(0, f"the file has no perspective camera: rendering with the auto camera from azimuth "
+            notices.insert(0, f"the file has no camera: rendering with the auto camera from azimuth "
                               f"{AZIMUTH:g} deg, elevation {ELEVATION:g} deg, yfov {YFOV_DEG:g} deg, framing the "
                               "whole animation (--camera auto chooses it for any file)")
     if element_size is None:
@@ -700,8 +709,10 @@ def _read_animation(doc, nodes, warnings, a: int, anim, unsupported: set[str]) -
         keys = values[:, 1] if interp == "CUBICSPLINE" else values  # not the cubic tangents
         if kind in ("light", "material") and prop in NON_NEGATIVE_PROPERTIES and np.any(keys < 0):
             raise doc.error(f"{kind} {prop} keys must not be negative", sf + ".output")
-        if kind == "camera" and not np.all((keys > 0) & (keys < np.pi)):
+        if kind == "camera" and prop == "yfov" and not np.all((keys > 0) & (keys < np.pi)):
             raise doc.error("camera yfov keys must lie in (0, pi)", sf + ".output")
+        if kind == "camera" and prop == "ymag" and not np.all(keys != 0):
+            raise doc.error("camera ymag keys must not be zero", sf + ".output")
         if prop == "rotation":  # keys must be rotations
             bad = np.flatnonzero(np.linalg.norm(keys, axis=1) <= 1e-6)
             if len(bad):
@@ -730,10 +741,5 @@ def _choose_camera(doc, nodes, order, cameras, name):
     for i in candidates:
         if name in (nodes[i].name, cameras[nodes[i].camera].name):
             return i
-    for i in order:  # an orthographic camera is listed (cameras[c] is None) but cannot render
-        c = nodes[i].camera
-        if c is not None and cameras[c] is None and name in (nodes[i].name, doc.gltf.cameras[c].name):
-            raise doc.error(f"camera {name!r} is orthographic: only perspective cameras are supported "
-                            "(--camera auto frames the scene with a perspective camera)", f"cameras[{c}]")
     names = ", ".join(sorted({cameras[nodes[i].camera].name for i in candidates} | {AUTO}))
     raise doc.error(f"no camera named {name!r} (cameras: {names})", "cameras")

@@ -6,10 +6,10 @@ A pointer becomes a key ``(kind, index, property)`` of the loader's channels
 pointers), "visibility" for KHR_node_visibility's ``visible`` (pipeline/scene/visibility.py),
 "light" for a punctual light's colour, intensity, range and spot cone angles, "material" for the
 properties of materials.ANIMATED_PROPERTIES (factors, emission, texture transforms), "camera" for a
-perspective camera's ``yfov``. Properties a ray-traced picture here does not depend on (a camera's
-clip planes and aspect ratio: the output resolution sets the aspect; a material's alpha cut-off:
-alpha is ignored) are accepted and change nothing. Any other pointer keeps the file's value, and a
-file that requires the extension is refused for it.
+perspective camera's ``yfov`` or an orthographic one's ``ymag``. Properties a ray-traced picture
+here does not depend on (a camera's clip planes, aspect ratio and xmag: the output resolution sets
+the aspect; a material's alpha cut-off: alpha is ignored) are accepted and change nothing. Any
+other pointer keeps the file's value, and a file that requires the extension is refused for it.
 """
 from __future__ import annotations
 
@@ -26,11 +26,11 @@ if TYPE_CHECKING:
 EXTENSION = "KHR_animation_pointer"
 # What the pointers animate here, for messages
 ANIMATED_POINTERS = ("node translation, rotation, scale, morph weights and visibility, light colour, intensity, "
-                     "range and spot cones, material factors, emission and texture transforms, and a perspective "
-                     "camera's field of view")
+                     "range and spot cones, material factors, emission and texture transforms, and a camera's "
+                     "field of view or orthographic height")
 # Values a key of each animated property holds (a sampler's output width); morph weights: one per target
 WIDTHS = {"translation": 3, "rotation": 4, "scale": 3, "visible": 1, "intensity": 1, "color": 3, "range": 1,
-          "innerConeAngle": 1, "outerConeAngle": 1, "yfov": 1, **MATERIAL_WIDTHS}
+          "innerConeAngle": 1, "outerConeAngle": 1, "yfov": 1, "ymag": 1, **MATERIAL_WIDTHS}
 # Light and material properties whose keys must not be negative
 NON_NEGATIVE_PROPERTIES = NON_NEGATIVE | {"intensity", "color", "range", "innerConeAngle", "outerConeAngle"}
 # A boolean's keys: unsigned bytes, 0 false (the extension's "Output Accessor Component Types")
@@ -40,9 +40,10 @@ _NODE = re.compile(r"/nodes/(\d+)/(translation|rotation|scale|weights)")
 _VISIBILITY = re.compile(r"/nodes/(\d+)/extensions/" + VISIBILITY + "/visible")
 _LIGHT = re.compile(r"/extensions/KHR_lights_punctual/lights/(\d+)/(intensity|color|range|spot/innerConeAngle|"
                     r"spot/outerConeAngle)")
-_CAMERA = re.compile(r"/cameras/(\d+)/perspective/yfov")
+_CAMERA = re.compile(r"/cameras/(\d+)/(perspective/yfov|orthographic/ymag)")
 _MATERIAL = re.compile(r"/materials/(\d+)/(" + "|".join(map(re.escape, ANIMATED_PROPERTIES)) + ")")
-_NO_EFFECT = re.compile(r"/cameras/\d+/perspective/(znear|zfar|aspectRatio)|/materials/\d+/alphaCutoff")
+_NO_EFFECT = re.compile(r"/cameras/\d+/(perspective/(znear|zfar|aspectRatio)|orthographic/(xmag|znear|zfar))"
+                        r"|/materials/\d+/alphaCutoff")
 
 
 def pointer_target(doc: GltfDocument, target: AnimationChannelTarget, f: str, unsupported: set[str]) -> tuple | None:
@@ -72,7 +73,7 @@ def pointer_target(doc: GltfDocument, target: AnimationChannelTarget, f: str, un
     if camera := _CAMERA.fullmatch(pointer):
         if not int(camera.group(1)) < len(g.cameras):
             raise doc.error(f"{pointer} points to missing camera {camera.group(1)}", where)
-        return "camera", int(camera.group(1)), "yfov"
+        return "camera", int(camera.group(1)), camera.group(2).split("/")[1]
     if material := _MATERIAL.fullmatch(pointer):
         i, prop = int(material.group(1)), ANIMATED_PROPERTIES[material.group(2)][0]
         if not i < len(g.materials):

@@ -278,8 +278,10 @@ class Scene:
         if self.camera_node is not None:
             node = self.nodes[self.camera_node]
             defn, ch = self.cameras[node.camera], self.camera_channels.get(node.camera)
-            if ch:  # a zoom (KHR_animation_pointer): the field of view at t, kept inside (0, pi)
+            if ch and "yfov" in ch:  # a zoom (KHR_animation_pointer): the field of view at t, kept inside (0, pi)
                 defn = replace(defn, yfov=float(np.clip(ch["yfov"].evaluate(t)[0], 1e-6, np.pi - 1e-6)))
+            if ch and "ymag" in ch and defn.orthographic:  # an orthographic zoom: the view's half height
+                defn = replace(defn, ymag=max(abs(float(ch["ymag"].evaluate(t)[0])), 1e-9))
             cam = Camera(defn, self.camera_node, world[self.camera_node].copy())
         elif self.framing is not None:
             cam = self.framing.camera

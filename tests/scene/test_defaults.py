@@ -71,7 +71,7 @@ def test_a_file_without_camera_or_light_gets_the_defaults_with_one_notice_each(t
         read_scene(path)  # once per file and process
     notices = [r.getMessage() for r in caplog.records if r.name == "pipeline.scene.notices"]
     assert len(notices) == 2 and all("\n" not in n and str(path) in n for n in notices)
-    assert "no perspective camera" in notices[0] and "azimuth 30 deg, elevation 20 deg, yfov 40 deg" in notices[0]
+    assert "no camera" in notices[0] and "azimuth 30 deg, elevation 20 deg, yfov 40 deg" in notices[0]
     assert "no light" in notices[1] and "--light none" in notices[1]
     state = scene.pose_frame(1)
     assert [li.kind for li in state.lights] == ["directional"] and state.sky is scene.sky
@@ -152,5 +152,5 @@ def test_quiet_renders_announce_no_defaults(tmp_path):
     loud = subprocess.run([*loom, "render", str(path), "--out", str(tmp_path / "l"), *common],
                           capture_output=True, text=True)
     assert quiet.returncode == 0 and loud.returncode == 0, quiet.stderr + loud.stderr
-    assert "no perspective camera" in loud.stderr and "INFO" not in quiet.stderr
+    assert "no camera" in loud.stderr and "INFO" not in quiet.stderr
     assert "rendered 1 frames" in quiet.stdout

@@ -10,7 +10,6 @@ from pipeline.cli import main
 from pipeline.errors import SceneError
 from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin.gltf_builder import GltfBuilder
-from tests.conftest import basic_builder
 from tests.scene.deforming_assets import (
     animated_morph_cube,
     cube_mesh,
@@ -207,25 +206,6 @@ def test_loom_info_states_what_deforms(tmp_path):
     cube = CliRunner().invoke(main, ["info", str(animated_morph_cube(tmp_path / "cube.glb"))]).output
     assert "AnimatedMorphCube/cube[0]: 2 morph target(s), weights animated" in cube
     assert "frames     3 at 30 fps" in cube
-
-
-def _with_orthographic_camera(tmp_path):
-    from pygltflib import Camera, Orthographic
-
-    b = basic_builder()
-    b.gltf.cameras.append(Camera(name="top", type="orthographic",
-                                 orthographic=Orthographic(xmag=1, ymag=1, znear=0.1, zfar=10)))
-    b.add_node("top_view", camera=0, translation=(1, 5, 1))
-    return b.write(tmp_path / "ortho.glb")
-
-
-@pytest.mark.parametrize("name", ["top", "top_view"])
-def test_choosing_an_orthographic_camera_says_so(tmp_path, name):
-    path = _with_orthographic_camera(tmp_path)
-    with pytest.raises(SceneError) as err:
-        read_scene(path, camera=name)
-    assert str(err.value) == (f"{path}: cameras[0]: camera {name!r} is orthographic: only perspective cameras "
-                              "are supported (--camera auto frames the scene with a perspective camera)")
 
 
 @pytest.mark.parametrize("change, field, reason", [
