@@ -2,7 +2,8 @@
 
 Mapping (docs/03-conventions.md §2; written in the README too):
 
-* ``baseColorFactor`` RGB is the Lambertian albedo (alpha ignored), times the ``baseColorTexture``
+* ``baseColorFactor`` RGB is the Lambertian albedo (its alpha cuts holes in MASK materials:
+  pipeline/scene/cutouts.py), times the ``baseColorTexture``
   and ``COLOR_0`` where present (pipeline/scene/shading.py, pipeline/scene/textures.py).
 * ``metallic >= 0.5`` and ``roughness < 0.2``: an ideal **mirror** whose reflectance is the base colour.
 * ``metallic >= 0.5`` and ``0.2 <= roughness < 0.6``: **glossy**, a normalised Phong lobe about the mirror
@@ -63,7 +64,8 @@ class Material:
     def state(self) -> np.ndarray:
         """Numbers that fully describe what the material does at one instant (for state keys)."""
         transforms = [t.transform.ravel() for t in (self.base_color_texture, self.emissive_texture) if t is not None]
-        return np.concatenate([self.albedo, self.emission, [KINDS.index(self.kind), self.roughness, self.base_alpha],
+        return np.concatenate([self.albedo, self.emission, [KINDS.index(self.kind), self.roughness, self.base_alpha,
+                                                         self.alpha_cutoff],
                                *transforms])
 
     @property
@@ -87,16 +89,18 @@ ANIMATED_PROPERTIES = {"pbrMetallicRoughness/baseColorFactor": ("baseColorFactor
                        "pbrMetallicRoughness/metallicFactor": ("metallicFactor", 1),
                        "pbrMetallicRoughness/roughnessFactor": ("roughnessFactor", 1),
                        "emissiveFactor": ("emissiveFactor", 3),
-                       "extensions/KHR_materials_emissive_strength/emissiveStrength": ("emissiveStrength", 1)}
+                       "extensions/KHR_materials_emissive_strength/emissiveStrength": ("emissiveStrength", 1),
+                       "alphaCutoff": ("alphaCutoff", 1)}
 # A texture's KHR_texture_transform (a scrolling or turning texture), per texture slot
 TEXTURE_SLOTS = {"baseColorTexture": "pbrMetallicRoughness/baseColorTexture", "emissiveTexture": "emissiveTexture"}
+_TEXTURE_FIELDS = {"baseColorTexture": "base_color_texture", "emissiveTexture": "emissive_texture"}  # on Material
 for _slot, _where in TEXTURE_SLOTS.items():
     for _part, _width in (("offset", 2), ("rotation", 1), ("scale", 2)):
         ANIMATED_PROPERTIES[f"{_where}/extensions/KHR_texture_transform/{_part}"] = (f"{_slot}.{_part}", _width)
 MATERIAL_WIDTHS = {name: width for name, width in ANIMATED_PROPERTIES.values()}
 # Properties whose keys must not be negative (texture offsets, rotations and scales may be)
 NON_NEGATIVE = frozenset({"baseColorFactor", "metallicFactor", "roughnessFactor", "emissiveFactor",
-                          "emissiveStrength"})
+                          "emissiveStrength", "alphaCutoff"})
 
 
 def _at_keys(material: Material, mat: pygltflib.Material, channels: dict):
@@ -157,7 +161,9 @@ def _factors(mat: pygltflib.Material) -> dict[str, np.ndarray]:
     strength = (mat.extensions or {}).get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)
     return {"baseColorFactor": np.asarray(base, float), "metallicFactor": np.asarray([metallic], float),
             "roughnessFactor": np.asarray([roughness], float), "emissiveFactor": np.asarray(emissive, float),
-            "emissiveStrength": np.asarray([strength], float), **_texture_transforms(mat)}
+            "emissiveStrength": np.asarray([strength], float),
+            "alphaCutoff": np.asarray([mat.alphaCutoff if mat.alphaCutoff is not None else 0.5], float),
+            **_texture_transforms(mat)}
 
 
 def animated_material(material: Material, mat: pygltflib.Material, values: dict[str, np.ndarray]) -> Material:
@@ -173,36 +179,20 @@ def animated_material(material: Material, mat: pygltflib.Material, values: dict[
             textures[_TEXTURE_FIELDS[slot]] = replace(texture, transform=transform)
     return replace(material, albedo=tuple(float(c) for c in np.clip(f["baseColorFactor"][:3], 0.0, 1.0)),
                    base_alpha=float(np.clip(f["baseColorFactor"][3], 0.0, 1.0)),
+                   alpha_cutoff=max(float(f["alphaCutoff"][0]), 0.0),
                    kind=classify(metallic, roughness), roughness=roughness,
                    emission=tuple(float(c) for c in np.maximum(f["emissiveFactor"] * f["emissiveStrength"][0], 0.0)),
                    **textures)
 
 
-_TEXTURE_FIELDS = {"baseColorTexture": "base_color_texture", "emissiveTexture": "emissive_texture"}
-
-
 def material_from_gltf(mat: pygltflib.Material, index: int) -> Material:
-    """Build a :class:`Material` from a pygltflib material."""
-    pbr = mat.pbrMetallicRoughness
-    f = _factors(mat)
-    base = f["baseColorFactor"]
-    metallic = float(pbr.metallicFactor) if pbr and pbr.metallicFactor is not None else 1.0
-    roughness = float(pbr.roughnessFactor) if pbr and pbr.roughnessFactor is not None else 1.0
-    emission = f["emissiveFactor"] * float(f["emissiveStrength"][0])
-    normal_scale = mat.normalTexture.scale if mat.normalTexture is not None and mat.normalTexture.scale is not None \
-        else 1.0
-    return Material(
-        normal_scale=float(normal_scale),
-        alpha_mode=mat.alphaMode or "OPAQUE",
-        alpha_cutoff=float(mat.alphaCutoff) if mat.alphaCutoff is not None else 0.5,
-        base_alpha=float(np.clip(base[3], 0.0, 1.0)),
-        name=mat.name or f"material{index}",
-        albedo=tuple(float(c) for c in np.clip(base[:3], 0.0, 1.0)),
-        kind=classify(metallic, roughness),
-        roughness=roughness,
-        emission=tuple(float(c) for c in emission),
-        double_sided=bool(mat.doubleSided),
-    )
+    """Build a :class:`Material` from a pygltflib material: its factors as :func:`animated_material`
+    reads them (the file's values, :func:`_factors`), at no animated key."""
+    scale = mat.normalTexture.scale if mat.normalTexture is not None else None
+    bare = Material(name=mat.name or f"material{index}", albedo=(0.0, 0.0, 0.0), kind="diffuse", roughness=1.0,
+                    emission=(0.0, 0.0, 0.0), double_sided=bool(mat.doubleSided),
+                    normal_scale=1.0 if scale is None else float(scale), alpha_mode=mat.alphaMode or "OPAQUE")
+    return animated_material(bare, mat, {})
 
 
 DEFAULT_MATERIAL = Material("default", (0.8, 0.8, 0.8), "diffuse", 1.0, (0.0, 0.0, 0.0))

@@ -5,11 +5,11 @@ A pointer becomes a key ``(kind, index, property)`` of the loader's channels
 (pipeline/scene/loader.py): "node" for a node's TRS or morph weights (the core targets written as
 pointers), "visibility" for KHR_node_visibility's ``visible`` (pipeline/scene/visibility.py),
 "light" for a punctual light's colour, intensity, range and spot cone angles, "material" for the
-properties of materials.ANIMATED_PROPERTIES (factors, emission, texture transforms), "camera" for a
-perspective camera's ``yfov`` or an orthographic one's ``ymag``. Properties a ray-traced picture
-here does not depend on (a camera's clip planes, aspect ratio and xmag: the output resolution sets
-the aspect; a material's alpha cut-off: alpha is ignored) are accepted and change nothing. Any
-other pointer keeps the file's value, and a file that requires the extension is refused for it.
+properties of materials.ANIMATED_PROPERTIES (factors, emission, texture transforms, alpha
+cut-off), "camera" for a perspective camera's ``yfov`` or an orthographic one's ``ymag``.
+Properties a ray-traced picture here does not depend on (a camera's clip planes, aspect ratio and
+xmag: the output resolution sets the aspect) are accepted and change nothing. Any other pointer
+keeps the file's value, and a file that requires the extension is refused for it.
 """
 from __future__ import annotations
 
@@ -42,8 +42,7 @@ _LIGHT = re.compile(r"/extensions/KHR_lights_punctual/lights/(\d+)/(intensity|co
                     r"spot/outerConeAngle)")
 _CAMERA = re.compile(r"/cameras/(\d+)/(perspective/yfov|orthographic/ymag)")
 _MATERIAL = re.compile(r"/materials/(\d+)/(" + "|".join(map(re.escape, ANIMATED_PROPERTIES)) + ")")
-_NO_EFFECT = re.compile(r"/cameras/\d+/(perspective/(znear|zfar|aspectRatio)|orthographic/(xmag|znear|zfar))"
-                        r"|/materials/\d+/alphaCutoff")
+_NO_EFFECT = re.compile(r"/cameras/\d+/(perspective/(znear|zfar|aspectRatio)|orthographic/(xmag|znear|zfar))")
 
 
 def pointer_target(doc: GltfDocument, target: AnimationChannelTarget, f: str, unsupported: set[str]) -> tuple | None:

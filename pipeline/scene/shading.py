@@ -176,8 +176,9 @@ class SurfaceShading:
             length = np.linalg.norm(tangent, axis=1)
             ok &= length > 1e-12
             tangent = tangent / np.where(ok, length, 1.0)[:, None]
-            side = np.sign(np.einsum("ij,ij->i", np.cross(nn, tangent), -dpdv))
-            bitangent = np.cross(nn, tangent) * np.where(side == 0, 1.0, side)[:, None]
+            across = np.cross(nn, tangent)
+            side = np.sign(np.einsum("ij,ij->i", across, -dpdv))
+            bitangent = across * np.where(side == 0, 1.0, side)[:, None]
             texel = sample(tex, interpolate(raw, u[rows], v[rows]))
             local = (2.0 * texel - 1.0) * np.array([scale, scale, 1.0])
             bent = local[:, :1] * tangent + local[:, 1:2] * bitangent + local[:, 2:] * nn

@@ -8,12 +8,13 @@ textures are sRGB-encoded), with the sampler's wrap modes and filter and the tex
 (through pipeline/scene/shading.py), so texture colours are the same for photons and pixels.
 
 Decisions: images are PNG, JPEG or WebP (``EXT_texture_webp``'s image is read in place of the
-fallback; any format OpenImageIO reads is accepted); an image embedded in a
-bufferView or a data URI is written to a temporary file for OpenImageIO, which reads files only from
-Python. There are no mipmaps: minification uses the magnification filter (NEAREST or LINEAR, LINEAR
-when unset), and the compositor's samples per pixel do the averaging. Alpha is ignored (opaque
-surfaces only). Normal textures are read as linear data (pipeline/scene/shading.py bends the
-shading normal with them); occlusion and metallic-roughness textures are not read.
+fallback; any format OpenImageIO reads is accepted); an image embedded in a bufferView or a data
+URI is written to a temporary file for OpenImageIO, which reads files only from Python. There are
+no mipmaps: minification uses the magnification filter (NEAREST or LINEAR, LINEAR when unset), and
+the compositor's samples per pixel do the averaging. The alpha channel is kept for alpha masks
+(pipeline/scene/cutouts.py); nothing is blended. Normal textures are read as linear data
+(pipeline/scene/shading.py bends the shading normal with them); occlusion and metallic-roughness
+textures are not read.
 Spec: glTF 2.0 §5.26-§5.29 (textures, images, samplers); KHR_texture_transform README.
 """
 from __future__ import annotations

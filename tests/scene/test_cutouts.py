@@ -20,7 +20,7 @@ LAMP_AT = np.array([1.0, 2.0, 1.0])  # basic_builder's lamp, 10 W/sr white
 SHEET_Y = 1.0
 
 
-def sheet(path, alpha: np.ndarray, *, mode="MASK", cutoff=0.5, element_size=None):
+def sheet(path, alpha: np.ndarray, *, mode="MASK", cutoff=0.5, element_size=None, extra=None):
     """basic_builder's floor and lamp with a 2 x 2 sheet at y = 1 between them (u = x / 2, v = z / 2),
     its base-colour texture white with the given alpha (H, W) in [0, 255]."""
     b = basic_builder()
@@ -32,6 +32,8 @@ def sheet(path, alpha: np.ndarray, *, mode="MASK", cutoff=0.5, element_size=None
                translation=(0, SHEET_Y, 0))
     if element_size:
         b.set_scene_extras({"photonloom": {"element_size": element_size}})
+    if extra:
+        extra(b)
     return b.write(path)
 
 
@@ -100,3 +102,19 @@ def test_a_sheet_with_fine_holes_has_the_irradiance_of_its_solid_texels(tmp_path
 def test_a_bad_alpha_mode_is_a_one_line_error(tmp_path):
     with pytest.raises(SceneError, match=r"materials\[1\].alphaMode: 'CUTOUT' is not one of OPAQUE, MASK, BLEND"):
         read_scene(sheet(tmp_path / "bad.glb", _half(), mode="CUTOUT"))
+
+
+def test_an_animated_cutoff_moves_the_holes(tmp_path):
+    # The sheet's half-transparent texels (alpha 128) are holes while the cut-off is 0.6 and solid
+    # once it falls to 0.4 (KHR_animation_pointer, STEP at 0.5 s); the frames' state keys differ
+    alpha = np.full((8, 8), 255)
+    alpha[:, :4] = 128
+    scene = read_scene(sheet(tmp_path / "fade.glb", alpha, cutoff=0.6, extra=lambda b: b.add_pointer_animation(
+        "fade", "/materials/1/alphaCutoff", [0, 0.5], [0.6, 0.4], "STEP")))
+    origin, down = np.array([[0.5, 3, 1]], np.float32), np.array([[0, -1, 0]], np.float32)
+    reached_floor = []
+    for t in (0.0, 0.75):
+        state = scene.pose(t)
+        tri, *_ = RayCaster(state).intersect(origin, down)
+        reached_floor.append(state.triangle_instance[tri[0]] == 0)
+    assert reached_floor == [True, False] and scene.pose(0).state_key != scene.pose(0.75).state_key

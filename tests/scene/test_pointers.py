@@ -69,7 +69,6 @@ def test_pointers_that_change_nothing_here_are_read_quietly(tmp_path):
     b.add_node("cam", camera=cam, translation=(0, 1, 5))
     b.add_pointer_animation("clip", f"/cameras/{cam}/perspective/znear", [0, 1], [0.1, 0.5])
     b.add_pointer_animation("clip", f"/cameras/{cam}/perspective/zfar", [0, 1], [50.0, 20.0])
-    b.add_pointer_animation("clip", "/materials/0/alphaCutoff", [0, 1], [0.5, 0.2])
     scene = read_scene(b.write(tmp_path / "clip.glb"))
     assert not scene.warnings and not scene.has_animation
 
