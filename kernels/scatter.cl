@@ -25,9 +25,9 @@ __kernel void scatter8(
     __global const int *tri, __global const float *hit_u, __global const float *hit_v,
     __global const float *dir_in, __global const double *beta_in, __global const long *photon,
     __global const double *glossy_cos, __global const double *albedo, __global const double *shading,
-    __global const float *corners, __global const double *normals, __global const int *tri_mat,
+    __global const int *hit_kind, __global const double *hit_exp,
+    __global const float *corners, __global const double *normals,
     __global const int *tri_n, __global const long *tri_offset,
-    __global const int *mat_kind, __global const double *mat_exp,
     __global uint *rec_key, __global ushort *rec_bary, __global float *rec_energy,
     __global uchar *recorded,
     __global float *origin_out, __global float *dir_out, __global double *beta_out,
@@ -38,8 +38,7 @@ __kernel void scatter8(
     const long8 tri_i = convert_long8(G8(int8, tri, i));
     const long8 hit = tri_i >= 0L;  // a miss (-1) records nothing and ends its path
     const long8 t = select((long8)(0), tri_i, hit);
-    const long8 m = convert_long8(G8(int8, tri_mat, t));
-    const long8 kind = convert_long8(G8(int8, mat_kind, m));
+    const long8 kind = convert_long8(G8(int8, hit_kind, i));
     const double8 u = convert_double8(G8(float8, hit_u, i)), v = convert_double8(G8(float8, hit_v, i));
     const double8 w0 = 1.0 - u - v;
     const long8 c9 = 9 * t;
@@ -94,7 +93,7 @@ __kernel void scatter8(
     const double8 mx = dx - 2.0 * dn * fx_, my = dy - 2.0 * dn * fy_, mz = dz - 2.0 * dn * fz_;
     const double8 u1 = uniform8(r1), u2 = uniform8(r2);
     const long8 is_glossy = kind == (long8)(KIND_GLOSSY);
-    const double8 e = G8(double8, mat_exp, m);
+    const double8 e = G8(double8, hit_exp, i);
     const double8 cos_t = select(sqrt(1.0 - u1), G8(double8, glossy_cos, select((long8)(0), i, is_glossy)), is_glossy);
     const double8 zx = select(mx, fx_, is_diffuse), zy = select(my, fy_, is_diffuse), zz = select(mz, fz_, is_diffuse);
     double8 lx, ly, lz;

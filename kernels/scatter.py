@@ -14,6 +14,8 @@ either. Per hit on triangle t with material m, photon index i, bounce d:
   Willems 1994); directions below the surface end the path.
 * Russian roulette: survive with q = max(albedo), weight x albedo / q (Arvo and Kirk 1990); the
   albedo is the hit's own base colour (textures, vertex colours: pipeline/scene/shading.py).
+* the kind and the exponent are the hit's own too where a metallic-roughness texture varies them
+  (``Hits.kind``), else its material's.
 * a new direction that leaves below the geometric surface (possible with shading normals) ends the
   path, so no photon leaks through a surface; the origin offset follows the geometric normal.
 
@@ -61,6 +63,8 @@ class Hits:
     photon: np.ndarray  # int64 photon indices
     albedo: np.ndarray | None = None  # (m, 3) float64 base colour at the hit; None: the material's
     shading: np.ndarray | None = None  # (m, 3) float64 unit shading normal; None: the geometric one
+    kind: np.ndarray | None = None  # (m,) kind code at the hit (metallic-roughness textures); None: the material's
+    exponent: np.ndarray | None = None  # (m,) float64 Phong exponent at the hit, with ``kind``
 
 
 def hit_albedo(tables: SceneTables, hits: Hits) -> np.ndarray:
@@ -68,6 +72,14 @@ def hit_albedo(tables: SceneTables, hits: Hits) -> np.ndarray:
     if hits.albedo is not None:
         return np.asarray(hits.albedo, np.float64)
     return np.take(tables.albedo, np.take(tables.tri_mat, np.maximum(hits.tri, 0)), axis=0)
+
+
+def hit_kind(tables: SceneTables, hits: Hits) -> tuple[np.ndarray, np.ndarray]:
+    """(int32 kind code, float64 Phong exponent) of every hit: ``hits.kind``/``exponent`` or its material's."""
+    if hits.kind is not None:
+        return np.asarray(hits.kind, np.int32), np.asarray(hits.exponent, np.float64)
+    m = np.take(tables.tri_mat, np.maximum(hits.tri, 0))
+    return np.take(tables.kind, m), np.take(tables.exponent, m)
 
 
 def hit_shading(tables: SceneTables, hits: Hits) -> np.ndarray:
@@ -104,13 +116,13 @@ def glossy_cos(tables: SceneTables, hits: Hits, depth: int, key: tuple[int, int]
     """cos of the Phong lobe's angle, u1^(1/(e+1)), for the glossy hits (0 elsewhere). Both backends
     take it from here: pow is a libm call, which would differ between NumPy and PoCL."""
     out = np.zeros(max(len(hits.tri), 1))
-    if not (tables.kind == 2).any():
+    if hits.kind is None and not (tables.kind == 2).any():
         return out
-    m = tables.tri_mat[np.maximum(hits.tri, 0)]
-    glossy = np.flatnonzero((hits.tri >= 0) & (tables.kind[m] == 2))
+    kind, exponent = hit_kind(tables, hits)
+    glossy = np.flatnonzero((hits.tri >= 0) & (kind == 2))
     if len(glossy):
         u1 = uniforms(hits.photon[glossy], depth, key)[:, 1]
-        out[glossy] = u1 ** (1.0 / (tables.exponent[m[glossy]] + 1.0))
+        out[glossy] = u1 ** (1.0 / (exponent[glossy] + 1.0))
     return out
 
 
@@ -120,8 +132,7 @@ def scatter_reference(tables: SceneTables, hits: Hits, depth: int, key: tuple[in
     m_count = len(hits.tri)
     hit = hits.tri >= 0
     t = np.where(hit, hits.tri, 0).astype(np.int64)
-    m = tables.tri_mat[t]
-    kind = tables.kind[m]
+    kind, exponent = hit_kind(tables, hits)
     u, v = hits.u.astype(np.float64), hits.v.astype(np.float64)
     c = tables.corners[t].astype(np.float64).reshape(-1, 3, 3)
     p = (1 - u - v)[:, None] * c[:, 0] + u[:, None] * c[:, 1] + v[:, None] * c[:, 2]
@@ -158,7 +169,7 @@ def scatter_reference(tables: SceneTables, hits: Hits, depth: int, key: tuple[in
     nd[kind == 1] = mirror[kind == 1]
     glossy = kind == 2
     if glossy.any():
-        e = tables.exponent[m[glossy]]
+        e = exponent[glossy]
         cos_a = glossy_cos(tables, hits, depth, key)[glossy]
         g = around(mirror[glossy], cos_a, 2.0 * np.pi * w[glossy, 2], polynomial=True)
         cos_o = np.einsum("ij,ij->i", g, facing[glossy])
@@ -186,9 +197,8 @@ class ScatterCL:
         self.tables = tables
         self._pool = None  # output arrays reused from call to call (_output_rows)
         self._tables = [device_table(self.ctx, a, dt) for a, dt in (
-            (tables.corners, np.float32), (tables.normals, np.float64), (tables.tri_mat, np.int32),
-            (tables.tri_n, np.int32), (tables.tri_offset, np.int64),
-            (tables.kind, np.int32), (tables.exponent, np.float64))]
+            (tables.corners, np.float32), (tables.normals, np.float64),
+            (tables.tri_n, np.int32), (tables.tri_offset, np.int64))]
 
     def __call__(self, hits: Hits, depth: int, key: tuple[int, int]) -> Bounce:
         """One bounce on the device. The returned arrays are this instance's and are overwritten by
@@ -206,7 +216,7 @@ class ScatterCL:
             hits.v.astype(np.float32, copy=False), hits.dirs.astype(np.float32, copy=False),
             hits.beta.astype(np.float64, copy=False), hits.photon.astype(np.int64, copy=False),
             glossy_cos(self.tables, hits, depth, key), hit_albedo(self.tables, hits),
-            hit_shading(self.tables, hits))]
+            hit_shading(self.tables, hits), *hit_kind(self.tables, hits))]
         out = Bounce(*self._output_rows(m))
         fields = ("key", "bary", "energy", "recorded", "origins", "dirs", "beta", "alive")
         outputs = [device_output(self.ctx, getattr(out, f)) for f in fields]

@@ -171,7 +171,11 @@ def trace_samples(state: FrameState, sh: ShadingTables, paths: CameraPaths, coun
         if not len(tri):
             break
         hits = CameraHits(sh, tri, u, v, origins, dirs, t)
-        kind = sh.kind[tri]
+        if sh.surface.kind_varies:  # metallic-roughness textures: each hit's own kind and lobe
+            kind, exponent = sh.surface.kinds(tri, u, v)
+            exponent = exponent.astype(np.float32)  # as the table holds them
+        else:
+            kind, exponent = sh.kind[tri], None
         if sh.surface.varies:  # textures or vertex colours: the base colour at every hit
             rho = sh.surface.base_color(tri, u, v).astype(np.float32)
         else:
@@ -222,7 +226,7 @@ def trace_samples(state: FrameState, sh: ShadingTables, paths: CameraPaths, coun
         glossy = np.flatnonzero(kind == 2)
         if len(glossy):
             mirror_g = hits.reflect(glossy)
-            lobe = (mirror_g, sh.exponent[tri[glossy]])
+            lobe = (mirror_g, sh.exponent[tri[glossy]] if exponent is None else exponent[glossy])
             acc[0, glossy] += rho[glossy] * punctual_light(sh, hits, glossy, lobe, rays, None)
 
         if not direct_out:
@@ -236,7 +240,7 @@ def trace_samples(state: FrameState, sh: ShadingTables, paths: CameraPaths, coun
         weight = rho[spec]
         g = np.flatnonzero(kind[spec] == 2)
         if len(g):
-            e = sh.exponent[tri[spec[g]]].astype(np.float64)
+            e = (sh.exponent[tri[spec[g]]] if exponent is None else exponent[spec[g]]).astype(np.float64)
             c = counter[spec[g] if path is None else path[spec[g]]]
             base = 2 + depth * DIMS_PER_DEPTH
             cos_a = uniform(key, c, base) ** (1.0 / (e + 1.0))  # pdf (e+1)/(2 pi) cos^e

@@ -28,7 +28,7 @@ from .nodes import MeshInstance, Node
 from .pointers import ANIMATED_POINTERS, BOOLEAN_ACCESSOR, NON_NEGATIVE_PROPERTIES, WIDTHS, pointer_target
 from .pointers import EXTENSION as POINTER
 from .scene import DEFAULT_ELEMENT_FRACTION, Scene
-from .textures import base_color_texture, emissive_texture, normal_texture
+from .textures import base_color_texture, emissive_texture, metallic_roughness_texture, normal_texture
 from .timeline import DEFAULT_FPS, MAX_FRAMES, Timeline
 from .vertex_attributes import read_vertex_attributes
 from .visibility import EXTENSION as VISIBILITY
@@ -559,11 +559,12 @@ def _node_name(doc, node: int) -> str:
 
 
 def _with_textures(doc: GltfDocument, materials: list) -> list:
-    """Materials with their base-colour, emissive and normal textures attached, each image decoded once
-    (per colour encoding)."""
+    """Materials with their base-colour, emissive, normal and metallic-roughness textures attached, each
+    image decoded once (per colour encoding)."""
     images: dict = {}
     return [replace(m, base_color_texture=base_color_texture(doc, i, images),
-                    emissive_texture=emissive_texture(doc, i, images), normal_texture=normal_texture(doc, i, images))
+                    emissive_texture=emissive_texture(doc, i, images), normal_texture=normal_texture(doc, i, images),
+                    metallic_roughness_texture=metallic_roughness_texture(doc, i, images))
             for i, m in enumerate(materials)]
 
 

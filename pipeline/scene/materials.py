@@ -10,6 +10,10 @@ Mapping (docs/03-conventions.md §2; written in the README too):
   direction with exponent ``2 / alpha^2 - 2``, ``alpha = roughness^2`` (the Blinn-Phong/Beckmann
   correspondence of Walter et al., EGSR 2007, §5.2), reflectance the base colour.
 * everything else is **diffuse**.
+* A ``metallicRoughnessTexture`` multiplies the factors per hit (metallic by its blue channel,
+  roughness by its green, linear data: glTF 2.0 §3.9.2), so one material may be diffuse at one texel and
+  a mirror at the next: :func:`kind_codes` and :func:`phong_exponents` classify each hit
+  (pipeline/scene/shading.py); :attr:`Material.kind` is then the kind at the factors alone.
 * ``emissiveFactor x KHR_materials_emissive_strength`` (x the ``emissiveTexture``) is emitted radiance
   (front face only).
 * ``doubleSided`` (glTF's default: false): a single-sided surface has no back. Photons that reach
@@ -52,10 +56,17 @@ class Material:
     alpha_mode: str = "OPAQUE"  # glTF alphaMode: MASK cuts holes where alpha < alpha_cutoff (pipeline/scene/cutouts.py)
     alpha_cutoff: float = 0.5  # glTF alphaCutoff
     base_alpha: float = 1.0  # baseColorFactor's alpha, times the base-colour texture's alpha at a hit
+    metallic: float = 0.0  # metallicFactor (with roughness, what ``kind`` is classified from)
+    metallic_roughness_texture: object = None  # a linear Texture: B multiplies metallic, G roughness, per hit
 
     @property
     def is_specular(self) -> bool:
-        return self.kind in ("mirror", "glossy")
+        """Mirror or glossy somewhere: at its factors, or at some texel of its metallic-roughness texture."""
+        if self.kind in ("mirror", "glossy"):
+            return True
+        tex = self.metallic_roughness_texture
+        return tex is not None and bool(np.any(kind_codes(self.metallic * tex.image[..., 2],
+                                                          self.roughness * tex.image[..., 1]) != 0))
 
     @property
     def is_emissive(self) -> bool:
@@ -64,9 +75,10 @@ class Material:
     def state(self) -> np.ndarray:
         """Numbers that fully describe what the material does at one instant (for state keys)."""
         transforms = [t.transform.ravel() for t in (self.base_color_texture, self.emissive_texture) if t is not None]
+        textured = [[self.metallic]] if self.metallic_roughness_texture is not None else []  # kind says it otherwise
         return np.concatenate([self.albedo, self.emission, [KINDS.index(self.kind), self.roughness, self.base_alpha,
                                                          self.alpha_cutoff],
-                               *transforms])
+                               *transforms, *textured])
 
     @property
     def phong_exponent(self) -> float:
@@ -76,11 +88,23 @@ class Material:
 
 def classify(metallic: float, roughness: float) -> str:
     """``"mirror"``, ``"glossy"`` or ``"diffuse"`` from the glTF factors (see module docstring)."""
-    if metallic >= METALLIC_THRESHOLD and roughness < MIRROR_ROUGHNESS:
-        return "mirror"
-    if metallic >= METALLIC_THRESHOLD and roughness < GLOSSY_ROUGHNESS:
-        return "glossy"
-    return "diffuse"
+    return KINDS[int(kind_codes(np.float64(metallic), np.float64(roughness)))]
+
+
+def kind_codes(metallic: np.ndarray, roughness: np.ndarray) -> np.ndarray:
+    """Each point's kind as its index in :data:`KINDS` (0 diffuse, 1 mirror, 2 glossy), from its
+    metallic and roughness values (the module docstring's thresholds)."""
+    metal = np.asarray(metallic) >= METALLIC_THRESHOLD
+    roughness = np.asarray(roughness)
+    return np.where(metal & (roughness < MIRROR_ROUGHNESS), 1,
+                    np.where(metal & (roughness < GLOSSY_ROUGHNESS), 2, 0)).astype(np.int8)
+
+
+def phong_exponents(roughness: np.ndarray) -> np.ndarray:
+    """float64 Phong exponents ``2 / alpha^2 - 2``, ``alpha = roughness^2``, per point (the
+    module docstring's correspondence; :attr:`Material.phong_exponent` for a whole material)."""
+    alpha = np.maximum(np.asarray(roughness, np.float64), 1e-3) ** 2
+    return 2.0 / (alpha * alpha) - 2.0
 
 
 # The material properties KHR_animation_pointer may animate here, by their pointers under
@@ -180,7 +204,7 @@ def animated_material(material: Material, mat: pygltflib.Material, values: dict[
     return replace(material, albedo=tuple(float(c) for c in np.clip(f["baseColorFactor"][:3], 0.0, 1.0)),
                    base_alpha=float(np.clip(f["baseColorFactor"][3], 0.0, 1.0)),
                    alpha_cutoff=max(float(f["alphaCutoff"][0]), 0.0),
-                   kind=classify(metallic, roughness), roughness=roughness,
+                   kind=classify(metallic, roughness), roughness=roughness, metallic=metallic,
                    emission=tuple(float(c) for c in np.maximum(f["emissiveFactor"] * f["emissiveStrength"][0], 0.0)),
                    **textures)
 

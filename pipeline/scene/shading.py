@@ -14,6 +14,9 @@
   the hit's interpolated ``TEXCOORD_n`` x the interpolated ``COLOR_0`` (glTF 2.0 §3.9.2). The photon
   tracer takes its Russian-roulette albedo from here, so colour bleeding follows the texture; the
   photon records do not change (pipeline/store/records.py).
+* **Kind**: a material's kind (diffuse, mirror, glossy) and Phong exponent, or, where it has a
+  ``metallicRoughnessTexture``, those of the texel at the hit (:meth:`SurfaceShading.kinds`; the
+  classification is pipeline/scene/materials.py's): a photon bounces and a pixel shades by the texel.
 * **Emission**: ``emissiveFactor x strength x emissiveTexture`` (glTF 2.0 §3.9.5; vertex colours do
   not apply): seen emitters and area-light samples in the compositor, photon weights at emission.
 
@@ -26,6 +29,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .materials import KINDS, kind_codes, phong_exponents
 from .textures import sample
 
 if TYPE_CHECKING:
@@ -121,6 +125,11 @@ class SurfaceShading:
                                   if j in used and m.is_emissive and getattr(m, "emissive_texture", None) is not None}
         self.normal_maps = {j: (m.normal_texture, m.normal_scale) for j, m in enumerate(mats)
                             if j in used and getattr(m, "normal_texture", None) is not None}
+        self.kind = np.array([KINDS.index(m.kind) for m in mats], np.int8)
+        self.exponent = np.array([m.phong_exponent for m in mats], np.float64)
+        self.metallic_roughness = {j: (m.metallic_roughness_texture, m.metallic, m.roughness)
+                                   for j, m in enumerate(mats)
+                                   if j in used and getattr(m, "metallic_roughness_texture", None) is not None}
         self.vertices, self.faces = getattr(state, "vertices", None), getattr(state, "faces", None)
 
     @property
@@ -197,6 +206,27 @@ class SurfaceShading:
         return self._textured(self.textures, rho, t, m, u, v)
 
     @property
+    def kind_varies(self) -> bool:
+        """True when some material's kind or lobe varies inside its triangles (metallic-roughness textures)."""
+        return bool(self.metallic_roughness)
+
+    def kinds(self, tri: np.ndarray, u: np.ndarray, v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(kind codes int8, Phong exponents float64) at the hits: the material's, or for a material
+        with a metallic-roughness texture, its factors x the texel's B (metallic) and G (roughness)."""
+        t = np.maximum(np.asarray(tri), 0)
+        m = self.tri_mat[t] if len(self.tri_mat) else np.zeros(len(t), np.int64)
+        kind, exponent = np.take(self.kind, m), np.take(self.exponent, m)
+        for j, (tex, metallic, roughness) in self.metallic_roughness.items():
+            rows = np.flatnonzero(m == j)
+            if not len(rows):
+                continue
+            texel = self._texel(tex, t[rows], np.take(u, rows), np.take(v, rows))
+            r = np.clip(roughness * texel[:, 1], 0.0, 1.0)
+            kind[rows] = kind_codes(metallic * texel[:, 2], r)
+            exponent[rows] = phong_exponents(r)
+        return kind, exponent
+
+    @property
     def emission_varies(self) -> bool:
         """True when some emitter's radiance varies inside its triangles (emissive textures)."""
         return bool(self.emissive_textures)
@@ -229,16 +259,19 @@ class SurfaceShading:
         """``value`` (n, 3) times each textured material's texture at its hits' texture coordinates."""
         for j, tex in textures.items():
             rows = np.flatnonzero(m == j)
-            if not len(rows):
-                continue
-            corners = self.texcoords.get(tex.texcoord)
-            if corners is None:
-                uv = np.zeros((len(rows), 2))
-            else:
-                uv = interpolate(np.take(corners, t[rows], axis=0).astype(np.float64),
-                                 np.take(u, rows), np.take(v, rows))
-            value[rows] *= sample(tex, uv)
+            if len(rows):
+                value[rows] *= self._texel(tex, t[rows], np.take(u, rows), np.take(v, rows))
         return value
+
+    def _texel(self, tex, tri: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """(n, 3) ``tex`` at hits of triangles ``tri``, at their interpolated texture coordinates
+        ((0, 0) where the primitive has none)."""
+        corners = self.texcoords.get(tex.texcoord)
+        if corners is None:
+            uv = np.zeros((len(tri), 2))
+        else:
+            uv = interpolate(np.take(corners, tri, axis=0).astype(np.float64), u, v)
+        return sample(tex, uv)
 
 
 def mean_emission(material: Material) -> np.ndarray:

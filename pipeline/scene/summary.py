@@ -103,8 +103,6 @@ def deforms_line(scene: Scene) -> str:
     return f"{len(parts)} of {len(scene.instances)} primitives posed per vertex: " + "; ".join(parts)
 
 
-# Texture slots of a glTF material that photonloom does not read yet (docs/09-frames.md §4)
-_UNREAD_TEXTURES = ("occlusionTexture", "metallicRoughnessTexture")
 
 
 def surface_lines(scene: Scene) -> list[str]:
@@ -121,27 +119,21 @@ def surface_lines(scene: Scene) -> list[str]:
                + (f"; KHR_texture_transform on {moved}" if moved else "") + ")")
     else:
         tex = "no base-colour textures"
-    unread = []
-    gltf = scene.document.gltf
-    for slot in _UNREAD_TEXTURES:
-        n = 0
-        for m in gltf.materials:
-            holder = m.pbrMetallicRoughness if slot == "metallicRoughnessTexture" else m
-            if holder is not None and getattr(holder, slot, None) is not None:
-                n += 1
-        if n:
-            unread.append(f"{slot} on {n}")
+    occluded = sum(1 for m in scene.document.gltf.materials if m.occlusionTexture is not None)
     emissive = sum(1 for m in used if scene.materials[m].emissive_texture is not None)
     if emissive:
         tex += f"; emissive textures on {emissive} material(s)"
     bent = sum(1 for m in used if scene.materials[m].normal_texture is not None)
     if bent:
         tex += f"; normal maps on {bent} material(s)"
+    varied = sum(1 for m in used if scene.materials[m].metallic_roughness_texture is not None)
+    if varied:
+        tex += f"; metallic-roughness textures on {varied} material(s)"
     masked = sum(1 for m in used if scene.materials[m].alpha_mode == "MASK")
     if masked:
         tex += f"; alpha masks (holes rays pass) on {masked} material(s)"
-    if unread:
-        tex += "; ignored (not read yet, factors used): " + ", ".join(unread)
+    if occluded:  # baked ambient occlusion: the photons' own shadowing of indirect light (textures.py)
+        tex += f"; occlusionTexture on {occluded} not applied (the photons compute occlusion)"
     n = len(scene.instances)
     smooth = sum(1 for i in scene.instances if i.attributes is not None and i.attributes.normals is not None)
     coloured = sum(1 for i in scene.instances if i.attributes is not None and i.attributes.color is not None)

@@ -1,4 +1,4 @@
-"""Base-colour and emissive textures: images decoded with OpenImageIO, samplers, ``KHR_texture_transform``.
+"""Material textures: images decoded with OpenImageIO, samplers, ``KHR_texture_transform``.
 
 A material's ``baseColorTexture`` or ``emissiveTexture`` becomes a :class:`Texture`: the image
 decoded once when the scene is loaded (a worker loads each scene once, pipeline/scene/scene_cache.py, so
@@ -13,8 +13,11 @@ URI is written to a temporary file for OpenImageIO, which reads files only from 
 no mipmaps: minification uses the magnification filter (NEAREST or LINEAR, LINEAR when unset), and
 the compositor's samples per pixel do the averaging. The alpha channel is kept for alpha masks
 (pipeline/scene/cutouts.py); nothing is blended. Normal textures are read as linear data
-(pipeline/scene/shading.py bends the shading normal with them); occlusion and metallic-roughness
-textures are not read.
+(pipeline/scene/shading.py bends the shading normal with them), and so are metallic-roughness textures
+(their blue and green channels scale the factors per hit: pipeline/scene/materials.py). Occlusion
+textures are not applied: they are baked ambient occlusion, the shadowing of indirect light that the
+photons compute themselves, so applying them would darken that light twice (pbrt-v4 and Mitsuba 3
+do not read them either).
 Spec: glTF 2.0 §5.26-§5.29 (textures, images, samplers); KHR_texture_transform README.
 """
 from __future__ import annotations
@@ -116,9 +119,19 @@ def normal_texture(doc: GltfDocument, material_index: int, images: dict) -> Text
     return _texture(doc, info, f"materials[{material_index}].normalTexture", images, linear=True)
 
 
+def metallic_roughness_texture(doc: GltfDocument, material_index: int, images: dict) -> Texture | None:
+    """The material's ``metallicRoughnessTexture`` (linear data: B metallic, G roughness) or None."""
+    pbr = doc.gltf.materials[material_index].pbrMetallicRoughness
+    info = pbr.metallicRoughnessTexture if pbr is not None else None
+    if info is None:
+        return None
+    return _texture(doc, info, f"materials[{material_index}].pbrMetallicRoughness.metallicRoughnessTexture",
+                    images, linear=True)
+
+
 def _texture(doc: GltfDocument, info, where: str, images: dict, *, linear: bool = False) -> Texture:
     """A glTF textureInfo ``info`` (at ``where``) as a :class:`Texture`, checked; ``linear`` for
-    data that are not colours (normal maps), which skip the sRGB decoding."""
+    data that are not colours (normal and metallic-roughness maps), which skip the sRGB decoding."""
     g = doc.gltf
     index = info.index
     if index is None or not 0 <= index < len(g.textures):

@@ -111,8 +111,9 @@ def test_record_constants_match_the_store():
 
 
 def _textured_smooth_hits(rng, tables, m) -> Hits:
-    """Hits with their own albedo (a texture) and shading normals tilted up to ~30 degrees off the
-    geometric ones (vertex normals), both given per hit as the tracer does."""
+    """Hits with their own albedo (a texture), shading normals tilted up to ~30 degrees off the
+    geometric ones (vertex normals) and kinds and Phong exponents (a metallic-roughness texture),
+    all given per hit as the tracer does."""
     hits = _hits(rng, tables, m)
     geo = tables.normals[hits.tri]
     tilt = geo + 0.6 * rng.normal(size=(m, 3)) * rng.random((m, 1))
@@ -121,6 +122,8 @@ def _textured_smooth_hits(rng, tables, m) -> Hits:
     hits.albedo = rng.random((m, 3))
     hits.albedo[: m // 10] = 0.0  # black texels absorb
     hits.shading = tilt
+    hits.kind = rng.integers(0, 3, m).astype(np.int32)
+    hits.exponent = rng.choice([0.5, 3.0, 40.0, 1e4], m)
     return hits
 
 
@@ -130,6 +133,7 @@ def test_bounce_follows_the_hit_albedo_and_shading_normal(rng):
     tables = _tables(rng, kinds=(0,))
     tables.albedo[:] = 1.0  # the material alone would never absorb
     hits = _textured_smooth_hits(rng, tables, 40_000)
+    hits.kind = hits.exponent = None  # the material's kind: diffuse
     out = scatter_reference(tables, hits, 1, (1, 2))
     black = hits.albedo.max(axis=1) == 0
     assert not out.alive[black].any() and out.alive[~black].any()
@@ -144,3 +148,28 @@ def test_bounce_follows_the_hit_albedo_and_shading_normal(rng):
     cos_s = np.einsum("ij,ij->i", out.dirs, hits.shading * fs[:, None])
     flat = np.einsum("ij,ij->i", hits.shading, geo) > 0.999
     assert abs(cos_s[flat & (hits.albedo.max(axis=1) > 0)].mean() - 2 / 3) < 0.02
+
+
+def test_bounce_follows_the_hit_kind(rng):
+    """A per-hit kind overrides the material's: on an all-diffuse table, hits marked mirror record
+    nothing and leave along the mirror direction about their shading normal, glossy ones gain the
+    lobe's weight, diffuse ones record."""
+    tables = _tables(rng, kinds=(0,))
+    tables.albedo[:] = 1.0
+    hits = _textured_smooth_hits(rng, tables, 20_000)
+    hits.albedo = None
+    out = scatter_reference(tables, hits, 1, (3, 4))
+    hit = hits.tri >= 0
+    assert (out.recorded == (hit & (hits.kind == 0))).all()
+    geo = tables.normals[hits.tri]
+    fs = np.where(np.einsum("ij,ij->i", geo, hits.dirs) < 0, 1.0, -1.0)
+    n = hits.shading * fs[:, None]
+    d = hits.dirs.astype(np.float64)
+    mirror = d - 2 * np.einsum("ij,ij->i", d, n)[:, None] * n
+    sel = (hits.kind == 1) & out.alive
+    assert sel.sum() > 1000
+    np.testing.assert_allclose(out.dirs[sel], mirror[sel], atol=1e-6)
+    glossy = (hits.kind == 2) & out.alive
+    cos_o = np.einsum("ij,ij->i", out.dirs[glossy].astype(np.float64), n[glossy])
+    e = hits.exponent[glossy]
+    np.testing.assert_allclose(out.beta[glossy], hits.beta[glossy] * (cos_o * (e + 2) / (e + 1))[:, None], rtol=1e-5)

@@ -162,13 +162,14 @@ class GltfBuilder:
                      base_color_texture: int | None = None, texcoord: int = 0,
                      texture_transform: dict | None = None, emissive_texture: int | None = None,
                      normal_texture: int | None = None, normal_scale: float = 1.0, alpha_mode: str | None = None,
-                     alpha_cutoff: float | None = None) -> int:
+                     alpha_cutoff: float | None = None, metallic_roughness_texture: int | None = None) -> int:
         """A metallic-roughness material; ``base_color`` is RGB or RGBA (the Lambertian albedo).
 
         ``base_color_texture`` is a texture index from :meth:`add_texture`, looked up with
         ``TEXCOORD_<texcoord>`` and an optional ``KHR_texture_transform`` (offset, rotation, scale);
         ``emissive_texture`` multiplies the emission, ``normal_texture`` (scaled by ``normal_scale``)
-        bends the shading normal, both looked up with the same set.
+        bends the shading normal, ``metallic_roughness_texture`` scales ``metallic`` by its blue channel
+        and ``roughness`` by its green, all looked up with the same set.
 
         Emitted radiance is ``emissive * emissive_strength``; a strength other than 1 is written as
         ``KHR_materials_emissive_strength``. ``double_sided`` defaults to True for surfaces that do
@@ -198,6 +199,9 @@ class GltfBuilder:
                 info.extensions = {TEXTURE_TRANSFORM_EXTENSION: dict(texture_transform)}
                 self._use_extension(TEXTURE_TRANSFORM_EXTENSION)
             material.pbrMetallicRoughness.baseColorTexture = info
+        if metallic_roughness_texture is not None:
+            material.pbrMetallicRoughness.metallicRoughnessTexture = pygltflib.TextureInfo(
+                index=int(metallic_roughness_texture), texCoord=int(texcoord))
         if emissive_texture is not None:
             material.emissiveTexture = pygltflib.TextureInfo(index=int(emissive_texture), texCoord=int(texcoord))
         if alpha_mode is not None:  # OPAQUE, MASK (holes where alpha < alpha_cutoff) or BLEND
