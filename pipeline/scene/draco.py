@@ -58,7 +58,11 @@ def _decode(doc: GltfDocument, prim, ext, attributes: dict, where: str) -> dict[
     faces = np.asarray(getattr(mesh, "faces", None) if isinstance(mesh, DracoPy.DracoMesh) else None)
     if faces is None or faces.ndim != 2 or faces.shape[1:] != (3,) or not len(faces):
         raise doc.error("the Draco data hold no triangles (a point cloud)", where + ".bufferView")
-    n_points = len(mesh.points)
+    points = getattr(mesh, "points", None)
+    if points is None or not len(points):  # what Draco makes of a stream whose counts its bytes cannot hold
+        raise doc.error(f"the {length:,} bytes of bufferView {view} are not Draco data that decode (no points)",
+                        where + ".bufferView")
+    n_points = len(points)
     out: dict[int, np.ndarray] = {}
     for semantic, uid in ext["attributes"].items():
         field = where + f".attributes.{semantic}"

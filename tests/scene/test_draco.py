@@ -5,6 +5,7 @@ posed at several instants, and a textured, vertex-coloured quad; broken Draco da
 disagree with their accessors are one-line errors."""
 from __future__ import annotations
 
+import base64
 import json
 
 import numpy as np
@@ -81,7 +82,41 @@ def _fewer_vertices(tree):
     tree["accessors"][tree["meshes"][0]["primitives"][0]["attributes"]["NORMAL"]]["count"] = 95
 
 
+def _varint(n: int) -> bytes:
+    out = bytearray()
+    while True:
+        out.append((n & 0x7F) | (0x80 if n > 0x7F else 0))
+        n >>= 7
+        if not n:
+            return bytes(out)
+
+
+def _claims_two_billion_points(tree):
+    """The Draco stream's own point count (sequential connectivity, bitstream 2.2: after the 11-byte
+    header, the faces' and the points' counts as varints) set to 2^31: a few bytes that would ask
+    the decoder for 24 GB of positions."""
+    view = tree["bufferViews"][_draco(tree)["bufferView"]]
+    uri = tree["buffers"][0]["uri"]
+    blob = bytearray(base64.b64decode(uri.split(",", 1)[1]))
+    data = bytes(blob[view["byteOffset"]: view["byteOffset"] + view["byteLength"]])
+    assert data[:5] == b"DRACO" and data[5:7] == b"\x02\x02" and data[8] == 0  # v2.2, sequential
+    at = 11
+    for _ in range(2):  # skip the two varints
+        while data[at] & 0x80:
+            at += 1
+        at += 1
+    faces = np.frombuffer(data[11:at], np.uint8)
+    n_faces = sum(int(b & 0x7F) << (7 * i) for i, b in enumerate(faces[: np.argmax(faces < 0x80) + 1]))
+    bomb = data[:11] + _varint(n_faces) + _varint(2**31) + data[at:]
+    view["byteOffset"], view["byteLength"] = len(blob), len(bomb)
+    blob += bomb
+    tree["buffers"][0] = {"byteLength": len(blob),
+                          "uri": "data:application/octet-stream;base64," + base64.b64encode(bytes(blob)).decode()}
+
+
 @pytest.mark.parametrize("change, match", [
+    (_claims_two_billion_points, r"KHR_draco_mesh_compression.bufferView: the [\d,]+ bytes of bufferView \d+ are "
+                                 r"not Draco data"),
     (_corrupt, r"KHR_draco_mesh_compression.bufferView: the [\d,]+ bytes of bufferView \d+ are not Draco data"),
     (_unknown_id, r"KHR_draco_mesh_compression.attributes.NORMAL: the Draco data have no attribute with unique "
                   r"id 99"),
