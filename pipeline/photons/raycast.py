@@ -22,7 +22,7 @@ from embreex import mesh_construction, rtcore_scene
 
 from kernels.scatter import surface_offset
 from pipeline.scene import FrameState
-from pipeline.scene.cutouts import Cutouts
+from pipeline.scene.cutouts import Cutouts, ray_uniforms
 
 MISS = -1
 # Holes of alpha-masked surfaces a ray passes before it counts as a miss (a forest seen edge-on)
@@ -56,7 +56,7 @@ class RayCaster:
         self.epsilon = OFFSET_REL
         self.offsets = triangle_offsets(tri)
         self.rays_cast = 0
-        self.cutouts = Cutouts.of(state)  # alpha-masked surfaces: rays pass their holes
+        self.cutouts = Cutouts.of(state)  # alpha-masked and blended surfaces: rays pass their holes
         # Commit the BVH now (embreex commits lazily on the first query).
         self._scene.run(np.zeros((1, 3), np.float32), np.array([[0, 0, 1]], np.float32))
 
@@ -73,22 +73,27 @@ class RayCaster:
         return self._through_holes(origins, directions, out["primID"], out["u"], out["v"], out["tfar"])
 
     def _through_holes(self, origins: np.ndarray, directions: np.ndarray, tri, u, v, t):
-        """Hits with those in an alpha-masked surface's holes replaced by what lies beyond: each such
-        ray starts again just past the hole's plane (the triangle's offset over the cosine) along
-        its direction, at most MAX_HOLES times."""
+        """Hits with those in a masked or blended surface's holes replaced by what lies beyond: each
+        such ray starts again just past the hole's plane (the triangle's offset over the cosine)
+        along its direction, at most MAX_HOLES times. A blend's holes are drawn from the ray that
+        meets it (``ray_uniforms`` of its start and direction)."""
         tri, u, v, t = (np.array(a) for a in (tri, u, v, t))
-        rows = np.flatnonzero(self.cutouts.holes(tri, u, v))
+        blends = self.cutouts.blends
+        xi = ray_uniforms(origins, directions, tri) if blends else None
+        rows = np.flatnonzero(self.cutouts.holes(tri, u, v, xi))
         for _ in range(MAX_HOLES):
             if not len(rows):
                 break
             d = directions[rows].astype(np.float64)
             cosine = np.abs(np.einsum("ij,ij->i", self.normals[tri[rows]], d))
             reach = t[rows].astype(np.float64) + self.offsets[tri[rows]] / np.maximum(cosine, 1e-3)
-            out = self._scene.run((origins[rows] + d * reach[:, None]).astype(np.float32), directions[rows], output=1)
+            restart = (origins[rows] + d * reach[:, None]).astype(np.float32)
+            out = self._scene.run(restart, directions[rows], output=1)
             self.rays_cast += len(rows)
             tri[rows], u[rows], v[rows] = out["primID"], out["u"], out["v"]
             t[rows] = np.where(out["primID"] >= 0, reach + out["tfar"], out["tfar"])
-            rows = rows[self.cutouts.holes(out["primID"], out["u"], out["v"])]
+            xi = ray_uniforms(restart, directions[rows], out["primID"]) if blends else None
+            rows = rows[self.cutouts.holes(out["primID"], out["u"], out["v"], xi)]
         if len(rows):  # a ray past MAX_HOLES holes: a miss rather than a hit on a hole
             tri[rows] = MISS
             t[rows] = np.inf

@@ -1,13 +1,21 @@
-"""Alpha-masked surfaces (glTF ``alphaMode`` MASK: leaves, fences, hair cards): rays pass where the
-surface's alpha is below its ``alphaCutoff`` (glTF 2.0 §3.9.4), as if nothing were there.
+"""Surfaces with alpha (glTF ``alphaMode``, §3.9.4): rays pass where the surface is not there.
+
+* MASK (leaves, fences, hair cards): a hit whose alpha is below the ``alphaCutoff`` is a hole.
+* BLEND (glass panes, veils, fading objects): a hit is a hole with probability 1 - alpha, decided
+  by a uniform number hashed from the ray itself (:func:`ray_uniforms`: its origin, direction and
+  the surface it met, so the same ray decides alike on every worker and in every run). A surface of
+  alpha a then stops a of the photons, shadow rays and camera samples that reach it and lets the
+  rest through: alpha compositing's "over" in expectation (Enderton et al., "Stochastic
+  transparency", I3D 2010), for light as for pixels, the pixels' samples averaging it.
 
 Alpha is ``baseColorFactor``'s fourth value times the base-colour texture's alpha channel at the
 hit (vertex colours' alpha is not read). :class:`Cutouts` answers, for hits of one frame state,
 which fall in a hole; the ray caster (pipeline/photons/raycast.py) continues such rays past the
-hole, for photons, camera rays and shadow rays alike. An element of a masked surface gathers photons
-only on its solid part, so its area counts only that part (:func:`element_coverage`, sampled once
-per element from the texture): the irradiance of a leaf is that of its solid texels, not diluted
-by its holes. ``BLEND`` surfaces are rendered opaque.
+hole, for photons, camera rays and shadow rays alike. An element of such a surface gathers photons
+only where they stop, so its area counts only that part (:func:`element_coverage`, sampled once
+per element from the texture: the solid fraction of a mask, the mean alpha of a blend): the
+irradiance of a leaf is that of its solid texels, not diluted by its holes, and a pane of alpha
+0.3 has the irradiance of the light that falls on it.
 """
 from __future__ import annotations
 
@@ -24,7 +32,8 @@ if TYPE_CHECKING:
     from .materials import Material
     from .scene import FrameState
 
-MASK = "MASK"
+MASK, BLEND = "MASK", "BLEND"
+SEE_THROUGH = (MASK, BLEND)  # the alpha modes that let rays through
 
 
 def _alpha_texture(material: Material):
@@ -35,12 +44,13 @@ def _alpha_texture(material: Material):
 
 
 class Cutouts:
-    """Which hits of a frame state fall in a masked surface's holes."""
+    """Which hits of a frame state fall in a masked or blended surface's holes."""
 
     def __init__(self, materials: list[Material], triangle_material: np.ndarray, texcoords: dict):
         self.tri_mat = np.asarray(triangle_material, np.int64)
-        self.masked = {j: (m.base_alpha, m.alpha_cutoff, _alpha_texture(m)) for j, m in enumerate(materials)
-                       if m.alpha_mode == MASK}
+        # cut-off None: a blend, whose holes are random
+        self.masked = {j: (m.base_alpha, m.alpha_cutoff if m.alpha_mode == MASK else None, _alpha_texture(m))
+                       for j, m in enumerate(materials) if m.alpha_mode in SEE_THROUGH}
         self.texcoords = texcoords
         flags = np.zeros(len(materials), bool)
         flags[list(self.masked)] = True
@@ -49,33 +59,77 @@ class Cutouts:
     @classmethod
     def of(cls, state: FrameState) -> "Cutouts | None":
         """The state's cutouts, None when no surface it draws is masked (rays need no second look)."""
-        if not any(m.alpha_mode == MASK for m in state.materials):
+        if not any(m.alpha_mode in SEE_THROUGH for m in state.materials):
             return None
         corners = getattr(state, "corners", None)
         found = cls(state.materials, state.triangle_material, corners.texcoords if corners is not None else {})
         return found if found.masked_triangle.any() else None
 
-    def holes(self, tri: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """(n,) bool: hits (``tri`` -1 for a miss) whose alpha is below their material's cut-off."""
+    @property
+    def blends(self) -> bool:
+        """Some surface is blended: its holes depend on the ray (``holes``' ``uniforms``)."""
+        return any(cutoff is None for _, cutoff, _ in self.masked.values())
+
+    def holes(self, tri: np.ndarray, u: np.ndarray, v: np.ndarray, uniforms: np.ndarray | None = None) -> np.ndarray:
+        """(n,) bool: hits (``tri`` -1 for a miss) in a hole: alpha below a mask's cut-off, or below
+        the hit's ``uniforms`` value in [0, 1) on a blend (:func:`ray_uniforms`; None: the blend's
+        mean, coverage's view, is not asked here, so None is only for scenes without blends)."""
         tri = np.asarray(tri)
         out = np.zeros(len(tri), bool)
         candidates = np.flatnonzero((tri >= 0) & self.masked_triangle[np.maximum(tri, 0)])
         if not len(candidates):
             return out
         m = self.tri_mat[tri[candidates]]
-        for j, (factor, cutoff, tex) in self.masked.items():
+        for j, (_, cutoff, _) in self.masked.items():
             rows = candidates[m == j]
             if not len(rows):
                 continue
-            alpha = np.full(len(rows), factor)
-            if tex is not None:
-                corners = self.texcoords.get(tex.texcoord)
-                uv = (np.zeros((len(rows), 2)) if corners is None else
-                      interpolate(np.take(corners, tri[rows], axis=0).astype(np.float64),
-                                  np.asarray(u, np.float64)[rows], np.asarray(v, np.float64)[rows]))
-                alpha = alpha * sample(tex, uv)[:, 0]
-            out[rows] = alpha < cutoff
+            alpha = self._alpha(j, tri[rows], np.asarray(u, np.float64)[rows], np.asarray(v, np.float64)[rows])
+            out[rows] = alpha < (cutoff if cutoff is not None else uniforms[rows])
         return out
+
+    def coverage(self, tri: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """(n,) the share of rays each hit point stops: 1 or 0 on a mask, alpha on a blend, 1 elsewhere."""
+        tri = np.asarray(tri)
+        out = np.ones(len(tri))
+        m = self.tri_mat[tri]
+        for j, (_, cutoff, _) in self.masked.items():
+            rows = np.flatnonzero(m == j)
+            if len(rows):
+                alpha = self._alpha(j, tri[rows], np.asarray(u, np.float64)[rows], np.asarray(v, np.float64)[rows])
+                out[rows] = alpha >= cutoff if cutoff is not None else np.clip(alpha, 0.0, 1.0)
+        return out
+
+    def _alpha(self, j: int, tri: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Alpha of material ``j`` at hits of its triangles ``tri``: factor x texture alpha."""
+        factor, _, tex = self.masked[j]
+        alpha = np.full(len(tri), factor)
+        if tex is not None:
+            corners = self.texcoords.get(tex.texcoord)
+            uv = (np.zeros((len(tri), 2)) if corners is None else
+                  interpolate(np.take(corners, tri, axis=0).astype(np.float64), u, v))
+            alpha = alpha * sample(tex, uv)[:, 0]
+        return alpha
+
+
+_GOLDEN, _MIX1, _MIX2 = np.uint64(0x9E3779B97F4A7C15), np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB)
+
+
+def ray_uniforms(origins: np.ndarray, directions: np.ndarray, tri: np.ndarray) -> np.ndarray:
+    """(n,) float64 in [0, 1): a hash of each ray's float32 origin and direction bits and the
+    triangle it met (SplitMix64's finaliser, Steele et al. 2014, over the seven words in turn), so a
+    blend's hole depends on nothing but the ray: the same on any worker, in any run."""
+    words = np.concatenate([np.ascontiguousarray(origins, np.float32).view(np.uint32).reshape(len(tri), 3),
+                            np.ascontiguousarray(directions, np.float32).view(np.uint32).reshape(len(tri), 3),
+                            np.asarray(tri).astype(np.int64).astype(np.uint32)[:, None]], axis=1).astype(np.uint64)
+    h = np.zeros(len(tri), np.uint64)
+    for k in range(words.shape[1]):
+        h = h ^ words[:, k]
+        h = h + _GOLDEN
+        h = (h ^ (h >> np.uint64(30))) * _MIX1
+        h = (h ^ (h >> np.uint64(27))) * _MIX2
+        h = h ^ (h >> np.uint64(31))
+    return (h >> np.uint64(11)).astype(np.float64) * (1.0 / (1 << 53))
 
 
 # Points per element whose alpha gives its coverage (a 4 x 4 stratified pattern)
@@ -84,8 +138,9 @@ COVERAGE_POINTS = 16
 
 def element_coverage(cutouts: Cutouts | None, triangle_n: np.ndarray, triangle_offset: np.ndarray,
                      cells: Callable[[int], tuple[np.ndarray, np.ndarray]]) -> np.ndarray | None:
-    """(E,) the solid fraction of each element (1 off masked surfaces), from the alpha at
-    COVERAGE_POINTS points spread over it; None without cutouts. ``cells(n)`` gives the lattice
+    """(E,) the share of the photons reaching each element that stop on it (1 off masked and blended
+    surfaces): the mean :meth:`Cutouts.coverage` of COVERAGE_POINTS points spread over it; None
+    without cutouts. ``cells(n)`` gives the lattice
     points and the cells of a triangle split n x n (pipeline/scene/elements.py)."""
     if cutouts is None or not cutouts.masked_triangle.any():
         return None
@@ -103,7 +158,7 @@ def element_coverage(cutouts: Cutouts | None, triangle_n: np.ndarray, triangle_o
             + b2[None, :, None] * (lattice[:, 2, None] - lattice[:, 0, None])  # (n*n, points, 2)
         tri = np.repeat(tris, at.shape[0] * at.shape[1])
         uv = np.tile(at.reshape(-1, 2), (len(tris), 1))
-        solid = ~cutouts.holes(tri, uv[:, 0], uv[:, 1])
+        solid = cutouts.coverage(tri, uv[:, 0], uv[:, 1])
         rows = (triangle_offset[tris][:, None] + np.arange(n * n)[None, :]).ravel()
         coverage[rows] = solid.reshape(len(tris) * n * n, -1).mean(axis=1)
     return coverage

@@ -2,8 +2,8 @@
 
 Mapping (docs/03-conventions.md §2; written in the README too):
 
-* ``baseColorFactor`` RGB is the Lambertian albedo (its alpha cuts holes in MASK materials:
-  pipeline/scene/cutouts.py), times the ``baseColorTexture``
+* ``baseColorFactor`` RGB is the Lambertian albedo (its alpha cuts holes in MASK materials and
+  lets rays through BLEND ones: pipeline/scene/cutouts.py), times the ``baseColorTexture``
   and ``COLOR_0`` where present (pipeline/scene/shading.py, pipeline/scene/textures.py).
 * ``metallic >= 0.5`` and ``roughness < 0.2``: an ideal **mirror** whose reflectance is the base colour.
 * ``metallic >= 0.5`` and ``0.2 <= roughness < 0.6``: **glossy**, a normalised Phong lobe about the mirror
@@ -53,7 +53,7 @@ class Material:
     double_sided: bool = True  # glTF doubleSided; False: photons reaching the back face are absorbed
     normal_texture: object = None  # a Texture of tangent-space normals bending the shading normal, or None
     normal_scale: float = 1.0  # normalTexture.scale: multiplies the map's x and y
-    alpha_mode: str = "OPAQUE"  # glTF alphaMode: MASK cuts holes where alpha < alpha_cutoff (pipeline/scene/cutouts.py)
+    alpha_mode: str = "OPAQUE"  # glTF alphaMode: MASK and BLEND let rays through (pipeline/scene/cutouts.py)
     alpha_cutoff: float = 0.5  # glTF alphaCutoff
     base_alpha: float = 1.0  # baseColorFactor's alpha, times the base-colour texture's alpha at a hit
     metallic: float = 0.0  # metallicFactor (with roughness, what ``kind`` is classified from)

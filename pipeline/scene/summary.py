@@ -132,6 +132,9 @@ def surface_lines(scene: Scene) -> list[str]:
     masked = sum(1 for m in used if scene.materials[m].alpha_mode == "MASK")
     if masked:
         tex += f"; alpha masks (holes rays pass) on {masked} material(s)"
+    blended = sum(1 for m in used if scene.materials[m].alpha_mode == "BLEND")
+    if blended:
+        tex += f"; alpha blending (rays pass 1 - alpha of the time) on {blended} material(s)"
     if occluded:  # baked ambient occlusion: the photons' own shadowing of indirect light (textures.py)
         tex += f"; occlusionTexture on {occluded} not applied (the photons compute occlusion)"
     n = len(scene.instances)

@@ -1,7 +1,8 @@
 """Alpha-masked surfaces (pipeline/scene/cutouts.py): rays pass a MASK surface's holes, camera,
 shadow and photon rays alike; an element's area counts its solid part only, so a leaf-like
 surface with holes finer than its elements has the irradiance of its solid texels, a point
-light's I cos / r^2; BLEND renders opaque; a bad alpha mode is a one-line error."""
+light's I cos / r^2; a blended sheet of alpha a stops a of the rays and photons reaching it, its
+irradiance still I cos / r^2, each ray's decision its own hash; a bad alpha mode is a one-line error."""
 from __future__ import annotations
 
 import numpy as np
@@ -14,6 +15,7 @@ from pipeline.errors import SceneError
 from pipeline.photons.raycast import RayCaster
 from pipeline.photons.tracing import PhotonRange, trace_batch
 from pipeline.scene import ElementMesh, read_scene
+from pipeline.scene.cutouts import ray_uniforms
 from tests.conftest import QUAD, QUAD_FACES, basic_builder
 
 LAMP_AT = np.array([1.0, 2.0, 1.0])  # basic_builder's lamp, 10 W/sr white
@@ -56,7 +58,7 @@ def test_rays_pass_the_holes_and_stop_on_the_solid_part(tmp_path):
     assert caster.occluded(floor + up * 1e-3, up, np.full(2, 5.0, np.float32)).tolist() == [False, True]
 
 
-@pytest.mark.parametrize("mode, cutoff, hit", [("MASK", 0.5, 0), ("MASK", 0.0, 1), ("BLEND", 0.5, 1),
+@pytest.mark.parametrize("mode, cutoff, hit", [("MASK", 0.5, 0), ("MASK", 0.0, 1), ("BLEND", 0.5, 0),
                                                ("OPAQUE", 0.5, 1)])
 def test_the_cutoff_and_the_modes(tmp_path, mode, cutoff, hit):
     state = read_scene(sheet(tmp_path / "m.glb", _half(), mode=mode, cutoff=cutoff)).pose(0)
@@ -118,3 +120,79 @@ def test_an_animated_cutoff_moves_the_holes(tmp_path):
         tri, *_ = RayCaster(state).intersect(origin, down)
         reached_floor.append(state.triangle_instance[tri[0]] == 0)
     assert reached_floor == [True, False] and scene.pose(0).state_key != scene.pose(0.75).state_key
+
+
+BLEND_ALPHA = 0.3
+
+
+def test_a_blended_pane_stops_alpha_of_the_rays(tmp_path):
+    # a pane of alpha 77/255 over the floor: parallel rays down, shadow rays up
+    scene = read_scene(sheet(tmp_path / "pane.glb", np.full((4, 4), round(255 * BLEND_ALPHA)), mode="BLEND"))
+    state = scene.pose(0)
+    caster = RayCaster(state)
+    rng = np.random.default_rng(5)
+    n = 100_000
+    origins = np.c_[rng.uniform(0.2, 1.8, n), np.full(n, 3.0), rng.uniform(0.2, 1.8, n)].astype(np.float32)
+    down = np.tile([0.0, -1.0, 0.0], (n, 1)).astype(np.float32)
+    tri, *_ = caster.intersect(origins, down)
+    stopped = (state.triangle_instance[tri] == 1).mean()
+    alpha = round(255 * BLEND_ALPHA) / 255
+    assert abs(stopped - alpha) < 4 * np.sqrt(alpha * (1 - alpha) / n)  # binomial, 4 sigma
+    up = -down
+    floor = origins.copy()
+    floor[:, 1] = 1e-3
+    shadowed = caster.occluded(floor, up, np.full(n, 5.0, np.float32)).mean()
+    assert abs(shadowed - alpha) < 4 * np.sqrt(alpha * (1 - alpha) / n)
+    again, *_ = caster.intersect(origins, down)
+    np.testing.assert_array_equal(again, tri)  # the same rays decide alike
+
+
+def test_a_blended_pane_has_the_irradiance_of_the_light_on_it_and_passes_the_rest(tmp_path):
+    alpha = round(255 * BLEND_ALPHA) / 255
+    counts = []
+    for mode in (None, "BLEND"):  # the bare floor, then under the pane
+        if mode is None:
+            path = basic_builder().write(tmp_path / "bare.glb")
+        else:
+            path = sheet(tmp_path / "pane.glb", np.full((4, 4), round(255 * BLEND_ALPHA)), mode="BLEND",
+                         element_size=0.2)
+        scene = read_scene(path)
+        elements = ElementMesh.build(scene)
+        state = scene.pose(0)
+        batch = trace_batch(state, elements, PhotonRange(1, 0, 200_000), PhotonConfig())
+        direct = (batch.key & DIRECT_BIT) != 0
+        element = batch.key[direct] & ELEMENT_MASK
+        centre = elements.element_positions(state).mean(axis=1)[element]
+        under = (elements.element_instance[element] == 0) & (np.abs(centre[:, 0] - 1) < 0.8) \
+            & (np.abs(centre[:, 2] - 1) < 0.8)
+        counts.append(under.sum())
+        if mode is not None:
+            pane = elements.element_instance == 1
+            np.testing.assert_allclose(elements.coverage[pane], alpha, rtol=1e-6)
+            e = vertex_irradiance(element, batch.bary[direct, 0], batch.bary[direct, 1], batch.energy[direct],
+                                  elements, elements.vertex_areas(state), batch.photons_emitted)
+            pos = elements.vertex_positions(state)
+            d = LAMP_AT - pos
+            r2 = np.einsum("ij,ij->i", d, d)
+            closed = 10.0 * (d[:, 1] / np.sqrt(r2)) / r2
+            inner = (elements.vertex_instance == 1) & (np.abs(pos[:, 0] - 1) < 0.5) & (np.abs(pos[:, 2] - 1) < 0.5)
+            assert abs(np.median(e[inner, 0] / closed[inner]) - 1) < 0.05  # not alpha x it
+    passed = counts[1] / counts[0]
+    assert abs(passed - (1 - alpha)) < 0.03, passed  # the floor under the pane gets 1 - alpha of the light
+
+
+def test_ray_uniforms_are_uniform_and_depend_on_every_word():
+    rng = np.random.default_rng(2)
+    n = 200_000
+    origins = rng.normal(size=(n, 3)).astype(np.float32)
+    dirs = rng.normal(size=(n, 3)).astype(np.float32)
+    tri = rng.integers(0, 1000, n)
+    xi = ray_uniforms(origins, dirs, tri)
+    assert (xi >= 0).all() and (xi < 1).all()
+    counts = np.histogram(xi, bins=10, range=(0, 1))[0]
+    assert np.abs(counts / n - 0.1).max() < 0.005
+    np.testing.assert_array_equal(ray_uniforms(origins, dirs, tri), xi)
+    nudged = origins.copy()
+    nudged[:, 2] = np.nextafter(nudged[:, 2], np.float32(np.inf))  # one ulp of one coordinate
+    assert abs(np.corrcoef(ray_uniforms(nudged, dirs, tri), xi)[0, 1]) < 0.01
+    assert abs(np.corrcoef(ray_uniforms(origins, dirs, tri + 1), xi)[0, 1]) < 0.01
