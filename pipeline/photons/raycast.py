@@ -73,14 +73,13 @@ class RayCaster:
         return self._through_holes(origins, directions, out["primID"], out["u"], out["v"], out["tfar"])
 
     def _through_holes(self, origins: np.ndarray, directions: np.ndarray, tri, u, v, t):
-        """Hits with those in a masked or blended surface's holes replaced by what lies beyond: each
-        such ray starts again just past the hole's plane (the triangle's offset over the cosine)
-        along its direction, at most MAX_HOLES times. A blend's holes are drawn from the ray that
-        meets it (``ray_uniforms`` of its start and direction)."""
+        """Hits with those in a masked, blended or transmissive surface's holes replaced by what lies
+        beyond: each such ray starts again just past the hole's plane (the triangle's offset over the
+        cosine) along its direction, at most MAX_HOLES times. Random holes are drawn from the ray
+        that meets them (``ray_uniforms`` of its start and direction)."""
         tri, u, v, t = (np.array(a) for a in (tri, u, v, t))
         blends = self.cutouts.blends
-        xi = ray_uniforms(origins, directions, tri) if blends else None
-        rows = np.flatnonzero(self.cutouts.holes(tri, u, v, xi))
+        rows = np.flatnonzero(self.cutouts.holes(tri, u, v, *self._draws(origins, directions, tri, blends)))
         for _ in range(MAX_HOLES):
             if not len(rows):
                 break
@@ -92,12 +91,20 @@ class RayCaster:
             self.rays_cast += len(rows)
             tri[rows], u[rows], v[rows] = out["primID"], out["u"], out["v"]
             t[rows] = np.where(out["primID"] >= 0, reach + out["tfar"], out["tfar"])
-            xi = ray_uniforms(restart, directions[rows], out["primID"]) if blends else None
-            rows = rows[self.cutouts.holes(out["primID"], out["u"], out["v"], xi)]
+            draws = self._draws(restart, directions[rows], out["primID"], blends)
+            rows = rows[self.cutouts.holes(out["primID"], out["u"], out["v"], *draws)]
         if len(rows):  # a ray past MAX_HOLES holes: a miss rather than a hit on a hole
             tri[rows] = MISS
             t[rows] = np.inf
         return tri, u, v, t
+
+    def _draws(self, origins: np.ndarray, directions: np.ndarray, tri: np.ndarray, blends: bool):
+        """(uniforms, |cos| to the hit triangle) of rays for random holes; (None, None) without them."""
+        if not blends:
+            return None, None
+        d = np.asarray(directions, np.float64)
+        cosines = np.abs(np.einsum("ij,ij->i", self.normals[np.maximum(tri, 0)], d)) / np.linalg.norm(d, axis=1)
+        return ray_uniforms(origins, directions, tri), cosines
 
     def occluded(self, origins: np.ndarray, directions: np.ndarray, distances: np.ndarray) -> np.ndarray:
         """True where something lies between ``origins`` and ``distances`` along ``directions``."""

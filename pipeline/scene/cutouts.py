@@ -20,7 +20,7 @@ irradiance of a leaf is that of its solid texels, not diluted by its holes, and 
 from __future__ import annotations
 
 from collections.abc import Callable
-from dataclasses import replace
+from dataclasses import dataclass, replace
 from typing import TYPE_CHECKING
 
 import numpy as np
@@ -43,14 +43,36 @@ def _alpha_texture(material: Material):
     return replace(tex, image=tex.alpha[:, :, None])
 
 
+def lets_through(material: Material) -> bool:
+    """Whether rays may pass some hits of ``material``: a mask, a blend or transmission."""
+    return material.alpha_mode in SEE_THROUGH or material.transmission > 0
+
+
+@dataclass(frozen=True)
+class _Passage:
+    """How one material lets rays through (see the module docstring)."""
+
+    alpha: float  # baseColorFactor's alpha
+    alpha_texture: object  # the base-colour texture's alpha as a one-channel Texture, or None
+    cutoff: float | None  # a mask's cut-off; None: not a mask
+    blend: bool
+    transmission: float  # 0: none
+    transmission_texture: object  # a Texture whose R scales ``transmission``, or None
+    f0: float  # Fresnel reflectance at normal incidence
+
+    @property
+    def random(self) -> bool:
+        return self.blend or self.transmission > 0
+
+
 class Cutouts:
-    """Which hits of a frame state fall in a masked or blended surface's holes."""
+    """Which hits of a frame state fall in a hole of a masked, blended or transmissive surface."""
 
     def __init__(self, materials: list[Material], triangle_material: np.ndarray, texcoords: dict):
         self.tri_mat = np.asarray(triangle_material, np.int64)
-        # cut-off None: a blend, whose holes are random
-        self.masked = {j: (m.base_alpha, m.alpha_cutoff if m.alpha_mode == MASK else None, _alpha_texture(m))
-                       for j, m in enumerate(materials) if m.alpha_mode in SEE_THROUGH}
+        self.masked = {j: _Passage(m.base_alpha, _alpha_texture(m), m.alpha_cutoff if m.alpha_mode == MASK else None,
+                                   m.alpha_mode == BLEND, m.transmission, m.transmission_texture, m.f0)
+                       for j, m in enumerate(materials) if lets_through(m)}
         self.texcoords = texcoords
         flags = np.zeros(len(materials), bool)
         flags[list(self.masked)] = True
@@ -58,8 +80,8 @@ class Cutouts:
 
     @classmethod
     def of(cls, state: FrameState) -> "Cutouts | None":
-        """The state's cutouts, None when no surface it draws is masked (rays need no second look)."""
-        if not any(m.alpha_mode in SEE_THROUGH for m in state.materials):
+        """The state's cutouts, None when no surface it draws lets rays through (they need no second look)."""
+        if not any(lets_through(m) for m in state.materials):
             return None
         corners = getattr(state, "corners", None)
         found = cls(state.materials, state.triangle_material, corners.texcoords if corners is not None else {})
@@ -67,49 +89,68 @@ class Cutouts:
 
     @property
     def blends(self) -> bool:
-        """Some surface is blended: its holes depend on the ray (``holes``' ``uniforms``)."""
-        return any(cutoff is None for _, cutoff, _ in self.masked.values())
+        """Some surface's holes are random (a blend, transmission): ``holes`` needs ``uniforms`` and ``cosines``."""
+        return any(p.random for p in self.masked.values())
 
-    def holes(self, tri: np.ndarray, u: np.ndarray, v: np.ndarray, uniforms: np.ndarray | None = None) -> np.ndarray:
-        """(n,) bool: hits (``tri`` -1 for a miss) in a hole: alpha below a mask's cut-off, or below
-        the hit's ``uniforms`` value in [0, 1) on a blend (:func:`ray_uniforms`; None: the blend's
-        mean, coverage's view, is not asked here, so None is only for scenes without blends)."""
+    def holes(self, tri: np.ndarray, u: np.ndarray, v: np.ndarray, uniforms: np.ndarray | None = None,
+              cosines: np.ndarray | None = None) -> np.ndarray:
+        """(n,) bool: hits (``tri`` -1 for a miss) in a hole: alpha below a mask's cut-off, or the
+        hit's ``uniforms`` value in [0, 1) (:func:`ray_uniforms`) at or above the share of rays it
+        stops, ``alpha`` on a blend times ``1 - transmission x (1 - F)`` with F Schlick's at the
+        ray's |cos| to the surface ``cosines``; both may be None where :attr:`blends` is False."""
         tri = np.asarray(tri)
         out = np.zeros(len(tri), bool)
         candidates = np.flatnonzero((tri >= 0) & self.masked_triangle[np.maximum(tri, 0)])
         if not len(candidates):
             return out
         m = self.tri_mat[tri[candidates]]
-        for j, (_, cutoff, _) in self.masked.items():
+        for j, passage in self.masked.items():
             rows = candidates[m == j]
             if not len(rows):
                 continue
-            alpha = self._alpha(j, tri[rows], np.asarray(u, np.float64)[rows], np.asarray(v, np.float64)[rows])
-            out[rows] = alpha < (cutoff if cutoff is not None else uniforms[rows])
+            hole, stops = self._stops(passage, tri[rows], np.asarray(u, np.float64)[rows],
+                                      np.asarray(v, np.float64)[rows], None if cosines is None else cosines[rows])
+            if passage.random:
+                hole |= uniforms[rows] >= stops
+            out[rows] = hole
         return out
 
     def coverage(self, tri: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """(n,) the share of rays each hit point stops: 1 or 0 on a mask, alpha on a blend, 1 elsewhere."""
+        """(n,) the share of rays arriving along the normal that each hit point stops: 0 in a mask's
+        holes, alpha on a blend, 1 - transmission x (1 - F0) on a transmissive surface, 1 elsewhere."""
         tri = np.asarray(tri)
         out = np.ones(len(tri))
         m = self.tri_mat[tri]
-        for j, (_, cutoff, _) in self.masked.items():
+        for j, passage in self.masked.items():
             rows = np.flatnonzero(m == j)
             if len(rows):
-                alpha = self._alpha(j, tri[rows], np.asarray(u, np.float64)[rows], np.asarray(v, np.float64)[rows])
-                out[rows] = alpha >= cutoff if cutoff is not None else np.clip(alpha, 0.0, 1.0)
+                hole, stops = self._stops(passage, tri[rows], np.asarray(u, np.float64)[rows],
+                                          np.asarray(v, np.float64)[rows], np.ones(len(rows)))
+                out[rows] = np.where(hole, 0.0, stops)
         return out
 
-    def _alpha(self, j: int, tri: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Alpha of material ``j`` at hits of its triangles ``tri``: factor x texture alpha."""
-        factor, _, tex = self.masked[j]
-        alpha = np.full(len(tri), factor)
-        if tex is not None:
-            corners = self.texcoords.get(tex.texcoord)
-            uv = (np.zeros((len(tri), 2)) if corners is None else
-                  interpolate(np.take(corners, tri, axis=0).astype(np.float64), u, v))
-            alpha = alpha * sample(tex, uv)[:, 0]
-        return alpha
+    def _stops(self, passage: _Passage, tri: np.ndarray, u: np.ndarray, v: np.ndarray,
+               cosines: np.ndarray | None) -> tuple[np.ndarray, np.ndarray]:
+        """(a mask's holes, the share of the other rays stopped) at hits of a material's triangles."""
+        alpha = np.full(len(tri), passage.alpha)
+        if passage.alpha_texture is not None:
+            alpha = alpha * self._texel(passage.alpha_texture, tri, u, v)
+        hole = alpha < passage.cutoff if passage.cutoff is not None else np.zeros(len(tri), bool)
+        stops = np.clip(alpha, 0.0, 1.0) if passage.blend else np.ones(len(tri))
+        if passage.transmission > 0:
+            t = np.full(len(tri), passage.transmission)
+            if passage.transmission_texture is not None:
+                t = t * self._texel(passage.transmission_texture, tri, u, v)
+            fresnel = passage.f0 + (1.0 - passage.f0) * (1.0 - np.clip(cosines, 0.0, 1.0)) ** 5  # Schlick 1994
+            stops = stops * (1.0 - t * (1.0 - fresnel))
+        return hole, stops
+
+    def _texel(self, tex, tri: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+        """Channel 0 of ``tex`` at hits of triangles ``tri`` ((0, 0) without texture coordinates)."""
+        corners = self.texcoords.get(tex.texcoord)
+        uv = (np.zeros((len(tri), 2)) if corners is None else
+              interpolate(np.take(corners, tri, axis=0).astype(np.float64), u, v))
+        return sample(tex, uv)[:, 0]
 
 
 _GOLDEN, _MIX1, _MIX2 = np.uint64(0x9E3779B97F4A7C15), np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB)

@@ -61,7 +61,10 @@ SCHEMA = {
     "materials": _list({"name": STR, "emissiveFactor": _NUMS, "doubleSided": BOOL, "alphaMode": STR,
                         "pbrMetallicRoughness": {"baseColorFactor": _NUMS, "metallicFactor": NUM,
                                                  "roughnessFactor": NUM, "baseColorTexture": {"index": INDEX}},
-                        "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": NUM}}}),
+                        "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": NUM},
+                                       "KHR_materials_transmission": {"transmissionFactor": NUM,
+                                                                      "transmissionTexture": {"index": INDEX}},
+                                       "KHR_materials_ior": {"ior": NUM}}}),
     "skins": _list({"joints": _list(INDEX), "inverseBindMatrices": INDEX, "skeleton": INDEX}),
 }
 

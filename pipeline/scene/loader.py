@@ -23,12 +23,18 @@ from .gltf import GltfDocument, read_gltf
 from .instancing import EXTENSION as INSTANCING
 from .instancing import instance_transforms, place_copy
 from .lights import light_def_from_gltf
-from .materials import DEFAULT_MATERIAL, any_emits, material_from_gltf
+from .materials import DEFAULT_MATERIAL, IOR, TRANSMISSION, any_emits, material_from_gltf
 from .nodes import MeshInstance, Node
 from .pointers import ANIMATED_POINTERS, BOOLEAN_ACCESSOR, NON_NEGATIVE_PROPERTIES, WIDTHS, pointer_target
 from .pointers import EXTENSION as POINTER
 from .scene import DEFAULT_ELEMENT_FRACTION, Scene
-from .textures import base_color_texture, emissive_texture, metallic_roughness_texture, normal_texture
+from .textures import (
+    base_color_texture,
+    emissive_texture,
+    metallic_roughness_texture,
+    normal_texture,
+    transmission_texture,
+)
 from .timeline import DEFAULT_FPS, MAX_FRAMES, Timeline
 from .vertex_attributes import read_vertex_attributes
 from .visibility import EXTENSION as VISIBILITY
@@ -245,6 +251,13 @@ def _check_material(doc, m, i: int) -> None:
                         f + ".extensions.KHR_materials_emissive_strength.emissiveStrength")
     if m.alphaMode is not None and m.alphaMode not in ALPHA_MODES:
         raise doc.error(f"{m.alphaMode!r} is not one of {', '.join(ALPHA_MODES)}", f + ".alphaMode")
+    extensions = m.extensions or {}
+    t = extensions.get(TRANSMISSION, {}).get("transmissionFactor", 0.0)
+    if not 0 <= t <= 1:
+        raise doc.error(f"must be in [0, 1], got {t}", f"{f}.extensions.{TRANSMISSION}.transmissionFactor")
+    ior = extensions.get(IOR, {}).get("ior", 1.5)
+    if not (ior >= 1 or ior == 0) or ior == float("inf"):  # KHR_materials_ior: [1, inf) or 0
+        raise doc.error(f"must be at least 1 (or 0), got {ior}", f"{f}.extensions.{IOR}.ior")
     if m.alphaCutoff is not None and not m.alphaCutoff >= 0:
         raise doc.error(f"must be non-negative, got {m.alphaCutoff}", f + ".alphaCutoff")
     pbr = m.pbrMetallicRoughness
@@ -559,12 +572,13 @@ def _node_name(doc, node: int) -> str:
 
 
 def _with_textures(doc: GltfDocument, materials: list) -> list:
-    """Materials with their base-colour, emissive, normal and metallic-roughness textures attached, each
-    image decoded once (per colour encoding)."""
+    """Materials with their base-colour, emissive, normal, metallic-roughness and transmission textures
+    attached, each image decoded once (per colour encoding)."""
     images: dict = {}
     return [replace(m, base_color_texture=base_color_texture(doc, i, images),
                     emissive_texture=emissive_texture(doc, i, images), normal_texture=normal_texture(doc, i, images),
-                    metallic_roughness_texture=metallic_roughness_texture(doc, i, images))
+                    metallic_roughness_texture=metallic_roughness_texture(doc, i, images),
+                    transmission_texture=transmission_texture(doc, i, images))
             for i, m in enumerate(materials)]
 
 

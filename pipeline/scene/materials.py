@@ -14,6 +14,12 @@ Mapping (docs/03-conventions.md §2; written in the README too):
   roughness by its green, linear data: glTF 2.0 §3.9.2), so one material may be diffuse at one texel and
   a mirror at the next: :func:`kind_codes` and :func:`phong_exponents` classify each hit
   (pipeline/scene/shading.py); :attr:`Material.kind` is then the kind at the factors alone.
+* ``KHR_materials_transmission`` (thin-walled, pipeline/scene/cutouts.py): a hit lets the ray through
+  with probability ``transmission x (1 - F)``, F Schlick's Fresnel term with ``F0 = ((ior - 1) /
+  (ior + 1))^2`` (``KHR_materials_ior``, 1.5 by default: F0 0.04); otherwise it reflects as a smooth
+  dielectric does, specularly: the kind is classified as if metallic were 1 (mirror below roughness
+  0.2, glossy below 0.6). What passes is neither bent nor tinted (``KHR_materials_volume`` is not
+  read), so clear glass is exact in how much it reflects and passes, coloured glass passes white.
 * ``emissiveFactor x KHR_materials_emissive_strength`` (x the ``emissiveTexture``) is emitted radiance
   (front face only).
 * ``doubleSided`` (glTF's default: false): a single-sided surface has no back. Photons that reach
@@ -36,6 +42,7 @@ if TYPE_CHECKING:
     import pygltflib
 
 KINDS = ("diffuse", "mirror", "glossy")
+TRANSMISSION, IOR = "KHR_materials_transmission", "KHR_materials_ior"
 MIRROR_ROUGHNESS = 0.2
 GLOSSY_ROUGHNESS = 0.6
 METALLIC_THRESHOLD = 0.5
@@ -58,6 +65,9 @@ class Material:
     base_alpha: float = 1.0  # baseColorFactor's alpha, times the base-colour texture's alpha at a hit
     metallic: float = 0.0  # metallicFactor (with roughness, what ``kind`` is classified from)
     metallic_roughness_texture: object = None  # a linear Texture: B multiplies metallic, G roughness, per hit
+    transmission: float = 0.0  # KHR_materials_transmission transmissionFactor (thin-walled, cutouts.py)
+    ior: float = 1.5  # KHR_materials_ior: Fresnel's F0 of what is transmissive
+    transmission_texture: object = None  # a linear Texture whose R multiplies ``transmission``, per hit
 
     @property
     def is_specular(self) -> bool:
@@ -76,9 +86,15 @@ class Material:
         """Numbers that fully describe what the material does at one instant (for state keys)."""
         transforms = [t.transform.ravel() for t in (self.base_color_texture, self.emissive_texture) if t is not None]
         textured = [[self.metallic]] if self.metallic_roughness_texture is not None else []  # kind says it otherwise
+        passing = [[self.transmission, self.ior]] if self.transmission > 0 else []
         return np.concatenate([self.albedo, self.emission, [KINDS.index(self.kind), self.roughness, self.base_alpha,
                                                          self.alpha_cutoff],
-                               *transforms, *textured])
+                               *transforms, *textured, *passing])
+
+    @property
+    def f0(self) -> float:
+        """Fresnel reflectance at normal incidence, ``((ior - 1) / (ior + 1))^2`` (KHR_materials_ior; 1 at ior 0)."""
+        return 1.0 if self.ior == 0 else ((self.ior - 1.0) / (self.ior + 1.0)) ** 2
 
     @property
     def phong_exponent(self) -> float:
@@ -114,7 +130,8 @@ ANIMATED_PROPERTIES = {"pbrMetallicRoughness/baseColorFactor": ("baseColorFactor
                        "pbrMetallicRoughness/roughnessFactor": ("roughnessFactor", 1),
                        "emissiveFactor": ("emissiveFactor", 3),
                        "extensions/KHR_materials_emissive_strength/emissiveStrength": ("emissiveStrength", 1),
-                       "alphaCutoff": ("alphaCutoff", 1)}
+                       "alphaCutoff": ("alphaCutoff", 1),
+                       "extensions/KHR_materials_transmission/transmissionFactor": ("transmissionFactor", 1)}
 # A texture's KHR_texture_transform (a scrolling or turning texture), per texture slot
 TEXTURE_SLOTS = {"baseColorTexture": "pbrMetallicRoughness/baseColorTexture", "emissiveTexture": "emissiveTexture"}
 _TEXTURE_FIELDS = {"baseColorTexture": "base_color_texture", "emissiveTexture": "emissive_texture"}  # on Material
@@ -124,7 +141,7 @@ for _slot, _where in TEXTURE_SLOTS.items():
 MATERIAL_WIDTHS = {name: width for name, width in ANIMATED_PROPERTIES.values()}
 # Properties whose keys must not be negative (texture offsets, rotations and scales may be)
 NON_NEGATIVE = frozenset({"baseColorFactor", "metallicFactor", "roughnessFactor", "emissiveFactor",
-                          "emissiveStrength", "alphaCutoff"})
+                          "emissiveStrength", "alphaCutoff", "transmissionFactor"})
 
 
 def _at_keys(material: Material, mat: pygltflib.Material, channels: dict):
@@ -182,11 +199,15 @@ def _factors(mat: pygltflib.Material) -> dict[str, np.ndarray]:
     metallic = pbr.metallicFactor if pbr and pbr.metallicFactor is not None else 1.0
     roughness = pbr.roughnessFactor if pbr and pbr.roughnessFactor is not None else 1.0
     emissive = mat.emissiveFactor if mat.emissiveFactor is not None else [0.0, 0.0, 0.0]
-    strength = (mat.extensions or {}).get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)
+    extensions = mat.extensions or {}
+    strength = extensions.get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)
+    transmission = extensions.get(TRANSMISSION, {}).get("transmissionFactor", 0.0)
+    ior = extensions.get(IOR, {}).get("ior", 1.5)
     return {"baseColorFactor": np.asarray(base, float), "metallicFactor": np.asarray([metallic], float),
             "roughnessFactor": np.asarray([roughness], float), "emissiveFactor": np.asarray(emissive, float),
             "emissiveStrength": np.asarray([strength], float),
             "alphaCutoff": np.asarray([mat.alphaCutoff if mat.alphaCutoff is not None else 0.5], float),
+            "transmissionFactor": np.asarray([transmission], float), "ior": np.asarray([ior], float),
             **_texture_transforms(mat)}
 
 
@@ -195,6 +216,7 @@ def animated_material(material: Material, mat: pygltflib.Material, values: dict[
     ANIMATED_PROPERTIES at one instant; the others keep the file's values."""
     f = {**_factors(mat), **values}
     metallic, roughness = float(f["metallicFactor"][0]), float(np.clip(f["roughnessFactor"][0], 0.0, 1.0))
+    transmission = float(np.clip(f["transmissionFactor"][0], 0.0, 1.0))
     textures = {}
     for slot in TEXTURE_SLOTS:
         texture = getattr(material, _TEXTURE_FIELDS[slot])
@@ -204,7 +226,8 @@ def animated_material(material: Material, mat: pygltflib.Material, values: dict[
     return replace(material, albedo=tuple(float(c) for c in np.clip(f["baseColorFactor"][:3], 0.0, 1.0)),
                    base_alpha=float(np.clip(f["baseColorFactor"][3], 0.0, 1.0)),
                    alpha_cutoff=max(float(f["alphaCutoff"][0]), 0.0),
-                   kind=classify(metallic, roughness), roughness=roughness, metallic=metallic,
+                   kind=classify(1.0 if transmission > 0 else metallic, roughness), roughness=roughness,
+                   metallic=metallic, transmission=transmission, ior=float(f["ior"][0]),
                    emission=tuple(float(c) for c in np.maximum(f["emissiveFactor"] * f["emissiveStrength"][0], 0.0)),
                    **textures)
 

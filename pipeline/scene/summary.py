@@ -132,6 +132,9 @@ def surface_lines(scene: Scene) -> list[str]:
     masked = sum(1 for m in used if scene.materials[m].alpha_mode == "MASK")
     if masked:
         tex += f"; alpha masks (holes rays pass) on {masked} material(s)"
+    passing = sum(1 for m in used if scene.materials[m].transmission > 0)
+    if passing:
+        tex += f"; transmission (thin-walled: not bent, not tinted) on {passing} material(s)"
     blended = sum(1 for m in used if scene.materials[m].alpha_mode == "BLEND")
     if blended:
         tex += f"; alpha blending (rays pass 1 - alpha of the time) on {blended} material(s)"

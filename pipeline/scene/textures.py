@@ -31,6 +31,7 @@ from dataclasses import dataclass, field
 from urllib.parse import unquote
 
 import numpy as np
+import pygltflib
 
 from .gltf import GltfDocument
 
@@ -127,6 +128,18 @@ def metallic_roughness_texture(doc: GltfDocument, material_index: int, images: d
         return None
     return _texture(doc, info, f"materials[{material_index}].pbrMetallicRoughness.metallicRoughnessTexture",
                     images, linear=True)
+
+
+def transmission_texture(doc: GltfDocument, material_index: int, images: dict) -> Texture | None:
+    """The material's ``KHR_materials_transmission`` ``transmissionTexture`` (linear: R scales the
+    factor) or None."""
+    ext = (doc.gltf.materials[material_index].extensions or {}).get("KHR_materials_transmission") or {}
+    info = ext.get("transmissionTexture")
+    if info is None:
+        return None
+    where = f"materials[{material_index}].extensions.KHR_materials_transmission.transmissionTexture"
+    return _texture(doc, pygltflib.TextureInfo(index=info["index"], texCoord=info.get("texCoord"),
+                                               extensions=info.get("extensions")), where, images, linear=True)
 
 
 def _texture(doc: GltfDocument, info, where: str, images: dict, *, linear: bool = False) -> Texture:

@@ -7,14 +7,19 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from click.testing import CliRunner
+from pygltflib import GLTF2
 
 from kernels.record_layout import DIRECT_BIT, ELEMENT_MASK
+from pipeline.cli import main
 from pipeline.collection.estimators import vertex_irradiance
 from pipeline.config import PhotonConfig
 from pipeline.errors import SceneError
+from pipeline.frames.images import frame_paths, read_exr
 from pipeline.photons.raycast import RayCaster
 from pipeline.photons.tracing import PhotonRange, trace_batch
 from pipeline.scene import ElementMesh, read_scene
+from pipeline.scene.builtin.gltf_builder import GltfBuilder
 from pipeline.scene.cutouts import ray_uniforms
 from tests.conftest import QUAD, QUAD_FACES, basic_builder
 
@@ -196,3 +201,118 @@ def test_ray_uniforms_are_uniform_and_depend_on_every_word():
     nudged[:, 2] = np.nextafter(nudged[:, 2], np.float32(np.inf))  # one ulp of one coordinate
     assert abs(np.corrcoef(ray_uniforms(nudged, dirs, tri), xi)[0, 1]) < 0.01
     assert abs(np.corrcoef(ray_uniforms(origins, dirs, tri + 1), xi)[0, 1]) < 0.01
+
+
+def _glass(path, *, transmission=1.0, ior=1.5, roughness=0.0, texture=None, **kw):
+    """basic_builder's floor and lamp with a 2 x 2 pane of thin glass at y = 1 between them."""
+    b = basic_builder()
+    mat = b.add_material("glass", (1.0, 1.0, 1.0), roughness=roughness)
+    ext = {"transmissionFactor": transmission}
+    if texture is not None:
+        ext["transmissionTexture"] = {"index": b.add_texture(texture)}
+    b.gltf.materials[mat].extensions["KHR_materials_transmission"] = ext
+    b.gltf.materials[mat].extensions["KHR_materials_ior"] = {"ior": ior}
+    b._use_extension("KHR_materials_transmission")
+    b._use_extension("KHR_materials_ior")
+    uv = np.c_[QUAD[:, 0] / 2, QUAD[:, 2] / 2]
+    b.add_node("pane", b.add_mesh("pane", QUAD, QUAD_FACES, material=mat, texcoords={0: uv}),
+               translation=(0, SHEET_Y, 0))
+    if kw.get("element_size"):
+        b.set_scene_extras({"photonloom": {"element_size": kw["element_size"]}})
+    return b.write(path)
+
+
+def _stopped(state, caster, cos_theta: float, n: int = 100_000) -> float:
+    """Share of n parallel rays at cos_theta to the pane's normal that stop on it (the pane is instance 1)."""
+    rng = np.random.default_rng(9)
+    sin = np.sqrt(1 - cos_theta**2)
+    d = np.tile([sin, -cos_theta, 0.0], (n, 1)).astype(np.float32)
+    hit_at = np.c_[rng.uniform(0.3, 1.7, n), np.full(n, SHEET_Y), rng.uniform(0.3, 1.7, n)]
+    origins = (hit_at - 2.0 * d).astype(np.float32)
+    tri, *_ = caster.intersect(origins, d)
+    return float(((tri >= 0) & (state.triangle_instance[tri] == 1)).mean())  # those passing may miss the floor
+
+
+@pytest.mark.parametrize("ior, cos_theta", [(1.5, 1.0), (1.5, 0.5), (1.5, 0.2), (2.4, 1.0)])
+def test_clear_glass_reflects_schlicks_share(tmp_path, ior, cos_theta):
+    state = read_scene(_glass(tmp_path / "glass.glb", ior=ior)).pose(0)
+    f0 = ((ior - 1) / (ior + 1)) ** 2
+    fresnel = f0 + (1 - f0) * (1 - cos_theta) ** 5
+    n = 100_000
+    assert abs(_stopped(state, RayCaster(state), cos_theta, n) - fresnel) < 4 * np.sqrt(fresnel * (1 - fresnel) / n)
+
+
+def test_glass_is_a_mirror_where_it_stops_and_its_elements_record_nothing(tmp_path):
+    scene = read_scene(_glass(tmp_path / "glass.glb"))
+    assert scene.materials[1].kind == "mirror" and scene.materials[1].transmission == 1.0
+    assert read_scene(_glass(tmp_path / "frosted.glb", roughness=0.8)).materials[1].kind == "diffuse"
+    elements = ElementMesh.build(scene)
+    state = scene.pose(0)
+    batch = trace_batch(state, elements, PhotonRange(1, 0, 100_000), PhotonConfig())
+    element = batch.key & ELEMENT_MASK
+    assert not (elements.element_instance[element] == 1).any()  # a mirror records nothing
+    bare = read_scene(basic_builder().write(tmp_path / "bare.glb"))
+    bare_batch = trace_batch(bare.pose(0), ElementMesh.build(bare), PhotonRange(1, 0, 100_000), PhotonConfig())
+    direct = [((b.key & DIRECT_BIT) != 0).sum() for b in (batch, bare_batch)]
+    # photons pass the pane as light's first hit still: about 1 - F of the floor's direct photons
+    # under the pane's shadow region (the pane covers the floor's centre seen from the lamp)
+    assert 0.85 < direct[0] / direct[1] < 0.99
+
+
+def test_a_transmission_texture_scales_the_factor(tmp_path):
+    texture = np.zeros((4, 4, 3), np.uint8)
+    texture[:, 2:] = 255  # transmissive where u >= 0.5 (x >= 1), opaque glass elsewhere
+    state = read_scene(_glass(tmp_path / "half.glb", texture=texture)).pose(0)
+    caster = RayCaster(state)
+    down = np.tile([0.0, -1.0, 0.0], (2, 1)).astype(np.float32)
+    stops = []
+    for x in (0.5, 1.5):
+        origins = np.tile([x, 3.0, 1.0], (2000, 1)).astype(np.float32)
+        origins[:, 2] += np.linspace(-0.4, 0.4, 2000, dtype=np.float32)
+        tri, *_ = caster.intersect(origins, np.tile(down[:1], (2000, 1)))
+        stops.append((state.triangle_instance[tri] == 1).mean())
+    assert stops[0] == 1.0 and 0.02 < stops[1] < 0.07  # F0 = 0.04 where it transmits
+
+
+@pytest.mark.parametrize("ext, value, match", [
+    ("KHR_materials_transmission", {"transmissionFactor": 1.5}, r"transmissionFactor: must be in \[0, 1\]"),
+    ("KHR_materials_ior", {"ior": 0.5}, r"ior: must be at least 1 \(or 0\)"),
+    ("KHR_materials_transmission", {"transmissionFactor": "yes"}, r"transmissionFactor: must be a finite number"),
+])
+def test_bad_transmission_values_are_one_line_errors(tmp_path, ext, value, match):
+    path = _glass(tmp_path / "bad.glb")
+    g = GLTF2().load(str(path))
+    g.materials[1].extensions[ext] = value
+    g.save(str(path))
+    with pytest.raises(SceneError, match=r"materials\[1\].extensions\." + ext + r"\." + match) as err:
+        read_scene(path)
+    assert "\n" not in str(err.value)
+
+
+def test_a_camera_sees_a_sunlit_floor_through_glass_at_one_minus_f0_squared(tmp_path):
+    # Sun and camera straight above: the shadow ray and the camera ray each pass the pane with
+    # probability 1 - F0 (0.96 at ior 1.5); what the camera meets reflected is the empty sky
+    direct = []
+    for name, pane in (("bare", False), ("glass", True)):
+        b = GltfBuilder()
+        white = b.add_material("white", (0.7, 0.7, 0.7))
+        b.add_node("floor", b.add_mesh("floor", QUAD * [4, 1, 4] - [3, 0, 3], QUAD_FACES, material=white))
+        if pane:
+            glass = b.add_material("glass", (1.0, 1.0, 1.0), roughness=0.0)
+            b.gltf.materials[glass].extensions["KHR_materials_transmission"] = {"transmissionFactor": 1.0}
+            b._use_extension("KHR_materials_transmission")
+            b.add_node("pane", b.add_mesh("pane", QUAD * [4, 1, 4] - [3, 0, 3], QUAD_FACES, material=glass),
+                       translation=(0, 1, 0))
+        b.add_node("sun", light=b.add_directional_light("sun", (1, 1, 1), 3.0), rotation=(-0.7071068, 0, 0, 0.7071068))
+        b.add_node("cam", camera=b.add_camera("cam", 0.6, 0.05), translation=(1, 3, 1),
+                   rotation=(-0.7071068, 0, 0, 0.7071068))
+        path = b.write(tmp_path / f"{name}.glb")
+        out = tmp_path / name
+        result = CliRunner().invoke(main, ["render", str(path), "--out", str(out), "--frames", "1", "--photons", "2000",
+                                           "--temporal", "off", "--resolution", "32x24", "--spp", "8",
+                                           "--scheduler", "synchronous", "--quiet"])
+        assert result.exit_code == 0, result.output
+        direct.append(read_exr(frame_paths(out, 1)[0])[0]["direct.R"])
+    assert (direct[0] > 0).all()  # the floor fills the frame
+    ratio = direct[1].mean() / direct[0].mean()
+    assert abs(ratio - 0.96 ** 2) < 0.02, ratio  # 768 pixels x 8 samples: binomial sd about 0.003
