@@ -11,6 +11,8 @@ For every pixel, ``spp`` jittered camera rays. At each hit:
 * Lambert cosines, reflections and lobes use the shading normal (vertex normals), sidedness and
   ray offsets the geometric one; the albedo is the hit's base colour (factor x texture x COLOR_0),
   per sample, so textures are resolved per pixel (pipeline/scene/shading.py);
+* with a shutter (``RenderSettings.shutter``), sample j of every pixel sees the scene and the camera
+  posed at its own instant of the open shutter: motion blur (pipeline/frames/shutter.py);
 * a ray that leaves the scene shows the sky's radiance, if there is a sky (coverage stays 0);
 * a **mirror** reflects, a **glossy** surface samples its normalised Phong lobe (the photon tracer's
   lobe, pipeline/scene/materials.py) and gets exact highlights of punctual lights; both continue up
@@ -34,9 +36,10 @@ from __future__ import annotations
 import time
 from dataclasses import dataclass
 
-from pipeline.frames.camera_paths import CameraPaths, render_frame
+from pipeline.frames.camera_paths import CameraPaths, render_exposure, render_frame
 from pipeline.frames.images import frame_paths, write_exr, write_png
 from pipeline.frames.settings import RenderSettings
+from pipeline.frames.shutter import shutter_states
 from pipeline.frames.tonemap import tonemap as tone
 from pipeline.scene.scene_cache import SceneRef
 from pipeline.store.illumination import IlluminationMaps
@@ -70,7 +73,11 @@ def composite_task(request: CompositeRequest) -> dict:
     state = scene.pose_frame(frame)
     irradiance = IlluminationMaps.open_shared(request.store_url).read(frame - 1, "indirect")
     t1 = time.perf_counter()
-    img = render_frame(state, elements, irradiance, CameraPaths.of(request.settings, request.seed, frame))
+    settings = request.settings
+    paths = CameraPaths.of(settings, request.seed, frame)
+    blur = shutter_states(scene, frame, settings.shutter, settings.spp)
+    img = (render_frame(state, elements, irradiance, paths) if blur is None
+           else render_exposure(state, blur, elements, irradiance, paths))
     t2 = time.perf_counter()
     exr, png = frame_paths(request.out_dir, frame)
     write_exr(exr, img.beauty, img.alpha, {"direct": img.direct, "indirect": img.indirect,

@@ -107,6 +107,10 @@ def job_options(f: _F) -> _F:
         click.option("--spp", type=int, default=RENDER_SPP, show_default=True,
                      help="Jittered camera samples per pixel (the default: the pixels' error no more visible "
                           "than the photon noise d_thr accepts, docs/10-sampling.md)."),
+        click.option("--shutter", type=float, default=0.0, show_default=True,
+                     help="Share of a frame interval the shutter is open, centred on the frame: motion blur "
+                          "(0.5: film's 180-degree shutter), each of a pixel's samples at its own instant "
+                          "(pipeline/frames/shutter.py). 0: no blur."),
         click.option("--photons", default="auto", show_default=True, callback=_photons,
                      help="N_frame: auto (chosen per segment by the AQM, §5.2) or photons per frame for every "
                           "frame."),
@@ -155,7 +159,7 @@ def render_request(scene_file: str, frames: str | None, out_dir: str, resolution
                    camera: str | None, seed: int, reflection_depth: int, photon_depth: int, d_thr: float | None,
                    config_file: str | None, light: str = "auto", tonemap: str = "filmic", exposure: float = 0.0,
                    element_size: float | None = None, display: str = "standard_fhd",
-                   fill: str = "full_screen", animation: str | None = None) -> RenderRequest:
+                   fill: str = "full_screen", animation: str | None = None, shutter: float = 0.0) -> RenderRequest:
     """The RenderRequest (pipeline/run/render.py) of the job options: one parameter per option."""
     from pipeline.config import RenderConfig, load_config
     from pipeline.frames.settings import RenderSettings
@@ -170,7 +174,7 @@ def render_request(scene_file: str, frames: str | None, out_dir: str, resolution
                          temporal=temporal, store_url=store_url, keep_records=keep_records, camera=camera,
                          animation=animation, config=RenderConfig.from_dict(fields), light=light,
                          settings=RenderSettings(width=width, height=height, spp=spp,
-                                                 reflection_depth=reflection_depth,
+                                                 reflection_depth=reflection_depth, shutter=shutter,
                                                  tonemap=ToneMapping(operator=tonemap, exposure=exposure,
                                                                      display=display, fill=fill)))
 

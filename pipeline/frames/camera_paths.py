@@ -99,31 +99,96 @@ def render_frame(state: FrameState, elements: ElementMesh | None, irradiance: np
         raise ValueError("also_maps and record_hits need a first map")
     caster = caster or caster_for(state)
     sh = ShadingTables(state, elements, irradiance, caster, paths.area_samples, also_maps)
+    record = MapHitRecorder() if record_hits else None
+    return _frame(paths, 3 + len(also_maps), chunk_rays, record,
+                  lambda counter, rays, out: trace_samples(state, sh, paths, counter, rays, out, record))
+
+
+def render_exposure(state: FrameState, shutter_states: Sequence[FrameState], elements: ElementMesh | None,
+                    irradiance: np.ndarray | None, paths: CameraPaths) -> FrameImage:
+    """Render one frame along ``paths`` with motion blur: sample j of every pixel sees the scene and
+    the camera of ``shutter_states[j]`` (``paths.spp`` states posed at pipeline/frames/shutter.py's
+    instants). Where they all equal ``state`` (the same geometry, lights and camera: nothing moves
+    while the shutter is open) it is :func:`render_frame`, to the bit."""
+    sh = ShadingTables(state, elements, irradiance, caster_for(state), paths.area_samples)
+    slices = _shutter_slices(state, sh, shutter_states, paths, (elements, irradiance))
+    if slices is None:
+        return render_frame(state, elements, irradiance, paths)
+    # chunks of spp x CHUNK_RAYS samples: each instant then traces a wavefront as large as render_frame's
+    return _frame(paths, 3, CHUNK_RAYS * paths.spp, None,
+                  lambda counter, rays, out: _trace_shutter(slices, paths, counter, rays, out))
+
+
+def _frame(paths: CameraPaths, n_layers: int, chunk_rays: int, record: MapHitRecorder | None, trace) -> FrameImage:
+    """The frame's layers from ``trace(counter, rays, out)``, which adds the layers of the camera
+    samples ``counter`` (whole pixels) into ``out`` (n_layers, n, 3) and returns their coverage:
+    direct, indirect, albedo, then the indirect layers of more maps, as contiguous planes."""
     spp = paths.spp
     n_pixels = paths.width * paths.height
-    n_layers = 3 + len(also_maps)
-    # direct, indirect, albedo, then the indirect layers of also_maps: contiguous planes
     layers = np.zeros((n_layers, n_pixels, 3), np.float32)
     alpha = np.zeros(n_pixels, np.float32)
     rays = dict.fromkeys(RAY_KINDS, 0)
-    record = MapHitRecorder() if record_hits else None
     chunk_pixels = max(1, chunk_rays // spp)
     samples = None if spp == 1 else np.empty((n_layers, chunk_pixels * spp, 3), np.float32)
     for lo in range(0, n_pixels, chunk_pixels):
         hi = min(n_pixels, lo + chunk_pixels)
         counter = np.arange(lo * spp, hi * spp, dtype=np.int64)
         if spp == 1:  # samples are pixels: trace straight into the layers
-            alpha[lo:hi] = trace_samples(state, sh, paths, counter, rays, layers[:, lo:hi], record)
+            alpha[lo:hi] = trace(counter, rays, layers[:, lo:hi])
         else:  # mean over each pixel's samples (consecutive counters), in a fixed order
             out = samples[:, :len(counter)]
             out.fill(0)
-            cover = trace_samples(state, sh, paths, counter, rays, out, record)
+            cover = trace(counter, rays, out)
             sample_means(out.reshape(n_layers, hi - lo, spp, 3), layers[:, lo:hi])
             alpha[lo:hi] = cover.reshape(hi - lo, spp).mean(axis=1)
     shape = (paths.height, paths.width, 3)
     direct, indirect, albedo, *also = (layers[i].reshape(shape) for i in range(n_layers))
     return FrameImage(direct + indirect, direct, indirect, albedo, alpha.reshape(shape[:2]), rays, also,
                       None if record is None else record.finish(paths.width, paths.height, spp))
+
+
+def _shutter_slices(state: FrameState, sh: ShadingTables, shutter_states, paths: CameraPaths, maps: tuple):
+    """[(state, tables)] of each sample index, tables shared by states with one state key; None
+    when every state is ``state`` as the camera and the scene see it (nothing moves while the
+    shutter is open, or there is no shutter). ``maps``: (elements, irradiance)."""
+    if shutter_states is None:
+        return None
+    if len(shutter_states) != paths.spp:
+        raise ValueError(f"shutter_states holds {len(shutter_states)} states for {paths.spp} samples a pixel")
+    if all(s.state_key == state.state_key and _same_view(s.camera, state.camera) for s in shutter_states):
+        return None
+    elements, irradiance = maps
+    tables = {state.state_key: sh}
+    for s in shutter_states:
+        if s.state_key not in tables:
+            tables[s.state_key] = ShadingTables(s, elements, irradiance, caster_for(s), paths.area_samples)
+    return [(s, tables[s.state_key]) for s in shutter_states]
+
+
+def _same_view(a: Camera | None, b: Camera | None) -> bool:
+    if a is None or b is None:
+        return a is b
+    return a.definition == b.definition and np.array_equal(a.to_world, b.to_world)
+
+
+def _trace_shutter(slices, paths: CameraPaths, counter: np.ndarray, rays: dict[str, int], out: np.ndarray):
+    """:func:`trace_samples` of the chunk ``counter`` (whole pixels) with sample j of each pixel
+    traced in the scene and from the camera of ``slices[j]``; returns the coverage (n,)."""
+    cover = np.zeros(len(counter), np.float32)
+    j_of = counter % paths.spp
+    primary = {}  # the chunk's camera rays by camera pose: computed once where only objects move
+    for j, (state, sh) in enumerate(slices):
+        sel = np.flatnonzero(j_of == j)
+        part = np.zeros((out.shape[0], len(sel), 3), np.float32)
+        cam = state.camera
+        view = (cam.definition, cam.to_world.tobytes()) if cam is not None else None
+        if view not in primary:
+            primary[view] = camera_rays(cam, paths.key, int(counter[0]), len(counter), paths)
+        origins, dirs = primary[view]
+        cover[sel] = trace_samples(state, sh, paths, counter[sel], rays, part, None,
+                                   (origins[sel], dirs[sel]))
+        out[:, sel] = part
+    return cover
 
 
 def camera_rays(cam: Camera, key: int, c0: int, n: int, paths: CameraPaths) -> tuple[np.ndarray, np.ndarray]:
@@ -144,14 +209,16 @@ def camera_rays(cam: Camera, key: int, c0: int, n: int, paths: CameraPaths) -> t
 
 
 def trace_samples(state: FrameState, sh: ShadingTables, paths: CameraPaths, counter: np.ndarray,
-                  rays: dict[str, int], out: np.ndarray, record: MapHitRecorder | None = None) -> np.ndarray:
+                  rays: dict[str, int], out: np.ndarray, record: MapHitRecorder | None = None,
+                  primary: tuple[np.ndarray, np.ndarray] | None = None) -> np.ndarray:
     """Add direct, indirect and albedo (and the indirect layers of ``sh.also``) of the camera
     samples ``counter`` of ``paths`` into ``out`` (L, n, 3), zero on entry; returns their coverage (n,).
-    ``record`` collects the hits that read the map."""
+    ``record`` collects the hits that read the map. ``primary``: the samples' camera rays (origins,
+    directions), when ``counter`` is not a run of consecutive samples (a shutter's slice)."""
     n = len(counter)
     cover = np.zeros(n, np.float32)
     key, max_depth = paths.key, paths.max_depth
-    origins, dirs = camera_rays(state.camera, key, int(counter[0]), n, paths)
+    origins, dirs = primary if primary is not None else camera_rays(state.camera, key, int(counter[0]), n, paths)
     path = None  # sample index of every live ray; None while it is 0..n-1
     throughput = None  # None while it is all ones (camera rays)
     for depth in range(max_depth + 1):

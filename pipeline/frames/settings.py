@@ -6,6 +6,7 @@ from dataclasses import asdict, dataclass, field
 
 from pipeline.errors import LoomError
 
+from .shutter import MAX_SHUTTER
 from .tonemap import ToneMapping
 
 MAX_SIDE = 16384
@@ -22,6 +23,9 @@ class RenderSettings:
     spp: int = 8
     reflection_depth: int = 4  # mirror/glossy reflections followed per camera path
     area_samples: int = 2  # area-light (or sky) samples per diffuse hit (scenes with emissive triangles or a sky)
+    # share of the frame interval the shutter is open, centred on the frame's time: motion blur
+    # (pipeline/frames/shutter.py); 0 is an instant, 0.5 film's 180-degree shutter
+    shutter: float = 0.0
     tonemap: ToneMapping = field(default_factory=ToneMapping)
 
     def __post_init__(self) -> None:
@@ -31,6 +35,10 @@ class RenderSettings:
             if isinstance(value, bool) or not isinstance(value, int) or not lo <= value <= hi:
                 flag = "--resolution" if name in ("width", "height") else f"--{name.replace('_', '-')}"
                 raise LoomError(f"{name} must be an integer in [{lo}, {hi}], got {value!r}", field=flag)
+        if isinstance(self.shutter, bool) or not isinstance(self.shutter, (int, float)) \
+                or not 0.0 <= self.shutter <= MAX_SHUTTER:
+            raise LoomError(f"shutter must be a number in [0, {MAX_SHUTTER:g}], got {self.shutter!r}",
+                            field="--shutter")
 
     def to_dict(self) -> dict:
         """Plain JSON values (the tone mapping as its own dict), for plan.json and the report."""

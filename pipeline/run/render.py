@@ -126,12 +126,13 @@ def prepare_job(request: RenderRequest) -> Job:
     look = dict(scene_hash=scene.scene_hash, camera=cam_name, seed=config.photons.seed, photon_hash=photon_hash,
                 width=settings.width, height=settings.height, spp=settings.spp,
                 reflection_depth=settings.reflection_depth, area_samples=settings.area_samples,
-                tonemap=settings.tonemap.to_dict())
+                tonemap=settings.tonemap.to_dict(), **({"shutter": settings.shutter} if settings.shutter else {}))
     # The AQM judges with Ward's operator whatever the look (pipeline/frames/tonemap.py): a new look re-decides nothing
     decision = dict(look, tonemap={k: v for k, v in look["tonemap"].items() if k not in LOOK_FIELDS},
                     first=p.frames[0], last=p.frames[-1], fmax=fmax, n_photons=n_photons,
                     temporal=temporal, selection=p.frames, collection=config.collection.hash,
                     filter=config.filter.hash, segments=config.segments.hash)
+    decision.pop("shutter", None)  # the AQM judges unblurred frames (pipeline/frames/shutter.py)
     if not guided:  # fixed settings read no segment parameter
         decision.pop("segments")
     # Absolute paths: tasks and farm recipes run elsewhere, and in other working directories
