@@ -1,7 +1,7 @@
 // One bounce of photon tracing after Embree found the hits (pipeline/photons/tracing.py drives the loop).
 // For every hit: record it if the surface is diffuse (element, element barycentrics, weight),
 // play Russian roulette on the albedo, and sample the next direction: cosine lobe (diffuse),
-// mirror, or normalised Phong lobe (glossy). Double precision throughout (PoCL CPU has fp64).
+// mirror, normalised Phong lobe (glossy), or Fresnel's choice of mirror and refraction (dielectric). Double precision throughout (PoCL CPU has fp64).
 // NumPy twin: kernels/scatter.py::scatter_reference; formulas are documented there.
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #pragma OPENCL FP_CONTRACT OFF  // no fused multiply-add: the NumPy twin rounds every product
@@ -11,6 +11,7 @@
 #define KIND_DIFFUSE 0
 #define KIND_MIRROR 1
 #define KIND_GLOSSY 2
+#define KIND_DIELECTRIC 3
 // PARITY_BIT, DIRECT_BIT, BARY_SCALE: build options from kernels/record_layout.py (kernels/context.py)
 
 // Eight rays a work item, written on double8/long8/uint8 so that it runs in SIMD whatever the
@@ -25,7 +26,7 @@ __kernel void scatter8(
     __global const int *tri, __global const float *hit_u, __global const float *hit_v,
     __global const float *dir_in, __global const double *beta_in, __global const long *photon,
     __global const double *glossy_cos, __global const double *albedo, __global const double *shading,
-    __global const int *hit_kind, __global const double *hit_exp,
+    __global const int *hit_kind, __global const double *hit_exp, __global const double *hit_ior,
     __global const float *corners, __global const double *normals,
     __global const int *tri_n, __global const long *tri_offset,
     __global uint *rec_key, __global ushort *rec_bary, __global float *rec_energy,
@@ -99,13 +100,31 @@ __kernel void scatter8(
     double8 lx, ly, lz;
     around8(zx, zy, zz, cos_t, 2.0 * M_PI * u2, &lx, &ly, &lz);
     const long8 is_mirror = kind == (long8)(KIND_MIRROR);
-    const double8 ox = select(lx, mx, is_mirror), oy = select(ly, my, is_mirror), oz = select(lz, mz, is_mirror);
+    // Solid glass: Fresnel's share reflects, the rest refracts by Snell's law (u1 decides); entering
+    // where the geometric normal faces the ray (eta = n1 / n2 = 1 / ior), leaving elsewhere
+    const long8 is_dielectric = kind == (long8)(KIND_DIELECTRIC);
+    const double8 ior = G8(double8, hit_ior, i);
+    const double8 eta = select(ior, 1.0 / ior, fs > 0.0);
+    const double8 cos_i = fmin(-dn, 1.0);
+    const double8 sin2_t = eta * eta * (1.0 - cos_i * cos_i);
+    const long8 tir = sin2_t >= 1.0;
+    const double8 cos_tr = sqrt(fmax(1.0 - sin2_t, 0.0));
+    const double8 rs = (eta * cos_i - cos_tr) / (eta * cos_i + cos_tr);
+    const double8 rp = (eta * cos_tr - cos_i) / (eta * cos_tr + cos_i);
+    const double8 fresnel = select(0.5 * (rs * rs + rp * rp), (double8)(1.0), tir);
+    const long8 refracts = is_dielectric & (u1 >= fresnel);
+    const double8 kt = eta * cos_i - cos_tr;
+    const long8 mirrors = is_mirror | (is_dielectric & ~refracts);
+    const double8 ox = select(select(lx, mx, mirrors), eta * dx + kt * fx_, refracts);
+    const double8 oy = select(select(ly, my, mirrors), eta * dy + kt * fy_, refracts);
+    const double8 oz = select(select(lz, mz, mirrors), eta * dz + kt * fz_, refracts);
     const double8 cos_o = ox * fx_ + oy * fy_ + oz * fz_;
     const double8 gw = select((double8)(1.0), fmax(cos_o, 0.0) * (e + 2.0) / (e + 1.0), is_glossy);
     bx *= gw; by *= gw; bz *= gw;
     survive = survive & (~is_glossy | (cos_o > 0.0));
     const double8 n_out = nx * ox + ny * oy + nz * oz;
-    survive = survive & (n_out * fs > 0.0);  // leaves on the side it arrived from
+    // leaves on the side it arrived from, or the other side where it refracts
+    survive = survive & select(n_out * fs > 0.0, n_out * fs < 0.0, refracts);
     const double8 off = surface_offset8(corners, c9, epsilon);
     const double8 side = select(off, -off, n_out < 0.0);
     S8(origin_out, 3 * i, convert_float8(px + nx * side));

@@ -12,6 +12,12 @@ either. Per hit on triangle t with material m, photon index i, bounce d:
 * glossy: a normalised Phong lobe about the mirror direction, pdf (e+1)/(2 pi) cos^e, sampled as
   cos = u^(1/(e+1)); the weight gains rho (e+2)/(e+1) cos_o (BRDF x cos / pdf, Lafortune and
   Willems 1994); directions below the surface end the path.
+* dielectric (solid glass): with probability F (Fresnel's equations for unpolarised light, the
+  mean of the s and p reflectances; 1 past the critical angle) the mirror direction, else the
+  refracted one, ``eta d + (eta cos_i - cos_t) n`` with ``eta = 1 / ior`` entering (where the
+  geometric normal faces the ray) and ``ior`` leaving (pbrt-v4 §9.3, §9.5); the choice is the
+  direction's first word (unused by a smooth surface's sampling). A refracted photon leaves on the
+  other side.
 * Russian roulette: survive with q = max(albedo), weight x albedo / q (Arvo and Kirk 1990); the
   albedo is the hit's own base colour (textures, vertex colours: pipeline/scene/shading.py).
 * the kind and the exponent are the hit's own too where a metallic-roughness texture varies them
@@ -33,7 +39,7 @@ from .philox import uniforms
 from .record_layout import BARY_SCALE, DIRECT_BIT, PARITY_BIT
 from .sampling import around
 
-KIND_CODE = {"diffuse": 0, "mirror": 1, "glossy": 2}
+KIND_CODE = {"diffuse": 0, "mirror": 1, "glossy": 2, "dielectric": 3}
 
 
 @dataclass
@@ -49,6 +55,7 @@ class SceneTables:
     kind: np.ndarray  # (M,) int32
     exponent: np.ndarray  # (M,) float64
     epsilon: float  # relative self-intersection offset (surface_offset)
+    ior: np.ndarray | None = None  # (M,) float64 index of refraction of dielectrics; None: the scene has none
 
 
 @dataclass
@@ -80,6 +87,13 @@ def hit_kind(tables: SceneTables, hits: Hits) -> tuple[np.ndarray, np.ndarray]:
         return np.asarray(hits.kind, np.int32), np.asarray(hits.exponent, np.float64)
     m = np.take(tables.tri_mat, np.maximum(hits.tri, 0))
     return np.take(tables.kind, m), np.take(tables.exponent, m)
+
+
+def hit_ior(tables: SceneTables, hits: Hits) -> np.ndarray:
+    """(m,) float64 index of refraction of every hit's material (1 where the scene has no dielectric)."""
+    if tables.ior is None:
+        return np.ones(len(hits.tri))
+    return np.take(tables.ior, np.take(tables.tri_mat, np.maximum(hits.tri, 0)))
 
 
 def hit_shading(tables: SceneTables, hits: Hits) -> np.ndarray:
@@ -161,12 +175,18 @@ def scatter_reference(tables: SceneTables, hits: Hits, depth: int, key: tuple[in
     q = rho.max(axis=1)
     survive = w[:, 0] < q
     beta = beta * rho / np.where(q > 0, q, 1.0)[:, None]
-    mirror = d - 2.0 * np.einsum("ij,ij->i", d, facing)[:, None] * facing
+    dn = np.einsum("ij,ij->i", d, facing)
+    mirror = d - 2.0 * dn[:, None] * facing
     nd = np.empty((m_count, 3))
     diffuse = kind == 0
     nd[diffuse] = around(facing[diffuse], np.sqrt(1.0 - w[diffuse, 1]), 2.0 * np.pi * w[diffuse, 2],
                          polynomial=True)
     nd[kind == 1] = mirror[kind == 1]
+    refracts = np.zeros(m_count, bool)
+    dielectric = np.flatnonzero(kind == 3)
+    if len(dielectric):
+        refracts[dielectric], nd[dielectric] = refract_or_reflect(d[dielectric], facing[dielectric], fs[dielectric],
+                                                                  hit_ior(tables, hits)[dielectric], w[dielectric, 1])
     glossy = kind == 2
     if glossy.any():
         e = exponent[glossy]
@@ -177,10 +197,32 @@ def scatter_reference(tables: SceneTables, hits: Hits, depth: int, key: tuple[in
         survive[glossy] &= cos_o > 0
         nd[glossy] = g
     n_out = np.einsum("ij,ij->i", n, nd)
-    survive &= n_out * fs > 0  # leaves on the side it arrived from
+    survive &= np.where(refracts, n_out * fs < 0, n_out * fs > 0)  # the other side only where it refracts
     side = np.where(n_out < 0, -1.0, 1.0)
     origins = (p + n * (side * surface_offset(tables.corners[t], tables.epsilon))[:, None]).astype(np.float32)
     return Bounce(key_out, bary, energy, recorded, origins, nd.astype(np.float32), beta, survive & hit)
+
+
+def refract_or_reflect(d: np.ndarray, facing: np.ndarray, fs: np.ndarray, ior: np.ndarray,
+                       u: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """(refracts, next direction) of rays ``d`` (n, 3) meeting solid glass, as scatter.cl computes
+    them (the module docstring): ``facing`` the unit shading normals on the incoming side, ``fs``
+    > 0 where the ray meets the front (entering), ``u`` uniform numbers against Fresnel's share.
+    The compositor's paths refract with it too (pipeline/frames/camera_paths.py)."""
+    dn = np.einsum("ij,ij->i", d, facing)
+    mirror = d - 2.0 * dn[:, None] * facing
+    eta = np.where(fs > 0, 1.0 / ior, ior)
+    cos_i = np.minimum(-dn, 1.0)
+    sin2_t = eta * eta * (1.0 - cos_i * cos_i)
+    tir = sin2_t >= 1.0
+    cos_t = np.sqrt(np.maximum(1.0 - sin2_t, 0.0))
+    with np.errstate(invalid="ignore", divide="ignore"):  # 0/0 only at grazing total reflection, unused
+        rs = (eta * cos_i - cos_t) / (eta * cos_i + cos_t)
+        rp = (eta * cos_t - cos_i) / (eta * cos_t + cos_i)
+    fresnel = np.where(tir, 1.0, 0.5 * (rs * rs + rp * rp))
+    refracts = u >= fresnel
+    refracted = eta[:, None] * d + (eta * cos_i - cos_t)[:, None] * facing
+    return refracts, np.where(refracts[:, None], refracted, mirror)
 
 
 class ScatterCL:
@@ -216,7 +258,7 @@ class ScatterCL:
             hits.v.astype(np.float32, copy=False), hits.dirs.astype(np.float32, copy=False),
             hits.beta.astype(np.float64, copy=False), hits.photon.astype(np.int64, copy=False),
             glossy_cos(self.tables, hits, depth, key), hit_albedo(self.tables, hits),
-            hit_shading(self.tables, hits), *hit_kind(self.tables, hits))]
+            hit_shading(self.tables, hits), *hit_kind(self.tables, hits), hit_ior(self.tables, hits))]
         out = Bounce(*self._output_rows(m))
         fields = ("key", "bary", "energy", "recorded", "origins", "dirs", "beta", "alive")
         outputs = [device_output(self.ctx, getattr(out, f)) for f in fields]

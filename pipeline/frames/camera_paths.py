@@ -21,6 +21,7 @@ import numpy as np
 
 from kernels.camera import camera_rays_cl, image_plane
 from kernels.sampling import around
+from kernels.scatter import refract_or_reflect
 from pipeline.frames.tonemap import image_adaptation
 from pipeline.photons.raycast import RayCaster, caster_for
 from pipeline.scene import ElementMesh, FrameState
@@ -299,7 +300,7 @@ def trace_samples(state: FrameState, sh: ShadingTables, paths: CameraPaths, coun
         if not direct_out:
             _put_layers(out, path, acc if throughput is None else acc * throughput[None])
 
-        # Mirror and glossy reflection continue the path
+        # Mirror and glossy reflection and glass continue the path
         spec = np.flatnonzero(kind != 0)
         if depth == max_depth or not len(spec):
             break
@@ -316,8 +317,17 @@ def trace_samples(state: FrameState, sh: ShadingTables, paths: CameraPaths, coun
             # normalised Phong BRDF rho (e+2)/(2 pi) cos^e times cos_o over the pdf
             weight[g] *= (np.maximum(cos_o, 0.0) * (e + 2.0) / (e + 1.0))[:, None]
             refl[g] = lobe_dir
+        through = np.zeros(len(spec), bool)  # refracted into or out of glass: leaves on the far side
+        glass = np.flatnonzero(kind[spec] == 3)
+        if len(glass):
+            rows = spec[glass]
+            c = counter[rows if path is None else path[rows]]
+            through[glass], refl[glass] = refract_or_reflect(
+                np.take(dirs, rows, axis=0).astype(np.float64), hits.shading(rows).astype(np.float64),
+                -hits.cos_in(rows), np.take(sh.ior, tri[rows]), uniform(key, c, 2 + depth * DIMS_PER_DEPTH))
         # leaving below the geometric surface (shading normals) ends the path, as in the tracer
-        keep = (weight.max(axis=1) > 0) & (np.einsum("ij,ij->i", refl, hits.facing(spec)) > 0)
+        side = np.einsum("ij,ij->i", refl, hits.facing(spec))
+        keep = (weight.max(axis=1) > 0) & np.where(through, side < 0, side > 0)
         spec, refl, weight = spec[keep], refl[keep], weight[keep]
         throughput = weight if throughput is None else throughput[spec] * weight
         origins = sh.caster.offset_origins(hits.points(spec), tri[spec], refl).astype(np.float32)

@@ -26,6 +26,7 @@ class ShadingTables:
         self.kind = np.array([KIND_CODE[m.kind] for m in mats], np.int8)[tri_mat]
         self.albedo = np.array([m.albedo for m in mats], np.float32)[tri_mat]
         self.exponent = np.array([m.phong_exponent for m in mats], np.float32)[tri_mat]
+        self.ior = np.array([m.ior for m in mats], np.float64)[tri_mat]  # glass refracts by it
         self.emission = np.array([m.emission for m in mats], np.float32)[tri_mat]
         self.emissive = self.emission.max(axis=1) > 0
         self.any_emissive = bool(self.emissive.any())

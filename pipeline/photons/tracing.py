@@ -74,7 +74,8 @@ def scene_tables(state: FrameState, elements: ElementMesh, caster: RayCaster) ->
         tri_n=elements.triangle_n.astype(np.int32), tri_offset=elements.triangle_offset[:-1].astype(np.int64),
         albedo=np.array([m.albedo for m in mats], np.float64),
         kind=np.array([KIND_CODE[m.kind] for m in mats], np.int32),
-        exponent=np.array([m.phong_exponent for m in mats], np.float64), epsilon=caster.epsilon)
+        exponent=np.array([m.phong_exponent for m in mats], np.float64), epsilon=caster.epsilon,
+        ior=(np.array([m.ior for m in mats], np.float64) if any(m.kind == "dielectric" for m in mats) else None))
 
 
 _scatterers: OrderedDict[tuple, object] = OrderedDict()

@@ -44,8 +44,9 @@ def _alpha_texture(material: Material):
 
 
 def lets_through(material: Material) -> bool:
-    """Whether rays may pass some hits of ``material``: a mask, a blend or transmission."""
-    return material.alpha_mode in SEE_THROUGH or material.transmission > 0
+    """Whether rays may pass some hits of ``material``: a mask, a blend or thin-walled transmission
+    (a solid dielectric refracts instead: kernels/scatter.py)."""
+    return material.alpha_mode in SEE_THROUGH or (material.transmission > 0 and material.kind != "dielectric")
 
 
 @dataclass(frozen=True)
@@ -71,7 +72,8 @@ class Cutouts:
     def __init__(self, materials: list[Material], triangle_material: np.ndarray, texcoords: dict):
         self.tri_mat = np.asarray(triangle_material, np.int64)
         self.masked = {j: _Passage(m.base_alpha, _alpha_texture(m), m.alpha_cutoff if m.alpha_mode == MASK else None,
-                                   m.alpha_mode == BLEND, m.transmission, m.transmission_texture, m.f0)
+                                   m.alpha_mode == BLEND, m.transmission if m.kind != "dielectric" else 0.0,
+                                   m.transmission_texture, m.f0)
                        for j, m in enumerate(materials) if lets_through(m)}
         self.texcoords = texcoords
         flags = np.zeros(len(materials), bool)

@@ -64,7 +64,9 @@ SCHEMA = {
                         "extensions": {"KHR_materials_emissive_strength": {"emissiveStrength": NUM},
                                        "KHR_materials_transmission": {"transmissionFactor": NUM,
                                                                       "transmissionTexture": {"index": INDEX}},
-                                       "KHR_materials_ior": {"ior": NUM}}}),
+                                       "KHR_materials_ior": {"ior": NUM},
+                                       "KHR_materials_volume": {"thicknessFactor": NUM, "attenuationDistance": NUM,
+                                                                "attenuationColor": _NUMS}}}),
     "skins": _list({"joints": _list(INDEX), "inverseBindMatrices": INDEX, "skeleton": INDEX}),
 }
 

@@ -15,7 +15,6 @@ from .scene import Scene
 # Why an extension that is only "used" (not required) is safe to ignore, by name prefix; the
 # file's core data is what gets rendered.
 _REASONS = (
-    ("KHR_materials_volume", "transmission is thin-walled: what passes is neither bent nor absorbed"),
     ("KHR_materials_", "the core metallic-roughness factors are used"),
     ("KHR_texture_", "the core texture reference is used"),
     ("EXT_texture_", "the core texture reference is used"),

@@ -23,7 +23,7 @@ from .gltf import GltfDocument, read_gltf
 from .instancing import EXTENSION as INSTANCING
 from .instancing import instance_transforms, place_copy
 from .lights import light_def_from_gltf
-from .materials import DEFAULT_MATERIAL, IOR, TRANSMISSION, any_emits, material_from_gltf
+from .materials import DEFAULT_MATERIAL, IOR, TRANSMISSION, VOLUME, any_emits, material_from_gltf
 from .nodes import MeshInstance, Node
 from .pointers import ANIMATED_POINTERS, BOOLEAN_ACCESSOR, NON_NEGATIVE_PROPERTIES, WIDTHS, pointer_target
 from .pointers import EXTENSION as POINTER
@@ -258,6 +258,9 @@ def _check_material(doc, m, i: int) -> None:
     ior = extensions.get(IOR, {}).get("ior", 1.5)
     if not (ior >= 1 or ior == 0) or ior == float("inf"):  # KHR_materials_ior: [1, inf) or 0
         raise doc.error(f"must be at least 1 (or 0), got {ior}", f"{f}.extensions.{IOR}.ior")
+    thickness = extensions.get(VOLUME, {}).get("thicknessFactor", 0.0)
+    if not 0 <= thickness < float("inf"):
+        raise doc.error(f"must be a non-negative number, got {thickness}", f"{f}.extensions.{VOLUME}.thicknessFactor")
     if m.alphaCutoff is not None and not m.alphaCutoff >= 0:
         raise doc.error(f"must be non-negative, got {m.alphaCutoff}", f + ".alphaCutoff")
     pbr = m.pbrMetallicRoughness

@@ -18,8 +18,14 @@ Mapping (docs/03-conventions.md §2; written in the README too):
   with probability ``transmission x (1 - F)``, F Schlick's Fresnel term with ``F0 = ((ior - 1) /
   (ior + 1))^2`` (``KHR_materials_ior``, 1.5 by default: F0 0.04); otherwise it reflects as a smooth
   dielectric does, specularly: the kind is classified as if metallic were 1 (mirror below roughness
-  0.2, glossy below 0.6). What passes is neither bent nor tinted (``KHR_materials_volume`` is not
-  read), so clear glass is exact in how much it reflects and passes, coloured glass passes white.
+  0.2, glossy below 0.6). What passes is neither bent nor tinted, so clear glass is exact in how
+  much it reflects and passes, coloured glass passes white.
+* ``KHR_materials_volume`` with ``thicknessFactor > 0`` on a transmissive material makes it a solid
+  **dielectric** instead (kernels/scatter.py, pipeline/frames/camera_paths.py): each hit reflects
+  Fresnel's share and refracts the rest by Snell's law with the ior, entering or leaving by which
+  side of its surface the ray meets; reflectance and transmittance are the base colour, roughness
+  is not read (smooth glass), nor is the attenuation. Shadow rays do not pass it: the light
+  behind glass objects is their caustic, carried by the photons.
 * ``emissiveFactor x KHR_materials_emissive_strength`` (x the ``emissiveTexture``) is emitted radiance
   (front face only).
 * ``doubleSided`` (glTF's default: false): a single-sided surface has no back. Photons that reach
@@ -41,8 +47,8 @@ from .textures import transform_matrix
 if TYPE_CHECKING:
     import pygltflib
 
-KINDS = ("diffuse", "mirror", "glossy")
-TRANSMISSION, IOR = "KHR_materials_transmission", "KHR_materials_ior"
+KINDS = ("diffuse", "mirror", "glossy", "dielectric")
+TRANSMISSION, IOR, VOLUME = "KHR_materials_transmission", "KHR_materials_ior", "KHR_materials_volume"
 MIRROR_ROUGHNESS = 0.2
 GLOSSY_ROUGHNESS = 0.6
 METALLIC_THRESHOLD = 0.5
@@ -68,11 +74,13 @@ class Material:
     transmission: float = 0.0  # KHR_materials_transmission transmissionFactor (thin-walled, cutouts.py)
     ior: float = 1.5  # KHR_materials_ior: Fresnel's F0 of what is transmissive
     transmission_texture: object = None  # a linear Texture whose R multiplies ``transmission``, per hit
+    thickness: float = 0.0  # KHR_materials_volume thicknessFactor: > 0 with transmission, a solid dielectric
 
     @property
     def is_specular(self) -> bool:
-        """Mirror or glossy somewhere: at its factors, or at some texel of its metallic-roughness texture."""
-        if self.kind in ("mirror", "glossy"):
+        """Mirror, glossy or dielectric somewhere: at its factors, or at some texel of its
+        metallic-roughness texture."""
+        if self.kind in ("mirror", "glossy", "dielectric"):
             return True
         tex = self.metallic_roughness_texture
         return tex is not None and bool(np.any(kind_codes(self.metallic * tex.image[..., 2],
@@ -86,7 +94,7 @@ class Material:
         """Numbers that fully describe what the material does at one instant (for state keys)."""
         transforms = [t.transform.ravel() for t in (self.base_color_texture, self.emissive_texture) if t is not None]
         textured = [[self.metallic]] if self.metallic_roughness_texture is not None else []  # kind says it otherwise
-        passing = [[self.transmission, self.ior]] if self.transmission > 0 else []
+        passing = [[self.transmission, self.ior, self.thickness]] if self.transmission > 0 else []
         return np.concatenate([self.albedo, self.emission, [KINDS.index(self.kind), self.roughness, self.base_alpha,
                                                          self.alpha_cutoff],
                                *transforms, *textured, *passing])
@@ -105,6 +113,15 @@ class Material:
 def classify(metallic: float, roughness: float) -> str:
     """``"mirror"``, ``"glossy"`` or ``"diffuse"`` from the glTF factors (see module docstring)."""
     return KINDS[int(kind_codes(np.float64(metallic), np.float64(roughness)))]
+
+
+def _kind(metallic: float, roughness: float, transmission: float, thickness: float, ior: float) -> str:
+    """A material's kind: a solid dielectric where it transmits through a volume, else as
+    :func:`classify` says, with metallic taken as 1 where it transmits (a smooth dielectric's
+    reflection is specular; see the module docstring)."""
+    if transmission > 0 and thickness > 0 and ior != 0:  # ior 0: KHR_materials_ior's perfect mirror
+        return "dielectric"
+    return classify(1.0 if transmission > 0 else metallic, roughness)
 
 
 def kind_codes(metallic: np.ndarray, roughness: np.ndarray) -> np.ndarray:
@@ -203,11 +220,13 @@ def _factors(mat: pygltflib.Material) -> dict[str, np.ndarray]:
     strength = extensions.get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)
     transmission = extensions.get(TRANSMISSION, {}).get("transmissionFactor", 0.0)
     ior = extensions.get(IOR, {}).get("ior", 1.5)
+    thickness = extensions.get(VOLUME, {}).get("thicknessFactor", 0.0)
     return {"baseColorFactor": np.asarray(base, float), "metallicFactor": np.asarray([metallic], float),
             "roughnessFactor": np.asarray([roughness], float), "emissiveFactor": np.asarray(emissive, float),
             "emissiveStrength": np.asarray([strength], float),
             "alphaCutoff": np.asarray([mat.alphaCutoff if mat.alphaCutoff is not None else 0.5], float),
             "transmissionFactor": np.asarray([transmission], float), "ior": np.asarray([ior], float),
+            "thicknessFactor": np.asarray([thickness], float),
             **_texture_transforms(mat)}
 
 
@@ -226,8 +245,9 @@ def animated_material(material: Material, mat: pygltflib.Material, values: dict[
     return replace(material, albedo=tuple(float(c) for c in np.clip(f["baseColorFactor"][:3], 0.0, 1.0)),
                    base_alpha=float(np.clip(f["baseColorFactor"][3], 0.0, 1.0)),
                    alpha_cutoff=max(float(f["alphaCutoff"][0]), 0.0),
-                   kind=classify(1.0 if transmission > 0 else metallic, roughness), roughness=roughness,
-                   metallic=metallic, transmission=transmission, ior=float(f["ior"][0]),
+                   kind=_kind(metallic, roughness, transmission, float(f["thicknessFactor"][0]), float(f["ior"][0])),
+                   roughness=roughness, metallic=metallic, transmission=transmission, ior=float(f["ior"][0]),
+                   thickness=float(f["thicknessFactor"][0]),
                    emission=tuple(float(c) for c in np.maximum(f["emissiveFactor"] * f["emissiveStrength"][0], 0.0)),
                    **textures)
 

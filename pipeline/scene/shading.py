@@ -129,7 +129,8 @@ class SurfaceShading:
         self.exponent = np.array([m.phong_exponent for m in mats], np.float64)
         self.metallic_roughness = {j: (m.metallic_roughness_texture, m.metallic, m.roughness)
                                    for j, m in enumerate(mats)
-                                   if j in used and getattr(m, "metallic_roughness_texture", None) is not None}
+                                   if j in used and getattr(m, "metallic_roughness_texture", None) is not None
+                                   and m.kind != "dielectric"}  # glass stays glass
         self.vertices, self.faces = getattr(state, "vertices", None), getattr(state, "faces", None)
 
     @property

@@ -8,7 +8,7 @@ from kernels.scatter import DIRECT_BIT, PARITY_BIT, Hits, ScatterCL, SceneTables
 from tests.kernels.twin_base import KernelTwinTests
 
 
-def _tables(rng, n_tri=50, kinds=(0, 1, 2)) -> SceneTables:
+def _tables(rng, n_tri=50, kinds=(0, 1, 2, 3)) -> SceneTables:
     corners = rng.normal(size=(n_tri, 9)).astype(np.float32)
     c = corners.astype(np.float64).reshape(-1, 3, 3)
     nrm = np.cross(c[:, 1] - c[:, 0], c[:, 2] - c[:, 0])
@@ -21,7 +21,8 @@ def _tables(rng, n_tri=50, kinds=(0, 1, 2)) -> SceneTables:
                        tri_n=rng.integers(1, 40, n_tri).astype(np.int32),
                        tri_offset=np.concatenate([[0], np.cumsum(rng.integers(1, 1600, n_tri - 1))]).astype(np.int64),
                        albedo=albedo, kind=np.array([kinds[i % len(kinds)] for i in range(n_mat)], np.int32),
-                       exponent=np.array([1.0, 2.0, 10.0, 100.0, 1e4, 0.5]), epsilon=1e-4)
+                       exponent=np.array([1.0, 2.0, 10.0, 100.0, 1e4, 0.5]), epsilon=1e-4,
+                       ior=np.array([1.5, 1.0, 1.33, 1.5, 2.4, 1.7]))
 
 
 def _hits(rng, tables, m) -> Hits:
@@ -122,7 +123,7 @@ def _textured_smooth_hits(rng, tables, m) -> Hits:
     hits.albedo = rng.random((m, 3))
     hits.albedo[: m // 10] = 0.0  # black texels absorb
     hits.shading = tilt
-    hits.kind = rng.integers(0, 3, m).astype(np.int32)
+    hits.kind = rng.integers(0, 4, m).astype(np.int32)
     hits.exponent = rng.choice([0.5, 3.0, 40.0, 1e4], m)
     return hits
 
@@ -173,3 +174,45 @@ def test_bounce_follows_the_hit_kind(rng):
     cos_o = np.einsum("ij,ij->i", out.dirs[glossy].astype(np.float64), n[glossy])
     e = hits.exponent[glossy]
     np.testing.assert_allclose(out.beta[glossy], hits.beta[glossy] * (cos_o * (e + 2) / (e + 1))[:, None], rtol=1e-5)
+
+
+def _fresnel(cos_i: float, eta: float) -> float:
+    """Unpolarised Fresnel reflectance (Hecht, Optics, §4.6) for n1 / n2 = eta."""
+    sin2_t = eta**2 * (1 - cos_i**2)
+    if sin2_t >= 1:
+        return 1.0
+    cos_t = np.sqrt(1 - sin2_t)
+    rs = (eta * cos_i - cos_t) / (eta * cos_i + cos_t)
+    rp = (eta * cos_t - cos_i) / (eta * cos_t + cos_i)
+    return 0.5 * (rs**2 + rp**2)
+
+
+@pytest.mark.parametrize("theta_deg, inside", [(0.0, False), (60.0, False), (30.0, True), (45.0, True)])
+def test_glass_reflects_fresnels_share_and_refracts_by_snells_law(theta_deg, inside):
+    """A glass (ior 1.5) triangle in the plane y = 0, normal +y, met from above (outside) or below
+    (inside, leaving): the share reflected is Fresnel's (all of it past the critical angle, 41.8
+    degrees, from inside), the rest leaves on the far side with sin(theta_t) = eta sin(theta_i)."""
+    n = 40_000
+    ccw = np.array([[-1e3, 0, -1e3, 0, 0, 1e3, 1e3, 0, -1e3]], np.float32)  # counter-clockwise seen from +y
+    tables = SceneTables(corners=ccw,
+                         normals=np.array([[0.0, 1.0, 0.0]]), tri_mat=np.zeros(1, np.int32),
+                         tri_n=np.ones(1, np.int32), tri_offset=np.zeros(1, np.int64), albedo=np.ones((1, 3)),
+                         kind=np.array([3], np.int32), exponent=np.zeros(1), epsilon=1e-4, ior=np.array([1.5]))
+    theta = np.radians(theta_deg)
+    d = np.array([np.sin(theta), np.cos(theta) if inside else -np.cos(theta), 0.0])
+    hits = Hits(np.zeros(n, np.int32), np.full(n, 0.3, np.float32), np.full(n, 0.3, np.float32),
+                np.tile(d, (n, 1)).astype(np.float32), np.ones((n, 3)), np.arange(n, dtype=np.int64))
+    out = scatter_reference(tables, hits, 1, (5, 6))
+    eta = 1.5 if inside else 1 / 1.5
+    f = _fresnel(np.cos(theta), eta)
+    up = out.dirs[:, 1] > 0
+    reflected = up if not inside else ~up
+    assert out.alive.all() and not out.recorded.any()
+    assert abs(reflected.mean() - f) < 4 * np.sqrt(max(f * (1 - f), 1e-12) / n) + 1e-9
+    if f < 1:
+        t = out.dirs[~reflected].astype(np.float64)
+        np.testing.assert_allclose(np.hypot(t[:, 0], t[:, 2]), eta * np.sin(theta), atol=1e-6)  # Snell
+        np.testing.assert_allclose(np.linalg.norm(t, axis=1), 1.0, atol=1e-6)
+        device = ScatterCL(tables)(hits, 1, (5, 6))
+        np.testing.assert_array_equal(device.alive, out.alive)
+        np.testing.assert_allclose(device.dirs, out.dirs, atol=1e-6)
