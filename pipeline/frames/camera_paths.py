@@ -239,6 +239,10 @@ def trace_samples(state: FrameState, sh: ShadingTables, paths: CameraPaths, coun
         if not len(tri):
             break
         hits = CameraHits(sh, tri, u, v, origins, dirs, t)
+        kept = sh.surface.volume_transmittance(tri, dirs, t)  # light absorbed inside coloured glass
+        if kept is not None:
+            kept = kept.astype(np.float32)
+            throughput = kept if throughput is None else throughput * kept
         if sh.surface.kind_varies:  # metallic-roughness textures: each hit's own kind and lobe
             kind, exponent = sh.surface.kinds(tri, u, v)
             exponent = exponent.astype(np.float32)  # as the table holds them

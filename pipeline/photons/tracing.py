@@ -174,6 +174,9 @@ def _trace_wavefront(tracer: _Tracer, photon: np.ndarray, capped: list[int]):
         tri = absorb_back_hits(tri, dirs, caster.normals, tracer.one_sided)
         if depth == 0 and any(li.definition.range is not None for li in state.lights):
             beta = beta * _range_window(state, table, emitter, dist)[:, None]
+        kept = surface.volume_transmittance(tri, dirs, dist)  # light absorbed inside coloured glass
+        if kept is not None:
+            beta = beta * kept
         kind, exponent = surface.kinds(tri, u, v) if surface.kind_varies else (None, None)
         hits = Hits(tri, u, v, dirs, beta, photon, albedo=surface.base_color(tri, u, v) if surface.varies else None,
                     shading=surface.normal(tri, u, v) if surface.smooth else None, kind=kind, exponent=exponent)

@@ -258,9 +258,16 @@ def _check_material(doc, m, i: int) -> None:
     ior = extensions.get(IOR, {}).get("ior", 1.5)
     if not (ior >= 1 or ior == 0) or ior == float("inf"):  # KHR_materials_ior: [1, inf) or 0
         raise doc.error(f"must be at least 1 (or 0), got {ior}", f"{f}.extensions.{IOR}.ior")
-    thickness = extensions.get(VOLUME, {}).get("thicknessFactor", 0.0)
+    volume = extensions.get(VOLUME, {})
+    thickness = volume.get("thicknessFactor", 0.0)
     if not 0 <= thickness < float("inf"):
         raise doc.error(f"must be a non-negative number, got {thickness}", f"{f}.extensions.{VOLUME}.thicknessFactor")
+    distance = volume.get("attenuationDistance", 1.0)
+    if not distance > 0:
+        raise doc.error(f"must be positive, got {distance}", f"{f}.extensions.{VOLUME}.attenuationDistance")
+    color = volume.get("attenuationColor", [1.0, 1.0, 1.0])
+    if len(color) != 3 or not all(0 <= c <= 1 for c in color):
+        raise doc.error(f"must be 3 numbers in [0, 1], got {color}", f"{f}.extensions.{VOLUME}.attenuationColor")
     if m.alphaCutoff is not None and not m.alphaCutoff >= 0:
         raise doc.error(f"must be non-negative, got {m.alphaCutoff}", f + ".alphaCutoff")
     pbr = m.pbrMetallicRoughness

@@ -25,7 +25,9 @@ Mapping (docs/03-conventions.md §2; written in the README too):
   Fresnel's share and refracts the rest by Snell's law with the ior, entering or leaving by which
   side of its surface the ray meets; reflectance and transmittance are the base colour, roughness
   is not read (smooth glass), nor is the attenuation. Shadow rays do not pass it: the light
-  behind glass objects is their caustic, carried by the photons.
+  behind glass objects is their caustic, carried by the photons. Inside it, light keeps
+  ``attenuationColor`` of itself over ``attenuationDistance`` (Beer's law, the extension's own
+  definition), applied where a ray leaves the volume (pipeline/scene/shading.py).
 * ``emissiveFactor x KHR_materials_emissive_strength`` (x the ``emissiveTexture``) is emitted radiance
   (front face only).
 * ``doubleSided`` (glTF's default: false): a single-sided surface has no back. Photons that reach
@@ -75,6 +77,9 @@ class Material:
     ior: float = 1.5  # KHR_materials_ior: Fresnel's F0 of what is transmissive
     transmission_texture: object = None  # a linear Texture whose R multiplies ``transmission``, per hit
     thickness: float = 0.0  # KHR_materials_volume thicknessFactor: > 0 with transmission, a solid dielectric
+    # KHR_materials_volume: light inside keeps attenuation_color after attenuation_distance (Beer's law)
+    attenuation_color: tuple[float, float, float] = (1.0, 1.0, 1.0)
+    attenuation_distance: float = float("inf")
 
     @property
     def is_specular(self) -> bool:
@@ -94,7 +99,8 @@ class Material:
         """Numbers that fully describe what the material does at one instant (for state keys)."""
         transforms = [t.transform.ravel() for t in (self.base_color_texture, self.emissive_texture) if t is not None]
         textured = [[self.metallic]] if self.metallic_roughness_texture is not None else []  # kind says it otherwise
-        passing = [[self.transmission, self.ior, self.thickness]] if self.transmission > 0 else []
+        passing = ([[self.transmission, self.ior, self.thickness, *self.attenuation_color, self.attenuation_distance]]
+                   if self.transmission > 0 else [])
         return np.concatenate([self.albedo, self.emission, [KINDS.index(self.kind), self.roughness, self.base_alpha,
                                                          self.alpha_cutoff],
                                *transforms, *textured, *passing])
@@ -220,13 +226,16 @@ def _factors(mat: pygltflib.Material) -> dict[str, np.ndarray]:
     strength = extensions.get("KHR_materials_emissive_strength", {}).get("emissiveStrength", 1.0)
     transmission = extensions.get(TRANSMISSION, {}).get("transmissionFactor", 0.0)
     ior = extensions.get(IOR, {}).get("ior", 1.5)
-    thickness = extensions.get(VOLUME, {}).get("thicknessFactor", 0.0)
+    volume = extensions.get(VOLUME, {})
+    thickness = volume.get("thicknessFactor", 0.0)
     return {"baseColorFactor": np.asarray(base, float), "metallicFactor": np.asarray([metallic], float),
             "roughnessFactor": np.asarray([roughness], float), "emissiveFactor": np.asarray(emissive, float),
             "emissiveStrength": np.asarray([strength], float),
             "alphaCutoff": np.asarray([mat.alphaCutoff if mat.alphaCutoff is not None else 0.5], float),
             "transmissionFactor": np.asarray([transmission], float), "ior": np.asarray([ior], float),
             "thicknessFactor": np.asarray([thickness], float),
+            "attenuationColor": np.asarray(volume.get("attenuationColor", [1.0, 1.0, 1.0]), float),
+            "attenuationDistance": np.asarray([volume.get("attenuationDistance", np.inf)], float),
             **_texture_transforms(mat)}
 
 
@@ -248,6 +257,8 @@ def animated_material(material: Material, mat: pygltflib.Material, values: dict[
                    kind=_kind(metallic, roughness, transmission, float(f["thicknessFactor"][0]), float(f["ior"][0])),
                    roughness=roughness, metallic=metallic, transmission=transmission, ior=float(f["ior"][0]),
                    thickness=float(f["thicknessFactor"][0]),
+                   attenuation_color=tuple(float(c) for c in f["attenuationColor"]),
+                   attenuation_distance=float(f["attenuationDistance"][0]),
                    emission=tuple(float(c) for c in np.maximum(f["emissiveFactor"] * f["emissiveStrength"][0], 0.0)),
                    **textures)
 

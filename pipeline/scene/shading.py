@@ -132,6 +132,10 @@ class SurfaceShading:
                                    if j in used and getattr(m, "metallic_roughness_texture", None) is not None
                                    and m.kind != "dielectric"}  # glass stays glass
         self.vertices, self.faces = getattr(state, "vertices", None), getattr(state, "faces", None)
+        # Beer's law inside solid glass: extinction per unit length (3,) of each attenuating volume
+        self.extinction = {j: -np.log(np.maximum(m.attenuation_color, 1e-12)) / m.attenuation_distance
+                           for j, m in enumerate(mats) if j in used and m.kind == "dielectric"
+                           and np.isfinite(m.attenuation_distance) and min(m.attenuation_color) < 1}
 
     @property
     def smooth(self) -> bool:
@@ -226,6 +230,21 @@ class SurfaceShading:
             kind[rows] = kind_codes(metallic * texel[:, 2], r)
             exponent[rows] = phong_exponents(r)
         return kind, exponent
+
+    def volume_transmittance(self, tri: np.ndarray, dirs: np.ndarray, dist: np.ndarray) -> np.ndarray | None:
+        """(n, 3) float64 share of light kept along rays that travelled ``dist`` to hits ``tri`` (-1: a
+        miss) inside an attenuating glass volume, known by meeting its surface from the back
+        (a closed volume's normals point out); 1 elsewhere. None where no volume attenuates."""
+        if not self.extinction:
+            return None
+        t = np.maximum(np.asarray(tri), 0)
+        m = self.tri_mat[t]
+        out = np.ones((len(t), 3))
+        leaving = (np.asarray(tri) >= 0) & (np.einsum("ij,ij->i", np.take(self.geometric, t, axis=0), dirs) > 0)
+        for j, sigma in self.extinction.items():
+            rows = np.flatnonzero(leaving & (m == j))
+            out[rows] = np.exp(-np.asarray(dist, np.float64)[rows, None] * sigma[None, :])
+        return out
 
     @property
     def emission_varies(self) -> bool:

@@ -137,7 +137,7 @@ def surface_lines(scene: Scene) -> list[str]:
         tex += f"; transmission (thin-walled: not bent, not tinted) on {passing} material(s)"
     solid = sum(1 for m in used if scene.materials[m].kind == "dielectric")
     if solid:
-        tex += f"; refracting glass (KHR_materials_volume; its attenuation not read) on {solid} material(s)"
+        tex += f"; refracting glass (KHR_materials_volume) on {solid} material(s)"
     blended = sum(1 for m in used if scene.materials[m].alpha_mode == "BLEND")
     if blended:
         tex += f"; alpha blending (rays pass 1 - alpha of the time) on {blended} material(s)"
