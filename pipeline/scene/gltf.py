@@ -43,6 +43,8 @@ TYPE_WIDTH = {"SCALAR": 1, "VEC2": 2, "VEC3": 3, "VEC4": 4, "MAT2": 4, "MAT3": 9
 # GLB's own uint32 length; an accessor without a bufferView is zeros that no byte backs, so its
 # size is capped on its own (it is only meaningful with sparse data).
 MAX_BUFFER_BYTES = (1 << 32) - 1
+# Compressed buffer views (pipeline/scene/meshopt.py); a buffer marked as its fallback may hold no data
+MESHOPT_EXTENSION = "EXT_meshopt_compression"
 MAX_UNBACKED_ACCESSOR_BYTES = 1 << 28
 # Buffer and image URIs must stay inside the scene's folder unless this is set to 1 (an explicit
 # opt-in: a scene file should not read /etc/passwd or /dev/zero because it says so).
@@ -53,7 +55,7 @@ ALLOW_OUTSIDE_ENV = "PHOTONLOOM_ALLOW_OUTSIDE_FILES"
 SUPPORTED_REQUIRED_EXTENSIONS = frozenset(
     {"EXT_mesh_gpu_instancing", "KHR_animation_pointer", "KHR_draco_mesh_compression", "KHR_lights_punctual",
      "KHR_materials_emissive_strength", "KHR_materials_ior", "KHR_materials_transmission",
-     "KHR_materials_volume", "KHR_mesh_quantization",
+     "KHR_materials_volume", "KHR_mesh_quantization", "EXT_meshopt_compression",
      "KHR_node_visibility", "KHR_texture_transform", "EXT_texture_webp"}
 )
 
@@ -69,6 +71,8 @@ class GltfDocument:
     tree: dict = field(default_factory=dict, repr=False)  # the parsed JSON, for what pygltflib drops (node.weights)
     # accessor -> its values decoded from compressed data (pipeline/scene/draco.py), read in place of its bytes
     decoded: dict[int, np.ndarray] = field(default_factory=dict, repr=False)
+    # bufferView -> its bytes decoded from compressed data (pipeline/scene/meshopt.py), read in place of its own
+    views: dict[int, bytes] = field(default_factory=dict, repr=False)
 
     def error(self, message: str, field: str | None = None) -> SceneError:
         return SceneError(message, path=str(self.path), field=field)
@@ -161,6 +165,8 @@ class GltfDocument:
         elem_bytes = itemsize * width
         view_start = _integer(view.byteOffset, 0, self, vf + ".byteOffset", default=0)
         view_len = _integer(view.byteLength, 1, self, vf + ".byteLength")
+        if view_index in self.views:  # decoded from compressed bytes: the view is all of them
+            data, view_start, view_len = self.views[view_index], 0, len(self.views[view_index])
         stride = elem_bytes
         if view.byteStride is not None:  # glTF §3.6.2.4: 4..252, a multiple of 4, at least one element
             stride = _integer(view.byteStride, 4, self, vf + ".byteStride")
@@ -290,6 +296,9 @@ def _load_buffer(gltf: pygltflib.GLTF2, index: int, path: Path, bin_chunk: bytes
     field = f"buffers[{index}]"
     p = str(path)
     uri = buf.uri
+    fallback = (buf.extensions or {}).get(MESHOPT_EXTENSION)
+    if uri is None and isinstance(fallback, dict) and fallback.get("fallback") is True:
+        return b""  # holds nothing: its views are all compressed elsewhere (pipeline/scene/meshopt.py)
     if uri is None:
         if index != 0 or bin_chunk is None:
             raise SceneError("has no uri and there is no GLB binary chunk", path=p, field=field)

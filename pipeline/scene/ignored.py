@@ -18,7 +18,6 @@ _REASONS = (
     ("KHR_materials_", "the core metallic-roughness factors are used"),
     ("KHR_texture_", "the core texture reference is used"),
     ("EXT_texture_", "the core texture reference is used"),
-    ("EXT_meshopt_", "the uncompressed fallback data is read"),
     ("KHR_xmp", "metadata does not change the picture"),
 )
 

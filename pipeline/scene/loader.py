@@ -24,6 +24,7 @@ from .instancing import EXTENSION as INSTANCING
 from .instancing import instance_transforms, place_copy
 from .lights import light_def_from_gltf
 from .materials import DEFAULT_MATERIAL, IOR, TRANSMISSION, VOLUME, any_emits, material_from_gltf
+from .meshopt import decode_views
 from .nodes import MeshInstance, Node
 from .pointers import ANIMATED_POINTERS, BOOLEAN_ACCESSOR, NON_NEGATIVE_PROPERTIES, WIDTHS, pointer_target
 from .pointers import EXTENSION as POINTER
@@ -77,6 +78,7 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
     g = doc.gltf
     warnings: list[str] = []
     notices: list[str] = []
+    doc.views.update(decode_views(doc))  # meshoptimizer-compressed buffer views, read as their bytes
     doc.decoded.update(decode_primitives(doc))  # Draco-compressed primitives, read as their accessors
     nodes = _read_nodes(doc)
     order = _reachable(doc, nodes)
