@@ -7,8 +7,9 @@ textures are sRGB-encoded), with the sampler's wrap modes and filter and the tex
 :func:`sample` is a pure function over arrays: the photon tracer and the compositor both call it
 (through pipeline/scene/shading.py), so texture colours are the same for photons and pixels.
 
-Decisions: images are PNG, JPEG or WebP (``EXT_texture_webp``'s image is read in place of the
-fallback; any format OpenImageIO reads is accepted); an image embedded in a bufferView or a data
+Decisions: images are PNG, JPEG, WebP or KTX2 (``EXT_texture_webp``'s and ``KHR_texture_basisu``'s
+images are read in place of the fallback; KTX2 is transcoded by Basis Universal's transcoder, any
+format OpenImageIO reads is accepted); an image embedded in a bufferView or a data
 URI is written to a temporary file for OpenImageIO, which reads files only from Python. There are
 no mipmaps: minification uses the magnification filter (NEAREST or LINEAR, LINEAR when unset), and
 the compositor's samples per pixel do the averaging. The alpha channel is kept for alpha masks
@@ -31,6 +32,7 @@ from dataclasses import dataclass, field
 from urllib.parse import unquote
 
 import numpy as np
+import opengl_basisu
 import pygltflib
 
 from .gltf import GltfDocument
@@ -44,8 +46,12 @@ MIRRORED_REPEAT = 33648
 WRAP_NAMES = {REPEAT: "repeat", CLAMP_TO_EDGE: "clamp", MIRRORED_REPEAT: "mirror"}
 _MIN_FILTERS = {NEAREST, LINEAR, 9984, 9985, 9986, 9987}  # the four mipmap modes sample level 0
 _SUFFIX = {"image/png": ".png", "image/jpeg": ".jpg", "image/webp": ".webp"}
-# A texture's WebP image, read in place of its PNG or JPEG fallback where it has one
-WEBP = "EXT_texture_webp"
+# A texture's WebP or KTX2 (Basis Universal) image, read in place of its PNG or JPEG fallback where it has one
+WEBP, BASISU = "EXT_texture_webp", "KHR_texture_basisu"
+KTX2_MAGIC = b"\xabKTX 20\xbb\r\n\x1a\n"
+# Pixels an image may have (16 times 4096 x 2048): decoded to float RGB that is 1.6 GB; checked
+# from the image's header before its pixels are decoded
+MAX_TEXTURE_PIXELS = 1 << 27
 
 
 @dataclass(frozen=True, eq=False)
@@ -151,9 +157,10 @@ def _texture(doc: GltfDocument, info, where: str, images: dict, *, linear: bool 
         raise doc.error(f"refers to a missing texture {index}", where + ".index")
     tex = g.textures[index]
     source, source_field = tex.source, f"textures[{index}].source"
-    webp = (tex.extensions or {}).get(WEBP)
-    if isinstance(webp, dict) and webp.get("source") is not None:  # preferred to the fallback (EXT_texture_webp)
-        source, source_field = webp["source"], f"textures[{index}].extensions.{WEBP}.source"
+    for name in (WEBP, BASISU):  # preferred to the fallback (EXT_texture_webp, KHR_texture_basisu)
+        ext = (tex.extensions or {}).get(name)
+        if isinstance(ext, dict) and ext.get("source") is not None:
+            source, source_field = ext["source"], f"textures[{index}].extensions.{name}.source"
     if not isinstance(source, int) or isinstance(source, bool) or not 0 <= source < len(g.images):
         raise doc.error(f"refers to a missing image {source} (no supported image source)", source_field)
     wrap_s = wrap_t = REPEAT
@@ -227,11 +234,15 @@ def _image_bytes(doc: GltfDocument, index: int) -> tuple[bytes, str | None]:
 def decode_image(doc: GltfDocument, index: int, *, linear: bool = False) -> tuple[np.ndarray, np.ndarray | None]:
     """``images[index]`` as linear RGB float32 (H, W, 3), sRGB to linear unless ``linear`` (the
     values are data, as a normal map's are), and its alpha channel (H, W) (never sRGB-encoded) or
-    None: decoded by OpenImageIO."""
+    None: decoded by OpenImageIO, or a KTX2 image (KHR_texture_basisu) by Basis Universal's
+    transcoder (:func:`_transcode_ktx2`)."""
     import OpenImageIO as oiio  # heavy: only where images are read or written
 
     data, suffix = _image_bytes(doc, index)
     where = f"images[{index}]"
+    if data[:12] == KTX2_MAGIC:
+        pixels = _transcode_ktx2(doc, data, where)
+        return _channels(pixels, linear)
     # OpenImageIO's Python binding reads files only: give it a private temporary one
     fd, name = tempfile.mkstemp(suffix=suffix or _sniff_suffix(data))
     try:
@@ -241,6 +252,7 @@ def decode_image(doc: GltfDocument, index: int, *, linear: bool = False) -> tupl
         if inp is None:
             raise doc.error(f"cannot decode the image: {oiio.geterror().strip() or 'unknown format'}", where)
         try:
+            _check_size(doc, inp.spec().width, inp.spec().height, where)
             pixels = inp.read_image("float")
         finally:
             inp.close()
@@ -248,6 +260,31 @@ def decode_image(doc: GltfDocument, index: int, *, linear: bool = False) -> tupl
         os.unlink(name)
     if pixels is None or pixels.ndim != 3 or pixels.shape[0] == 0 or pixels.shape[1] == 0:
         raise doc.error("the image holds no pixels", where)
+    return _channels(pixels, linear)
+
+
+def _check_size(doc: GltfDocument, width: int, height: int, where: str) -> None:
+    if width * height > MAX_TEXTURE_PIXELS:
+        raise doc.error(f"{width} x {height} pixels is more than the {MAX_TEXTURE_PIXELS:,} an image may have", where)
+
+
+def _transcode_ktx2(doc: GltfDocument, data: bytes, where: str) -> np.ndarray:
+    """A KTX2 image's first level as float RGBA (H, W, 4; RGB where it stores no alpha) in [0, 1]:
+    its Basis Universal payload (ETC1S or UASTC, the codecs KHR_texture_basisu allows) transcoded
+    to 8-bit RGBA by Binomial's transcoder (opengl_basisu; docs/16-libraries.md §6). The encoded
+    values are returned as they are: whether they are sRGB is the texture slot's to say."""
+    try:
+        texture = opengl_basisu.open(bytes(data))
+        _check_size(doc, texture.width, texture.height, where)
+        image = texture.transcode(opengl_basisu.Target.RGBA8)
+    except opengl_basisu.BasisuError as err:  # corrupt data, or a KTX2 without a Basis Universal payload
+        raise doc.error(f"cannot transcode the KTX2 image: {err}", where) from None
+    pixels = np.asarray(image.data, np.float32).reshape(texture.height, texture.width, 4) / 255.0
+    return pixels if texture.has_alpha else pixels[:, :, :3]
+
+
+def _channels(pixels: np.ndarray, linear: bool) -> tuple[np.ndarray, np.ndarray | None]:
+    """Decoded pixels (H, W, C) in [0, 1] as linear RGB float32 and alpha (or None)."""
     channels = pixels.shape[2]
     rgb = np.repeat(pixels[:, :, :1], 3, axis=2) if channels < 3 else pixels[:, :, :3]
     rgb = np.clip(rgb, 0.0, 1.0)

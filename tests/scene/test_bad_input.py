@@ -89,8 +89,8 @@ def _lines_primitive(tmp_path):
 
 def _unsupported_required_extension(tmp_path):
     raw, doc = _glb_parts(basic_builder())
-    doc["extensionsRequired"] = ["KHR_texture_basisu"]
-    doc.setdefault("extensionsUsed", []).append("KHR_texture_basisu")
+    doc["extensionsRequired"] = ["EXT_lights_image_based"]
+    doc.setdefault("extensionsUsed", []).append("EXT_lights_image_based")
     (tmp_path / "bad.glb").write_bytes(_pack_glb(doc, _binary(raw)))
 
 
@@ -102,7 +102,7 @@ CASES = {
     "accessor-out-of-range": (_accessor_out_of_range, "out of range"),
     "nan-vertex": (_nan_vertex, "NaN"),
     "lines": (_lines_primitive, "LINES is not supported"),
-    "extension": (_unsupported_required_extension, "KHR_texture_basisu"),
+    "extension": (_unsupported_required_extension, "EXT_lights_image_based"),
 }
 
 
