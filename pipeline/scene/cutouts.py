@@ -8,8 +8,8 @@
   rest through: alpha compositing's "over" in expectation (Enderton et al., "Stochastic
   transparency", I3D 2010), for light as for pixels, the pixels' samples averaging it.
 
-Alpha is ``baseColorFactor``'s fourth value times the base-colour texture's alpha channel at the
-hit (vertex colours' alpha is not read). :class:`Cutouts` answers, for hits of one frame state,
+Alpha is ``baseColorFactor``'s fourth value times the base-colour texture's alpha channel times
+``COLOR_0``'s alpha (a VEC4 colour), at the hit. :class:`Cutouts` answers, for hits of one frame state,
 which fall in a hole; the ray caster (pipeline/photons/raycast.py) continues such rays past the
 hole, for photons, camera rays and shadow rays alike. An element of such a surface gathers photons
 only where they stop, so its area counts only that part (:func:`element_coverage`, sampled once
@@ -31,6 +31,7 @@ from .textures import sample
 if TYPE_CHECKING:
     from .materials import Material
     from .scene import FrameState
+    from .shading import CornerAttributes
 
 MASK, BLEND = "MASK", "BLEND"
 SEE_THROUGH = (MASK, BLEND)  # the alpha modes that let rays through
@@ -69,13 +70,14 @@ class _Passage:
 class Cutouts:
     """Which hits of a frame state fall in a hole of a masked, blended or transmissive surface."""
 
-    def __init__(self, materials: list[Material], triangle_material: np.ndarray, texcoords: dict):
+    def __init__(self, materials: list[Material], triangle_material: np.ndarray, corners: CornerAttributes | None):
         self.tri_mat = np.asarray(triangle_material, np.int64)
         self.masked = {j: _Passage(m.base_alpha, _alpha_texture(m), m.alpha_cutoff if m.alpha_mode == MASK else None,
                                    m.alpha_mode == BLEND, m.transmission if m.kind != "dielectric" else 0.0,
                                    m.transmission_texture, m.f0)
                        for j, m in enumerate(materials) if lets_through(m)}
-        self.texcoords = texcoords
+        self.texcoords = corners.texcoords if corners is not None else {}
+        self.vertex_alpha = corners.alpha if corners is not None else None  # (F, 3) or None
         flags = np.zeros(len(materials), bool)
         flags[list(self.masked)] = True
         self.masked_triangle = flags[self.tri_mat] if len(self.tri_mat) else np.zeros(0, bool)
@@ -85,8 +87,7 @@ class Cutouts:
         """The state's cutouts, None when no surface it draws lets rays through (they need no second look)."""
         if not any(lets_through(m) for m in state.materials):
             return None
-        corners = getattr(state, "corners", None)
-        found = cls(state.materials, state.triangle_material, corners.texcoords if corners is not None else {})
+        found = cls(state.materials, state.triangle_material, getattr(state, "corners", None))
         return found if found.masked_triangle.any() else None
 
     @property
@@ -137,6 +138,9 @@ class Cutouts:
         alpha = np.full(len(tri), passage.alpha)
         if passage.alpha_texture is not None:
             alpha = alpha * self._texel(passage.alpha_texture, tri, u, v)
+        if self.vertex_alpha is not None:
+            corners = np.take(self.vertex_alpha, tri, axis=0)[:, :, None].astype(np.float64)
+            alpha = alpha * interpolate(corners, u, v)[:, 0]
         hole = alpha < passage.cutoff if passage.cutoff is not None else np.zeros(len(tri), bool)
         stops = np.clip(alpha, 0.0, 1.0) if passage.blend else np.ones(len(tri))
         if passage.transmission > 0:

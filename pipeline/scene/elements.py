@@ -184,8 +184,7 @@ class ElementMesh:
         p = occ_pos[elem_occ]
         local_areas = 0.5 * np.linalg.norm(np.cross(p[:, 1] - p[:, 0], p[:, 2] - p[:, 0]), axis=1)
         inst_elems = np.searchsorted(element_instance, np.arange(len(scene.instances) + 1))
-        coverage = element_coverage(Cutouts(scene.materials, state.triangle_material,
-                                            scene.corner_attributes.texcoords if scene.corner_attributes else {}),
+        coverage = element_coverage(Cutouts(scene.materials, state.triangle_material, scene.corner_attributes),
                                     tri_n, offsets, _cells)
         return cls(size, tri_n.astype(np.int32), offsets, element_vertices, element_instance,
                    element_triangle, vertex_local, vertex_instance, local_areas, inst_elems,

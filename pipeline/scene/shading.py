@@ -49,6 +49,7 @@ class CornerAttributes:
 
     texcoords: dict[int, np.ndarray]  # set -> (F, 3, 2) float32; zeros where an instance lacks the set
     color: np.ndarray | None  # (F, 3, 3) float32 linear RGB; ones where an instance has no COLOR_0
+    alpha: np.ndarray | None = None  # (F, 3) float32 COLOR_0's alpha; ones where an instance has none
 
     @property
     def empty(self) -> bool:
@@ -74,7 +75,11 @@ def corner_attributes(instances: Sequence[MeshInstance]) -> CornerAttributes | N
             a.color[inst.faces] if a is not None and a.color is not None
             else np.ones((len(inst.faces), 3, 3), np.float32)
             for inst, a in zip(instances, attrs)])
-    return CornerAttributes(texcoords, color)
+    alpha = None
+    if any(a is not None and a.alpha is not None for a in attrs):
+        alpha = np.concatenate([a.alpha[inst.faces] if a is not None and a.alpha is not None
+                                else np.ones((len(inst.faces), 3), np.float32) for inst, a in zip(instances, attrs)])
+    return CornerAttributes(texcoords, color, alpha)
 
 
 def world_corner_normals(instances: Sequence[MeshInstance], matrices: np.ndarray) -> np.ndarray | None:

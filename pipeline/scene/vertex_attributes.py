@@ -26,7 +26,8 @@ class VertexAttributes:
 
     normals: np.ndarray | None  # (V, 3) float64 local, unit or zero (zero: flat there)
     texcoords: dict[int, np.ndarray]  # set -> (V, 2) float32
-    color: np.ndarray | None  # (V, 3) float32 linear RGB (alpha ignored)
+    color: np.ndarray | None  # (V, 3) float32 linear RGB
+    alpha: np.ndarray | None = None  # (V,) float32 COLOR_0's alpha (a VEC4 with some value below 1), else None
 
     @property
     def empty(self) -> bool:
@@ -62,6 +63,9 @@ def read_vertex_attributes(doc: GltfDocument, attributes: pygltflib.Attributes, 
         if uv is not None:
             texcoords[s] = uv.astype(np.float32)
     color = read("COLOR_0", (3, 4))
+    alpha = None
     if color is not None:
+        if color.shape[1] == 4 and np.any(color[:, 3] < 1):  # multiplies the base colour's alpha (glTF §3.9.2)
+            alpha = np.clip(color[:, 3], 0.0, 1.0).astype(np.float32)
         color = np.clip(color[:, :3], 0.0, 1.0).astype(np.float32)
-    return VertexAttributes(normals, texcoords, color)
+    return VertexAttributes(normals, texcoords, color, alpha)

@@ -316,3 +316,25 @@ def test_a_camera_sees_a_sunlit_floor_through_glass_at_one_minus_f0_squared(tmp_
     assert (direct[0] > 0).all()  # the floor fills the frame
     ratio = direct[1].mean() / direct[0].mean()
     assert abs(ratio - 0.96 ** 2) < 0.02, ratio  # 768 pixels x 8 samples: binomial sd about 0.003
+
+
+def test_vertex_colour_alpha_cuts_and_blends_as_its_interpolation_says(tmp_path):
+    # The sheet's COLOR_0 alpha runs 0 at x = 0 to 1 at x = 2 (QUAD's corners): a mask of cut-off
+    # 0.5 has its hole where x < 1, a blend stops x / 2 of the rays meeting it at x
+    alpha = QUAD[:, 0] / 2
+    colors = np.c_[np.ones((4, 3)), alpha]
+    for mode in ("MASK", "BLEND"):
+        b = basic_builder()
+        mat = b.add_material("fade", (0.5, 0.5, 0.5), alpha_mode=mode, alpha_cutoff=0.5 if mode == "MASK" else None)
+        b.add_node("sheet", b.add_mesh("sheet", QUAD, QUAD_FACES, material=mat, colors=colors),
+                   translation=(0, SHEET_Y, 0))
+        state = read_scene(b.write(tmp_path / f"{mode}.glb")).pose(0)
+        caster = RayCaster(state)
+        for x in (0.5, 1.5):
+            n = 20_000 if mode == "BLEND" else 50
+            z = np.linspace(0.2, 1.8, n)
+            origins = np.c_[np.full(n, x), np.full(n, 3.0), z].astype(np.float32)
+            tri, *_ = caster.intersect(origins, np.tile([0.0, -1.0, 0.0], (n, 1)).astype(np.float32))
+            stopped = (state.triangle_instance[tri] == 1).mean()
+            want = (x > 1) if mode == "MASK" else x / 2
+            assert abs(stopped - want) < (0.02 if mode == "BLEND" else 1e-9), (mode, x, stopped)
