@@ -134,6 +134,7 @@ class Deformation:
 
     target_positions: np.ndarray | None = None  # (K, V, 3) float64 displacements
     target_normals: np.ndarray | None = None  # (K, V, 3) float64 displacements
+    target_tangents: np.ndarray | None = None  # (K, V, 3) float64 displacements of TANGENT's xyz
     default_weights: np.ndarray | None = None  # (K,) node.weights, else mesh.weights, else zeros
     skin: Skin | None = None
     joints: np.ndarray | None = None  # (V, S) int64 into skin.joints, S = 4 x the JOINTS_n sets
@@ -176,6 +177,31 @@ def transform_normals(normals: np.ndarray, linear: np.ndarray) -> np.ndarray:
     n = np.einsum("vab,vb->va", cofactor, normals) * np.where(det < 0, -1.0, 1.0)[:, None]
     length = np.linalg.norm(n, axis=1, keepdims=True)
     return np.divide(n, length, out=np.zeros_like(n), where=length > 1e-12)
+
+
+def transform_tangents(tangents: np.ndarray, linear: np.ndarray) -> np.ndarray:
+    """(V, 4) unit tangents (xyz) carried by ``linear`` ((V, 3, 3) or (3, 3)), as vectors in the
+    surface are, renormalised (zero where one vanishes), with the handedness w times sign(det):
+    a mirroring matrix reverses the bitangent ``w (n x t)`` that glTF 2.0 §3.7.2.1 defines."""
+    m = np.broadcast_to(linear, (len(tangents), 3, 3))
+    t = np.einsum("vab,vb->va", m, tangents[:, :3])
+    length = np.linalg.norm(t, axis=1, keepdims=True)
+    t = np.divide(t, length, out=np.zeros_like(t), where=length > 1e-12)
+    return np.c_[t, tangents[:, 3] * np.where(np.linalg.det(m) < 0, -1.0, 1.0)]
+
+
+def pose_tangents(tangents: np.ndarray, deformation: Deformation, morph_weights: np.ndarray | None,
+                  node_world: np.ndarray, joint_world: np.ndarray | None) -> np.ndarray:
+    """(V, 4) world tangents of one deforming instance, as :func:`pose_vertices` poses its normals:
+    morphed by TANGENT's target displacements, then carried by its node's or its skin's matrices."""
+    d = deformation
+    w = morph_weights if morph_weights is not None else np.zeros(0)
+    local = np.c_[morph(tangents[:, :3], d.target_tangents, w), tangents[:, 3]]
+    if d.skin is None:
+        return transform_tangents(local, node_world[:3, :3])
+    blended = blend(d.joints, d.weights, joint_matrices(joint_world, d.skin.inverse_bind))
+    blended[d.weights.sum(axis=1) == 0] = node_world
+    return transform_tangents(local, blended[:, :3, :3])
 
 
 def normalise_weights(weights: np.ndarray) -> np.ndarray:

@@ -518,11 +518,11 @@ def _read_deformation(doc, node: int, mesh: int, prim, f: str, n_vertices: int,
     if len(counts) > 1:  # glTF 2.0 §3.7.2.2: all primitives have the same number of targets
         raise doc.error(f"its primitives have different numbers of morph targets ({sorted(counts)})",
                         f"meshes[{mesh}].primitives")
-    positions = normals = weights0 = None
+    positions = normals = tangents = weights0 = None
     if targets:
         k = len(targets)
-        positions, normals = np.zeros((k, n_vertices, 3)), np.zeros((k, n_vertices, 3))
-        has_p = has_n = False
+        positions, normals, tangents = (np.zeros((k, n_vertices, 3)) for _ in range(3))
+        has_p = has_n = has_t = False
         for t, target in enumerate(targets):
             if target.get("POSITION") is not None:
                 positions[t] = vec3(target["POSITION"], f"{f}.targets[{t}].POSITION")
@@ -530,7 +530,11 @@ def _read_deformation(doc, node: int, mesh: int, prim, f: str, n_vertices: int,
             if target.get("NORMAL") is not None:
                 normals[t] = vec3(target["NORMAL"], f"{f}.targets[{t}].NORMAL")
                 has_n = True
+            if target.get("TANGENT") is not None:  # xyz displacements (glTF 2.0 §3.7.2.2)
+                tangents[t] = vec3(target["TANGENT"], f"{f}.targets[{t}].TANGENT")
+                has_t = True
         positions, normals = (positions if has_p else None), (normals if has_n else None)
+        tangents = tangents if has_t else None
         weights0, where = np.zeros(k), None
         node_weights = doc.tree.get("nodes", [{}] * len(g.nodes))[node].get("weights")  # not in pygltflib
         if node_weights is not None:
@@ -573,9 +577,10 @@ def _read_deformation(doc, node: int, mesh: int, prim, f: str, n_vertices: int,
             warnings.append(f"{f}: {unbound} vertex(es) have all skin weights zero: they follow the node "
                             f"{_node_name(doc, node)!r} unskinned")
         weights = normalise_weights(raw)
-    if skin is None and positions is None and normals is None:
+    if skin is None and positions is None and normals is None and tangents is None:
         return None
-    return Deformation(target_positions=positions, target_normals=normals, default_weights=weights0,
+    return Deformation(target_positions=positions, target_normals=normals, target_tangents=tangents,
+                       default_weights=weights0,
                        skin=skin, joints=joints, weights=weights)
 
 

@@ -19,13 +19,13 @@ from pathlib import Path
 
 import numpy as np
 
-from .animation import Sampler, joint_matrices, pose_vertices, trs_matrix
+from .animation import Sampler, joint_matrices, pose_tangents, pose_vertices, trs_matrix
 from .camera import AUTO, Camera, CameraDef, Framing
 from .gltf import GltfDocument
 from .lights import Light, LightDef
 from .materials import Material, animated_material, any_emits, may_reflect
 from .nodes import MeshInstance, Node
-from .shading import CornerAttributes, corner_attributes, world_corner_normals
+from .shading import CornerAttributes, corner_attributes, world_corner_normals, world_corner_tangents
 from .sky import Sky
 from .timeline import Timeline
 from .visibility import visible_nodes
@@ -56,6 +56,7 @@ class FrameState:
     instance_matrices: np.ndarray  # (I, 4, 4) float64 local-to-world of each instance
     state_key: str  # equal for two instants whose geometry and lights are equal
     corner_normals: np.ndarray | None = None  # (F, 3, 3) float32 world vertex normals (shading.py)
+    corner_tangents: np.ndarray | None = None  # (F, 3, 4) float32 world TANGENTs, w the handedness (shading.py)
     corners: CornerAttributes | None = None  # texture coordinates and colours per corner (shading.py)
     sky: Sky | None = None  # the uniform sky emitter (pipeline/scene/sky.py), if the scene has one
     # Instances posed per vertex (skins, morph targets): their world vertices are in ``vertices``,
@@ -258,11 +259,17 @@ class Scene:
         inst_mats = np.stack([world[inst.node] for inst in self.instances])
         verts = [(inst.vertices @ m[:3, :3].T + m[:3, 3]) for inst, m in zip(self.instances, inst_mats)]
         corner_normals = world_corner_normals(self.instances, inst_mats)
+        corner_tangents = world_corner_tangents(self.instances, inst_mats)
         first_face = np.cumsum([0] + [len(inst.faces) for inst in self.instances])
         for inst in self.deforming:
             verts[inst.index], normals = self.deformed_vertices(inst, world, t)
+            faces_of = slice(first_face[inst.index], first_face[inst.index + 1])
             if normals is not None and corner_normals is not None:
-                corner_normals[first_face[inst.index]:first_face[inst.index + 1]] = normals[inst.faces]
+                corner_normals[faces_of] = normals[inst.faces]
+            if inst.attributes is not None and inst.attributes.tangents is not None:
+                corner_tangents[faces_of] = pose_tangents(inst.attributes.tangents, inst.deformation,
+                                                          self.morph_weights(inst, t), world[inst.node],
+                                                          self._joint_world(inst, world))[inst.faces]
         for inst in self.instances:
             if not shown[inst.node]:
                 verts[inst.index] = np.broadcast_to(world[inst.node][:3, 3], verts[inst.index].shape)
@@ -301,6 +308,7 @@ class Scene:
             instance_matrices=inst_mats,
             state_key=self._state_key(world, lights, materials, t, shown),
             corner_normals=corner_normals,
+            corner_tangents=corner_tangents,
             corners=self.corner_attributes,
             sky=self.sky,
             deformed_instances=tuple(inst.index for inst in self.deforming),

@@ -8,8 +8,9 @@
   ``NORMAL`` are flat shaded, as glTF 2.0 §3.7.2.1 asks. Lambert cosines, mirror and lobe directions
   use the shading normal (kernels/scatter.py, pipeline/frames/camera_paths.py).
 * **Normal maps**: a material's ``normalTexture`` bends that normal by the texel's tangent-space
-  normal (:meth:`SurfaceShading._bent`), in a frame built from the triangle's dp/du; the file's
-  ``TANGENT`` attribute is not read. Photons and pixels bounce and shade about the bent normal.
+  normal (:meth:`SurfaceShading._bent`), in the frame of the file's ``TANGENT`` (posed, per corner:
+  :func:`world_corner_tangents`, pipeline/scene/animation.py ``pose_tangents``), else of the
+  triangle's dp/du. Photons and pixels bounce and shade about the bent normal.
 * **Base colour**: ``baseColorFactor`` RGB x the ``baseColorTexture`` (pipeline/scene/textures.py) at
   the hit's interpolated ``TEXCOORD_n`` x the interpolated ``COLOR_0`` (glTF 2.0 §3.9.2). The photon
   tracer takes its Russian-roulette albedo from here, so colour bleeding follows the texture; the
@@ -29,6 +30,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from .animation import transform_tangents
 from .materials import KINDS, kind_codes, phong_exponents
 from .textures import sample
 
@@ -82,6 +84,21 @@ def corner_attributes(instances: Sequence[MeshInstance]) -> CornerAttributes | N
     return CornerAttributes(texcoords, color, alpha)
 
 
+def world_corner_tangents(instances: Sequence[MeshInstance], matrices: np.ndarray) -> np.ndarray | None:
+    """(F, 3, 4) float32 world-space TANGENTs at every triangle corner (unit xyz, w the handedness
+    with the node's mirroring), zero where an instance has none; None when no instance has any."""
+    if not any(inst.attributes is not None and inst.attributes.tangents is not None for inst in instances):
+        return None
+    parts = []
+    for inst, m in zip(instances, matrices):
+        a = inst.attributes
+        if a is None or a.tangents is None:
+            parts.append(np.zeros((len(inst.faces), 3, 4), np.float32))
+        else:
+            parts.append(transform_tangents(a.tangents, m[:3, :3])[inst.faces].astype(np.float32))
+    return np.concatenate(parts)
+
+
 def world_corner_normals(instances: Sequence[MeshInstance], matrices: np.ndarray) -> np.ndarray | None:
     """(F, 3, 3) float32 world-space unit vertex normals at every triangle corner, zero where an
     instance has no NORMAL (flat there); None when no instance has normals. A normal transforms by
@@ -112,6 +129,7 @@ class SurfaceShading:
     def __init__(self, state, geometric_normals: np.ndarray):
         self.geometric = np.asarray(geometric_normals, np.float64)
         self.corner_normals = getattr(state, "corner_normals", None)
+        self.corner_tangents = getattr(state, "corner_tangents", None)  # the file's TANGENTs, posed
         # triangles with vertex normals: the only ones whose hits need interpolating
         self.smooth_triangle = (None if self.corner_normals is None
                                 else np.any(self.corner_normals != 0, axis=(1, 2)))
@@ -177,8 +195,9 @@ class SurfaceShading:
         ``(2 c - 1) x (scale, scale, 1)`` in the frame of the triangle's dp/du (its texture
         coordinates as the texture transform maps them), made orthogonal to ``n``, the bitangent
         ``n x t`` towards decreasing v, as glTF's +Y-up maps want (pbrt-v4's NormalMap and the Khronos
-        sample viewer build the same frame where a file gives no TANGENT). Triangles whose texture
-        coordinates span no area keep ``n``."""
+        sample viewer build the same frame where a file gives no TANGENT). Where the file gives
+        TANGENTs, their interpolation is the tangent instead, and ``w (n x t)`` the bitangent
+        (glTF 2.0 §3.7.2.1: the frame the map was baked in). Triangles with neither keep ``n``."""
         m = self.tri_mat[t]
         for j, (tex, scale) in self.normal_maps.items():
             rows = np.flatnonzero(m == j)
@@ -198,6 +217,8 @@ class SurfaceShading:
             across = np.cross(nn, tangent)
             side = np.sign(np.einsum("ij,ij->i", across, -dpdv))
             bitangent = across * np.where(side == 0, 1.0, side)[:, None]
+            if self.corner_tangents is not None:
+                self._file_frame(tri, u[rows], v[rows], nn, (tangent, bitangent, ok))
             texel = sample(tex, interpolate(raw, u[rows], v[rows]))
             local = (2.0 * texel - 1.0) * np.array([scale, scale, 1.0])
             bent = local[:, :1] * tangent + local[:, 1:2] * bitangent + local[:, 2:] * nn
@@ -205,6 +226,24 @@ class SurfaceShading:
             ok &= length > 1e-12
             n[rows] = np.where(ok[:, None], bent / np.where(ok, length, 1.0)[:, None], nn)
         return n
+
+    def _file_frame(self, tri: np.ndarray, u: np.ndarray, v: np.ndarray, nn: np.ndarray, frame: tuple) -> None:
+        """Overwrite ``frame`` (tangent, bitangent, ok) in place where the triangles ``tri`` have the
+        file's TANGENT at all three corners: the interpolated tangent made orthogonal to ``nn``, and
+        ``w (nn x t)``."""
+        tangent, bitangent, ok = frame
+        corners = np.take(self.corner_tangents, tri, axis=0).astype(np.float64)
+        rows = np.flatnonzero(np.all(np.any(corners[:, :, :3] != 0, axis=2), axis=1))
+        if not len(rows):
+            return
+        t = interpolate(corners[rows, :, :3], u[rows], v[rows])
+        t -= nn[rows] * np.einsum("ij,ij->i", nn[rows], t)[:, None]
+        length = np.linalg.norm(t, axis=1)
+        rows, t, length = rows[length > 1e-12], t[length > 1e-12], length[length > 1e-12]
+        tangent[rows] = t / length[:, None]
+        w = np.where(corners[rows, :, 3].sum(axis=1) < 0, -1.0, 1.0)
+        bitangent[rows] = np.cross(nn[rows], tangent[rows]) * w[:, None]
+        ok[rows] = True
 
     def base_color(self, tri: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
         """(n, 3) float64 base colour at the hits (factor x texture x COLOR_0); -1 rows: triangle 0."""

@@ -28,6 +28,7 @@ class VertexAttributes:
     texcoords: dict[int, np.ndarray]  # set -> (V, 2) float32
     color: np.ndarray | None  # (V, 3) float32 linear RGB
     alpha: np.ndarray | None = None  # (V,) float32 COLOR_0's alpha (a VEC4 with some value below 1), else None
+    tangents: np.ndarray | None = None  # (V, 4) float64 TANGENT: unit xyz (zero: none there), w the handedness +-1
 
     @property
     def empty(self) -> bool:
@@ -36,7 +37,7 @@ class VertexAttributes:
 
 def read_vertex_attributes(doc: GltfDocument, attributes: pygltflib.Attributes, n_vertices: int,
                            field: str) -> VertexAttributes:
-    """NORMAL, TEXCOORD_0/1 and COLOR_0 of a primitive's ``attributes`` (pygltflib), checked."""
+    """NORMAL, TANGENT, TEXCOORD_0/1 and COLOR_0 of a primitive's ``attributes`` (pygltflib), checked."""
 
     def read(name: str, widths: tuple[int, ...]) -> np.ndarray | None:
         index = getattr(attributes, name, None)
@@ -62,10 +63,17 @@ def read_vertex_attributes(doc: GltfDocument, attributes: pygltflib.Attributes, 
         uv = read(f"TEXCOORD_{s}", (2,))
         if uv is not None:
             texcoords[s] = uv.astype(np.float32)
+    tangents = read("TANGENT", (4,))
+    if tangents is not None and normals is not None:  # a tangent frame needs the normal it is tangent to
+        length = np.linalg.norm(tangents[:, :3], axis=1, keepdims=True)
+        xyz = np.divide(tangents[:, :3], length, out=np.zeros((len(tangents), 3)), where=length > 1e-12)
+        tangents = np.c_[xyz, np.where(tangents[:, 3] < 0, -1.0, 1.0)]
+    else:
+        tangents = None
     color = read("COLOR_0", (3, 4))
     alpha = None
     if color is not None:
         if color.shape[1] == 4 and np.any(color[:, 3] < 1):  # multiplies the base colour's alpha (glTF §3.9.2)
             alpha = np.clip(color[:, 3], 0.0, 1.0).astype(np.float32)
         color = np.clip(color[:, :3], 0.0, 1.0).astype(np.float32)
-    return VertexAttributes(normals, texcoords, color, alpha)
+    return VertexAttributes(normals, texcoords, color, alpha, tangents)

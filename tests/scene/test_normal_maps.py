@@ -24,15 +24,27 @@ def _texel(tangent_space) -> np.ndarray:
     return np.tile(np.round((np.asarray(tangent_space) + 1) / 2 * 255).astype(np.uint8), (4, 4, 1))
 
 
-def floor(path, tangent_space=None, *, scale=1.0, mirrored=False, sun=False):
-    """The 2 x 2 floor QUAD (normal +y) with u = x / 2 (or 1 - x / 2), v = z / 2, its map one texel."""
+def floor(path, tangent_space=None, *, scale=1.0, mirrored=False, sun=False, tangent=None, turned=None):
+    """The 2 x 2 floor QUAD (normal +y) with u = x / 2 (or 1 - x / 2), v = z / 2, its map one texel;
+    with ``tangent`` (x, y, z, w) its TANGENT (and NORMAL), the floor turned about +y by the
+    quaternion ``turned`` by its node or, with ``turned=("skin", q)``, by a joint it is skinned to."""
     b = GltfBuilder()
     uv = np.c_[QUAD[:, 0] / 2, QUAD[:, 2] / 2]
     if mirrored:
         uv[:, 0] = 1 - uv[:, 0]
     normal = None if tangent_space is None else b.add_texture(_texel(tangent_space))
     mat = b.add_material("m", (0.5, 0.5, 0.5), normal_texture=normal, normal_scale=scale)
-    b.add_node("floor", b.add_mesh("floor", QUAD, QUAD_FACES, material=mat, texcoords={0: uv}))
+    normals = None if tangent is None else np.tile([0.0, 1.0, 0.0], (4, 1)).astype(np.float32)
+    mesh = b.add_mesh("floor", QUAD, QUAD_FACES, material=mat, texcoords={0: uv}, normals=normals)
+    if tangent is not None:
+        b.gltf.meshes[mesh].primitives[0].attributes.TANGENT = b.add_accessor(
+            np.tile(tangent, (4, 1)).astype(np.float32), target=34962)
+    skinned = isinstance(turned, tuple) and turned[0] == "skin"
+    node = b.add_node("floor", mesh, rotation=None if skinned else turned)
+    if skinned:
+        joint = b.add_node("bone", rotation=turned[1])
+        b.gltf.nodes[node].skin = b.add_skin([joint])
+        b.bind_skin(mesh, 0, np.zeros((4, 4), int), np.tile([1.0, 0, 0, 0], (4, 1)))
     if sun:
         b.add_node("sun", light=b.add_directional_light("sun", (1, 1, 1), 3.0), rotation=(-0.7071068, 0, 0, 0.7071068))
         b.add_node("cam", camera=b.add_camera("cam", 0.9, 0.05), translation=(1, 3, 1),
@@ -46,7 +58,8 @@ def _normals(path):
     state = read_scene(path).pose_frame(1)
     surface = SurfaceShading(state, caster_for(state).normals)
     u, v = np.array([0.1, 0.3, 0.6]), np.array([0.2, 0.5, 0.1])
-    return surface.normal(np.array([0, 1, 1]), u, v)
+    tri = np.flatnonzero(state.triangle_instance == 0)[[0, 1, 1]]
+    return surface.normal(tri, u, v)
 
 
 @pytest.mark.parametrize("tangent_space, scale, mirrored, want", [
@@ -58,6 +71,21 @@ def _normals(path):
 def test_a_constant_map_tilts_the_normal_as_its_closed_form(tmp_path, tangent_space, scale, mirrored, want):
     n = _normals(floor(tmp_path / "f.glb", tangent_space, scale=scale, mirrored=mirrored))
     np.testing.assert_allclose(n, [want] * 3, atol=0.006)  # 8-bit texels
+
+
+TURN_Y = (0.0, 0.7071068, 0.0, 0.7071068)  # +90 degrees about +y: +z turns to +x
+
+
+@pytest.mark.parametrize("tangent_space, tangent, turned, want", [
+    ((SIN, 0, COS), (0, 0, 1, 1), None, (0, COS, SIN)),  # towards the file's tangent, +z, not dp/du's +x
+    ((0, SIN, COS), (0, 0, 1, 1), None, (SIN, COS, 0)),  # the bitangent w (n x t) = +x
+    ((0, SIN, COS), (0, 0, 1, -1), None, (-SIN, COS, 0)),  # w = -1: the other way
+    ((SIN, 0, COS), (0, 0, 1, 1), TURN_Y, (SIN, COS, 0)),  # the node turns the tangent with it
+    ((SIN, 0, COS), (0, 0, 1, 1), ("skin", TURN_Y), (SIN, COS, 0)),  # and so does the joint of a skin
+])
+def test_the_files_tangents_span_the_frame(tmp_path, tangent_space, tangent, turned, want):
+    n = _normals(floor(tmp_path / "t.glb", tangent_space, tangent=tangent, turned=turned))
+    np.testing.assert_allclose(n, [want] * 3, atol=0.006)
 
 
 def test_a_flat_map_changes_nothing(tmp_path):
