@@ -12,7 +12,7 @@ import click
 from pipeline.aqm.display import DISPLAYS as _DISPLAYS
 from pipeline.config import PhotonConfig as _PhotonConfig
 
-from .scene import ANIMATION_HELP, CAMERA_HELP, LIGHT_HELP
+from .scene import ANIMATION_HELP, CAMERA_HELP, LIGHT_HELP, VARIANT_HELP
 
 if TYPE_CHECKING:
     from pipeline.run.render import RenderRequest
@@ -64,9 +64,10 @@ def scheduler_options(f: _F) -> _F:
 @click.option("--quiet", is_flag=True, help="No progress bar, no notices of the defaults chosen.")
 @click.option("--light", type=click.Choice(["auto", "none"]), default="auto", show_default=True, help=LIGHT_HELP)
 @click.option("--animation", default=None, help=ANIMATION_HELP)
+@click.option("--variant", default=None, help=VARIANT_HELP)
 @scheduler_options
 def shoot_command(scene_file, frames, photons, store_url, seed, element_size, photon_depth, keep_records, quiet,
-                  light, animation, scheduler, workers) -> None:
+                  light, animation, variant, scheduler, workers) -> None:
     """Trace photons for every frame of SCENE_FILE into a photon store (resumable)."""
     from pipeline.config import PhotonConfig
     from pipeline.run.shoot import plan, shoot
@@ -75,7 +76,7 @@ def shoot_command(scene_file, frames, photons, store_url, seed, element_size, ph
     if quiet:
         _hush_notices()
     config = PhotonConfig(seed=seed, element_size=element_size, photon_depth=photon_depth)
-    p = plan(read_scene(scene_file, light=light, animation=animation), frames, photons, config)
+    p = plan(read_scene(scene_file, light=light, animation=animation, variant=variant), frames, photons, config)
     summary = shoot(p, store_url, keep_records=keep_records, scheduler=scheduler, workers=workers,
                     progress=not quiet)
     click.echo(
@@ -124,6 +125,7 @@ def job_options(f: _F) -> _F:
         click.option("--keep-records", is_flag=True, help=_KEEP_HELP),
         click.option("--camera", default=None, help=CAMERA_HELP),
         click.option("--animation", default=None, help=ANIMATION_HELP),
+        click.option("--variant", default=None, help=VARIANT_HELP),
         click.option("--seed", type=int, default=0, show_default=True),
         click.option("--reflection-depth", type=int, default=4, show_default=True,
                      help="Mirror/glossy reflections followed per camera path."),
@@ -159,7 +161,8 @@ def render_request(scene_file: str, frames: str | None, out_dir: str, resolution
                    camera: str | None, seed: int, reflection_depth: int, photon_depth: int, d_thr: float | None,
                    config_file: str | None, light: str = "auto", tonemap: str = "filmic", exposure: float = 0.0,
                    element_size: float | None = None, display: str = "standard_fhd",
-                   fill: str = "full_screen", animation: str | None = None, shutter: float = 0.0) -> RenderRequest:
+                   fill: str = "full_screen", animation: str | None = None, shutter: float = 0.0,
+                   variant: str | None = None) -> RenderRequest:
     """The RenderRequest (pipeline/run/render.py) of the job options: one parameter per option."""
     from pipeline.config import RenderConfig, load_config
     from pipeline.frames.settings import RenderSettings
@@ -172,7 +175,7 @@ def render_request(scene_file: str, frames: str | None, out_dir: str, resolution
                   **({} if element_size is None else {"element_size": element_size}))
     return RenderRequest(scene_path=scene_file, frames=frames, out_dir=out_dir, n_photons=photons, fmax=fmax,
                          temporal=temporal, store_url=store_url, keep_records=keep_records, camera=camera,
-                         animation=animation, config=RenderConfig.from_dict(fields), light=light,
+                         animation=animation, variant=variant, config=RenderConfig.from_dict(fields), light=light,
                          settings=RenderSettings(width=width, height=height, spp=spp,
                                                  reflection_depth=reflection_depth, shutter=shutter,
                                                  tonemap=ToneMapping(operator=tonemap, exposure=exposure,

@@ -9,6 +9,8 @@ CAMERA_HELP = ("Camera or camera-node name, or auto: frame the whole animation (
                "Default: the first camera, auto when the file has none.")
 ANIMATION_HELP = ("The animation that plays (by name). Default: the file's first; every animation plays that "
                   "animates no node an earlier one does, so clips of one character play one at a time.")
+VARIANT_HELP = ("The material variant to render (KHR_materials_variants, by name; `loom info` lists them). "
+                "Default: each primitive's own material.")
 LIGHT_HELP = ("auto: a file without any light is lit by a default sun and sky (pipeline/scene/default_lights.py); "
               "none: refuse it.")
 
@@ -30,11 +32,12 @@ def scene_command(name: str, output: str) -> None:
 @click.option("--element-size", type=float, default=None, help="Element edge bound (default: the scene's).")
 @click.option("--light", type=click.Choice(["auto", "none"]), default="auto", show_default=True, help=LIGHT_HELP)
 @click.option("--animation", default=None, help=ANIMATION_HELP)
+@click.option("--variant", default=None, help=VARIANT_HELP)
 def info_command(scene_file: str, camera: str | None, element_size: float | None, light: str,
-                 animation: str | None) -> None:
+                 animation: str | None, variant: str | None) -> None:
     """Summarise SCENE_FILE: timeline, geometry, elements, lights, materials, cameras, needs."""
     from pipeline.scene.summary import describe
 
-    scene = read_scene(scene_file, camera=camera, light=light, animation=animation)
+    scene = read_scene(scene_file, camera=camera, light=light, animation=animation, variant=variant)
     for line in describe(scene, element_size):
         click.echo(line)

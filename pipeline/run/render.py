@@ -90,6 +90,7 @@ class RenderRequest:
     camera: str | None = None  # None: the file's first camera
     light: str = "auto"  # none: refuse a file without light instead of lighting it by default
     animation: str | None = None  # the animation that plays first (None: the file's first, pipeline/scene/loader.py)
+    variant: str | None = None  # the material variant (None: the primitives' own, pipeline/scene/variants.py)
     keep_records: bool = False  # also store every photon hit (a render reads only the counts and sums)
 
 
@@ -102,7 +103,8 @@ def prepare_job(request: RenderRequest) -> Job:
     n_photons, temporal, frames = request.n_photons, request.temporal, request.frames
     out = Path(request.out_dir)
     check_out_dir(out)
-    scene = read_scene(request.scene_path, camera=request.camera, light=request.light, animation=request.animation)
+    scene = read_scene(request.scene_path, camera=request.camera, light=request.light, animation=request.animation,
+                       variant=request.variant)
     p = plan(scene, frames, n_photons if n_photons is not None else 1, config.photons)
     store_url = request.store_url or str(out / "photons.zarr")
     check_store_location(store_url)
@@ -146,7 +148,7 @@ def prepare_job(request: RenderRequest) -> Job:
                render_hash=stable_digest(look), decision_hash=stable_digest(decision), fmax=fmax,
                n_photons=n_photons, temporal=temporal,
                single_state=len(set(p.sources[f] for f in p.frames)) == 1 and guided,
-               animation=scene.animation_option)
+               animation=scene.animation_option, variant=scene.variant_option)
 
 
 def _create_outputs(out: Path, store_url: str, p, keep_records: bool) -> None:

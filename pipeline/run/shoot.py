@@ -93,7 +93,8 @@ def shoot_key(config: PhotonConfig, element_size: float, frame: int, batch: int,
 
 def tasks(p: ShootPlan, store: PhotonStore, url: str) -> list[tuple[str, ShootRequest]]:
     """(key, request) of every batch still to trace."""
-    scene = SceneRef(str(p.scene.path), p.scene.scene_hash, None, p.elements.element_size, p.scene.animation_option)
+    scene = SceneRef(str(p.scene.path), p.scene.scene_hash, None, p.elements.element_size, p.scene.animation_option,
+                     p.scene.variant_option)
     out = []
     for f in p.traced_frames:
         done = store.done_batches(f - 1)

@@ -56,6 +56,7 @@ SUPPORTED_REQUIRED_EXTENSIONS = frozenset(
     {"EXT_mesh_gpu_instancing", "KHR_animation_pointer", "KHR_draco_mesh_compression", "KHR_lights_punctual",
      "KHR_materials_emissive_strength", "KHR_materials_ior", "KHR_materials_transmission",
      "KHR_materials_volume", "KHR_mesh_quantization", "EXT_meshopt_compression", "KHR_texture_basisu",
+     "KHR_materials_variants",
      "KHR_node_visibility", "KHR_texture_transform", "EXT_texture_webp"}
 )
 

@@ -37,6 +37,7 @@ from .textures import (
     transmission_texture,
 )
 from .timeline import DEFAULT_FPS, MAX_FRAMES, Timeline
+from .variants import apply_variant
 from .vertex_attributes import read_vertex_attributes
 from .visibility import EXTENSION as VISIBILITY
 from .visibility import always_hidden
@@ -63,18 +64,21 @@ _WEIGHT_COMPONENTS = (5126, 5121, 5123)
 
 
 def read_scene(path: str | Path, *, camera: str | None = None, fps: float | None = None,
-              light: str = "auto", animation: str | None = None) -> Scene:
+               light: str = "auto", animation: str | None = None, variant: str | None = None) -> Scene:
     """Load a ``.glb``/``.gltf`` file. ``camera`` picks a camera by camera or node name, or
     ``auto`` (pipeline/scene/default_camera.py); ``light`` ``auto`` lights a file without light
     with the default sun and sky (pipeline/scene/default_lights.py), ``none`` refuses it;
-    ``animation`` names the animation that plays first (the file's first when None)."""
-    return build_scene(read_gltf(path), camera=camera, fps=fps, light=light, animation=animation)
+    ``animation`` names the animation that plays first (the file's first when None); ``variant``
+    the material variant (pipeline/scene/variants.py; None: the primitives' own materials)."""
+    return build_scene(read_gltf(path), camera=camera, fps=fps, light=light, animation=animation, variant=variant)
 
 
 def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | None = None,
-                light: str = "auto", animation: str | None = None) -> Scene:
+                light: str = "auto", animation: str | None = None, variant: str | None = None) -> Scene:
     if light not in LIGHT_CHOICES:
         raise ValueError(f"light must be one of {LIGHT_CHOICES}, got {light!r}")
+    if variant is not None:
+        apply_variant(doc, variant)
     g = doc.gltf
     warnings: list[str] = []
     notices: list[str] = []
@@ -173,7 +177,7 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
         timeline=Timeline(fps=fps, frames=int(n_frames)), camera_node=camera_node,
         element_size=float(element_size or 0.0), dropped_triangles=dropped, warnings=warnings, notices=notices,
         animations_played=tuple(played), animations_left_out=tuple(left_out),
-        animation_option=None if played == default else played[0],
+        animation_option=None if played == default else played[0], variant_option=variant,
         default_lights=(default_sun(),) if unlit else (), sky=default_sky() if unlit else None,
     )
     if camera_node is None:  # --camera auto, or the file has no camera that renders

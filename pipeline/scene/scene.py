@@ -109,6 +109,7 @@ class Scene:
     animations_played: tuple[str, ...] = ()
     animations_left_out: tuple[str, ...] = ()
     animation_option: str | None = None
+    variant_option: str | None = None  # the KHR_materials_variants variant rendered (pipeline/scene/variants.py)
 
     # --- identity ---------------------------------------------------------------------------------
 

@@ -14,19 +14,20 @@ from pipeline.scene import ElementMesh, Scene
 
 from .loader import read_scene
 
-_SCENES: dict[tuple[str, str, str | None, str | None], Scene] = {}  # the last _KEEP scenes, oldest first
+_SCENES: dict[tuple, Scene] = {}  # the last _KEEP scenes, oldest first
 _KEEP = 2
 
 
-def load_scene(path: str, scene_hash: str, camera: str | None = None, animation: str | None = None) -> Scene:
-    """The scene of ``path`` as the run read it (``camera``, ``animation``: read_scene's), checked
-    against ``scene_hash``, which also tells apart the clips a file's animations offer."""
+def load_scene(path: str, scene_hash: str, camera: str | None = None, animation: str | None = None,
+               variant: str | None = None) -> Scene:
+    """The scene of ``path`` as the run read it (``camera``, ``animation``, ``variant``: read_scene's),
+    checked against ``scene_hash``, which also tells apart the clips and variants a file offers."""
     # One cache entry per (path, hash, camera) however the call spells it: lru_cache keyed on the
     # arguments as passed, so load_scene(p, h) and load_scene(p, h, None) parsed the file twice
     # (0.07-0.15 s each for ROOM, most of it pygltflib's JSON decoding) in every worker
-    scene = _SCENES.get((path, scene_hash, camera, animation))
+    scene = _SCENES.get((path, scene_hash, camera, animation, variant))
     if scene is None:
-        scene = read_scene(path, camera=camera, animation=animation)
+        scene = read_scene(path, camera=camera, animation=animation, variant=variant)
         if scene.scene_hash != scene_hash:
             raise SceneError(f"changed during the run (hash {scene.scene_hash}, expected {scene_hash})", path=path)
         keep_scene(path, camera, scene)
@@ -38,31 +39,33 @@ def keep_scene(path: str, camera: str | None, scene: Scene) -> None:
     for, and the animation they name (Scene.animation_option): the client's own
     (pipeline/run/render.py), which the report at the end of a render reads again, without parsing
     the file a second time in the serial end of the run."""
-    _SCENES[(path, scene.scene_hash, camera, scene.animation_option)] = scene
+    _SCENES[(path, scene.scene_hash, camera, scene.animation_option, scene.variant_option)] = scene
     while len(_SCENES) > _KEEP:
         del _SCENES[next(iter(_SCENES))]
 
 
 @lru_cache(maxsize=2)
-def load_elements(path: str, scene_hash: str, element_size: float, animation: str | None = None) -> ElementMesh:
+def load_elements(path: str, scene_hash: str, element_size: float, animation: str | None = None,
+                  variant: str | None = None) -> ElementMesh:
     """The element mesh of the scene (posed at its first frame, so of the clip that plays)."""
-    return ElementMesh.build(load_scene(path, scene_hash, animation=animation), element_size)
+    return ElementMesh.build(load_scene(path, scene_hash, animation=animation, variant=variant), element_size)
 
 
 @dataclass(frozen=True)
 class SceneRef:
     """A scene as tasks name it: the file, the hash it must still have, the camera (None: the
     file's first), the resolved element size of its element mesh and the animation that plays
-    first (None: the file's first, pipeline/scene/loader.py)."""
+    first (None: the file's first, pipeline/scene/loader.py) and the material variant (None: none)."""
 
     path: str
     scene_hash: str
     camera: str | None
     element_size: float
     animation: str | None = None
+    variant: str | None = None
 
     def scene(self) -> Scene:
-        return load_scene(self.path, self.scene_hash, self.camera, self.animation)
+        return load_scene(self.path, self.scene_hash, self.camera, self.animation, self.variant)
 
     def elements(self) -> ElementMesh:
-        return load_elements(self.path, self.scene_hash, self.element_size, self.animation)
+        return load_elements(self.path, self.scene_hash, self.element_size, self.animation, self.variant)

@@ -10,6 +10,7 @@ from .default_lights import describe_default_lights
 from .elements import ElementMesh
 from .ignored import ignored
 from .scene import Scene
+from .variants import variant_names
 
 INFO_STATE_FRAMES = 2_000
 
@@ -76,6 +77,11 @@ def describe(scene: Scene, element_size: float | None = None) -> list[str]:
             "area lights (emissive triangles)" if scene.has_area_lights else "no area lights",
         ]),
     ]
+    names = variant_names(scene.document)
+    if names:  # KHR_materials_variants
+        lines.append(f"variants   {len(names)}: {', '.join(names)}; rendering "
+                     + (f"{scene.variant_option!r}" if scene.variant_option else "each primitive's own material")
+                     + " (--variant NAME)")
     lines.append("deforms    " + deforms_line(scene))
     lines += surface_lines(scene)
     lines += [f"warning    {w}" for w in scene.warnings]

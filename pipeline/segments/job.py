@@ -33,11 +33,13 @@ class Job:
     temporal: str  # adaptive | fixed | off
     single_state: bool  # camera-only motion: every frame shares one photon set
     animation: str | None = None  # the --animation option (None: the file's first clip, pipeline/scene/loader.py)
+    variant: str | None = None  # the --variant option (None: the primitives' own materials, pipeline/scene/variants.py)
 
     @property
     def scene_ref(self) -> SceneRef:
         """The scene as the job's tasks load it."""
-        return SceneRef(self.scene_path, self.scene_hash, self.camera, self.element_size, self.animation)
+        return SceneRef(self.scene_path, self.scene_hash, self.camera, self.element_size, self.animation,
+                        self.variant)
 
     def to_dict(self) -> dict:
         return {f.name: (getattr(self, f.name).to_dict() if f.name in ("settings", "config") else getattr(self, f.name))
