@@ -15,6 +15,13 @@ def rng():
     return np.random.default_rng(12345)
 
 
+def sun_and_camera_above(b: GltfBuilder, at: tuple = (1, 3, 1)) -> None:
+    """A sun straight down (3 W/m^2 white) and a camera at ``at`` looking straight down (yfov 0.9)."""
+    down = (-0.7071068, 0, 0, 0.7071068)  # -Z turned to -Y
+    b.add_node("sun", light=b.add_directional_light("sun", (1, 1, 1), 3.0), rotation=down)
+    b.add_node("cam", camera=b.add_camera("cam", 0.9, 0.05), translation=at, rotation=down)
+
+
 def basic_builder(light: bool = True) -> GltfBuilder:
     """A 2 x 2 floor at y = 0 lit by a point light 2 units above its centre."""
     b = GltfBuilder()

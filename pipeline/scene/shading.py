@@ -87,39 +87,40 @@ def corner_attributes(instances: Sequence[MeshInstance]) -> CornerAttributes | N
 def world_corner_tangents(instances: Sequence[MeshInstance], matrices: np.ndarray) -> np.ndarray | None:
     """(F, 3, 4) float32 world-space TANGENTs at every triangle corner (unit xyz, w the handedness
     with the node's mirroring), zero where an instance has none; None when no instance has any."""
-    if not any(inst.attributes is not None and inst.attributes.tangents is not None for inst in instances):
-        return None
-    parts = []
-    for inst, m in zip(instances, matrices):
-        a = inst.attributes
-        if a is None or a.tangents is None:
-            parts.append(np.zeros((len(inst.faces), 3, 4), np.float32))
-        else:
-            parts.append(transform_tangents(a.tangents, m[:3, :3])[inst.faces].astype(np.float32))
-    return np.concatenate(parts)
+    return _world_corners(instances, matrices, "tangents", 4, transform_tangents)
 
 
 def world_corner_normals(instances: Sequence[MeshInstance], matrices: np.ndarray) -> np.ndarray | None:
     """(F, 3, 3) float32 world-space unit vertex normals at every triangle corner, zero where an
     instance has no NORMAL (flat there); None when no instance has normals. A normal transforms by
     the inverse transpose of the linear part of its node's matrix."""
-    if not any(inst.attributes is not None and inst.attributes.normals is not None for inst in instances):
+    return _world_corners(instances, matrices, "normals", 3, _carry_normals)
+
+
+def _carry_normals(normals: np.ndarray, linear: np.ndarray) -> np.ndarray | None:
+    try:
+        inverse_t = np.linalg.inv(linear).T
+    except np.linalg.LinAlgError:  # a node scaled to nothing: its triangles have no area
+        return None
+    n = normals @ inverse_t.T
+    length = np.linalg.norm(n, axis=1, keepdims=True)
+    return np.divide(n, length, out=np.zeros_like(n), where=length > 1e-12)
+
+
+def _world_corners(instances: Sequence[MeshInstance], matrices: np.ndarray, attribute: str, width: int,
+                   carry) -> np.ndarray | None:
+    """(F, 3, width) float32 per-corner world values of the vertex ``attribute``, each instance's
+    carried by ``carry(values, linear part of its matrix)`` (None: zeros), zero where an instance
+    lacks it; None where no instance has it."""
+    if not any(inst.attributes is not None and getattr(inst.attributes, attribute) is not None
+               for inst in instances):
         return None
     parts = []
     for inst, m in zip(instances, matrices):
-        a = inst.attributes
-        if a is None or a.normals is None:
-            parts.append(np.zeros((len(inst.faces), 3, 3), np.float32))
-            continue
-        try:
-            inverse_t = np.linalg.inv(m[:3, :3]).T
-        except np.linalg.LinAlgError:  # a node scaled to nothing: its triangles have no area
-            parts.append(np.zeros((len(inst.faces), 3, 3), np.float32))
-            continue
-        n = a.normals @ inverse_t.T
-        length = np.linalg.norm(n, axis=1, keepdims=True)
-        n = np.divide(n, length, out=np.zeros_like(n), where=length > 1e-12)
-        parts.append(n[inst.faces].astype(np.float32))
+        values = None if inst.attributes is None else getattr(inst.attributes, attribute)
+        world = None if values is None else carry(values, m[:3, :3])
+        parts.append(np.zeros((len(inst.faces), 3, width), np.float32) if world is None
+                     else world[inst.faces].astype(np.float32))
     return np.concatenate(parts)
 
 

@@ -9,6 +9,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from pygltflib import OcclusionTextureInfo
 
 from kernels.record_layout import DIRECT_BIT, ELEMENT_MASK
 from pipeline.cli import main
@@ -20,7 +21,7 @@ from pipeline.scene import ElementMesh, read_scene
 from pipeline.scene.builtin.gltf_builder import GltfBuilder
 from pipeline.scene.materials import phong_exponents
 from pipeline.scene.shading import SurfaceShading
-from tests.conftest import QUAD, QUAD_FACES
+from tests.conftest import QUAD, QUAD_FACES, sun_and_camera_above
 
 METAL_MIRROR, DIFFUSE = (0, 0, 255), (0, 255, 0)  # (R unused, G roughness, B metallic), linear bytes
 
@@ -41,13 +42,10 @@ def floor(path, texels=None, *, metallic=1.0, roughness=1.0, sun=False, occlusio
     mat = b.add_material("m", (0.5, 0.5, 0.5), metallic=metallic, roughness=roughness,
                          metallic_roughness_texture=tex)
     if occlusion:
-        from pygltflib import OcclusionTextureInfo
         b.gltf.materials[mat].occlusionTexture = OcclusionTextureInfo(index=b.add_texture(_texture((0,) * 3, (0,) * 3)))
     b.add_node("floor", b.add_mesh("floor", QUAD, QUAD_FACES, material=mat, texcoords={0: uv}))
     if sun:
-        b.add_node("sun", light=b.add_directional_light("sun", (1, 1, 1), 3.0), rotation=(-0.7071068, 0, 0, 0.7071068))
-        b.add_node("cam", camera=b.add_camera("cam", 0.9, 0.05), translation=(1, 3, 1),
-                   rotation=(-0.7071068, 0, 0, 0.7071068))
+        sun_and_camera_above(b)
     else:
         b.add_node("lamp", light=b.add_point_light("lamp", (1, 1, 1), 10.0), translation=(1, 2, 1))
     return b.write(path)

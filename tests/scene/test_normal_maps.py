@@ -15,7 +15,7 @@ from pipeline.photons.raycast import caster_for
 from pipeline.scene import read_scene
 from pipeline.scene.builtin.gltf_builder import GltfBuilder
 from pipeline.scene.shading import SurfaceShading
-from tests.conftest import QUAD, QUAD_FACES
+from tests.conftest import QUAD, QUAD_FACES, sun_and_camera_above
 
 SIN, COS = 0.6, 0.8  # a = 36.87 deg, written exactly enough in 8 bits: (0.6 + 1) / 2 = 204 / 255
 
@@ -46,9 +46,7 @@ def floor(path, tangent_space=None, *, scale=1.0, mirrored=False, sun=False, tan
         b.gltf.nodes[node].skin = b.add_skin([joint])
         b.bind_skin(mesh, 0, np.zeros((4, 4), int), np.tile([1.0, 0, 0, 0], (4, 1)))
     if sun:
-        b.add_node("sun", light=b.add_directional_light("sun", (1, 1, 1), 3.0), rotation=(-0.7071068, 0, 0, 0.7071068))
-        b.add_node("cam", camera=b.add_camera("cam", 0.9, 0.05), translation=(1, 3, 1),
-                   rotation=(-0.7071068, 0, 0, 0.7071068))
+        sun_and_camera_above(b)
     else:
         b.add_node("lamp", light=b.add_point_light("lamp", (1, 1, 1), 1.0), translation=(1, 2, 1))
     return b.write(path)
