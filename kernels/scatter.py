@@ -238,6 +238,7 @@ class ScatterCL:
         self.kernel = kernel("scatter", "scatter8")
         self.tables = tables
         self._pool = None  # output arrays reused from call to call (_output_rows)
+        self._ones = None  # the index of refraction of every hit of a scene without glass (_hit_ior)
         self._tables = [device_table(self.ctx, a, dt) for a, dt in (
             (tables.corners, np.float32), (tables.normals, np.float64),
             (tables.tri_n, np.int32), (tables.tri_offset, np.int64))]
@@ -258,7 +259,7 @@ class ScatterCL:
             hits.v.astype(np.float32, copy=False), hits.dirs.astype(np.float32, copy=False),
             hits.beta.astype(np.float64, copy=False), hits.photon.astype(np.int64, copy=False),
             glossy_cos(self.tables, hits, depth, key), hit_albedo(self.tables, hits),
-            hit_shading(self.tables, hits), *hit_kind(self.tables, hits), hit_ior(self.tables, hits))]
+            hit_shading(self.tables, hits), *hit_kind(self.tables, hits), self._hit_ior(hits))]
         out = Bounce(*self._output_rows(m))
         fields = ("key", "bary", "energy", "recorded", "origins", "dirs", "beta", "alive")
         outputs = [device_output(self.ctx, getattr(out, f)) for f in fields]
@@ -270,6 +271,14 @@ class ScatterCL:
         out.recorded = out.recorded.view(bool)
         out.alive = out.alive.view(bool)
         return out
+
+    def _hit_ior(self, hits: Hits) -> np.ndarray:
+        """:func:`hit_ior`, without a new array of ones every bounce where the scene has no glass."""
+        if self.tables.ior is not None:
+            return hit_ior(self.tables, hits)
+        if self._ones is None or len(self._ones) < len(hits.tri):
+            self._ones = np.ones(max(len(hits.tri), 1))
+        return self._ones[:len(hits.tri)]
 
     _OUTPUTS = ((np.uint32, ()), (np.uint16, (2,)), (np.float32, (3,)), (np.uint8, ()), (np.float32, (3,)),
                 (np.float32, (3,)), (np.float64, (3,)), (np.uint8, ()))
