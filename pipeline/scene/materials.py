@@ -24,7 +24,7 @@ Mapping (docs/03-conventions.md §2; written in the README too):
   **dielectric** instead (kernels/scatter.py, pipeline/frames/camera_paths.py): each hit reflects
   Fresnel's share and refracts the rest by Snell's law with the ior, entering or leaving by which
   side of its surface the ray meets; reflectance and transmittance are the base colour, roughness
-  is not read (smooth glass), nor is the attenuation. Shadow rays do not pass it: the light
+  is not read (smooth glass). Shadow rays do not pass it: the light
   behind glass objects is their caustic, carried by the photons. Inside it, light keeps
   ``attenuationColor`` of itself over ``attenuationDistance`` (Beer's law, the extension's own
   definition), applied where a ray leaves the volume (pipeline/scene/shading.py).
