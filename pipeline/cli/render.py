@@ -12,7 +12,7 @@ import click
 from pipeline.aqm.display import DISPLAYS as _DISPLAYS
 from pipeline.config import PhotonConfig as _PhotonConfig
 
-from .scene import ANIMATION_HELP, CAMERA_HELP, LIGHT_HELP, VARIANT_HELP
+from .scene import ANIMATION_HELP, CAMERA_HELP, ENVIRONMENT_HELP, LIGHT_HELP, VARIANT_HELP
 
 if TYPE_CHECKING:
     from pipeline.run.render import RenderRequest
@@ -126,6 +126,9 @@ def job_options(f: _F) -> _F:
         click.option("--camera", default=None, help=CAMERA_HELP),
         click.option("--animation", default=None, help=ANIMATION_HELP),
         click.option("--variant", default=None, help=VARIANT_HELP),
+        click.option("--environment", default=None, type=click.Path(dir_okay=False), help=ENVIRONMENT_HELP),
+        click.option("--environment-strength", type=float, default=1.0, show_default=True,
+                     help="Multiplies the environment map's radiance."),
         click.option("--seed", type=int, default=0, show_default=True),
         click.option("--reflection-depth", type=int, default=4, show_default=True,
                      help="Mirror/glossy reflections followed per camera path."),
@@ -162,7 +165,8 @@ def render_request(scene_file: str, frames: str | None, out_dir: str, resolution
                    config_file: str | None, light: str = "auto", tonemap: str = "filmic", exposure: float = 0.0,
                    element_size: float | None = None, display: str = "standard_fhd",
                    fill: str = "full_screen", animation: str | None = None, shutter: float = 0.0,
-                   variant: str | None = None) -> RenderRequest:
+                   variant: str | None = None, environment: str | None = None,
+                   environment_strength: float = 1.0) -> RenderRequest:
     """The RenderRequest (pipeline/run/render.py) of the job options: one parameter per option."""
     from pipeline.config import RenderConfig, load_config
     from pipeline.frames.settings import RenderSettings
@@ -176,6 +180,7 @@ def render_request(scene_file: str, frames: str | None, out_dir: str, resolution
     return RenderRequest(scene_path=scene_file, frames=frames, out_dir=out_dir, n_photons=photons, fmax=fmax,
                          temporal=temporal, store_url=store_url, keep_records=keep_records, camera=camera,
                          animation=animation, variant=variant, config=RenderConfig.from_dict(fields), light=light,
+                         environment=None if environment is None else (environment, environment_strength),
                          settings=RenderSettings(width=width, height=height, spp=spp,
                                                  reflection_depth=reflection_depth, shutter=shutter,
                                                  tonemap=ToneMapping(operator=tonemap, exposure=exposure,

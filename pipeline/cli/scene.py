@@ -11,6 +11,8 @@ ANIMATION_HELP = ("The animation that plays (by name). Default: the file's first
                   "animates no node an earlier one does, so clips of one character play one at a time.")
 VARIANT_HELP = ("The material variant to render (KHR_materials_variants, by name; `loom info` lists them). "
                 "Default: each primitive's own material.")
+ENVIRONMENT_HELP = ("An equirectangular (HDRI) radiance map lighting the scene from every direction, EXR or HDR "
+                    "(pipeline/scene/environment.py), in place of the default sun and sky.")
 LIGHT_HELP = ("auto: a file without any light is lit by a default sun and sky (pipeline/scene/default_lights.py); "
               "none: refuse it.")
 
@@ -33,11 +35,17 @@ def scene_command(name: str, output: str) -> None:
 @click.option("--light", type=click.Choice(["auto", "none"]), default="auto", show_default=True, help=LIGHT_HELP)
 @click.option("--animation", default=None, help=ANIMATION_HELP)
 @click.option("--variant", default=None, help=VARIANT_HELP)
+@click.option("--environment", default=None, type=click.Path(dir_okay=False), help=ENVIRONMENT_HELP)
+@click.option("--environment-strength", type=float, default=1.0, show_default=True,
+              help="Multiplies the environment map's radiance.")
 def info_command(scene_file: str, camera: str | None, element_size: float | None, light: str,
-                 animation: str | None, variant: str | None) -> None:
+                 animation: str | None, variant: str | None, environment: str | None,
+                 environment_strength: float) -> None:
     """Summarise SCENE_FILE: timeline, geometry, elements, lights, materials, cameras, needs."""
+    from pipeline.scene.environment import load_environment
     from pipeline.scene.summary import describe
 
-    scene = read_scene(scene_file, camera=camera, light=light, animation=animation, variant=variant)
+    env = None if environment is None else load_environment(environment, environment_strength)
+    scene = read_scene(scene_file, camera=camera, light=light, animation=animation, variant=variant, environment=env)
     for line in describe(scene, element_size):
         click.echo(line)

@@ -9,6 +9,7 @@ from typing import TYPE_CHECKING
 import numpy as np
 
 from kernels.sampling import around
+from pipeline.scene.environment import EnvironmentMap
 from pipeline.scene.shading import triangle_points
 
 from .punctual_lights import FAR
@@ -76,6 +77,8 @@ def sky_light(sh: ShadingTables, key: int, counter: np.ndarray, depth: int, hits
     origin = hits.points(rows) + facing * sh.offsets[hits.tri[rows]][:, None]  # the sky is on the facing side
     c = counter[rows]
     base = SKY_DIMS + depth * SKY_DIMS_PER_DEPTH
+    if isinstance(sh.sky, EnvironmentMap):
+        return _environment_light(sh, (key, c, base), rows, (origin, facing, lobe), rays, total)
     for s in range(sh.sky_samples):
         u1, u2 = uniform(key, c, base + 2 * s), uniform(key, c, base + 2 * s + 1)
         d = np.ascontiguousarray(around(lobe, np.sqrt(u1), 2.0 * np.pi * u2), np.float32)
@@ -84,3 +87,24 @@ def sky_light(sh: ShadingTables, key: int, counter: np.ndarray, depth: int, hits
         rays["area"] += len(rows)
         total[rows[free]] += sh.sky.radiance(d[free])
     return total * np.float32(np.pi / sh.sky_samples)
+
+
+def _environment_light(sh: ShadingTables, numbers: tuple, rows: np.ndarray, frame: tuple, rays: dict[str, int],
+                       total: np.ndarray) -> np.ndarray:
+    """:func:`sky_light` for an environment map: ``sky_samples`` directions by the map's importance
+    (pipeline/scene/environment.py), E = mean of L cos / pdf over them (0 where occluded, below the
+    surface or behind the shading normal). ``numbers``: (key, counters, first dimension);
+    ``frame``: (ray origins, facing normals, shading normals) of the rows."""
+    key, c, base = numbers
+    origin, facing, lobe = frame
+    env = sh.sky
+    for s in range(sh.sky_samples):
+        u = [uniform(key, c, base + 3 * s + k) for k in range(3)]  # the sky's dimensions, three a sample
+        d, pdf = env.sample(*u)
+        cos = np.einsum("ij,ij->i", d, lobe)
+        d = np.ascontiguousarray(d, np.float32)
+        free = (np.einsum("ij,ij->i", d, facing) > 0) & (cos > 0)
+        free[free] = ~sh.caster.occluded(origin[free], d[free], np.full(int(free.sum()), FAR, np.float32))
+        rays["area"] += len(rows)
+        total[rows[free]] += (env.radiance(d[free]) * (cos[free] / pdf[free])[:, None]).astype(np.float32)
+    return total / np.float32(sh.sky_samples)

@@ -36,6 +36,7 @@ from kernels.emit import AREA, DIRECTIONAL, POINT, SKY, SPOT, EmissionTables
 from kernels.philox import EMISSION_STREAM, uniforms
 from kernels.sampling import orthonormal_basis
 from pipeline.scene import FrameState
+from pipeline.scene.environment import EnvironmentMap
 from pipeline.scene.shading import SurfaceShading
 
 from .raycast import RayCaster
@@ -116,7 +117,13 @@ def emission_tables(state: FrameState, caster: RayCaster) -> EmissionTables | No
         group.append(i)
     rows = [(li.position, li.direction, li.radiant, np.cos(li.definition.outer_cone),
              np.cos(li.definition.inner_cone)) for li in state.lights]
-    if state.sky is not None:
+    if isinstance(state.sky, EnvironmentMap):  # one emitter; environment_photons gives its photons
+        kinds.append(SKY)
+        index.append(len(rows))
+        flux.append(state.sky.power(radius))
+        group.append(-1)
+        rows.append((np.zeros(3), np.array([0.0, -1.0, 0.0]), np.zeros(3), np.cos(np.pi / 4), 1.0))  # unused
+    elif state.sky is not None:
         for (radiance, axis), power in zip(state.sky.hemispheres, state.sky.power(radius)):
             kinds.append(SKY)
             index.append(len(rows))
@@ -149,6 +156,33 @@ def emission_tables(state: FrameState, caster: RayCaster) -> EmissionTables | No
         normals=caster.normals, center=caster.center.astype(np.float64), radius=float(radius),
         epsilon=float(caster.epsilon), light_cells=light_cells, cell_size=cell_size,
         cells=np.concatenate(cells) if cells else np.zeros((0, 2)))
+
+
+def environment_photons(table: EmissionTables, env: EnvironmentMap, photon: np.ndarray, emitter: np.ndarray,
+                        key: tuple[int, int], emitted: tuple[np.ndarray, np.ndarray, np.ndarray]
+                        ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """(origins, directions, weights) of photons with those of the environment map's emitter
+    (pipeline/scene/environment.py) drawn again by its importance: a direction towards the map by
+    :meth:`EnvironmentMap.sample`, travelling the other way from a point uniform on a disk of the
+    table's radius facing it, 1.05 R upstream of the centre (kernels/emit.py's sky), weight
+    L / pdf x pi R^2 over the emitter's selection probability. Their own Philox words (streams
+    EMISSION_STREAM + 2 and + 3): the same photons on any worker."""
+    origins, dirs, beta = (np.array(a) for a in emitted)
+    rows = np.flatnonzero(table.kind[emitter] == SKY)
+    if not len(rows):
+        return origins, dirs, beta
+    w = uniforms(photon[rows], EMISSION_STREAM + 2, key)
+    w2 = uniforms(photon[rows], EMISSION_STREAM + 3, key)
+    towards, pdf = env.sample(w[:, 0], w[:, 1], w[:, 2])
+    travel = -towards
+    tt, ss = orthonormal_basis(travel)
+    r, a = table.radius * np.sqrt(w[:, 3]), 2.0 * np.pi * w2[:, 0]
+    origins[rows] = (table.center + tt * (r * np.cos(a))[:, None] + ss * (r * np.sin(a))[:, None]
+                     - travel * (table.radius * 1.05)).astype(np.float32)
+    dirs[rows] = travel.astype(np.float32)
+    scale = np.pi * table.radius * table.radius / (pdf * table.prob[emitter[rows]])
+    beta[rows] = env.radiance(towards).astype(np.float64) * scale[:, None]
+    return origins, dirs, beta
 
 
 def textured_emission_weights(table: EmissionTables, surface: SurfaceShading, caster: RayCaster,

@@ -35,9 +35,10 @@ from kernels.record_layout import DIRECT_BIT, ELEMENT_MASK
 from kernels.scatter import KIND_CODE, Hits, ScatterCL, SceneTables, scatter_reference
 from pipeline.config import PhotonConfig
 from pipeline.scene import ElementMesh, FrameState
+from pipeline.scene.environment import EnvironmentMap
 from pipeline.scene.shading import SurfaceShading
 
-from .emission import emission_tables, textured_emission_weights
+from .emission import emission_tables, environment_photons, textured_emission_weights
 from .raycast import RayCaster, caster_for
 from .sidedness import absorb_back_hits, one_sided_triangles
 
@@ -165,6 +166,8 @@ def _trace_wavefront(tracer: _Tracer, photon: np.ndarray, capped: list[int]):
     shading normal at each hit come from ``tracer.surface`` (pipeline/scene/shading.py)."""
     state, caster, table, surface, key = tracer.state, tracer.caster, tracer.table, tracer.surface, tracer.key
     origins, dirs, beta, emitter = tracer.emit(photon, key)
+    if isinstance(state.sky, EnvironmentMap):  # an HDRI: its photons by its own importance
+        origins, dirs, beta = environment_photons(table, state.sky, photon, emitter, key, (origins, dirs, beta))
     if surface.emission_varies:  # emissive textures: weight by the texture at each origin
         beta = beta * textured_emission_weights(table, surface, caster, photon, emitter, key)
     for depth in range(tracer.max_depth):

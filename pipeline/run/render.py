@@ -40,6 +40,7 @@ from pipeline.paths import check_writable_dir
 from pipeline.report.page import page_parts, write_report
 from pipeline.report.skipped import skipped_work, summary_lines
 from pipeline.scene import read_scene
+from pipeline.scene.environment import load_environment
 from pipeline.scene.scene_cache import keep_scene
 from pipeline.segments.job import Job
 from pipeline.segments.records import read_records
@@ -91,6 +92,7 @@ class RenderRequest:
     light: str = "auto"  # none: refuse a file without light instead of lighting it by default
     animation: str | None = None  # the animation that plays first (None: the file's first, pipeline/scene/loader.py)
     variant: str | None = None  # the material variant (None: the primitives' own, pipeline/scene/variants.py)
+    environment: tuple[str, float] | None = None  # an environment map's file, strength (scene/environment.py)
     keep_records: bool = False  # also store every photon hit (a render reads only the counts and sums)
 
 
@@ -103,8 +105,9 @@ def prepare_job(request: RenderRequest) -> Job:
     n_photons, temporal, frames = request.n_photons, request.temporal, request.frames
     out = Path(request.out_dir)
     check_out_dir(out)
+    env = None if request.environment is None else load_environment(*request.environment)
     scene = read_scene(request.scene_path, camera=request.camera, light=request.light, animation=request.animation,
-                       variant=request.variant)
+                       variant=request.variant, environment=env)
     p = plan(scene, frames, n_photons if n_photons is not None else 1, config.photons)
     store_url = request.store_url or str(out / "photons.zarr")
     check_store_location(store_url)
@@ -148,7 +151,8 @@ def prepare_job(request: RenderRequest) -> Job:
                render_hash=stable_digest(look), decision_hash=stable_digest(decision), fmax=fmax,
                n_photons=n_photons, temporal=temporal,
                single_state=len(set(p.sources[f] for f in p.frames)) == 1 and guided,
-               animation=scene.animation_option, variant=scene.variant_option)
+               animation=scene.animation_option, variant=scene.variant_option,
+               environment=None if env is None else env.source)
 
 
 def _create_outputs(out: Path, store_url: str, p, keep_records: bool) -> None:

@@ -16,6 +16,7 @@ from pipeline.errors import LoomError
 from pipeline.paths import check_writable_dir
 from pipeline.photons.tracing import PhotonRange
 from pipeline.scene import ElementMesh, Scene
+from pipeline.scene.environment import EnvironmentMap
 from pipeline.scene.scene_cache import SceneRef
 from pipeline.store import PhotonStore, StoreIdentity, remove_partials
 from workers.shoot import ShootRequest, shoot_task
@@ -93,8 +94,9 @@ def shoot_key(config: PhotonConfig, element_size: float, frame: int, batch: int,
 
 def tasks(p: ShootPlan, store: PhotonStore, url: str) -> list[tuple[str, ShootRequest]]:
     """(key, request) of every batch still to trace."""
+    env = p.scene.sky.source if isinstance(p.scene.sky, EnvironmentMap) else None
     scene = SceneRef(str(p.scene.path), p.scene.scene_hash, None, p.elements.element_size, p.scene.animation_option,
-                     p.scene.variant_option)
+                     p.scene.variant_option, env)
     out = []
     for f in p.traced_frames:
         done = store.done_batches(f - 1)

@@ -7,6 +7,7 @@ displacements, default and animated weights) are read here into each instance's
 """
 from __future__ import annotations
 
+import hashlib
 import logging
 from dataclasses import replace
 from pathlib import Path
@@ -19,6 +20,7 @@ from .default_camera import AZIMUTH, ELEVATION, YFOV_DEG, animation_bounds, fram
 from .default_lights import default_sky, default_sun
 from .draco import decode_primitives
 from .elements import MAX_ELEMENTS
+from .environment import EnvironmentMap
 from .gltf import GltfDocument, read_gltf
 from .instancing import EXTENSION as INSTANCING
 from .instancing import instance_transforms, place_copy
@@ -64,21 +66,28 @@ _WEIGHT_COMPONENTS = (5126, 5121, 5123)
 
 
 def read_scene(path: str | Path, *, camera: str | None = None, fps: float | None = None,
-               light: str = "auto", animation: str | None = None, variant: str | None = None) -> Scene:
+               light: str = "auto", animation: str | None = None, variant: str | None = None,
+               environment: EnvironmentMap | None = None) -> Scene:
     """Load a ``.glb``/``.gltf`` file. ``camera`` picks a camera by camera or node name, or
     ``auto`` (pipeline/scene/default_camera.py); ``light`` ``auto`` lights a file without light
     with the default sun and sky (pipeline/scene/default_lights.py), ``none`` refuses it;
     ``animation`` names the animation that plays first (the file's first when None); ``variant``
-    the material variant (pipeline/scene/variants.py; None: the primitives' own materials)."""
-    return build_scene(read_gltf(path), camera=camera, fps=fps, light=light, animation=animation, variant=variant)
+    the material variant (pipeline/scene/variants.py; None: the primitives' own materials);
+    ``environment`` an image-based light around the scene (pipeline/scene/environment.py), in
+    place of the default sun and sky."""
+    return build_scene(read_gltf(path), camera=camera, fps=fps, light=light, animation=animation, variant=variant,
+                       environment=environment)
 
 
 def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | None = None,
-                light: str = "auto", animation: str | None = None, variant: str | None = None) -> Scene:
+                light: str = "auto", animation: str | None = None, variant: str | None = None,
+                environment: EnvironmentMap | None = None) -> Scene:
     if light not in LIGHT_CHOICES:
         raise ValueError(f"light must be one of {LIGHT_CHOICES}, got {light!r}")
     if variant is not None:
         apply_variant(doc, variant)
+    if environment is not None:  # another light is another scene: its photons are not the file's alone
+        doc.digest = hashlib.sha256(f"{doc.digest}\0environment\0{environment.digest}".encode()).hexdigest()
     g = doc.gltf
     warnings: list[str] = []
     notices: list[str] = []
@@ -139,7 +148,7 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
                                                               if hidden else ""), "meshes")
     animated_materials = _by_target(channels, "material")
     emissive = any_emits(materials, g.materials, animated_materials, {inst.material for inst in instances})
-    unlit = not any(nodes[i].light is not None for i in shown) and not emissive
+    unlit = not any(nodes[i].light is not None for i in shown) and not emissive and environment is None
     if unlit and light == "none":
         raise doc.error("the scene has no light: no KHR_lights_punctual light on a node and no emissive material "
                         "(--light auto lights it with a default sun and sky)", "lights")
@@ -178,7 +187,8 @@ def build_scene(doc: GltfDocument, *, camera: str | None = None, fps: float | No
         element_size=float(element_size or 0.0), dropped_triangles=dropped, warnings=warnings, notices=notices,
         animations_played=tuple(played), animations_left_out=tuple(left_out),
         animation_option=None if played == default else played[0], variant_option=variant,
-        default_lights=(default_sun(),) if unlit else (), sky=default_sky() if unlit else None,
+        default_lights=(default_sun(),) if unlit else (),
+        sky=environment if environment is not None else (default_sky() if unlit else None),
     )
     if camera_node is None:  # --camera auto, or the file has no camera that renders
         scene.framing = frame_animation(scene)

@@ -21,6 +21,7 @@ import numpy as np
 
 from .animation import Sampler, joint_matrices, pose_tangents, pose_vertices, trs_matrix
 from .camera import AUTO, Camera, CameraDef, Framing
+from .environment import EnvironmentMap
 from .gltf import GltfDocument
 from .lights import Light, LightDef
 from .materials import Material, animated_material, any_emits, may_reflect
@@ -58,7 +59,7 @@ class FrameState:
     corner_normals: np.ndarray | None = None  # (F, 3, 3) float32 world vertex normals (shading.py)
     corner_tangents: np.ndarray | None = None  # (F, 3, 4) float32 world TANGENTs, w the handedness (shading.py)
     corners: CornerAttributes | None = None  # texture coordinates and colours per corner (shading.py)
-    sky: Sky | None = None  # the uniform sky emitter (pipeline/scene/sky.py), if the scene has one
+    sky: Sky | EnvironmentMap | None = None  # the sky at infinity (sky.py, environment.py), if the scene has one
     # Instances posed per vertex (skins, morph targets): their world vertices are in ``vertices``,
     # ``instance_matrices`` does not place them (ElementMesh.vertex_positions reads them from there)
     deformed_instances: tuple[int, ...] = ()
@@ -92,7 +93,7 @@ class Scene:
     # What the loader chose for a file that lacks it (pipeline/scene/loader.py), one line each
     notices: list[str] = field(default_factory=list)
     default_lights: tuple[Light, ...] = ()  # pipeline/scene/default_lights.py: the file has no light
-    sky: Sky | None = None
+    sky: Sky | EnvironmentMap | None = None
     framing: Framing | None = None  # the auto camera (pipeline/scene/default_camera.py), no camera_node
     # KHR_animation_pointer's channels (pipeline/scene/pointers.py): light -> intensity | color | range |
     # innerConeAngle | outerConeAngle; material -> the short names of materials.ANIMATED_PROPERTIES;

@@ -2,12 +2,14 @@
 from __future__ import annotations
 
 from collections import Counter
+from pathlib import Path
 
 import numpy as np
 
 from .default_camera import describe_framing
 from .default_lights import describe_default_lights
 from .elements import ElementMesh
+from .environment import EnvironmentMap
 from .ignored import ignored
 from .scene import Scene
 from .variants import variant_names
@@ -66,7 +68,8 @@ def describe(scene: Scene, element_size: float | None = None) -> list[str]:
         f"at element size {elements.element_size:g}",
         "lights     " + (", ".join(f"{n} {k}" for k, n in sorted(light_kinds.items())) or "no punctual lights")
         + (f"; {n_area} emissive triangles" if n_area else "")
-        + (f"; the file has none, rendering with the {describe_default_lights()}" if scene.default_lights else ""),
+        + (f"; the file has none, rendering with the {describe_default_lights()}" if scene.default_lights else "")
+        + _environment(scene),
         "materials  " + ", ".join(f"{kinds[k]} {k}" for k in ("diffuse", "specular", "emissive")),
         f"cameras    {len(cams)}: " + (", ".join(cams) or "none") + f"; rendering with {chosen}",
         f"animated   {len(animated)} nodes" + (": " + ", ".join(animated) if animated else "")
@@ -87,6 +90,15 @@ def describe(scene: Scene, element_size: float | None = None) -> list[str]:
     lines += [f"warning    {w}" for w in scene.warnings]
     lines += [f"ignored    {w}" for w in ignored(scene)]
     return lines
+
+
+def _environment(scene: Scene) -> str:
+    """The lights line's account of an environment map, if the scene has one."""
+    env = scene.sky
+    if not isinstance(env, EnvironmentMap) or env.source is None:
+        return ""
+    return f"; an environment map around it, {Path(env.source[0]).name} ({env.size[1]}x{env.size[0]}, " \
+           f"strength {env.source[1]:g})"
 
 
 def deforms_line(scene: Scene) -> str:

@@ -34,12 +34,13 @@ class Job:
     single_state: bool  # camera-only motion: every frame shares one photon set
     animation: str | None = None  # the --animation option (None: the file's first clip, pipeline/scene/loader.py)
     variant: str | None = None  # the --variant option (None: the primitives' own materials, pipeline/scene/variants.py)
+    environment: tuple[str, float] | None = None  # --environment's file and strength (pipeline/scene/environment.py)
 
     @property
     def scene_ref(self) -> SceneRef:
         """The scene as the job's tasks load it."""
         return SceneRef(self.scene_path, self.scene_hash, self.camera, self.element_size, self.animation,
-                        self.variant)
+                        self.variant, self.environment)
 
     def to_dict(self) -> dict:
         return {f.name: (getattr(self, f.name).to_dict() if f.name in ("settings", "config") else getattr(self, f.name))
@@ -47,6 +48,8 @@ class Job:
 
     @classmethod
     def from_dict(cls, data: dict) -> Job:
+        environment = data.get("environment")
         return cls(**{**data, "selection": tuple(data["selection"]),
+                      "environment": None if environment is None else (str(environment[0]), float(environment[1])),
                       "settings": RenderSettings.from_dict(data["settings"]),
                       "config": RenderConfig.from_dict(data["config"])})
