@@ -79,17 +79,29 @@ LOCAL_DASK_CONFIG = {
 }
 
 
+_DASK_LOGGERS = ("distributed", "tornado", "asyncio")
+
+
+def silence_dask_logs() -> None:
+    """Run on each worker as the run ends: its Dask loggers say nothing more (close_local)."""
+    for name in _DASK_LOGGERS:
+        logging.getLogger(name).setLevel(logging.CRITICAL)
+
+
 def close_local(client: Any, cluster: Any, timeout: float = 10.0) -> None:
     """Close a LocalCluster so nothing of it outlives the run: with Dask's loggers in this process
     (the nannies') silenced, the nannies stop their workers first and this waits until the
     scheduler has none (a worker's heartbeat to a closed scheduler is what printed a
-    CommClosedError traceback after a successful render), then the client closes before the cluster."""
-    loggers = [logging.getLogger(name) for name in ("distributed", "tornado", "asyncio")]
+    CommClosedError traceback after a successful render), then the client closes before the cluster.
+    The workers' own loggers are silenced first too: on a busy machine a worker whose heartbeat the
+    closing cut short logged "Failed to communicate with scheduler" with its traceback."""
+    loggers = [logging.getLogger(name) for name in _DASK_LOGGERS]
     levels = [logger.level for logger in loggers]
     for logger in loggers:
         logger.setLevel(logging.CRITICAL)
     try:
         try:
+            client.run(silence_dask_logs)
             cluster.scale(0)
             deadline = time.monotonic() + timeout
             while client.scheduler_info().get("workers") and time.monotonic() < deadline:
