@@ -129,6 +129,8 @@ def job_options(f: _F) -> _F:
         click.option("--environment", default=None, type=click.Path(dir_okay=False), help=ENVIRONMENT_HELP),
         click.option("--environment-strength", type=float, default=1.0, show_default=True,
                      help="Multiplies the environment map's radiance."),
+        click.option("--environment-rotation", type=float, default=0.0, show_default=True,
+                     help="Turns the environment map about +Y, degrees counter-clockwise seen from above."),
         click.option("--seed", type=int, default=0, show_default=True),
         click.option("--reflection-depth", type=int, default=4, show_default=True,
                      help="Mirror/glossy reflections followed per camera path."),
@@ -166,7 +168,7 @@ def render_request(scene_file: str, frames: str | None, out_dir: str, resolution
                    element_size: float | None = None, display: str = "standard_fhd",
                    fill: str = "full_screen", animation: str | None = None, shutter: float = 0.0,
                    variant: str | None = None, environment: str | None = None,
-                   environment_strength: float = 1.0) -> RenderRequest:
+                   environment_strength: float = 1.0, environment_rotation: float = 0.0) -> RenderRequest:
     """The RenderRequest (pipeline/run/render.py) of the job options: one parameter per option."""
     from pipeline.config import RenderConfig, load_config
     from pipeline.frames.settings import RenderSettings
@@ -180,7 +182,8 @@ def render_request(scene_file: str, frames: str | None, out_dir: str, resolution
     return RenderRequest(scene_path=scene_file, frames=frames, out_dir=out_dir, n_photons=photons, fmax=fmax,
                          temporal=temporal, store_url=store_url, keep_records=keep_records, camera=camera,
                          animation=animation, variant=variant, config=RenderConfig.from_dict(fields), light=light,
-                         environment=None if environment is None else (environment, environment_strength),
+                         environment=(None if environment is None
+                                      else (environment, environment_strength, environment_rotation)),
                          settings=RenderSettings(width=width, height=height, spp=spp,
                                                  reflection_depth=reflection_depth, shutter=shutter,
                                                  tonemap=ToneMapping(operator=tonemap, exposure=exposure,

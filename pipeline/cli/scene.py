@@ -38,14 +38,16 @@ def scene_command(name: str, output: str) -> None:
 @click.option("--environment", default=None, type=click.Path(dir_okay=False), help=ENVIRONMENT_HELP)
 @click.option("--environment-strength", type=float, default=1.0, show_default=True,
               help="Multiplies the environment map's radiance.")
+@click.option("--environment-rotation", type=float, default=0.0, show_default=True,
+              help="Turns the environment map about +Y, degrees counter-clockwise seen from above.")
 def info_command(scene_file: str, camera: str | None, element_size: float | None, light: str,
                  animation: str | None, variant: str | None, environment: str | None,
-                 environment_strength: float) -> None:
+                 environment_strength: float, environment_rotation: float) -> None:
     """Summarise SCENE_FILE: timeline, geometry, elements, lights, materials, cameras, needs."""
     from pipeline.scene.environment import load_environment
     from pipeline.scene.summary import describe
 
-    env = None if environment is None else load_environment(environment, environment_strength)
+    env = None if environment is None else load_environment(environment, environment_strength, environment_rotation)
     scene = read_scene(scene_file, camera=camera, light=light, animation=animation, variant=variant, environment=env)
     for line in describe(scene, element_size):
         click.echo(line)

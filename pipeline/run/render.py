@@ -92,7 +92,7 @@ class RenderRequest:
     light: str = "auto"  # none: refuse a file without light instead of lighting it by default
     animation: str | None = None  # the animation that plays first (None: the file's first, pipeline/scene/loader.py)
     variant: str | None = None  # the material variant (None: the primitives' own, pipeline/scene/variants.py)
-    environment: tuple[str, float] | None = None  # an environment map's file, strength (scene/environment.py)
+    environment: tuple[str, float, float] | None = None  # an environment map's file, strength, rotation
     keep_records: bool = False  # also store every photon hit (a render reads only the counts and sums)
 
 

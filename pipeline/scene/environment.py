@@ -4,8 +4,10 @@
 units of docs/03-conventions.md §1, times ``--environment-strength``), in place of the default sky.
 Directions map to the image as Blender's world does (so an HDRI lights a file exported from Blender
 as it lit the .blend): column u = atan2(Z, X) / 2 pi + 1/2, row v = 1/2 - asin(Y) / pi from the top
-(glTF's +Y up). A texel is a constant radiance over its solid angle, sin(elevation) x longitude
-band (``texel_solid_angles``); lookups take the texel a direction falls in.
+(glTF's +Y up), turned about +Y by ``--environment-rotation`` degrees (the right-hand rule,
+counter-clockwise seen from above: a sun at -Z turned by 90 degrees shines from -X). A texel is a
+constant radiance over its solid angle, sin(elevation) x longitude band (``texel_solid_angles``);
+lookups take the texel a direction falls in.
 
 Sampled by importance (pbrt-v4's image infinite light, piecewise constant): a texel with
 probability proportional to its brightest channel times its solid angle, then a direction uniform
@@ -37,7 +39,8 @@ class EnvironmentMap:
 
     image: np.ndarray = field(repr=False)
     digest: str  # of the file's bytes and the strength: which light a photon store was made under
-    source: tuple[str, float] | None = None  # the (absolute file, strength) it was loaded from, for workers
+    source: tuple[str, float, float] | None = None  # (absolute file, strength, rotation) it came from, for workers
+    rotation: float = 0.0  # degrees about +Y, counter-clockwise seen from above
     _cdf: np.ndarray = field(init=False, repr=False)
     _pdf: np.ndarray = field(init=False, repr=False)  # (H * W,) per solid angle, of a direction in each texel
 
@@ -56,8 +59,16 @@ class EnvironmentMap:
     def size(self) -> tuple[int, int]:
         return self.image.shape[0], self.image.shape[1]
 
+    def _turn(self, d: np.ndarray, sign: float) -> np.ndarray:
+        """``d`` (n, 3) turned about +Y by ``sign`` x the rotation (+1: map to world, -1: world to map)."""
+        if not self.rotation:
+            return d
+        a = sign * np.radians(self.rotation)
+        c, s = np.cos(a), np.sin(a)
+        return np.stack([c * d[:, 0] + s * d[:, 2], d[:, 1], -s * d[:, 0] + c * d[:, 2]], axis=1)
+
     def _texel(self, directions: np.ndarray) -> np.ndarray:
-        d = np.asarray(directions, np.float64)
+        d = self._turn(np.asarray(directions, np.float64), -1.0)
         h, w = self.size
         u = np.arctan2(d[:, 2], d[:, 0]) / (2.0 * np.pi) + 0.5
         v = 0.5 - np.arcsin(np.clip(d[:, 1] / np.maximum(np.linalg.norm(d, axis=1), 1e-30), -1.0, 1.0)) / np.pi
@@ -82,7 +93,7 @@ class EnvironmentMap:
         y = lo + np.asarray(u2) * (hi - lo)  # sin(elevation) uniform: uniform in the band's solid angle
         phi = 2.0 * np.pi * ((j + np.asarray(u1)) / w - 0.5)
         r = np.sqrt(np.maximum(1.0 - y * y, 0.0))
-        return np.stack([r * np.cos(phi), y, r * np.sin(phi)], axis=1), np.take(self._pdf, texel)
+        return self._turn(np.stack([r * np.cos(phi), y, r * np.sin(phi)], axis=1), 1.0), np.take(self._pdf, texel)
 
     def power(self, radius: float) -> np.ndarray:
         """(3,) flux through a disk of ``radius`` from every direction: pi R^2 x the integral of L
@@ -101,9 +112,10 @@ def texel_solid_angles(h: int, w: int) -> np.ndarray:
     return np.repeat(((edges[:-1] - edges[1:]) * 2.0 * np.pi / w)[:, None], w, axis=1)
 
 
-def load_environment(path: str | Path, strength: float = 1.0) -> EnvironmentMap:
+def load_environment(path: str | Path, strength: float = 1.0, rotation: float = 0.0) -> EnvironmentMap:
     """The map in ``path`` (EXR or HDR for radiance; an 8-bit image is read as sRGB-encoded), times
-    ``strength``; a one-line error for a file that cannot be read or holds no usable radiance."""
+    ``strength``, turned by ``rotation`` degrees about +Y; a one-line error for a file that cannot be
+    read or holds no usable radiance."""
     import OpenImageIO as oiio  # heavy: only where images are read
 
     path = Path(path)
@@ -111,6 +123,9 @@ def load_environment(path: str | Path, strength: float = 1.0) -> EnvironmentMap:
     if not np.isfinite(strength) or strength < 0:
         raise SceneError(f"strength must be a non-negative number, got {strength}", path=str(path),
                          field="--environment-strength")
+    if not np.isfinite(rotation):
+        raise SceneError(f"rotation must be a number of degrees, got {rotation}", path=str(path),
+                         field="--environment-rotation")
     try:
         data = path.read_bytes()
     except OSError as err:
@@ -137,5 +152,6 @@ def load_environment(path: str | Path, strength: float = 1.0) -> EnvironmentMap:
     if not np.all(np.isfinite(rgb)) or rgb.min() < 0:
         raise SceneError("the environment map has negative, NaN or infinite radiance", path=str(path),
                          field=field_name)
-    digest = hashlib.sha256(data + f"\0{strength!r}".encode()).hexdigest()
-    return EnvironmentMap((rgb * strength).astype(np.float32), digest, (str(path.resolve()), float(strength)))
+    digest = hashlib.sha256(data + f"\0{strength!r}\0{rotation!r}".encode()).hexdigest()
+    return EnvironmentMap((rgb * strength).astype(np.float32), digest,
+                          (str(path.resolve()), float(strength), float(rotation)), float(rotation))

@@ -20,9 +20,9 @@ _KEEP = 2
 
 
 def load_scene(path: str, scene_hash: str, camera: str | None = None, animation: str | None = None,
-               variant: str | None = None, environment: tuple[str, float] | None = None) -> Scene:
+               variant: str | None = None, environment: tuple[str, float, float] | None = None) -> Scene:
     """The scene of ``path`` as the run read it (``camera``, ``animation``, ``variant``: read_scene's;
-    ``environment``: the (file, strength) of its environment map), checked against ``scene_hash``,
+    ``environment``: the (file, strength, rotation) of its environment map), checked against ``scene_hash``,
     which also tells apart the clips, variants and environments a file is rendered with."""
     # One cache entry per (path, hash, camera) however the call spells it: lru_cache keyed on the
     # arguments as passed, so load_scene(p, h) and load_scene(p, h, None) parsed the file twice
@@ -49,7 +49,7 @@ def keep_scene(path: str, camera: str | None, scene: Scene) -> None:
 
 @lru_cache(maxsize=2)
 def load_elements(path: str, scene_hash: str, element_size: float, animation: str | None = None,
-                  variant: str | None = None, environment: tuple[str, float] | None = None) -> ElementMesh:
+                  variant: str | None = None, environment: tuple[str, float, float] | None = None) -> ElementMesh:
     """The element mesh of the scene (posed at its first frame, so of the clip that plays)."""
     return ElementMesh.build(load_scene(path, scene_hash, animation=animation, variant=variant,
                                         environment=environment), element_size)
@@ -60,7 +60,7 @@ class SceneRef:
     """A scene as tasks name it: the file, the hash it must still have, the camera (None: the
     file's first), the resolved element size of its element mesh and the animation that plays
     first (None: the file's first, pipeline/scene/loader.py), the material variant (None: none)
-    and the environment map's (file, strength) (None: none)."""
+    and the environment map's (file, strength, rotation) (None: none)."""
 
     path: str
     scene_hash: str
@@ -68,7 +68,7 @@ class SceneRef:
     element_size: float
     animation: str | None = None
     variant: str | None = None
-    environment: tuple[str, float] | None = None
+    environment: tuple[str, float, float] | None = None
 
     def scene(self) -> Scene:
         return load_scene(self.path, self.scene_hash, self.camera, self.animation, self.variant, self.environment)

@@ -97,8 +97,9 @@ def _environment(scene: Scene) -> str:
     env = scene.sky
     if not isinstance(env, EnvironmentMap) or env.source is None:
         return ""
+    turned = f", turned {env.rotation:g} deg" if env.rotation else ""
     return f"; an environment map around it, {Path(env.source[0]).name} ({env.size[1]}x{env.size[0]}, " \
-           f"strength {env.source[1]:g})"
+           f"strength {env.source[1]:g}{turned})"
 
 
 def deforms_line(scene: Scene) -> str:

@@ -34,7 +34,7 @@ class Job:
     single_state: bool  # camera-only motion: every frame shares one photon set
     animation: str | None = None  # the --animation option (None: the file's first clip, pipeline/scene/loader.py)
     variant: str | None = None  # the --variant option (None: the primitives' own materials, pipeline/scene/variants.py)
-    environment: tuple[str, float] | None = None  # --environment's file and strength (pipeline/scene/environment.py)
+    environment: tuple[str, float, float] | None = None  # --environment: file, strength, rotation (environment.py)
 
     @property
     def scene_ref(self) -> SceneRef:
@@ -50,6 +50,7 @@ class Job:
     def from_dict(cls, data: dict) -> Job:
         environment = data.get("environment")
         return cls(**{**data, "selection": tuple(data["selection"]),
-                      "environment": None if environment is None else (str(environment[0]), float(environment[1])),
+                      "environment": (None if environment is None
+                                      else (str(environment[0]), *map(float, environment[1:]))),
                       "settings": RenderSettings.from_dict(data["settings"]),
                       "config": RenderConfig.from_dict(data["config"])})

@@ -121,3 +121,17 @@ def test_loom_render_takes_an_exr_map(tmp_path):
     bad = CliRunner().invoke(main, ["info", str(path), "--environment", str(tmp_path / "none.exr")])
     assert bad.exit_code == 2 and "none.exr: --environment: cannot read the environment map" in bad.output
     assert len(bad.output.strip().splitlines()) == 1
+
+
+def test_a_turned_map_turns_its_light(tmp_path):
+    # the bright texel sits towards -Z; turned 90 degrees (right-hand rule about +Y) it lies towards -X
+    env = one_texel(11, 4.0)
+    turned = EnvironmentMap(env.image, env.digest, None, 90.0)
+    rng = np.random.default_rng(3)
+    d, _ = turned.sample(rng.random(2000), rng.random(2000), rng.random(2000))
+    horizontal = d[:, [0, 2]] / np.linalg.norm(d[:, [0, 2]], axis=1, keepdims=True)
+    assert np.abs(horizontal - [-1.0, 0.0]).max() < 0.05  # within the texel's width, 2 pi / 128 = 0.049
+    np.testing.assert_array_equal(turned.radiance(d), env.radiance(np.c_[-d[:, 2], d[:, 1], d[:, 0]]))
+    # what lights the floor does not depend on the turn about its normal
+    path = open_floor(tmp_path / "floor.glb")
+    assert _direct_mean(path, turned) == pytest.approx(_direct_mean(path, env), rel=0.02)
