@@ -60,7 +60,7 @@ def dask_cluster(tmp_path):
                 p.terminate()
         for p in procs:
             try:
-                p.wait(timeout=20)
+                p.wait(timeout=5)  # a worker whose scheduler is gone may linger past SIGTERM: then SIGKILL
             except subprocess.TimeoutExpired:
                 p.kill()
                 p.wait()
