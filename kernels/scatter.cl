@@ -1,7 +1,8 @@
 // One bounce of photon tracing after Embree found the hits (pipeline/photons/tracing.py drives the loop).
 // For every hit: record it if the surface is diffuse (element, element barycentrics, weight),
 // play Russian roulette on the albedo, and sample the next direction: cosine lobe (diffuse),
-// mirror, normalised Phong lobe (glossy), or Fresnel's choice of mirror and refraction (dielectric). Double precision throughout (PoCL CPU has fp64).
+// mirror, normalised Phong lobe (glossy), or Fresnel's choice of mirror and refraction (dielectric).
+// Double precision throughout (PoCL CPU has fp64).
 // NumPy twin: kernels/scatter.py::scatter_reference; formulas are documented there.
 #pragma OPENCL EXTENSION cl_khr_fp64 : enable
 #pragma OPENCL FP_CONTRACT OFF  // no fused multiply-add: the NumPy twin rounds every product

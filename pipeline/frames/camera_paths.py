@@ -111,8 +111,7 @@ def render_exposure(state: FrameState, shutter_states: Sequence[FrameState], ele
     the camera of ``shutter_states[j]`` (``paths.spp`` states posed at pipeline/frames/shutter.py's
     instants). Where they all equal ``state`` (the same geometry, lights and camera: nothing moves
     while the shutter is open) it is :func:`render_frame`, to the bit."""
-    sh = ShadingTables(state, elements, irradiance, caster_for(state), paths.area_samples)
-    slices = _shutter_slices(state, sh, shutter_states, paths, (elements, irradiance))
+    slices = _shutter_slices(state, shutter_states, paths, (elements, irradiance))
     if slices is None:
         return render_frame(state, elements, irradiance, paths)
     # chunks of spp x CHUNK_RAYS samples: each instant then traces a wavefront as large as render_frame's
@@ -148,7 +147,7 @@ def _frame(paths: CameraPaths, n_layers: int, chunk_rays: int, record: MapHitRec
                       None if record is None else record.finish(paths.width, paths.height, spp))
 
 
-def _shutter_slices(state: FrameState, sh: ShadingTables, shutter_states, paths: CameraPaths, maps: tuple):
+def _shutter_slices(state: FrameState, shutter_states, paths: CameraPaths, maps: tuple):
     """[(state, tables)] of each sample index, tables shared by states with one state key; None
     when every state is ``state`` as the camera and the scene see it (nothing moves while the
     shutter is open, or there is no shutter). ``maps``: (elements, irradiance)."""
@@ -159,7 +158,7 @@ def _shutter_slices(state: FrameState, sh: ShadingTables, shutter_states, paths:
     if all(s.state_key == state.state_key and _same_view(s.camera, state.camera) for s in shutter_states):
         return None
     elements, irradiance = maps
-    tables = {state.state_key: sh}
+    tables = {}
     for s in shutter_states:
         if s.state_key not in tables:
             tables[s.state_key] = ShadingTables(s, elements, irradiance, caster_for(s), paths.area_samples)

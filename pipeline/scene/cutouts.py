@@ -25,8 +25,7 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
-from .shading import interpolate
-from .textures import sample
+from .shading import interpolate, texel_at
 
 if TYPE_CHECKING:
     from .materials import Material
@@ -137,7 +136,7 @@ class Cutouts:
         """(a mask's holes, the share of the other rays stopped) at hits of a material's triangles."""
         alpha = np.full(len(tri), passage.alpha)
         if passage.alpha_texture is not None:
-            alpha = alpha * self._texel(passage.alpha_texture, tri, u, v)
+            alpha = alpha * texel_at(self.texcoords, passage.alpha_texture, tri, u, v)[:, 0]
         if self.vertex_alpha is not None:
             corners = np.take(self.vertex_alpha, tri, axis=0)[:, :, None].astype(np.float64)
             alpha = alpha * interpolate(corners, u, v)[:, 0]
@@ -146,17 +145,11 @@ class Cutouts:
         if passage.transmission > 0:
             t = np.full(len(tri), passage.transmission)
             if passage.transmission_texture is not None:
-                t = t * self._texel(passage.transmission_texture, tri, u, v)
+                t = t * texel_at(self.texcoords, passage.transmission_texture, tri, u, v)[:, 0]
             fresnel = passage.f0 + (1.0 - passage.f0) * (1.0 - np.clip(cosines, 0.0, 1.0)) ** 5  # Schlick 1994
             stops = stops * (1.0 - t * (1.0 - fresnel))
         return hole, stops
 
-    def _texel(self, tex, tri: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """Channel 0 of ``tex`` at hits of triangles ``tri`` ((0, 0) without texture coordinates)."""
-        corners = self.texcoords.get(tex.texcoord)
-        uv = (np.zeros((len(tri), 2)) if corners is None else
-              interpolate(np.take(corners, tri, axis=0).astype(np.float64), u, v))
-        return sample(tex, uv)[:, 0]
 
 
 _GOLDEN, _MIX1, _MIX2 = np.uint64(0x9E3779B97F4A7C15), np.uint64(0xBF58476D1CE4E5B9), np.uint64(0x94D049BB133111EB)

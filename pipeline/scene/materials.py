@@ -44,12 +44,14 @@ from typing import TYPE_CHECKING
 
 import numpy as np
 
+from kernels.scatter import KIND_CODE
+
 from .textures import transform_matrix
 
 if TYPE_CHECKING:
     import pygltflib
 
-KINDS = ("diffuse", "mirror", "glossy", "dielectric")
+KINDS = tuple(sorted(KIND_CODE, key=KIND_CODE.get))  # by the code the bounce kernel knows each kind by
 TRANSMISSION, IOR, VOLUME = "KHR_materials_transmission", "KHR_materials_ior", "KHR_materials_volume"
 MIRROR_ROUGHNESS = 0.2
 GLOSSY_ROUGHNESS = 0.6

@@ -32,7 +32,7 @@ import numpy as np
 
 from .animation import transform_tangents
 from .materials import KINDS, kind_codes, phong_exponents
-from .textures import sample
+from .textures import Texture, sample
 
 if TYPE_CHECKING:
     from collections.abc import Sequence
@@ -329,14 +329,7 @@ class SurfaceShading:
         return value
 
     def _texel(self, tex, tri: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
-        """(n, 3) ``tex`` at hits of triangles ``tri``, at their interpolated texture coordinates
-        ((0, 0) where the primitive has none)."""
-        corners = self.texcoords.get(tex.texcoord)
-        if corners is None:
-            uv = np.zeros((len(tri), 2))
-        else:
-            uv = interpolate(np.take(corners, tri, axis=0).astype(np.float64), u, v)
-        return sample(tex, uv)
+        return texel_at(self.texcoords, tex, tri, u, v)
 
 
 def mean_emission(material: Material) -> np.ndarray:
@@ -366,6 +359,18 @@ def uv_derivatives(p: np.ndarray, uv: np.ndarray) -> tuple[np.ndarray, np.ndarra
     dpdu = (duv12[:, 1:2] * dp02 - duv02[:, 1:2] * dp12) * inv
     dpdv = (duv02[:, 0:1] * dp12 - duv12[:, 0:1] * dp02) * inv
     return dpdu, dpdv, ok
+
+
+def texel_at(texcoords: dict, tex: Texture, tri: np.ndarray, u: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """(n, 3) float64 texture ``tex`` at hits of triangles ``tri``, at their texture coordinates
+    interpolated from the per-corner ``texcoords`` (CornerAttributes'; (0, 0) where the primitive
+    has none): the one lookup of every texture slot, shading's and cut-outs' alike."""
+    corners = texcoords.get(tex.texcoord)
+    if corners is None:
+        uv = np.zeros((len(tri), 2))
+    else:
+        uv = interpolate(np.take(corners, tri, axis=0).astype(np.float64), u, v)
+    return sample(tex, uv)
 
 
 def interpolate(corners: np.ndarray, u: npt.ArrayLike, v: npt.ArrayLike) -> np.ndarray:
